@@ -1,0 +1,37 @@
+# cmocka tests registered through CTest. add_test() with a target name runs it
+# through CMAKE_CROSSCOMPILING_EMULATOR when cross-building, so the same tests
+# can run under QEMU.
+find_package(PkgConfig REQUIRED)
+
+# piezo_add_cmocka_test(NAME SOURCES src... [LIBS lib...] [GOLDEN kernel...])
+# GOLDEN kernel: generate golden/<kernel>_vectors.h from the host golden model
+# (python -m piezoctl.golden.export <kernel>) and put it on the include path.
+function(piezo_add_cmocka_test name)
+  cmake_parse_arguments(T "" "" "SOURCES;LIBS;GOLDEN" ${ARGN})
+  add_executable(${name} ${T_SOURCES})
+  target_link_libraries(${name} PRIVATE piezo_warnings ${T_LIBS} piezo_cmocka)
+  foreach(kernel IN LISTS T_GOLDEN)
+    piezo_golden_header(${kernel} header)
+    target_sources(${name} PRIVATE ${header})
+  endforeach()
+  target_include_directories(${name} PRIVATE ${CMAKE_BINARY_DIR}/golden)
+  add_test(NAME ${name} COMMAND ${name})
+  set_tests_properties(${name} PROPERTIES ENVIRONMENT "CMOCKA_MESSAGE_OUTPUT=stdout")
+endfunction()
+
+function(piezo_golden_header kernel outvar)
+  set(out ${CMAKE_BINARY_DIR}/golden/${kernel}_vectors.h)
+  if(NOT TARGET golden_${kernel})
+    file(GLOB_RECURSE host_sources CONFIGURE_DEPENDS
+         ${PROJECT_SOURCE_DIR}/host/piezoctl/*.py)
+    add_custom_command(
+      OUTPUT ${out}
+      COMMAND ${CMAKE_COMMAND} -E make_directory ${CMAKE_BINARY_DIR}/golden
+      COMMAND ${PIEZOCTL_PYTHON} -m piezoctl.golden.export ${kernel} -o ${out}
+      DEPENDS ${host_sources}
+      COMMENT "Golden vectors for ${kernel} from the host golden model"
+      VERBATIM)
+    add_custom_target(golden_${kernel} DEPENDS ${out})
+  endif()
+  set(${outvar} ${out} PARENT_SCOPE)
+endfunction()

@@ -1,0 +1,81 @@
+/*
+ * fixed_q.h - the fixed-point primitives every core kernel uses.
+ *
+ * Formats (see docs/fixed-point.md; the names match common/interface.toml):
+ *   q15  int16_t,  Q0.15: signals normalized to full scale, [-1, 1 - 2^-15].
+ *   q24  int32_t,  Q7.24: gains, weights, densities, polynomial coefficients,
+ *                  [-128, 128 - 2^-24].
+ *   q16  int32_t, Q15.16: slopes and scales, [-32768, 32768 - 2^-16].
+ *   accumulators   int64_t, sized per kernel so that they cannot overflow.
+ *
+ * The one rounding rule: a right shift by s > 0 bits adds 2^(s-1) first and
+ * then shifts arithmetically (floor), i.e. round half toward +infinity.
+ * host/piezoctl/fixed.py implements the identical rule ((x + (1 << (s-1))) >> s
+ * on Python integers) and the golden-vector tests prove the two bit for bit.
+ *
+ * Saturation: a value stored as a signal is clamped to the q15 range by
+ * piezo_sat_q15(); nothing else saturates silently.
+ */
+#ifndef PIEZO_FIXED_Q_H
+#define PIEZO_FIXED_Q_H
+
+#include <stdint.h>
+
+#define PIEZO_Q15_MAX INT16_MAX
+#define PIEZO_Q15_MIN INT16_MIN
+#define PIEZO_Q15_ONE 32768L      /* 1.0 in q15 (not representable in int16_t) */
+#define PIEZO_Q24_ONE 16777216L   /* 1.0 in q24 */
+#define PIEZO_Q16_ONE 65536L      /* 1.0 in q16 */
+
+/* The rounding rule relies on >> of a negative signed value being an
+ * arithmetic (floor) shift. C99 leaves it implementation-defined; every
+ * compiler we build with (gcc, clang, arm-none-eabi-gcc) shifts arithmetically,
+ * and this refuses to compile anywhere that does not. */
+typedef char piezo_arith_shift_check_t[((-3L >> 1) == -2L) ? 1 : -1];
+
+/** Round-half-up right shift of a 64-bit value by s bits (1 <= s <= 62). */
+static inline int64_t piezo_rshift_rnd64(int64_t x, unsigned s)
+{
+    return (x + ((int64_t)1 << (s - 1u))) >> s;
+}
+
+/** Round-half-up right shift of a 32-bit value by s bits (1 <= s <= 30). */
+static inline int32_t piezo_rshift_rnd32(int32_t x, unsigned s)
+{
+    return (int32_t)(((int64_t)x + ((int64_t)1 << (s - 1u))) >> s);
+}
+
+/** Clamp a wide value to the q15 range. */
+static inline int16_t piezo_sat_q15(int64_t x)
+{
+    if (x > PIEZO_Q15_MAX) {
+        return PIEZO_Q15_MAX;
+    }
+    if (x < PIEZO_Q15_MIN) {
+        return PIEZO_Q15_MIN;
+    }
+    return (int16_t)x;
+}
+
+/** Clamp a wide value to the int32 range (q24, q16 intermediates). */
+static inline int32_t piezo_sat_i32(int64_t x)
+{
+    if (x > INT32_MAX) {
+        return INT32_MAX;
+    }
+    if (x < INT32_MIN) {
+        return INT32_MIN;
+    }
+    return (int32_t)x;
+}
+
+/** q15 * q24 -> q15 with the rounding rule and saturation. */
+static inline int16_t piezo_mul_q15_q24(int32_t a_q15, int32_t b_q24)
+{
+    return piezo_sat_q15(piezo_rshift_rnd64((int64_t)a_q15 * b_q24, 24u));
+}
+
+static inline int32_t piezo_max_i32(int32_t a, int32_t b) { return a > b ? a : b; }
+static inline int32_t piezo_min_i32(int32_t a, int32_t b) { return a < b ? a : b; }
+
+#endif /* PIEZO_FIXED_Q_H */

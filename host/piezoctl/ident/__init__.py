@@ -1,0 +1,1 @@
+"""Offline identification of model parameters from recordings."""

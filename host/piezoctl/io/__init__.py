@@ -1,0 +1,1 @@
+"""Files the host reads and writes: recordings, model files."""

@@ -1,0 +1,1 @@
+"""float64 reference implementations of the firmware's operators and models."""
