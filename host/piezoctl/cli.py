@@ -1,25 +1,21 @@
 """Command-line entry point: ``piezoctl <command> ...`` (``tools/piezoctl``).
 
-Each command lives in its own module and registers itself in :data:`COMMANDS`
-with ``add_parser(subparsers)`` and ``run(args) -> int``.
+Commands are the modules of :mod:`piezoctl.commands`; each registers itself
+with ``add_parser(subparsers)``. A user error (bad file, bad option) raises
+:class:`CliError` and is printed as one line with exit status 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import pkgutil
 import sys
 
-from . import __version__
+from . import __version__, commands
+from .errors import CliError
 
-# command name -> module implementing add_parser(subparsers) and run(args)
-COMMANDS = {
-    "golden-error": "piezoctl.golden.error_table",
-}
-
-
-class CliError(Exception):
-    """An error the user caused (bad file, bad option): printed as one line, exit 2."""
+__all__ = ["main", "build_parser", "CliError"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,9 +24,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Piezo nanopositioning controller: identify, tabulate, flash, diagnose.")
     ap.add_argument("--version", action="version", version=f"piezoctl {__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND")
-    for name, modname in COMMANDS.items():
-        mod = importlib.import_module(modname)
-        mod.add_parser(sub)
+    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        importlib.import_module(f"{commands.__name__}.{info.name}").add_parser(sub)
     return ap
 
 

@@ -1,4 +1,4 @@
-"""``piezoctl golden-error``: float-versus-fixed error of every core kernel.
+"""Float-versus-fixed error of every core kernel (``piezoctl golden-error``).
 
 For each kernel on a realistic signal, the float64 reference and the bit-exact
 golden model run side by side; the table gives the maximum error in output LSB
@@ -11,7 +11,7 @@ import importlib
 
 import numpy as np
 
-__all__ = ["KERNELS", "error_stats", "rows", "add_parser", "run"]
+__all__ = ["KERNELS", "error_stats", "rows", "markdown"]
 
 # golden modules that provide error_report() -> list of (case, y_float, y_fixed_q15)
 KERNELS = ["kp", "rkp", "dcc", "play", "eupi", "eupi_inv"]
@@ -53,18 +53,3 @@ def markdown(table: list[tuple[str, str, float, float]]) -> str:
     for k, case, mx, snr in table:
         lines.append(f"| {k} | {case} | {mx:.2f} | {snr:.1f} |")
     return "\n".join(lines) + "\n"
-
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("golden-error", help="float-versus-fixed error table of the core kernels")
-    p.add_argument("--out", help="also write the table (Markdown) to this file")
-    p.set_defaults(func=run)
-
-
-def run(args) -> int:
-    text = markdown(rows())
-    print(text, end="")
-    if args.out:
-        with open(args.out, "w", encoding="utf-8") as fh:
-            fh.write(text)
-    return 0
