@@ -1,0 +1,295 @@
+"""Recording CSV files: the drive and the measured displacement of one run.
+
+The contract (``docs/recordings.md``)::
+
+    # sample_rate_hz: 10000          optional metadata lines "# key: value"
+    # device: stage 3
+    t,u,y,u2,x2                      header line: column names
+    0,0.0,0.012,0.0,0.0              one row per sample
+    0.0001,0.5,0.013,0.0,0.001
+
+Columns (order free, names exact): ``t`` time [s], ``u`` drive command [V],
+``y`` measured displacement [um] are required; ``u2`` drive of the other axis
+[V], ``x2`` position of the other axis [um], ``reference`` [um] and ``temp``
+[degC] are optional; any other column is ignored (and may hold anything).
+Every value of a known column must be a finite number and ``t`` must increase
+strictly. A file breaking the contract raises :class:`RecordingError` (a
+:class:`~piezoctl.errors.CliError`: one line naming the file and the line,
+exit status 2 from the CLI).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+from typing import Mapping
+
+import numpy as np
+
+from ..errors import CliError
+
+__all__ = [
+    "Recording", "RecordingError", "load_recording", "save_recording",
+    "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "COLUMN_UNITS",
+]
+
+REQUIRED_COLUMNS = ("t", "u", "y")
+OPTIONAL_COLUMNS = ("u2", "x2", "reference", "temp")
+COLUMN_UNITS = {"t": "s", "u": "V", "y": "um", "u2": "V", "x2": "um",
+                "reference": "um", "temp": "degC"}
+
+_META_RE = re.compile(r"^#\s*([A-Za-z0-9_.\-]+)\s*:\s*(.*?)\s*$")
+
+
+class RecordingError(CliError):
+    """A recording file breaks the contract; the message names file and line."""
+
+
+@dataclasses.dataclass
+class Recording:
+    """One recorded run.
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Time [s], strictly increasing.
+    u : ndarray, shape (T,)
+        Drive command [V].
+    y : ndarray, shape (T,)
+        Measured displacement [um].
+    u2, x2, reference, temp : ndarray, shape (T,), or None
+        Drive of the other axis [V], position of the other axis [um],
+        reference [um], temperature [degC], where recorded.
+    meta : dict of str to str
+        The ``# key: value`` metadata lines, in file order.
+    path : str or None
+        The file it was read from.
+    """
+
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    u2: np.ndarray | None = None
+    x2: np.ndarray | None = None
+    reference: np.ndarray | None = None
+    temp: np.ndarray | None = None
+    meta: dict = dataclasses.field(default_factory=dict)
+    path: str | None = None
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def dt(self) -> float:
+        """Sample period [s]: the median step of ``t``."""
+        if len(self) < 2:
+            raise RecordingError(f"{self.path or 'recording'}: fewer than 2 samples, no sample period")
+        return float(np.median(np.diff(self.t)))
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Sample rate [Hz]: the ``sample_rate_hz`` metadata if given, else 1 / :attr:`dt`."""
+        value = self.meta.get("sample_rate_hz")
+        if value is not None:
+            try:
+                rate = float(value)
+            except ValueError:
+                rate = float("nan")
+            if not (np.isfinite(rate) and rate > 0):
+                raise RecordingError(f"{self.path or 'recording'}: metadata sample_rate_hz "
+                                     f"{value!r} is not a positive number")
+            return rate
+        return 1.0 / self.dt
+
+    def columns(self) -> dict:
+        """The recorded columns (required and present optional ones) by name."""
+        out = {name: getattr(self, name) for name in REQUIRED_COLUMNS}
+        for name in OPTIONAL_COLUMNS:
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
+        return out
+
+
+def _fail(path: str, lineno: int | None, msg: str) -> RecordingError:
+    where = f"{path}: line {lineno}" if lineno is not None else f"{path}"
+    return RecordingError(f"{where}: {msg}")
+
+
+def _read_head(path: str, lines: list[str]) -> tuple[dict, list[str], int]:
+    """Parse metadata and header; return (meta, column names, index of the header line)."""
+    meta: dict[str, str] = {}
+    for i, raw in enumerate(lines):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            m = _META_RE.match(line)
+            if m:
+                meta[m.group(1)] = m.group(2)
+            continue
+        names = [c.strip() for c in line.split(",")]
+        return meta, names, i
+    raise _fail(path, None, "no header line (expected a line of column names such as 't,u,y')")
+
+
+def _locate_bad_row(path: str, lines: list[str], first: int, ncols: int,
+                    use: dict[str, int]) -> RecordingError:
+    """Slow path: find the first data line that does not parse and describe it."""
+    for i in range(first, len(lines)):
+        line = lines[i].strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = line.split(",")
+        if len(fields) != ncols:
+            return _fail(path, i + 1, f"{len(fields)} fields, header has {ncols}")
+        for name, col in use.items():
+            try:
+                float(fields[col])
+            except ValueError:
+                return _fail(path, i + 1, f"column {name!r}: {fields[col].strip()!r} is not a number")
+    return _fail(path, None, "data could not be parsed")
+
+
+def load_recording(path: str | os.PathLike) -> Recording:
+    """Read a recording CSV file (see the module docstring for the contract).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The CSV file.
+
+    Returns
+    -------
+    Recording
+        Arrays in float64 and the metadata.
+
+    Raises
+    ------
+    RecordingError
+        Missing file, no header, a required column missing, a duplicated
+        column, a field that is not a number, a non-finite value, fewer than two
+        rows, or time not strictly increasing. The message is one line naming
+        the file and, where it applies, the line number (1-based, counting
+        metadata and header lines) of the offending row.
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, "r", encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    except OSError as exc:
+        raise _fail(path, None, f"cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise _fail(path, None, "not a text (UTF-8) file") from None
+
+    meta, names, hdr = _read_head(path, lines)
+    seen = set()
+    for name in names:
+        if name in seen and name in COLUMN_UNITS:
+            raise _fail(path, hdr + 1, f"column {name!r} appears twice in the header")
+        seen.add(name)
+    missing = [c for c in REQUIRED_COLUMNS if c not in names]
+    if missing:
+        raise _fail(path, hdr + 1, f"header lacks column(s) {', '.join(missing)} "
+                                   f"(required: t, u, y; found: {','.join(names)})")
+    use = {name: names.index(name) for name in REQUIRED_COLUMNS + OPTIONAL_COLUMNS if name in names}
+
+    # Data lines and their 1-based line numbers (blank and comment lines skipped).
+    first = hdr + 1
+    body = lines[first:]
+    keep = np.fromiter((bool(s.strip()) and not s.lstrip().startswith("#") for s in body),
+                       dtype=bool, count=len(body))
+    lineno = np.nonzero(keep)[0] + first + 1
+    if lineno.size < 2:
+        raise _fail(path, None, f"{lineno.size} data row(s); a recording needs at least 2")
+    data_lines = body if keep.all() else [s for s, k in zip(body, keep) if k]
+
+    cols = list(use.values())
+    try:
+        data = np.loadtxt(data_lines, delimiter=",", usecols=cols, dtype=np.float64, ndmin=2,
+                          comments=None)
+    except ValueError:
+        raise _locate_bad_row(path, lines, first, len(names), use) from None
+    # loadtxt only checks the columns it converts; every row must still have all fields.
+    nfields = np.fromiter((s.count(",") for s in data_lines), dtype=np.int64, count=len(data_lines))
+    bad = np.nonzero(nfields != len(names) - 1)[0]
+    if bad.size:
+        r = int(bad[0])
+        raise _fail(path, int(lineno[r]), f"{nfields[r] + 1} fields, header has {len(names)}")
+
+    finite = np.isfinite(data)
+    if not finite.all():
+        r, c = np.argwhere(~finite)[0]
+        name = list(use)[c]
+        raise _fail(path, int(lineno[r]), f"column {name!r} is {float(data[r, c])!r} (values must be finite numbers)")
+    t = data[:, list(use).index("t")]
+    step = np.diff(t)
+    bad = np.nonzero(step <= 0)[0]
+    if bad.size:
+        r = int(bad[0]) + 1
+        raise _fail(path, int(lineno[r]), f"time not increasing: t = {float(t[r])!r} s after {float(t[r - 1])!r} s")
+
+    arrays = {name: np.ascontiguousarray(data[:, j]) for j, name in enumerate(use)}
+    return Recording(meta=meta, path=path, **arrays)
+
+
+def _fmt_block(block: np.ndarray, fmt_row: str) -> str:
+    return (fmt_row * block.shape[0]) % tuple(block.ravel().tolist())
+
+
+def save_recording(path: str | os.PathLike, rec: Recording | Mapping[str, np.ndarray],
+                   meta: Mapping[str, object] | None = None, precision: int = 10) -> None:
+    """Write a recording CSV file that :func:`load_recording` reads back.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Output file (overwritten).
+    rec : Recording or mapping of str to array_like
+        The columns: a :class:`Recording`, or a mapping with at least ``t``
+        [s], ``u`` [V], ``y`` [um] and optionally the other known columns or
+        any other column (written after the known ones, as given).
+    meta : mapping, optional
+        Metadata written as ``# key: value`` lines; for a :class:`Recording`
+        its own ``meta`` is used when this is None.
+    precision : int
+        Significant digits per value (default 10).
+
+    Raises
+    ------
+    RecordingError
+        Columns of different lengths, a required column missing, or a key or
+        value that would not read back.
+    """
+    path = os.fspath(path)
+    if isinstance(rec, Recording):
+        cols = rec.columns()
+        if meta is None:
+            meta = rec.meta
+    else:
+        cols = dict(rec)
+    missing = [c for c in REQUIRED_COLUMNS if c not in cols]
+    if missing:
+        raise RecordingError(f"{path}: cannot save, column(s) {', '.join(missing)} missing")
+    order = [c for c in REQUIRED_COLUMNS + OPTIONAL_COLUMNS if c in cols]
+    order += [c for c in cols if c not in order]
+    arrays = [np.asarray(cols[c], dtype=np.float64).reshape(-1) for c in order]
+    n = arrays[0].shape[0]
+    if any(a.shape[0] != n for a in arrays):
+        raise RecordingError(f"{path}: cannot save, columns have different lengths "
+                             f"({', '.join(f'{c}={a.shape[0]}' for c, a in zip(order, arrays))})")
+    for c in order:
+        if "," in c or not c.strip():
+            raise RecordingError(f"{path}: cannot save, bad column name {c!r}")
+    data = np.column_stack(arrays) if arrays else np.empty((0, 0))
+    fmt_row = ",".join([f"%.{precision}g"] * len(order)) + "\n"
+    with open(path, "w", encoding="utf-8", newline="\n") as fh:
+        for key, value in (meta or {}).items():
+            text = str(value)
+            if not re.fullmatch(r"[A-Za-z0-9_.\-]+", str(key)) or "\n" in text:
+                raise RecordingError(f"{path}: cannot save metadata {key!r}: {text!r}")
+            fh.write(f"# {key}: {text}\n")
+        fh.write(",".join(order) + "\n")
+        chunk = 50_000
+        for i in range(0, n, chunk):
+            fh.write(_fmt_block(data[i:i + chunk], fmt_row))
