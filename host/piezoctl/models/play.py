@@ -1,0 +1,101 @@
+"""float64 reference of the classical (CPI) and unparallel (UPI) play operators.
+
+The UPI play operator with threshold ``r >= 0`` and slope ``a > 0`` maps an
+input sequence ``u`` to
+
+    F(k) = max(u(k) - r, min(a * (u(k) + r), F(k-1))),    F(-1) = y0,
+
+the minimum taken first, exactly as written. ``a = 1`` gives the classical
+play (backlash) operator of the Prandtl-Ishlinskii (CPI) model. Units: ``u``,
+``r`` and ``F`` share the input's unit (normalized full scale in piezoctl);
+``a`` is dimensionless.
+
+The firmware kernel ``firmware/core/play.c`` computes the same recursion in
+fixed point; ``piezoctl.golden.play`` is its bit-exact model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["play_outputs"]
+
+# Samples per block of the precomputed branch arrays: bounds memory to
+# 2 * _BLOCK * n float64 values however long the input is.
+_BLOCK = 4096
+
+
+def play_outputs(u, r, a=1.0, y0=None) -> np.ndarray:
+    """Outputs of a bank of play operators at every sample.
+
+    Parameters
+    ----------
+    u : ndarray, shape (T,)
+        Input sequence [input unit, e.g. normalized drive].
+    r : array_like, shape (n,)
+        Thresholds, ``r >= 0`` [input unit]. Order does not matter.
+    a : float or array_like, shape (n,), optional
+        Slopes of the upper branch ``a * (u + r)``, ``a > 0``
+        [dimensionless]. 1.0 (default) gives classical play operators; a
+        scalar applies to every operator.
+    y0 : array_like, shape (n,), or None, optional
+        Operator outputs before the first sample, ``F(-1)`` [input unit].
+        ``None`` (default) means 0 for every operator (relaxed, demagnetized
+        state).
+
+    Returns
+    -------
+    ndarray, shape (T, n)
+        ``out[k, i]`` is operator ``i``'s output after sample ``k``.
+
+    Raises
+    ------
+    ValueError
+        On a negative threshold, a non-positive slope, or mismatched shapes.
+
+    Notes
+    -----
+    Vectorized over operators, sequential over time (the recursion is
+    inherently sequential); 300,000 samples of 40 operators take about a
+    second.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> play_outputs(np.array([0.0, 0.5, 1.0, 0.5, 0.0]), [0.25]).ravel()
+    array([0.  , 0.25, 0.75, 0.75, 0.25])
+    """
+    u = np.asarray(u, dtype=np.float64)
+    if u.ndim != 1:
+        raise ValueError("u must be one-dimensional")
+    r = np.atleast_1d(np.asarray(r, dtype=np.float64))
+    if r.ndim != 1:
+        raise ValueError("r must be one-dimensional")
+    n = r.size
+    a = np.broadcast_to(np.asarray(a, dtype=np.float64), (n,)).copy() if np.ndim(a) == 0 \
+        else np.asarray(a, dtype=np.float64)
+    if a.shape != (n,):
+        raise ValueError(f"a must be a scalar or have shape ({n},), got {a.shape}")
+    if np.any(r < 0) or not np.all(np.isfinite(r)):
+        raise ValueError("thresholds r must be finite and >= 0")
+    if np.any(a <= 0) or not np.all(np.isfinite(a)):
+        raise ValueError("slopes a must be finite and > 0")
+    f = np.zeros(n) if y0 is None else np.array(y0, dtype=np.float64).reshape(-1)
+    if f.shape != (n,):
+        raise ValueError(f"y0 must have shape ({n},), got {f.shape}")
+
+    T = u.size
+    out = np.empty((T, n))
+    for k0 in range(0, T, _BLOCK):
+        ub = u[k0:k0 + _BLOCK, None]
+        lo = ub - r                 # lower branch u - r
+        hi = a * (ub + r)           # upper branch a * (u + r)
+        ob = out[k0:k0 + _BLOCK]
+        minimum, maximum = np.minimum, np.maximum
+        for k in range(ub.shape[0]):
+            row = ob[k]
+            minimum(hi[k], f, out=row)
+            maximum(lo[k], row, out=row)
+            f = row
+        f = f.copy()
+    return out
