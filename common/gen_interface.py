@@ -42,6 +42,15 @@ def gauss_lut(spec: dict, fmt: dict) -> list[int]:
             for i in range(n)]
 
 
+def sine_lut(spec: dict, fmt: dict) -> list[int]:
+    """One period of sin, the last sample repeating the first, rounded and clamped."""
+    one = 1 << fmt["frac"]
+    top = (1 << (fmt["bits"] - 1)) - 1
+    n = spec["n"]
+    return [max(-top - 1, min(top, math.floor(math.sin(2.0 * math.pi * (i % (n - 1)) / (n - 1)) * one + 0.5)))
+            for i in range(n)]
+
+
 def check_registers(name: str, regs: list[dict]) -> None:
     used: dict[int, str] = {}
     for r in regs:
@@ -76,6 +85,10 @@ def gen_c(d: dict, crc: int) -> tuple[str, str]:
           f"#define PIEZO_GAUSS_LUT_N {g['n']}",
           f"#define PIEZO_GAUSS_ZMAX_Q16 {int(g['zmax'] * 65536)}L",
           f"extern const int16_t piezo_gauss_lut_q15[PIEZO_GAUSS_LUT_N];", ""]
+    sn = d["luts"]["sine"]
+    h += [f"/* {sn['doc']} */",
+          f"#define PIEZO_SINE_LUT_N {sn['n']}",
+          f"extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];", ""]
     t = d["table"]
     h += [f"/* Table image: {t['doc']} */",
           f"#define PIEZO_TABLE_MAGIC 0x{t['magic']:08X}u",
@@ -112,6 +125,11 @@ def gen_c(d: dict, crc: int) -> tuple[str, str]:
     for i in range(0, len(lut), 12):
         c.append("    " + ", ".join(str(v) for v in lut[i:i + 12]) + ",")
     c += ["};", ""]
+    sine = sine_lut(d["luts"]["sine"], d["qformats"][d["luts"]["sine"]["format"]])
+    c.append("const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N] = {")
+    for i in range(0, len(sine), 12):
+        c.append("    " + ", ".join(str(v) for v in sine[i:i + 12]) + ",")
+    c += ["};", ""]
     return "\n".join(h), "\n".join(c)
 
 
@@ -127,6 +145,8 @@ def gen_py(d: dict, crc: int) -> str:
         f"GAUSS_LUT_N = {g['n']}",
         f"GAUSS_ZMAX = {g['zmax']!r}",
         f"GAUSS_LUT_Q15 = {gauss_lut(g, d['qformats'][g['format']])}",
+        f"SINE_LUT_N = {d['luts']['sine']['n']}",
+        f"SINE_LUT_Q15 = {sine_lut(d['luts']['sine'], d['qformats'][d['luts']['sine']['format']])}",
         f"TABLE_MAGIC = 0x{d['table']['magic']:08X}",
         f"TABLE_MAX_BYTES = {d['table']['max_bytes']}",
         f"TABLE_KINDS = {json.dumps(d['table']['kinds'])}",

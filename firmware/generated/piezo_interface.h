@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 1u
-#define PIEZO_INTERFACE_CRC32 0x4BE1263Cu
+#define PIEZO_INTERFACE_CRC32 0xB397471Bu
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -19,6 +19,10 @@
 #define PIEZO_GAUSS_LUT_N 257
 #define PIEZO_GAUSS_ZMAX_Q16 262144L
 extern const int16_t piezo_gauss_lut_q15[PIEZO_GAUSS_LUT_N];
+
+/* sin over one period, linear interpolation between samples */
+#define PIEZO_SINE_LUT_N 1025
+extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 
 /* Table image: little-endian image: header, payload, CRC-32 (IEEE 802.3, zlib's) over all bytes before it */
 #define PIEZO_TABLE_MAGIC 0x505A5442u

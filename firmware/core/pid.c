@@ -1,0 +1,126 @@
+#include "pid.h"
+
+#include <stddef.h>
+
+#include "fixed_q.h"
+#include "piezo_err.h"
+
+int piezo_pid_init(piezo_pid_t *p, const piezo_pid_coef_t *coef)
+{
+    if (p == NULL || coef == NULL || coef->out_min_q15 > coef->out_max_q15) {
+        return PIEZO_EINVAL;
+    }
+    p->coef = coef;
+    piezo_pid_reset(p);
+    return PIEZO_OK;
+}
+
+void piezo_pid_reset(piezo_pid_t *p)
+{
+    p->integ_q39 = 0;
+    p->e_prev_q15 = 0;
+    p->out_q15 = 0;
+    p->saturated = 0u;
+}
+
+int16_t piezo_pid_process(piezo_pid_t *p, int16_t e_q15)
+{
+    const piezo_pid_coef_t *c = p->coef;
+    const int64_t lo = (int64_t)c->out_min_q15 * PIEZO_Q24_ONE;
+    const int64_t hi = (int64_t)c->out_max_q15 * PIEZO_Q24_ONE;
+    int64_t integ = p->integ_q39;
+    int64_t v;
+    /* anti-windup: hold the integrator while the last output sat at a limit
+     * and the error would push it further out */
+    if (!(p->saturated && ((p->out_q15 >= c->out_max_q15 && e_q15 > 0) ||
+                           (p->out_q15 <= c->out_min_q15 && e_q15 < 0)))) {
+        integ += (int64_t)c->ki_q24 * e_q15;
+        integ = integ > hi ? hi : (integ < lo ? lo : integ);
+    }
+    v = (int64_t)c->kp_q24 * e_q15 + integ +
+        (int64_t)c->kd_q24 * ((int32_t)e_q15 - p->e_prev_q15);
+    v = piezo_rshift_rnd64(v, 24u);
+    p->saturated = (uint8_t)(v > c->out_max_q15 || v < c->out_min_q15);
+    p->out_q15 = (int16_t)(v > c->out_max_q15 ? c->out_max_q15 : (v < c->out_min_q15 ? c->out_min_q15 : v));
+    p->integ_q39 = integ;
+    p->e_prev_q15 = e_q15;
+    return p->out_q15;
+}
+
+int piezo_biquad_init(piezo_biquad_t *f, const piezo_biquad_coef_t *coef)
+{
+    const int32_t lim = 4 * (int32_t)PIEZO_Q24_ONE;
+    if (f == NULL || coef == NULL) {
+        return PIEZO_EINVAL;
+    }
+    if (coef->b0_q24 <= -lim || coef->b0_q24 >= lim || coef->b1_q24 <= -lim || coef->b1_q24 >= lim ||
+        coef->b2_q24 <= -lim || coef->b2_q24 >= lim || coef->a1_q24 <= -lim || coef->a1_q24 >= lim ||
+        coef->a2_q24 <= -lim || coef->a2_q24 >= lim) {
+        return PIEZO_ERANGE;
+    }
+    f->coef = coef;
+    piezo_biquad_reset(f);
+    return PIEZO_OK;
+}
+
+void piezo_biquad_reset(piezo_biquad_t *f)
+{
+    f->x1_q15 = f->x2_q15 = 0;
+    f->y1_q31 = f->y2_q31 = 0;
+}
+
+int16_t piezo_biquad_process(piezo_biquad_t *f, int16_t x_q15)
+{
+    const piezo_biquad_coef_t *c = f->coef;
+    int64_t acc = ((int64_t)c->b0_q24 * x_q15 + (int64_t)c->b1_q24 * f->x1_q15 +
+                   (int64_t)c->b2_q24 * f->x2_q15) * PIEZO_Q16_ONE -
+                  (int64_t)c->a1_q24 * f->y1_q31 - (int64_t)c->a2_q24 * f->y2_q31;
+    int32_t y31 = piezo_sat_i32(piezo_rshift_rnd64(acc, 24u));
+    f->x2_q15 = f->x1_q15;
+    f->x1_q15 = x_q15;
+    f->y2_q31 = f->y1_q31;
+    f->y1_q31 = y31;
+    return piezo_sat_q15(piezo_rshift_rnd64(y31, 16u));
+}
+
+int piezo_limit_init(piezo_limit_t *l, const piezo_limit_coef_t *coef, int16_t start_q15)
+{
+    if (l == NULL || coef == NULL || coef->min_q15 > coef->max_q15 || coef->max_step_q15 < 0) {
+        return PIEZO_EINVAL;
+    }
+    l->coef = coef;
+    piezo_limit_reset(l, start_q15);
+    return PIEZO_OK;
+}
+
+void piezo_limit_reset(piezo_limit_t *l, int16_t start_q15)
+{
+    l->prev_q15 = start_q15;
+    l->flags = 0u;
+}
+
+int16_t piezo_limit_process(piezo_limit_t *l, int16_t u_q15)
+{
+    const piezo_limit_coef_t *c = l->coef;
+    int32_t u = u_q15;
+    l->flags = 0u;
+    if (u > c->max_q15) {
+        u = c->max_q15;
+        l->flags |= PIEZO_LIMIT_CLAMPED;
+    } else if (u < c->min_q15) {
+        u = c->min_q15;
+        l->flags |= PIEZO_LIMIT_CLAMPED;
+    }
+    if (c->max_step_q15 > 0) {
+        int32_t d = u - l->prev_q15;
+        if (d > c->max_step_q15) {
+            u = l->prev_q15 + c->max_step_q15;
+            l->flags |= PIEZO_LIMIT_SLEWED;
+        } else if (d < -c->max_step_q15) {
+            u = l->prev_q15 - c->max_step_q15;
+            l->flags |= PIEZO_LIMIT_SLEWED;
+        }
+    }
+    l->prev_q15 = (int16_t)u;
+    return (int16_t)u;
+}

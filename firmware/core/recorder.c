@@ -1,0 +1,157 @@
+#include "recorder.h"
+
+#include <stddef.h>
+
+#include "piezo_err.h"
+
+int piezo_rec_init(piezo_rec_t *r, int16_t *buf_q15, uint32_t buf_len, uint8_t n_signals)
+{
+    if (r == NULL || buf_q15 == NULL || buf_len == 0u || n_signals == 0u) {
+        return PIEZO_EINVAL;
+    }
+    r->buf_q15 = buf_q15;
+    r->n_signals = n_signals;
+    r->cfg.n_channels = 1u;
+    r->cfg.signal[0] = 0u;
+    r->cfg.decimation = 1u;
+    r->cfg.pretrigger = 0u;
+    r->cfg.trigger = PIEZO_REC_IMMEDIATE;
+    r->cfg.trigger_signal = 0u;
+    r->cfg.trigger_level_q15 = 0;
+    r->buf_len = buf_len;
+    r->capacity = buf_len;
+    piezo_rec_reset(r);
+    return PIEZO_OK;
+}
+
+int piezo_rec_configure(piezo_rec_t *r, const piezo_rec_cfg_t *cfg)
+{
+    uint32_t cap;
+    if (cfg == NULL || cfg->n_channels == 0u || cfg->n_channels > PIEZO_REC_MAX_CHANNELS ||
+        cfg->decimation == 0u || cfg->trigger > PIEZO_REC_FALLING ||
+        cfg->trigger_signal >= r->n_signals) {
+        return PIEZO_EINVAL;
+    }
+    if (r->state == PIEZO_REC_ARMED || r->state == PIEZO_REC_TRIGGERED) {
+        return PIEZO_EORDER;
+    }
+    for (uint8_t i = 0; i < cfg->n_channels; i++) {
+        if (cfg->signal[i] >= r->n_signals) {
+            return PIEZO_EINVAL;
+        }
+    }
+    /* frames that fit: buffer samples / channels, by subtraction (the core
+     * links no division, even outside the tick) */
+    cap = 0u;
+    for (uint32_t left = r->buf_len; left >= cfg->n_channels; left -= cfg->n_channels) {
+        cap++;
+    }
+    if (cfg->pretrigger >= cap) {
+        return PIEZO_ERANGE;
+    }
+    r->cfg = *cfg;
+    r->capacity = cap;
+    piezo_rec_reset(r);
+    return PIEZO_OK;
+}
+
+void piezo_rec_reset(piezo_rec_t *r)
+{
+    r->state = PIEZO_REC_IDLE;
+    r->write = 0u;
+    r->filled = 0u;
+    r->post_left = 0u;
+    r->decim_count = 0u;
+    r->have_last = 0u;
+}
+
+void piezo_rec_arm(piezo_rec_t *r)
+{
+    piezo_rec_reset(r);
+    r->state = PIEZO_REC_ARMED;
+    if (r->cfg.trigger == PIEZO_REC_IMMEDIATE) {
+        piezo_rec_trigger(r);
+    }
+}
+
+void piezo_rec_trigger(piezo_rec_t *r)
+{
+    if (r->state != PIEZO_REC_ARMED) {
+        return;
+    }
+    /* keep at most `pretrigger` frames from before; fill the rest after */
+    if (r->filled > r->cfg.pretrigger) {
+        r->filled = r->cfg.pretrigger;
+    }
+    r->post_left = r->capacity - r->filled;
+    r->state = PIEZO_REC_TRIGGERED;
+}
+
+static void store(piezo_rec_t *r, const int16_t *signals_q15)
+{
+    int16_t *frame = r->buf_q15 + (size_t)r->write * r->cfg.n_channels;
+    for (uint8_t i = 0; i < r->cfg.n_channels; i++) {
+        frame[i] = signals_q15[r->cfg.signal[i]];
+    }
+    if (++r->write == r->capacity) {
+        r->write = 0u;
+    }
+    if (r->filled < r->capacity) {
+        r->filled++;
+    }
+}
+
+void piezo_rec_process(piezo_rec_t *r, const int16_t *signals_q15)
+{
+    if (r->state != PIEZO_REC_ARMED && r->state != PIEZO_REC_TRIGGERED) {
+        return;
+    }
+    if (r->decim_count != 0u) {
+        if (++r->decim_count == r->cfg.decimation) {
+            r->decim_count = 0u;
+        }
+        return;
+    }
+    if (r->cfg.decimation > 1u) {
+        r->decim_count = 1u;
+    }
+    if (r->state == PIEZO_REC_ARMED &&
+        (r->cfg.trigger == PIEZO_REC_RISING || r->cfg.trigger == PIEZO_REC_FALLING)) {
+        int16_t v = signals_q15[r->cfg.trigger_signal];
+        int16_t lvl = r->cfg.trigger_level_q15;
+        if (r->have_last &&
+            ((r->cfg.trigger == PIEZO_REC_RISING && r->last_trigger_q15 < lvl && v >= lvl) ||
+             (r->cfg.trigger == PIEZO_REC_FALLING && r->last_trigger_q15 > lvl && v <= lvl))) {
+            piezo_rec_trigger(r);
+        }
+        r->last_trigger_q15 = v;
+        r->have_last = 1u;
+    }
+    store(r, signals_q15);
+    if (r->state == PIEZO_REC_TRIGGERED && --r->post_left == 0u) {
+        r->state = PIEZO_REC_DONE;
+    }
+}
+
+uint32_t piezo_rec_frames(const piezo_rec_t *r)
+{
+    return r->filled;
+}
+
+int piezo_rec_read(const piezo_rec_t *r, uint32_t k, int16_t *out_q15)
+{
+    uint32_t slot;
+    if (out_q15 == NULL || k >= r->filled) {
+        return PIEZO_ERANGE;
+    }
+    /* oldest frame sits `filled` slots behind the write position */
+    slot = (r->write >= r->filled) ? r->write - r->filled : r->write + r->capacity - r->filled;
+    slot += k;
+    if (slot >= r->capacity) {
+        slot -= r->capacity;
+    }
+    for (uint8_t i = 0; i < r->cfg.n_channels; i++) {
+        out_q15[i] = r->buf_q15[(size_t)slot * r->cfg.n_channels + i];
+    }
+    return PIEZO_OK;
+}

@@ -1,0 +1,4 @@
+# Control-loop building blocks: wave generator, recorder, PID + notch, limiter.
+piezo_add_cmocka_test(test_wave SOURCES test_wave.c LIBS piezo_core m)
+piezo_add_cmocka_test(test_recorder SOURCES test_recorder.c LIBS piezo_core)
+piezo_add_cmocka_test(test_pid SOURCES test_pid.c LIBS piezo_core m)

@@ -1,0 +1,110 @@
+/* Data recorder: triggers, pretrigger, decimation, time-ordered readout. */
+#include "piezo_test.h"
+#include "piezo_err.h"
+#include "recorder.h"
+
+#define NSIG 3
+
+static void feed(piezo_rec_t *r, int16_t counter, int16_t other)
+{
+    int16_t sig[NSIG] = {counter, other, (int16_t)-counter};
+    piezo_rec_process(r, sig);
+}
+
+static void test_immediate_capture_in_order(void **state)
+{
+    (void)state;
+    int16_t buf[20];
+    piezo_rec_t r;
+    piezo_rec_cfg_t c = {.n_channels = 2, .signal = {0, 2}, .decimation = 1, .trigger = PIEZO_REC_IMMEDIATE};
+    assert_int_equal(piezo_rec_init(&r, buf, 20, NSIG), PIEZO_OK);
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_OK);
+    piezo_rec_arm(&r);
+    for (int16_t k = 0; k < 15; k++) {
+        feed(&r, k, 0);
+    }
+    assert_int_equal(r.state, PIEZO_REC_DONE);
+    assert_int_equal(piezo_rec_frames(&r), 10);
+    for (uint32_t k = 0; k < 10; k++) {
+        int16_t f[2];
+        assert_int_equal(piezo_rec_read(&r, k, f), PIEZO_OK);
+        assert_int_equal(f[0], (int)k);
+        assert_int_equal(f[1], -(int)k);
+    }
+    int16_t f[2];
+    assert_int_equal(piezo_rec_read(&r, 10, f), PIEZO_ERANGE);
+}
+
+static void test_rising_trigger_keeps_pretrigger_frames(void **state)
+{
+    (void)state;
+    int16_t buf[16];
+    piezo_rec_t r;
+    piezo_rec_cfg_t c = {.n_channels = 1, .signal = {0}, .decimation = 1, .pretrigger = 4,
+                         .trigger = PIEZO_REC_RISING, .trigger_signal = 1, .trigger_level_q15 = 100};
+    assert_int_equal(piezo_rec_init(&r, buf, 16, NSIG), PIEZO_OK);
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_OK);
+    piezo_rec_arm(&r);
+    for (int16_t k = 0; k < 100; k++) {
+        feed(&r, k, k >= 50 ? 200 : 0); /* crosses 100 upward at k = 50 */
+    }
+    assert_int_equal(r.state, PIEZO_REC_DONE);
+    assert_int_equal(piezo_rec_frames(&r), 16);
+    for (uint32_t k = 0; k < 16; k++) {
+        int16_t f;
+        assert_int_equal(piezo_rec_read(&r, k, &f), PIEZO_OK);
+        assert_int_equal(f, 46 + (int)k); /* 4 frames before the trigger sample */
+    }
+}
+
+static void test_decimation_and_software_trigger(void **state)
+{
+    (void)state;
+    int16_t buf[8];
+    piezo_rec_t r;
+    piezo_rec_cfg_t c = {.n_channels = 1, .signal = {0}, .decimation = 3, .trigger = PIEZO_REC_SOFTWARE};
+    assert_int_equal(piezo_rec_init(&r, buf, 8, NSIG), PIEZO_OK);
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_OK);
+    piezo_rec_arm(&r);
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_EORDER); /* not while armed */
+    for (int16_t k = 0; k < 10; k++) {
+        feed(&r, k, 0);
+    }
+    piezo_rec_trigger(&r);
+    for (int16_t k = 10; k < 100; k++) {
+        feed(&r, k, 0);
+    }
+    assert_int_equal(piezo_rec_frames(&r), 8);
+    int16_t f;
+    assert_int_equal(piezo_rec_read(&r, 0, &f), PIEZO_OK);
+    assert_int_equal(f, 12);
+    assert_int_equal(piezo_rec_read(&r, 7, &f), PIEZO_OK);
+    assert_int_equal(f, 33);
+}
+
+static void test_bad_configuration_is_refused(void **state)
+{
+    (void)state;
+    int16_t buf[8];
+    piezo_rec_t r;
+    assert_int_equal(piezo_rec_init(&r, buf, 8, NSIG), PIEZO_OK);
+    piezo_rec_cfg_t c = {.n_channels = 2, .signal = {0, NSIG}, .decimation = 1};
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_EINVAL);
+    c.signal[1] = 1;
+    c.pretrigger = 4; /* 8 samples / 2 channels = 4 frames: no room after */
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_ERANGE);
+    c.pretrigger = 0;
+    c.decimation = 0;
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_EINVAL);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_immediate_capture_in_order),
+        cmocka_unit_test(test_rising_trigger_keeps_pretrigger_frames),
+        cmocka_unit_test(test_decimation_and_software_trigger),
+        cmocka_unit_test(test_bad_configuration_is_refused),
+    };
+    return cmocka_run_group_tests_name("recorder", tests, NULL, NULL);
+}
