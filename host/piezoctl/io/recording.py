@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import CliError
 
 __all__ = [
-    "Recording", "RecordingError", "load_recording", "save_recording",
+    "Recording", "RecordingError", "load_recording", "save_recording", "write_csv",
     "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "COLUMN_UNITS",
 ]
 
@@ -237,6 +237,59 @@ def _fmt_block(block: np.ndarray, fmt_row: str) -> str:
     return (fmt_row * block.shape[0]) % tuple(block.ravel().tolist())
 
 
+def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray],
+              meta: Mapping[str, object] | None = None, precision: int = 10) -> None:
+    """Write columns as CSV: ``# key: value`` metadata lines, header, rows.
+
+    The general writer behind :func:`save_recording`; it requires no column
+    (``piezoctl simulate`` writes ``t,y`` with it).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Output file (overwritten).
+    columns : mapping of str to array_like
+        Columns in the order to write, all of the same length.
+    meta : mapping, optional
+        Metadata lines.
+    precision : int
+        Significant digits per value (default 10).
+
+    Raises
+    ------
+    RecordingError
+        Columns of different lengths, a bad column name, a metadata key or
+        value that would not read back, or the file cannot be written.
+    """
+    path = os.fspath(path)
+    order = list(columns)
+    arrays = [np.asarray(columns[c], dtype=np.float64).reshape(-1) for c in order]
+    if not arrays:
+        raise RecordingError(f"{path}: cannot save, no columns")
+    n = arrays[0].shape[0]
+    if any(a.shape[0] != n for a in arrays):
+        raise RecordingError(f"{path}: cannot save, columns have different lengths "
+                             f"({', '.join(f'{c}={a.shape[0]}' for c, a in zip(order, arrays))})")
+    for c in order:
+        if "," in c or "\n" in c or not c.strip() or c.strip().startswith("#"):
+            raise RecordingError(f"{path}: cannot save, bad column name {c!r}")
+    data = np.column_stack(arrays)
+    fmt_row = ",".join([f"%.{precision}g"] * len(order)) + "\n"
+    try:
+        with open(path, "w", encoding="utf-8", newline="\n") as fh:
+            for key, value in (meta or {}).items():
+                text = str(value)
+                if not re.fullmatch(r"[A-Za-z0-9_.\-]+", str(key)) or "\n" in text:
+                    raise RecordingError(f"{path}: cannot save metadata {key!r}: {text!r}")
+                fh.write(f"# {key}: {text}\n")
+            fh.write(",".join(order) + "\n")
+            chunk = 50_000
+            for i in range(0, n, chunk):
+                fh.write(_fmt_block(data[i:i + chunk], fmt_row))
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+
 def save_recording(path: str | os.PathLike, rec: Recording | Mapping[str, np.ndarray],
                    meta: Mapping[str, object] | None = None, precision: int = 10) -> None:
     """Write a recording CSV file that :func:`load_recording` reads back.
@@ -273,23 +326,4 @@ def save_recording(path: str | os.PathLike, rec: Recording | Mapping[str, np.nda
         raise RecordingError(f"{path}: cannot save, column(s) {', '.join(missing)} missing")
     order = [c for c in REQUIRED_COLUMNS + OPTIONAL_COLUMNS if c in cols]
     order += [c for c in cols if c not in order]
-    arrays = [np.asarray(cols[c], dtype=np.float64).reshape(-1) for c in order]
-    n = arrays[0].shape[0]
-    if any(a.shape[0] != n for a in arrays):
-        raise RecordingError(f"{path}: cannot save, columns have different lengths "
-                             f"({', '.join(f'{c}={a.shape[0]}' for c, a in zip(order, arrays))})")
-    for c in order:
-        if "," in c or not c.strip():
-            raise RecordingError(f"{path}: cannot save, bad column name {c!r}")
-    data = np.column_stack(arrays) if arrays else np.empty((0, 0))
-    fmt_row = ",".join([f"%.{precision}g"] * len(order)) + "\n"
-    with open(path, "w", encoding="utf-8", newline="\n") as fh:
-        for key, value in (meta or {}).items():
-            text = str(value)
-            if not re.fullmatch(r"[A-Za-z0-9_.\-]+", str(key)) or "\n" in text:
-                raise RecordingError(f"{path}: cannot save metadata {key!r}: {text!r}")
-            fh.write(f"# {key}: {text}\n")
-        fh.write(",".join(order) + "\n")
-        chunk = 50_000
-        for i in range(0, n, chunk):
-            fh.write(_fmt_block(data[i:i + chunk], fmt_row))
+    write_csv(path, {c: cols[c] for c in order}, meta=meta, precision=precision)
