@@ -23,7 +23,7 @@ OUT_C = ROOT / "firmware" / "generated" / "piezo_interface.c"
 OUT_PY = ROOT / "host" / "piezoctl" / "interface.py"
 
 CTYPES = {"uint16": "uint16_t", "int16": "int16_t", "uint32": "uint32_t", "int32": "int32_t"}
-SIZES = {"uint16": 2, "int16": 2, "uint32": 4, "int32": 4}
+SIZES = {"uint16": 2, "int16": 2, "uint32": 4, "int32": 4, "bytes": 1}
 REGS = {"uint16": 1, "int16": 1, "uint32": 2, "int32": 2}
 
 
@@ -61,11 +61,15 @@ def check_registers(name: str, regs: list[dict]) -> None:
             used[a] = r["name"]
 
 
+def field_bytes(f: dict) -> int:
+    return SIZES[f["type"]] * f.get("count", 1)
+
+
 def header_offsets(fields: list[dict]) -> list[tuple[dict, int]]:
     out, off = [], 0
     for f in fields:
         out.append((f, off))
-        off += SIZES[f["type"]]
+        off += field_bytes(f)
     return out
 
 
@@ -97,8 +101,13 @@ def gen_c(d: dict, crc: int) -> tuple[str, str]:
         h.append(f"#define PIEZO_TABLE_KIND_{k.upper()} {v}u")
     hdr = header_offsets(t["header"])
     for f, off in hdr:
-        h.append(f"#define PIEZO_TABLE_HDR_{f['name'].upper()}_OFFSET {off}u  /* {f['type']} */")
-    h.append(f"#define PIEZO_TABLE_HDR_BYTES {sum(SIZES[f['type']] for f in t['header'])}u")
+        h.append(f"#define PIEZO_TABLE_HDR_{f['name'].upper()}_OFFSET {off}u  /* {f['type']}"
+                 + (f" x{f['count']}" if "count" in f else "") + " */")
+    h.append(f"#define PIEZO_TABLE_HDR_BYTES {sum(field_bytes(f) for f in t['header'])}u")
+    for k, v in t["section_types"].items():
+        h.append(f"#define PIEZO_SECTION_TYPE_{k.upper()} {v}u")
+    for k, v in t["reasons"].items():
+        h.append(f"#define PIEZO_TABLE_REASON_{k.upper()} {v}u")
     h.append("")
     mb = d["modbus"]
     h += ["/* Modbus register map (0-based addresses; 32-bit values high word first) */",
@@ -150,9 +159,11 @@ def gen_py(d: dict, crc: int) -> str:
         f"TABLE_MAGIC = 0x{d['table']['magic']:08X}",
         f"TABLE_MAX_BYTES = {d['table']['max_bytes']}",
         f"TABLE_KINDS = {json.dumps(d['table']['kinds'])}",
-        "# (name, type, byte offset) of the table header fields, little-endian",
-        f"TABLE_HEADER = {[(f['name'], f['type'], off) for f, off in hdr]!r}",
-        f"TABLE_HEADER_BYTES = {sum(SIZES[f['type']] for f in d['table']['header'])}",
+        "# (name, type, byte offset, count) of the table header fields, little-endian",
+        f"TABLE_HEADER = {[(f['name'], f['type'], off, f.get('count', 1)) for f, off in hdr]!r}",
+        f"TABLE_HEADER_BYTES = {sum(field_bytes(f) for f in d['table']['header'])}",
+        f"SECTION_TYPES = {json.dumps(d['table']['section_types'])}",
+        f"TABLE_REASONS = {json.dumps(d['table']['reasons'])}",
         f"MODBUS_UNIT_ID = {d['modbus']['unit_id']}",
         f"MODBUS_MAX_WRITE_REGISTERS = {d['modbus']['max_write_registers']}",
         f"MODBUS_MAX_READ_REGISTERS = {d['modbus']['max_read_registers']}",

@@ -2,7 +2,7 @@
 
 # fmt: off
 LAYOUT_VERSION = 1
-INTERFACE_CRC32 = 0xB397471B
+INTERFACE_CRC32 = 0x36D4A9EA
 QFORMATS = {"q15": {"bits": 16, "frac": 15}, "q24": {"bits": 32, "frac": 24}, "q16": {"bits": 32, "frac": 16}}
 GAUSS_LUT_N = 257
 GAUSS_ZMAX = 4.0
@@ -12,9 +12,11 @@ SINE_LUT_Q15 = [0, 201, 402, 603, 804, 1005, 1206, 1407, 1608, 1809, 2009, 2210,
 TABLE_MAGIC = 0x505A5442
 TABLE_MAX_BYTES = 16384
 TABLE_KINDS = {"kp_dcc": 1, "rkp": 2, "eupi_inverse": 3, "cascade": 4, "cross_coupling": 5}
-# (name, type, byte offset) of the table header fields, little-endian
-TABLE_HEADER = [('magic', 'uint32', 0), ('layout_version', 'uint16', 4), ('kind', 'uint16', 6), ('interface_crc', 'uint32', 8), ('payload_len', 'uint32', 12), ('table_version', 'uint32', 16), ('data_hash', 'uint32', 20), ('fit_nrmse_ppm', 'uint32', 24), ('tool_version', 'uint32', 28), ('build_time', 'uint32', 32)]
-TABLE_HEADER_BYTES = 36
+# (name, type, byte offset, count) of the table header fields, little-endian
+TABLE_HEADER = [('magic', 'uint32', 0, 1), ('layout_version', 'uint16', 4, 1), ('kind', 'uint16', 6, 1), ('interface_crc', 'uint32', 8, 1), ('header_bytes', 'uint16', 12, 1), ('n_sections', 'uint16', 14, 1), ('payload_len', 'uint32', 16, 1), ('table_version', 'uint32', 20, 1), ('q_signal_frac', 'uint16', 24, 1), ('q_coef_frac', 'uint16', 26, 1), ('fit_nrmse_ppm', 'uint32', 28, 1), ('tool_version', 'uint32', 32, 1), ('build_time', 'uint32', 36, 1), ('data_sha256', 'bytes', 40, 16)]
+TABLE_HEADER_BYTES = 56
+SECTION_TYPES = {"int16": 1, "int32": 2}
+TABLE_REASONS = {"ok": 0, "bad_magic": 1, "bad_layout_version": 2, "bad_interface_crc": 3, "bad_length": 4, "bad_crc": 5, "bad_kind": 6, "bad_section": 7, "out_of_range": 8, "not_monotonic": 9, "unstable_inverse": 10, "nothing_staged": 11, "locked": 12, "storage_failed": 13, "no_previous": 14}
 MODBUS_UNIT_ID = 1
 MODBUS_MAX_WRITE_REGISTERS = 123
 MODBUS_MAX_READ_REGISTERS = 125

@@ -1,0 +1,1 @@
+"""Coefficient-table images: layout (common/interface.toml), building, parsing."""
