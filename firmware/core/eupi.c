@@ -1,0 +1,118 @@
+/* EUPI hysteresis model (see eupi.h). */
+#include "eupi.h"
+
+#include "fixed_q.h"
+
+int piezo_eupi_check_bank_q15(const struct piezo_play_coef *bank)
+{
+    const size_t n_ops = PIEZO_PLAY_N_OPS(bank->n_r, bank->n_a);
+    if (n_ops > PIEZO_PLAY_MAX_OPS) {
+        return PIEZO_ERANGE;
+    }
+    if (n_ops > 0u && (bank->r_q15 == NULL || bank->w_q24 == NULL)) {
+        return PIEZO_EINVAL;
+    }
+    for (size_t i = 0; i < bank->n_r; i++) {
+        if (bank->r_q15[i] > PIEZO_Q15_MAX) {
+            return PIEZO_EINVAL;
+        }
+    }
+    for (size_t k = 0; k < n_ops; k++) {
+        if (bank->w_q24[k] < 0) {
+            return PIEZO_EINVAL;
+        }
+    }
+    return PIEZO_OK;
+}
+
+int piezo_eupi_check_upi_poly(const struct piezo_play_coef *upi,
+                              const int32_t *p_q24, uint16_t n_p)
+{
+    if (upi->n_r > 0u && upi->n_a == 0u) {
+        return PIEZO_EINVAL; /* a UPI grid needs its slopes */
+    }
+    const int rc = piezo_eupi_check_bank_q15(upi);
+    if (rc != PIEZO_OK) {
+        return rc;
+    }
+    if (n_p > PIEZO_EUPI_MAX_POLY) {
+        return PIEZO_ERANGE;
+    }
+    if (n_p > 0u && p_q24 == NULL) {
+        return PIEZO_EINVAL;
+    }
+    int64_t sum = 0;
+    for (size_t m = 0; m < n_p; m++) {
+        sum += p_q24[m] < 0 ? -(int64_t)p_q24[m] : (int64_t)p_q24[m];
+    }
+    return sum > PIEZO_EUPI_POLY_SUM_MAX_Q24 ? PIEZO_EINVAL : PIEZO_OK;
+}
+
+int piezo_eupi_init(struct piezo_eupi *m, const struct piezo_eupi_coef *coef,
+                    int32_t *state_q15, size_t state_len,
+                    int64_t *work_q39, size_t work_len)
+{
+    if (m == NULL || coef == NULL || state_q15 == NULL) {
+        return PIEZO_EINVAL;
+    }
+    if (coef->a0_q24 <= 0 || coef->cpi.n_a != 0u) {
+        return PIEZO_EINVAL;
+    }
+    int rc = piezo_eupi_check_bank_q15(&coef->cpi);
+    if (rc == PIEZO_OK) {
+        rc = piezo_eupi_check_upi_poly(&coef->upi, coef->p_q24, coef->n_p);
+    }
+    if (rc != PIEZO_OK) {
+        return rc;
+    }
+    const size_t n_cpi = coef->cpi.n_r;
+    if (state_len < n_cpi) {
+        return PIEZO_ERANGE;
+    }
+    struct piezo_play cpi;
+    struct piezo_play upi;
+    rc = piezo_play_init(&cpi, &coef->cpi, state_q15, n_cpi, NULL, 0u);
+    if (rc == PIEZO_OK) {
+        rc = piezo_play_init(&upi, &coef->upi, state_q15 + n_cpi, state_len - n_cpi,
+                             work_q39, work_q39 == NULL ? 0u : work_len);
+    }
+    if (rc != PIEZO_OK) {
+        return rc;
+    }
+    m->coef = coef;
+    m->cpi = cpi;
+    m->upi = upi;
+    return PIEZO_OK;
+}
+
+void piezo_eupi_reset(struct piezo_eupi *m)
+{
+    piezo_play_reset(&m->cpi);
+    piezo_play_reset(&m->upi);
+}
+
+int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
+                            int16_t u_q15)
+{
+    const int64_t c0 = (int64_t)p0_q24 << 15;
+    if (n_p == 0u) {
+        return c0;
+    }
+    /* h = p_Np; h = h * u + p_m down to m = 2; P = p0 + (h * u) * u. */
+    int32_t h = p_q24[n_p - 1u];
+    for (size_t m = n_p - 1u; m > 0u; m--) {
+        h = (int32_t)(piezo_rshift_rnd64((int64_t)h * u_q15, 15u) + p_q24[m - 1u]);
+    }
+    const int32_t hu = (int32_t)piezo_rshift_rnd64((int64_t)h * u_q15, 15u);
+    return (int64_t)hu * u_q15 + c0;
+}
+
+int16_t piezo_eupi_process(struct piezo_eupi *m, int16_t u_q15)
+{
+    const struct piezo_eupi_coef *c = m->coef;
+    int64_t acc = (int64_t)c->a0_q24 * u_q15;
+    acc += piezo_play_process(&m->cpi, u_q15);
+    acc += piezo_play_process(&m->upi, u_q15);
+    acc += piezo_eupi_poly_q39(c->p_q24, c->n_p, c->p0_q24, u_q15);
+    return piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+}

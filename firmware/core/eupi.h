@@ -1,0 +1,104 @@
+/*
+ * eupi.h - extended unparallel Prandtl-Ishlinskii (EUPI) hysteresis model,
+ * one sample per call.
+ *
+ *     y = H[u] = G_CPI[u] + G_UPI[u] + P(u)
+ *     G_CPI[u] = a0 * u + sum_i b_i * F_{r_i,1}[u]          (classical bank)
+ *     G_UPI[u] = sum_i sum_j d_ij * F_{rU_i,a_j}[u]          (unparallel grid)
+ *     P(u)     = p0 + sum_{m=2..Np} p_m * u^m                (Horner)
+ *
+ * with the play operators of play.h.
+ *
+ * Formats and ranges (checked by init):
+ *   u_q15, y_q15      int16_t q15, full scale [-1, 1).
+ *   a0_q24            int32_t Q7.24, > 0.
+ *   cpi               classical bank (n_a == 0): r_q15 thresholds in
+ *                     [0, 32767], non-decreasing; w_q24 = b_i >= 0.
+ *   upi               unparallel grid (n_a >= 1 unless n_r == 0): r_q15 in
+ *                     [0, 32767], non-decreasing; a_q24 = a_j > 0;
+ *                     w_q24 = d_ij >= 0, row-major (i, j).
+ *   p_q24[n_p]        Q7.24 coefficients of u^2 .. u^(n_p + 1),
+ *                     n_p <= PIEZO_EUPI_MAX_POLY, sum |p_m| <= 64.
+ *   p0_q24            Q7.24 constant term.
+ *
+ * Rounding: the play operators as in play.h; each Horner step rounds to Q7.24
+ * with piezo_rshift_rnd64(h * u, 15); the output rounds the Q39 sum once with
+ * piezo_rshift_rnd64(acc, 24).
+ *
+ * Saturation: the output is clamped to q15 by piezo_sat_q15() (the golden model
+ * clamps at the same points); nothing else saturates.
+ *
+ * Initial state: all operator outputs 0 (init and reset).
+ *
+ * Scaling and overflow: with |u| <= 1 and thresholds in [0, 1), classical
+ * outputs stay in [-1, 1) and unparallel outputs in [-2, 1), i.e. below 2^16
+ * in q15 units. A weight is below 2^31 in Q7.24, so each product of the Q39
+ * accumulator is below 2^47 and a0 * u below 2^46; the Horner value h stays
+ * below sum |p_m| + n_p LSB <= 2^30 (fits int32) and P below 2^46 in Q39.
+ * With at most 2 * 256 operators the sum stays below 2^57: the int64
+ * accumulator cannot overflow.
+ */
+#ifndef PIEZO_EUPI_H
+#define PIEZO_EUPI_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "piezo_err.h"
+#include "play.h"
+
+#define PIEZO_EUPI_MAX_POLY 8u                      /* powers u^2 .. u^9 */
+#define PIEZO_EUPI_POLY_SUM_MAX_Q24 ((int64_t)64 << 24)  /* sum |p_m| <= 64 */
+
+/* Entries of the caller's state (int32) and work (int64) arrays. */
+#define PIEZO_EUPI_STATE_LEN(n_cpi, n_upi_r, n_upi_a) \
+    ((size_t)(n_cpi) + (size_t)(n_upi_r) * (size_t)(n_upi_a))
+#define PIEZO_EUPI_WORK_LEN(n_upi_r, n_upi_a) ((size_t)(n_upi_r) * (size_t)(n_upi_a))
+
+/* Coefficients: constant, may be shared. */
+struct piezo_eupi_coef {
+    struct piezo_play_coef cpi;  /* b_i on r_i, classical */
+    struct piezo_play_coef upi;  /* d_ij on (rU_i, a_j) */
+    const int32_t *p_q24;        /* [n_p] coefficients of u^2 .. u^(n_p+1) */
+    int32_t a0_q24;              /* linear gain, > 0 */
+    int32_t p0_q24;              /* constant term */
+    uint16_t n_p;
+};
+
+struct piezo_eupi {
+    const struct piezo_eupi_coef *coef;
+    struct piezo_play cpi;
+    struct piezo_play upi;
+};
+
+/*
+ * Check the coefficients, bind the caller's arrays and reset.
+ * state_q15: PIEZO_EUPI_STATE_LEN(cpi.n_r, upi.n_r, upi.n_a) entries;
+ * work_q39: PIEZO_EUPI_WORK_LEN(upi.n_r, upi.n_a) entries (may be NULL if 0).
+ * Returns PIEZO_OK, PIEZO_EINVAL, PIEZO_EORDER or PIEZO_ERANGE (play.h, plus:
+ * a0 <= 0, a threshold >= 1, a negative weight, sum |p_m| > 64, a classical
+ * bank with slopes or a UPI grid without, n_p > PIEZO_EUPI_MAX_POLY).
+ */
+int piezo_eupi_init(struct piezo_eupi *m, const struct piezo_eupi_coef *coef,
+                    int32_t *state_q15, size_t state_len,
+                    int64_t *work_q39, size_t work_len);
+
+void piezo_eupi_reset(struct piezo_eupi *m);
+
+/* One sample: y_q15 = sat_q15(H[u](k)). */
+int16_t piezo_eupi_process(struct piezo_eupi *m, int16_t u_q15);
+
+/* Shared with eupi_inv.c. */
+
+/* P(u) in Q39 by Horner (see Rounding above); exact for n_p == 0. */
+int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
+                            int16_t u_q15);
+
+/* Checks of the G_UPI + P part common to the model and its inverse. */
+int piezo_eupi_check_upi_poly(const struct piezo_play_coef *upi,
+                              const int32_t *p_q24, uint16_t n_p);
+
+/* Checks that a bank's thresholds are q15 signals (< 1) and weights >= 0. */
+int piezo_eupi_check_bank_q15(const struct piezo_play_coef *bank);
+
+#endif /* PIEZO_EUPI_H */

@@ -1,0 +1,99 @@
+/*
+ * play.h - a bank of classical (CPI) or unparallel (UPI) play operators with
+ * their weighted sum, one sample per call.
+ *
+ * Operator (threshold r >= 0, upper-branch slope a > 0; a = 1 is the
+ * classical play operator):
+ *
+ *     F(k) = max(u(k) - r, min(a * (u(k) + r), F(k-1)))
+ *
+ * the minimum taken first, exactly as written. A bank is either
+ *   - classical (n_a == 0): n_r operators F_{r_i,1}, no multiplication; or
+ *   - unparallel (n_a >= 1): the n_r x n_a grid F_{r_i,a_j}, stored row-major
+ *     (operator k = i * n_a + j).
+ * process() updates every operator and returns sum_k w_k * F_k.
+ *
+ * Formats:
+ *   u_q15, r_q15, f_q15  int32_t holding q15-scaled values (Q16.15): 32768 is
+ *                        1.0 full scale. The container is wide because the
+ *                        inverse compensator feeds a bank with inputs and
+ *                        thresholds beyond [-1, 1) and because UPI outputs
+ *                        reach [-1 - r, 1) for inputs in [-1, 1).
+ *                        Range: |u| <= PIEZO_PLAY_WIDE_MAX_Q15 (32.0 FS),
+ *                        0 <= r <= PIEZO_PLAY_WIDE_MAX_Q15.
+ *   a_q24, w_q24         int32_t Q7.24; a > 0, w any sign.
+ *   return value         int64_t Q39 (q15 * q24), not rounded.
+ *
+ * Rounding: the upper branch a * (u + r) is rounded to q15 with the one rule,
+ * piezo_rshift_rnd64(a * (u + r), 24). init precomputes
+ * off_q39 = a_q24 * r_q15 + 2^23 per operator, so that process() forms
+ * (off_q39 + a_q24 * u_q15) >> 24, which is the same integer with one
+ * multiply-accumulate and no per-tick constant. The lower branch and the
+ * classical upper branch u +- r are exact. The weighted sum is exact.
+ *
+ * Saturation: none; nothing can overflow within the documented ranges.
+ *
+ * Initial state: every operator output is 0 after init and reset (relaxed,
+ * demagnetized actuator at u = 0).
+ *
+ * Scaling and overflow: for |u| <= 2^20 and 0 <= r <= 2^20 (q15-scaled), an
+ * operator output satisfies u - r <= F <= max over past samples of (u - r),
+ * so |F| <= 2^21. The upper branch |a * (u + r)| < 2^31 * 2^21 = 2^52 before
+ * the shift and < 2^28 after it (fits int32). Each weighted term is
+ * |w * F| < 2^31 * 2^21 = 2^52, and at most PIEZO_PLAY_MAX_OPS = 256 = 2^8
+ * terms give |sum| < 2^60: the int64 accumulator has 3 guard bits left.
+ * Inputs in [-1, 1) with thresholds in [0, 1) (the EUPI model) keep
+ * |F| <= 2^16 and |sum| < 2^55.
+ */
+#ifndef PIEZO_PLAY_H
+#define PIEZO_PLAY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "piezo_err.h"
+
+#define PIEZO_PLAY_MAX_OPS 256u                       /* operators per bank */
+#define PIEZO_PLAY_WIDE_MAX_Q15 ((int32_t)1 << 20)    /* 32.0 FS: |u| and r bound */
+
+/* Operators in a bank of n_r thresholds and n_a slopes (n_a = 0: classical). */
+#define PIEZO_PLAY_N_OPS(n_r, n_a) ((size_t)(n_r) * ((n_a) ? (size_t)(n_a) : 1u))
+
+/* Coefficients: constant, may be shared by several instances. */
+struct piezo_play_coef {
+    const int32_t *r_q15;  /* [n_r] thresholds, 0 <= r <= WIDE_MAX, non-decreasing */
+    const int32_t *a_q24;  /* [n_a] upper-branch slopes, > 0; unused if n_a == 0 */
+    const int32_t *w_q24;  /* [PIEZO_PLAY_N_OPS(n_r, n_a)] weights, row-major (i, j) */
+    uint16_t n_r;          /* thresholds */
+    uint16_t n_a;          /* slopes; 0 = classical play operators (a = 1) */
+};
+
+/* Instance: caller-owned; the arrays are the caller's too. */
+struct piezo_play {
+    const struct piezo_play_coef *coef;
+    int32_t *f_q15;        /* [n_ops] operator outputs (state) */
+    int64_t *off_q39;      /* [n_ops] a_j * r_i + 2^23 (UPI banks only) */
+    size_t n_ops;
+};
+
+/*
+ * Check the coefficients, bind the caller's arrays and reset.
+ * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; off_q39 needs as
+ * many for an unparallel bank and may be NULL (off_len 0) for a classical one.
+ * Returns PIEZO_OK, PIEZO_EINVAL (NULL pointer, r < 0 or r > WIDE_MAX,
+ * a <= 0), PIEZO_EORDER (thresholds decreasing) or PIEZO_ERANGE (more than
+ * PIEZO_PLAY_MAX_OPS operators, or an array too short).
+ */
+int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
+                    int32_t *f_q15, size_t f_len, int64_t *off_q39, size_t off_len);
+
+/* Every operator output back to 0. */
+void piezo_play_reset(struct piezo_play *p);
+
+/*
+ * One sample: update every operator with u_q15 (|u_q15| <= WIDE_MAX) and
+ * return sum_k w_q24[k] * F_k in Q39. The outputs stay readable in p->f_q15.
+ */
+int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15);
+
+#endif /* PIEZO_PLAY_H */

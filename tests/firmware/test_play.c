@@ -1,0 +1,208 @@
+/* The CPI/UPI play operator bank against the host golden model, bit for bit. */
+#include <string.h>
+
+#include "piezo_test.h"
+#include "fixed_q.h"
+#include "play.h"
+#include "play_vectors.h"
+
+static int32_t f_buf[PIEZO_PLAY_MAX_OPS];
+static int64_t off_buf[PIEZO_PLAY_MAX_OPS];
+
+static const struct piezo_play_coef cpi_coef = {
+    golden_play_cpi_r_q15, golden_play_cpi_a_q24, golden_play_cpi_w_q24,
+    GOLDEN_PLAY_CPI_NR, GOLDEN_PLAY_CPI_NA,
+};
+static const struct piezo_play_coef upi_coef = {
+    golden_play_upi_r_q15, golden_play_upi_a_q24, golden_play_upi_w_q24,
+    GOLDEN_PLAY_UPI_NR, GOLDEN_PLAY_UPI_NA,
+};
+static const struct piezo_play_coef wide_coef = {
+    golden_play_wide_r_q15, golden_play_wide_a_q24, golden_play_wide_w_q24,
+    GOLDEN_PLAY_WIDE_NR, GOLDEN_PLAY_WIDE_NA,
+};
+
+/* Run one case from reset: the weighted sum of every sample and every
+ * operator output of the first nf samples must equal the golden model's. */
+static void run_case(const char *name, const struct piezo_play_coef *coef,
+                     const int32_t *u, const int64_t *acc, size_t n,
+                     const int32_t *f, size_t nf)
+{
+    struct piezo_play p;
+    assert_int_equal(piezo_play_init(&p, coef, f_buf, PIEZO_PLAY_MAX_OPS,
+                                     off_buf, PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+    const size_t n_ops = PIEZO_PLAY_N_OPS(coef->n_r, coef->n_a);
+    for (size_t k = 0; k < n; k++) {
+        /* assert_golden_i32 compares as long long: exact for int64 too */
+        assert_golden_i32(name, k, piezo_play_process(&p, u[k]), acc[k]);
+        for (size_t i = 0; k < nf && i < n_ops; i++) {
+            assert_golden_i32(name, k * n_ops + i, p.f_q15[i], f[k * n_ops + i]);
+        }
+    }
+}
+
+#define BANK_CASES(bank, BANK, coef)                                              \
+    static void test_##bank##_matches_golden(void **state)                        \
+    {                                                                             \
+        (void)state;                                                              \
+        run_case(#bank " random", &(coef), golden_play_##bank##_random_u,         \
+                 golden_play_##bank##_random_acc, GOLDEN_PLAY_##BANK##_RANDOM_N,  \
+                 golden_play_##bank##_random_f, GOLDEN_PLAY_##BANK##_RANDOM_NF);  \
+        run_case(#bank " realistic", &(coef), golden_play_##bank##_realistic_u,   \
+                 golden_play_##bank##_realistic_acc,                              \
+                 GOLDEN_PLAY_##BANK##_REALISTIC_N,                                \
+                 golden_play_##bank##_realistic_f,                                \
+                 GOLDEN_PLAY_##BANK##_REALISTIC_NF);                              \
+        run_case(#bank " steps", &(coef), golden_play_##bank##_steps_u,           \
+                 golden_play_##bank##_steps_acc, GOLDEN_PLAY_##BANK##_STEPS_N,    \
+                 golden_play_##bank##_steps_f, GOLDEN_PLAY_##BANK##_STEPS_NF);    \
+        run_case(#bank " reversals", &(coef), golden_play_##bank##_reversals_u,   \
+                 golden_play_##bank##_reversals_acc,                              \
+                 GOLDEN_PLAY_##BANK##_REVERSALS_N,                                \
+                 golden_play_##bank##_reversals_f,                                \
+                 GOLDEN_PLAY_##BANK##_REVERSALS_NF);                              \
+        run_case(#bank " constant", &(coef), golden_play_##bank##_constant_u,     \
+                 golden_play_##bank##_constant_acc,                               \
+                 GOLDEN_PLAY_##BANK##_CONSTANT_N,                                 \
+                 golden_play_##bank##_constant_f,                                 \
+                 GOLDEN_PLAY_##BANK##_CONSTANT_NF);                               \
+        run_case(#bank " edges", &(coef), golden_play_##bank##_edges_u,           \
+                 golden_play_##bank##_edges_acc, GOLDEN_PLAY_##BANK##_EDGES_N,    \
+                 golden_play_##bank##_edges_f, GOLDEN_PLAY_##BANK##_EDGES_NF);    \
+    }
+
+BANK_CASES(cpi, CPI, cpi_coef)
+BANK_CASES(upi, UPI, upi_coef)
+BANK_CASES(wide, WIDE, wide_coef)
+
+/* Two instances share one coefficient set: the realistic run goes on across
+ * the split without reset while a second instance runs other input in between
+ * and is reset; the golden model continued from its state at the split. */
+static void test_split_run_carries_state(void **state)
+{
+    (void)state;
+    static int32_t f2[PIEZO_PLAY_MAX_OPS];
+    static int64_t off2[PIEZO_PLAY_MAX_OPS];
+    struct piezo_play a;
+    struct piezo_play b;
+    assert_int_equal(piezo_play_init(&a, &upi_coef, f_buf, PIEZO_PLAY_MAX_OPS,
+                                     off_buf, PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_play_init(&b, &upi_coef, f2, PIEZO_PLAY_MAX_OPS,
+                                     off2, PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+    for (size_t k = 0; k < GOLDEN_PLAY_SPLIT_HALF; k++) {
+        assert_golden_i32("split block 1", k, piezo_play_process(&a, golden_play_split_u[k]),
+                          golden_play_split_acc[k]);
+        (void)piezo_play_process(&b, golden_play_split_u[GOLDEN_PLAY_SPLIT_N - 1u - k]);
+    }
+    piezo_play_reset(&b);
+    for (size_t k = GOLDEN_PLAY_SPLIT_HALF; k < GOLDEN_PLAY_SPLIT_N; k++) {
+        (void)piezo_play_process(&b, -golden_play_split_u[k]);
+        assert_golden_i32("split block 2", k, piezo_play_process(&a, golden_play_split_u[k]),
+                          golden_play_split_acc[k]);
+    }
+}
+
+static void test_reset_zeroes_state(void **state)
+{
+    (void)state;
+    struct piezo_play p;
+    assert_int_equal(piezo_play_init(&p, &upi_coef, f_buf, PIEZO_PLAY_MAX_OPS,
+                                     off_buf, PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+    (void)piezo_play_process(&p, 30000);
+    (void)piezo_play_process(&p, -30000);
+    piezo_play_reset(&p);
+    for (size_t k = 0; k < p.n_ops; k++) {
+        assert_int_equal(p.f_q15[k], 0);
+    }
+    /* From reset the first sample equals the golden first sample. */
+    assert_true(piezo_play_process(&p, golden_play_upi_random_u[0]) ==
+                golden_play_upi_random_acc[0]);
+}
+
+static void test_init_refuses_bad_coefficients(void **state)
+{
+    (void)state;
+    struct piezo_play p;
+    int32_t r[3] = {0, 100, 200};
+    int32_t a[2] = {PIEZO_Q24_ONE, PIEZO_Q24_ONE / 2};
+    int32_t w[6] = {1, 2, 3, 4, 5, 6};
+    struct piezo_play_coef c = {r, a, w, 3, 2};
+    int32_t f[6];
+    int64_t off[6];
+
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_OK);
+    assert_int_equal(piezo_play_init(NULL, &c, f, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, NULL, f, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, NULL, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, NULL, 0), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, f, 5, off, 6), PIEZO_ERANGE);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 5), PIEZO_ERANGE);
+    r[1] = 300; /* not ascending */
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EORDER);
+    r[1] = 200; /* equal thresholds are allowed */
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_OK);
+    r[0] = -1;
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    r[0] = 0;
+    r[2] = PIEZO_PLAY_WIDE_MAX_Q15 + 1;
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    r[2] = PIEZO_PLAY_WIDE_MAX_Q15;
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_OK);
+    a[1] = 0;
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    a[1] = -5;
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    a[1] = 5;
+    c.w_q24 = NULL;
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    c.w_q24 = w;
+    c.n_r = 129; /* 129 x 2 > PIEZO_PLAY_MAX_OPS */
+    assert_int_equal(piezo_play_init(&p, &c, f, 1000, off, 1000), PIEZO_ERANGE);
+    /* A classical bank needs no work array. */
+    c.n_r = 3;
+    c.n_a = 0;
+    assert_int_equal(piezo_play_init(&p, &c, f, 3, NULL, 0), PIEZO_OK);
+}
+
+/* The branches by hand: classical play with r = 0.25 follows the issue's
+ * example of the float reference, and a UPI operator's upper branch. */
+static void test_branches_by_hand(void **state)
+{
+    (void)state;
+    struct piezo_play p;
+    int32_t r[1] = {8192};               /* 0.25 */
+    int32_t w[1] = {PIEZO_Q24_ONE};
+    int32_t a[1] = {PIEZO_Q24_ONE / 2};  /* 0.5 */
+    struct piezo_play_coef c = {r, a, w, 1, 0};
+    int32_t f[1];
+    int64_t off[1];
+    const int32_t u[5] = {0, 16384, 32767, 16384, 0};
+    const int32_t want[5] = {0, 8192, 24575, 24575, 8192};
+    assert_int_equal(piezo_play_init(&p, &c, f, 1, NULL, 0), PIEZO_OK);
+    for (size_t k = 0; k < 5; k++) {
+        (void)piezo_play_process(&p, u[k]);
+        assert_golden_i32("cpi by hand", k, f[0], want[k]);
+    }
+    c.n_a = 1; /* F = max(u - 0.25, min(0.5 (u + 0.25), F)) */
+    assert_int_equal(piezo_play_init(&p, &c, f, 1, off, 1), PIEZO_OK);
+    assert_true(piezo_play_process(&p, -16384) == (int64_t)-4096 * PIEZO_Q24_ONE);
+    assert_int_equal(f[0], -4096);                    /* 0.5 (-0.5 + 0.25) */
+    (void)piezo_play_process(&p, 32767);
+    assert_int_equal(f[0], 24575);                    /* lower branch u - r */
+    (void)piezo_play_process(&p, 3);
+    assert_int_equal(f[0], 4098);                     /* 0.5 (3 + 8192) = 4097.5 -> up */
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_cpi_matches_golden),
+        cmocka_unit_test(test_upi_matches_golden),
+        cmocka_unit_test(test_wide_matches_golden),
+        cmocka_unit_test(test_split_run_carries_state),
+        cmocka_unit_test(test_reset_zeroes_state),
+        cmocka_unit_test(test_init_refuses_bad_coefficients),
+        cmocka_unit_test(test_branches_by_hand),
+    };
+    return cmocka_run_group_tests_name("play", tests, NULL, NULL);
+}
