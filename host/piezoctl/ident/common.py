@@ -19,7 +19,7 @@ from ..errors import CliError
 
 __all__ = [
     "Options", "IdentError", "nrmse", "rmse", "drive_range", "normalize", "fit_stride",
-    "solve_linear", "LinearFit", "add_common_options", "COMMON_OPTION_DESTS", "recording_rows",
+    "solve_linear", "LinearFit", "Gram", "add_common_options", "COMMON_OPTION_DESTS", "recording_rows",
 ]
 
 
@@ -141,10 +141,111 @@ class LinearFit:
         self.rows = int(rows)
 
 
+class Gram:
+    """Normal equations ``A^T A``, ``A^T y`` of a stacked least-squares problem.
+
+    Attributes
+    ----------
+    G : ndarray, shape (P + n_off, P + n_off)
+        Gram matrix; the feature columns first, then the offset columns.
+    b : ndarray, shape (P + n_off,)
+        ``A^T y``.
+    P : int
+        Number of feature columns.
+    n_off : int
+        Number of offset columns (0, 1, or one per file).
+    offset : str
+        ``"shared"``, ``"per-file"`` or ``"none"``.
+    n_files : int
+        Number of files.
+    rows : int
+        Samples accumulated.
+    """
+
+    def __init__(self, features, targets, offset="shared", max_rows=200_000, block=16384):
+        nf = len(features)
+        if nf != len(targets) or nf == 0:
+            raise ValueError("features and targets must be non-empty sequences of equal length")
+        if offset not in ("shared", "per-file", "none"):
+            raise IdentError(f"--offset {offset}: must be shared or per-file")
+        lengths = [len(t) for t in targets]
+        stride = fit_stride(sum(lengths), max_rows)
+        n_off = {"shared": 1, "per-file": nf, "none": 0}[offset]
+        P = None
+        G = b = None
+        rows = 0
+        for f, (X, y) in enumerate(zip(features, targets)):
+            idx = np.arange(0, lengths[f], stride)
+            for s in range(0, idx.size, block):
+                sel = idx[s:s + block]
+                Xb = X(sel) if callable(X) else X[sel]
+                Xb = np.asarray(Xb, dtype=np.float64)
+                if P is None:
+                    P = Xb.shape[1]
+                    G = np.zeros((P + n_off, P + n_off))
+                    b = np.zeros(P + n_off)
+                if n_off:
+                    ones = np.zeros((sel.size, n_off))
+                    ones[:, 0 if offset == "shared" else f] = 1.0
+                    Xb = np.hstack([Xb, ones])
+                yb = np.asarray(y, dtype=np.float64)[sel]
+                G += Xb.T @ Xb
+                b += Xb.T @ yb
+                rows += sel.size
+        self.G, self.b, self.P, self.n_off = G, b, P, n_off
+        self.offset, self.n_files, self.rows = offset, nf, rows
+
+    def solve(self, cols=None, lower=-np.inf, upper=np.inf, ridge=0.0, penalty=None) -> LinearFit:
+        """Bounded least squares on a subset ``cols`` of the feature columns (default all).
+
+        ``lower``, ``upper``, ``penalty`` refer to the selected columns; see
+        :func:`solve_linear` for ``ridge`` and ``penalty``.
+        """
+        P = self.P
+        cols = np.arange(P) if cols is None else np.asarray(cols, dtype=int)
+        p = cols.size
+        sel = np.concatenate([cols, P + np.arange(self.n_off)])
+        G = self.G[np.ix_(sel, sel)].copy()
+        b = self.b[sel]
+        scale = float(np.mean(np.diag(G)[:p])) if p else 0.0
+        if ridge > 0 and p:
+            G[:p, :p] += np.eye(p) * ridge * scale
+        if penalty is not None:
+            G[:p, :p] += np.asarray(penalty, dtype=np.float64) * scale
+        # Column scaling keeps the factorization well conditioned.
+        d = np.sqrt(np.maximum(np.diag(G), 1e-300))
+        Gs = G / d[:, None] / d[None, :]
+        bs = b / d
+        jitter = 1e-12 * float(np.trace(Gs)) / Gs.shape[0]
+        R = linalg.cholesky(Gs + jitter * np.eye(Gs.shape[0]), lower=False)
+        z = linalg.solve_triangular(R, bs, trans="T")
+        lo = np.concatenate([np.broadcast_to(np.asarray(lower, dtype=float), (p,)),
+                             np.full(self.n_off, -np.inf)])
+        hi = np.concatenate([np.broadcast_to(np.asarray(upper, dtype=float), (p,)),
+                             np.full(self.n_off, np.inf)])
+        if np.all(np.isinf(lo)) and np.all(np.isinf(hi)):
+            xs = linalg.solve_triangular(R, z)
+        else:
+            res = optimize.lsq_linear(R, z, bounds=(lo * d, hi * d), method="bvls", tol=1e-12)
+            xs = res.x
+        x = xs / d
+        if self.offset == "shared":
+            offs = np.full(self.n_files, x[p])
+        elif self.offset == "per-file":
+            offs = x[p:]
+        else:
+            offs = np.zeros(self.n_files)
+        out = LinearFit(x[:p], offs, self.rows)
+        # residual sum of squares of the unpenalized problem: |z - R x|^2 is the part
+        # of |A x - y|^2 that depends on x (up to the jitter)
+        out.cost = float(np.sum((R @ xs - z) ** 2))
+        return out
+
+
 def solve_linear(features: Sequence[np.ndarray], targets: Sequence[np.ndarray], *,
                  lower: np.ndarray | float = -np.inf, upper: np.ndarray | float = np.inf,
                  offset: str = "shared", max_rows: int = 200_000, ridge: float = 0.0,
-                 block: int = 16384) -> LinearFit:
+                 penalty: np.ndarray | None = None, block: int = 16384) -> LinearFit:
     """Least squares ``y_f ~ X_f @ coef + c_f`` over files f, with bounds on ``coef``.
 
     Parameters
@@ -164,6 +265,10 @@ def solve_linear(features: Sequence[np.ndarray], targets: Sequence[np.ndarray], 
     ridge : float
         Tikhonov weight, relative to the mean diagonal of the Gram matrix of the
         features (0: none). Offsets are not penalized.
+    penalty : ndarray, shape (P, P), optional
+        A further quadratic penalty ``coef^T K coef`` (e.g. ``D^T D`` of a
+        difference operator), scaled like ``ridge`` by the mean diagonal of the
+        Gram matrix of the features.
     block : int
         Rows per block of the Gram accumulation.
 
@@ -173,66 +278,15 @@ def solve_linear(features: Sequence[np.ndarray], targets: Sequence[np.ndarray], 
 
     Notes
     -----
-    The Gram matrix ``A^T A`` and ``A^T y`` are accumulated in blocks, then
-    factored ``A^T A = R^T R`` (Cholesky, with a relative jitter of 1e-12 for
-    rank deficiency); ``|A x - y|^2 = |R x - z|^2 + const`` with
-    ``R^T z = A^T y``, so the bounded problem is solved on the P x P system
-    by :func:`scipy.optimize.lsq_linear` (bounded-variable least squares).
+    The Gram matrix ``A^T A`` and ``A^T y`` are accumulated in blocks
+    (:class:`Gram`), then factored ``A^T A = R^T R`` (Cholesky, with a
+    relative jitter of 1e-12 for rank deficiency); ``|A x - y|^2 = |R x - z|^2
+    + const`` with ``R^T z = A^T y``, so the bounded problem is solved on the
+    P x P system by :func:`scipy.optimize.lsq_linear` (bounded-variable least
+    squares).
     """
-    nf = len(features)
-    if nf != len(targets) or nf == 0:
-        raise ValueError("features and targets must be non-empty sequences of equal length")
-    lengths = [len(t) for t in targets]
-    stride = fit_stride(sum(lengths), max_rows)
-    n_off = {"shared": 1, "per-file": nf, "none": 0}[offset]
-    P = None
-    G = b = None
-    yy = 0.0
-    rows = 0
-    for f, (X, y) in enumerate(zip(features, targets)):
-        idx = np.arange(0, lengths[f], stride)
-        for s in range(0, idx.size, block):
-            sel = idx[s:s + block]
-            Xb = X(sel) if callable(X) else X[sel]
-            Xb = np.asarray(Xb, dtype=np.float64)
-            if P is None:
-                P = Xb.shape[1]
-                G = np.zeros((P + n_off, P + n_off))
-                b = np.zeros(P + n_off)
-            if n_off:
-                ones = np.zeros((sel.size, n_off))
-                ones[:, 0 if offset == "shared" else f] = 1.0
-                Xb = np.hstack([Xb, ones])
-            yb = np.asarray(y, dtype=np.float64)[sel]
-            G += Xb.T @ Xb
-            b += Xb.T @ yb
-            yy += float(yb @ yb)
-            rows += sel.size
-    if ridge > 0 and P:
-        G[:P, :P] += np.eye(P) * ridge * float(np.mean(np.diag(G)[:P]))
-    # Column scaling keeps the factorization well conditioned.
-    d = np.sqrt(np.maximum(np.diag(G), 1e-300))
-    Gs = G / d[:, None] / d[None, :]
-    bs = b / d
-    jitter = 1e-12 * float(np.trace(Gs)) / Gs.shape[0]
-    R = linalg.cholesky(Gs + jitter * np.eye(Gs.shape[0]), lower=False)
-    z = linalg.solve_triangular(R, bs, trans="T")
-    lo = np.concatenate([np.broadcast_to(np.asarray(lower, dtype=float), (P,)), np.full(n_off, -np.inf)])
-    hi = np.concatenate([np.broadcast_to(np.asarray(upper, dtype=float), (P,)), np.full(n_off, np.inf)])
-    if np.all(np.isinf(lo)) and np.all(np.isinf(hi)):
-        xs = linalg.solve_triangular(R, z)
-    else:
-        res = optimize.lsq_linear(R, z, bounds=(lo * d, hi * d), method="bvls", tol=1e-12)
-        xs = res.x
-    x = xs / d
-    coef = x[:P]
-    if offset == "shared":
-        offs = np.full(nf, x[P])
-    elif offset == "per-file":
-        offs = x[P:]
-    else:
-        offs = np.zeros(nf)
-    return LinearFit(coef, offs, rows)
+    gram = Gram(features, targets, offset=offset, max_rows=max_rows, block=block)
+    return gram.solve(lower=lower, upper=upper, ridge=ridge, penalty=penalty)
 
 
 def simulate_offsets(params: dict, n_files: int) -> list[float]:
