@@ -94,7 +94,7 @@ void piezo_eupi_reset(struct piezo_eupi *m)
 int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
                             int16_t u_q15)
 {
-    const int64_t c0 = (int64_t)p0_q24 << 15;
+    const int64_t c0 = (int64_t)p0_q24 * PIEZO_Q15_ONE; /* Q39; no << of a negative */
     if (n_p == 0u) {
         return c0;
     }
