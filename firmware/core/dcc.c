@@ -1,0 +1,107 @@
+/* dcc.c - KP compensation operators and the DCC law; see dcc.h. */
+#include "dcc.h"
+
+#include "fixed_q.h"
+
+enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coeffs *coeffs,
+                              int32_t *cpsi_q15, int32_t *zo_q15, size_t n_state)
+{
+    if (dcc == NULL || coeffs == NULL || cpsi_q15 == NULL || zo_q15 == NULL ||
+        coeffs->c_q24 == NULL) {
+        return PIEZO_EINVAL;
+    }
+    dcc->coeffs = NULL;
+    const enum piezo_err err = piezo_kp_grid_check(&coeffs->grid);
+    if (err != PIEZO_OK) {
+        return err;
+    }
+    if (n_state < coeffs->grid.n_ops) {
+        return PIEZO_ERANGE;
+    }
+    if (coeffs->g_q24 < 1) {
+        return PIEZO_EINVAL;
+    }
+    dcc->coeffs = coeffs;
+    dcc->cpsi_q15 = cpsi_q15;
+    dcc->zo_q15 = zo_q15;
+    piezo_dcc_reset(dcc);
+    return PIEZO_OK;
+}
+
+void piezo_dcc_reset(struct piezo_dcc *dcc)
+{
+    const struct piezo_kp_grid *g = &dcc->coeffs->grid;
+    for (uint16_t j = 0; j < g->n_ops; j++) {
+        dcc->cpsi_q15[j] = g->nmin_q15;
+        dcc->zo_q15[j] = g->nmin_q15;
+    }
+    dcc->xi_q15 = g->nmin_q15;
+    dcc->v_prev_q15 = g->nmin_q15;
+    dcc->u_last_q15 = g->nmin_q15;
+    dcc->dir = -1;
+}
+
+/* Advance the operators with v and return sum_j Psi_j * c_j (scaled by 2^39). */
+static int64_t dcc_step(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    const struct piezo_kp_grid *g = &dcc->coeffs->grid;
+    const int32_t *c = dcc->coeffs->c_q24;
+    int32_t *cpsi = dcc->cpsi_q15;
+    int32_t *zo = dcc->zo_q15;
+    const uint16_t n = g->n_ops;
+    const int32_t v = v_q15;
+    int64_t acc = 0;
+
+    if (v_q15 != dcc->v_prev_q15) {
+        const int8_t dir = (v_q15 > dcc->v_prev_q15) ? 1 : -1;
+        if (dir != dcc->dir) { /* reversal: remember where it happened */
+            dcc->xi_q15 = dcc->v_prev_q15;
+            for (uint16_t j = 0; j < n; j++) {
+                zo[j] = cpsi[j];
+            }
+            dcc->dir = dir;
+        }
+        const int32_t lin0 = v - dcc->xi_q15; /* v - xi, shared by all operators */
+        if (dir > 0) {
+            const int16_t *th = g->n2_q15;
+            for (uint16_t j = 0; j < n; j++) {
+                const int32_t x = v - th[j];
+                const int32_t cand = (x - piezo_kp_ridge_q15(g, x)) + th[j]; /* ro(x) + n2 */
+                const int32_t lin = lin0 + zo[j];
+                const int32_t p = lin < cand ? lin : cand;
+                cpsi[j] = p;
+                acc += (int64_t)p * c[j];
+            }
+        } else {
+            const int16_t *th = g->n1_q15;
+            for (uint16_t j = 0; j < n; j++) {
+                const int32_t x = v - th[j];
+                const int32_t cand = (x - piezo_kp_ridge_q15(g, x)) + th[j]; /* ro(x) + n1 */
+                const int32_t lin = lin0 + zo[j];
+                const int32_t p = lin > cand ? lin : cand;
+                cpsi[j] = p;
+                acc += (int64_t)p * c[j];
+            }
+        }
+        dcc->v_prev_q15 = v_q15;
+    } else {
+        for (uint16_t j = 0; j < n; j++) {
+            acc += (int64_t)cpsi[j] * c[j];
+        }
+    }
+    return acc;
+}
+
+void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    (void)dcc_step(dcc, v_q15);
+}
+
+int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
+{
+    int64_t acc = dcc_step(dcc, dcc->u_last_q15);
+    acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
+    const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    dcc->u_last_q15 = u;
+    return u;
+}

@@ -1,0 +1,187 @@
+/* KP compensation operators and the DCC law (firmware/core/dcc.c) against the
+ * host golden model (host/piezoctl/golden/dcc.py), bit for bit; the identity
+ * psi_j + Psi_j == v in integers against the KP kernel; init's refusals. */
+#include <string.h>
+
+#include "piezo_test.h"
+#include "dcc.h"
+#include "kp.h"
+#include "dcc_vectors.h"
+
+#define DCC_OF(p)                                                                     \
+    {                                                                                 \
+        .grid = {.n1_q15 = p##_n1, .n2_q15 = p##_n2, .n_ops = p##_NOPS,               \
+                 .nmin_q15 = p##_NMIN, .rmax_q15 = p##_RMAX, .slope_q16 = p##_SLOPE,  \
+                 .xsat_q15 = p##_XSAT},                                               \
+        .c_q24 = p##_c, .g_q24 = p##_G                                                \
+    }
+
+static const struct piezo_dcc_coeffs dcc_std = DCC_OF(dcc_std);
+static const struct piezo_dcc_coeffs dcc_half = DCC_OF(dcc_half);
+static const struct piezo_dcc_coeffs dcc_edge = DCC_OF(dcc_edge);
+
+struct dcc_case {
+    const char *name;
+    const struct piezo_dcc_coeffs *c;
+    const int16_t *yd;
+    const int16_t *u;
+    size_t n;
+};
+
+#define DCC_CASE(name, set) \
+    {#name, &set, dcc_case_##name##_yd, dcc_case_##name##_u, sizeof(dcc_case_##name##_yd) / sizeof(int16_t)},
+static const struct dcc_case cases[] = {DCC_GOLDEN_CASES(DCC_CASE)};
+#define N_CASES (sizeof(cases) / sizeof(cases[0]))
+
+static int32_t cpsi_a[PIEZO_KP_MAX_OPS], zo_a[PIEZO_KP_MAX_OPS];
+static int32_t cpsi_b[PIEZO_KP_MAX_OPS], zo_b[PIEZO_KP_MAX_OPS];
+static int16_t psi_k[PIEZO_KP_MAX_OPS];
+
+static void run_block(struct piezo_dcc *d, const struct dcc_case *c, size_t k0, size_t k1)
+{
+    char label[64];
+    snprintf(label, sizeof label, "dcc %s", c->name);
+    for (size_t k = k0; k < k1; k++) {
+        assert_golden_i32(label, k, piezo_dcc_process(d, c->yd[k]), c->u[k]);
+    }
+}
+
+static const struct dcc_case *find_case(const char *name)
+{
+    for (size_t i = 0; i < N_CASES; i++) {
+        if (strcmp(cases[i].name, name) == 0) {
+            return &cases[i];
+        }
+    }
+    fail_msg("no golden case %s", name);
+    return NULL;
+}
+
+static void test_golden_cases(void **state)
+{
+    (void)state;
+    assert_true(N_CASES >= 9u);
+    for (size_t i = 0; i < N_CASES; i++) {
+        struct piezo_dcc d;
+        assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+        run_block(&d, &cases[i], 0, cases[i].n);
+    }
+}
+
+/* psi_j + Psi_j == v exactly, every operator, every sample, from reset. */
+static void check_identity(const struct piezo_dcc_coeffs *dc, const int16_t *v, size_t n,
+                           const char *name)
+{
+    const struct piezo_kp_coeffs kc = {.grid = dc->grid, .w_q24 = dc->c_q24};
+    struct piezo_kp kp;
+    struct piezo_dcc d;
+    assert_int_equal(piezo_kp_init(&kp, &kc, psi_k, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_init(&d, dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    for (uint16_t j = 0; j < dc->grid.n_ops; j++) {
+        assert_int_equal(psi_k[j] + cpsi_a[j], dc->grid.nmin_q15);
+    }
+    for (size_t k = 0; k < n; k++) {
+        (void)piezo_kp_process(&kp, v[k]);
+        piezo_dcc_ops_update(&d, v[k]);
+        for (uint16_t j = 0; j < dc->grid.n_ops; j++) {
+            if ((int32_t)psi_k[j] + cpsi_a[j] != v[k]) {
+                fail_msg("%s: sample %lu operator %u: psi %d + Psi %ld != v %d", name,
+                         (unsigned long)k, (unsigned)j, psi_k[j], (long)cpsi_a[j], v[k]);
+            }
+        }
+    }
+}
+
+#define N_OF(a) (sizeof(a) / sizeof((a)[0]))
+
+static void test_psi_plus_compensation_is_input(void **state)
+{
+    (void)state;
+    const struct piezo_dcc_coeffs *sets[] = {&dcc_std, &dcc_half, &dcc_edge};
+    for (size_t s = 0; s < N_OF(sets); s++) {
+        check_identity(sets[s], dcc_ops_random_v, N_OF(dcc_ops_random_v), "random");
+        check_identity(sets[s], dcc_ops_alternating_v, N_OF(dcc_ops_alternating_v), "alternating");
+        check_identity(sets[s], dcc_ops_steps_v, N_OF(dcc_ops_steps_v), "steps");
+        check_identity(sets[s], dcc_ops_edges_v, N_OF(dcc_ops_edges_v), "edges");
+        check_identity(sets[s], dcc_ops_realistic_v, N_OF(dcc_ops_realistic_v), "realistic");
+    }
+}
+
+/* Two process loops with a pause (another instance sharing the coefficients
+ * runs in between): the state carries over. */
+static void test_split_run_and_shared_coeffs(void **state)
+{
+    (void)state;
+    const struct dcc_case *c = find_case("realistic");
+    const struct dcc_case *other = find_case("random");
+    struct piezo_dcc a, b;
+    assert_int_equal(piezo_dcc_init(&a, &dcc_std, cpsi_a, zo_a, dcc_std_NOPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_init(&b, &dcc_std, cpsi_b, zo_b, dcc_std_NOPS), PIEZO_OK);
+    const size_t split = c->n / 4u + 1u;
+    run_block(&a, c, 0, split);
+    run_block(&b, other, 0, other->n);
+    run_block(&a, c, split, c->n);
+}
+
+static void test_reset_restores_initial_state(void **state)
+{
+    (void)state;
+    struct piezo_dcc d;
+    assert_int_equal(piezo_dcc_init(&d, &dcc_std, cpsi_a, zo_a, dcc_std_NOPS), PIEZO_OK);
+    run_block(&d, find_case("random"), 0, 321);
+    piezo_dcc_reset(&d);
+    assert_int_equal(d.u_last_q15, dcc_std_NMIN);
+    assert_int_equal(d.dir, -1);
+    for (size_t j = 0; j < dcc_std_NOPS; j++) {
+        assert_int_equal(cpsi_a[j], dcc_std_NMIN);
+        assert_int_equal(zo_a[j], dcc_std_NMIN);
+    }
+    const struct dcc_case *c = find_case("steps");
+    run_block(&d, c, 0, c->n);
+}
+
+static enum piezo_err init_with(const struct piezo_dcc_coeffs *c, size_t n_state)
+{
+    struct piezo_dcc d;
+    return piezo_dcc_init(&d, c, cpsi_a, zo_a, n_state);
+}
+
+static void test_init_refuses_bad_coefficients(void **state)
+{
+    (void)state;
+    struct piezo_dcc d;
+    struct piezo_dcc_coeffs c = dcc_std;
+    assert_int_equal(init_with(&c, dcc_std_NOPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_init(NULL, &c, cpsi_a, zo_a, dcc_std_NOPS), PIEZO_EINVAL);
+    assert_int_equal(piezo_dcc_init(&d, NULL, cpsi_a, zo_a, dcc_std_NOPS), PIEZO_EINVAL);
+    assert_int_equal(piezo_dcc_init(&d, &c, NULL, zo_a, dcc_std_NOPS), PIEZO_EINVAL);
+    assert_int_equal(piezo_dcc_init(&d, &c, cpsi_a, NULL, dcc_std_NOPS), PIEZO_EINVAL);
+    assert_int_equal(init_with(&c, dcc_std_NOPS - 1u), PIEZO_ERANGE);
+    c = dcc_std; c.c_q24 = NULL;
+    assert_int_equal(init_with(&c, dcc_std_NOPS), PIEZO_EINVAL);
+    c = dcc_std; c.g_q24 = 0;
+    assert_int_equal(init_with(&c, dcc_std_NOPS), PIEZO_EINVAL);
+    c = dcc_std; c.g_q24 = -(1 << 24);
+    assert_int_equal(init_with(&c, dcc_std_NOPS), PIEZO_EINVAL);
+    c = dcc_std; c.g_q24 = 1;
+    assert_int_equal(init_with(&c, dcc_std_NOPS), PIEZO_OK);
+    /* the grid is checked too */
+    c = dcc_std; c.grid.n_ops = 0;
+    assert_int_equal(init_with(&c, dcc_std_NOPS), PIEZO_ERANGE);
+    c = dcc_std; c.grid.slope_q16 = 0;
+    assert_int_equal(init_with(&c, dcc_std_NOPS), PIEZO_EINVAL);
+    c = dcc_std; c.grid.n1_q15 = dcc_std_n2; c.grid.n2_q15 = dcc_std_n1; /* swapped */
+    assert_int_equal(init_with(&c, dcc_std_NOPS), PIEZO_EORDER);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_golden_cases),
+        cmocka_unit_test(test_psi_plus_compensation_is_input),
+        cmocka_unit_test(test_split_run_and_shared_coeffs),
+        cmocka_unit_test(test_reset_restores_initial_state),
+        cmocka_unit_test(test_init_refuses_bad_coefficients),
+    };
+    return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);
+}
