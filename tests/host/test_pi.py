@@ -289,3 +289,11 @@ def test_c_header_is_generated(kernel):
     text = mod.c_header()
     assert f"PIEZO_GOLDEN_{kernel.upper()}_VECTORS_H" in text
     assert len(text) < 1_500_000
+
+
+@pytest.mark.parametrize("modname", ["piezoctl.models.play", "piezoctl.models.eupi"])
+def test_docstring_examples_run(modname):
+    import doctest
+    import importlib
+    res = doctest.testmod(importlib.import_module(modname))
+    assert res.attempted > 0 and res.failed == 0
