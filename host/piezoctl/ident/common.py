@@ -236,9 +236,9 @@ class Gram:
         else:
             offs = np.zeros(self.n_files)
         out = LinearFit(x[:p], offs, self.rows)
-        # residual sum of squares of the unpenalized problem: |z - R x|^2 is the part
-        # of |A x - y|^2 that depends on x (up to the jitter)
-        out.cost = float(np.sum((R @ xs - z) ** 2))
+        # |A x - y|^2 = |R x - z|^2 - |z|^2 + |y|^2; z depends on the columns chosen,
+        # so subsets compare by |R x - z|^2 - |z|^2 (same |y|^2 for all)
+        out.cost = float(np.sum((R @ xs - z) ** 2) - np.sum(z ** 2))
         return out
 
 
