@@ -693,6 +693,22 @@ int stage_simulate_file(const char *path, uint64_t seed, double sample_rate_hz, 
     return stage_run(&s, n, u0, u1, y0, y1);
 }
 
+int stage_file_info(const char *path, int *num_axes, double *sample_rate_hz, char *errbuf, size_t errlen)
+{
+    stage_params p;
+    int rc = stage_params_load_json(path, &p, errbuf, errlen);
+    if (rc != STAGE_OK) {
+        return rc;
+    }
+    if (num_axes) {
+        *num_axes = p.num_axes;
+    }
+    if (sample_rate_hz) {
+        *sample_rate_hz = p.sample_rate_hz;
+    }
+    return STAGE_OK;
+}
+
 /* --------------------------------------------------------------- accessors */
 
 double stage_true_um(const stage_t *s, int axis) { return s->ax[axis].x_true; }

@@ -292,6 +292,10 @@ int stage_simulate_file(const char *path, uint64_t seed, double sample_rate_hz, 
                         const double *u0, const double *u1, double *y0, double *y1,
                         char *errbuf, size_t errlen);
 
+/* Loads and checks a parameter file and reports its axis count and sample
+ * rate (for the host binding). */
+int stage_file_info(const char *path, int *num_axes, double *sample_rate_hz, char *errbuf, size_t errlen);
+
 /* Conversions (the same as stage_step uses). */
 int32_t stage_drive_to_dac_code(const stage_t *s, int axis, double u_volts);
 double stage_dac_code_to_volts(const stage_t *s, int axis, int32_t code);
