@@ -26,10 +26,10 @@ try:
 except sil_stage.StageLibraryError as exc:
     _missing = str(exc)
 
-pytestmark = pytest.mark.skipif(_missing is not None, reason=f"C stage model not built: {_missing}")
+needs_lib = pytest.mark.skipif(_missing is not None, reason=f"C stage model not built: {_missing}")
 
 needs_stage_sim = pytest.mark.skipif(
-    not STAGE_SIM.is_file(), reason=f"{STAGE_SIM} not built (cmake --build --preset sil)")
+    _missing is not None or not STAGE_SIM.is_file(), reason=f"{STAGE_SIM} not built (cmake --build --preset sil)")
 
 
 def _drive(n, fs=10000.0):
@@ -79,6 +79,7 @@ def test_binding_equals_the_sil_code_path_bit_for_bit(tmp_path, name, seed):
     assert np.ptp(y) > 10.0
 
 
+@needs_lib
 def test_same_seed_same_samples_other_seed_other_noise():
     params = sil_stage.default_stage_path()
     t, u, _ = _drive(5000)
@@ -90,6 +91,7 @@ def test_same_seed_same_samples_other_seed_other_noise():
     assert np.max(np.abs(a - c)) < 0.05  # 2 nm rms noise: differences stay small
 
 
+@needs_lib
 def test_two_axis_returns_both_axes_and_u2_defaults_to_zero():
     params = sil_stage.default_stage_path("two_axis")
     t, u, _ = _drive(3000)
@@ -101,6 +103,7 @@ def test_two_axis_returns_both_axes_and_u2_defaults_to_zero():
         sil_stage.simulate_stage(sil_stage.default_stage_path(), t, u, u)
 
 
+@needs_lib
 def test_other_sample_rate_from_t():
     params = sil_stage.default_stage_path()
     t10, u10, _ = _drive(2000, fs=10000.0)
@@ -120,6 +123,7 @@ def _bad(tmp_path, text):
     return p
 
 
+@needs_lib
 def test_bad_parameter_files_give_clear_errors(tmp_path):
     t, u, _ = _drive(10)
     p = _bad(tmp_path, '{\n  "axes": [{\n    "hysteresis": {"alpah": 0.3}\n  }]\n}\n')
@@ -145,6 +149,7 @@ def test_missing_library_tells_how_to_build(monkeypatch, tmp_path):
         sil_stage.find_library()
 
 
+@needs_lib
 def test_cli_stage_simulate(tmp_path, capsys):
     params = sil_stage.default_stage_path()
     t, u, _ = _drive(2000)
