@@ -94,7 +94,7 @@ static void axis_default(stage_axis_params *a)
     a->mechanics.enabled = true;
     a->mechanics.n_modes = 2;
     a->mechanics.mode[0].freq_hz = 970.0;
-    a->mechanics.mode[0].damping = 0.03;
+    a->mechanics.mode[0].damping = 0.012;
     a->mechanics.mode[0].gain = 0.97;
     a->mechanics.mode[1].freq_hz = 3100.0;
     a->mechanics.mode[1].damping = 0.02;
