@@ -96,7 +96,10 @@ size_t piezo_rtu_poll(piezo_rtu_t *r, uint32_t now_us, const piezo_mb_regs_t *re
     if (r->unit_id == 0u) {
         return 0u;
     }
-    if ((r->len[r->rx] > 0u || r->broken != 0u) && now_us - r->last_us >= r->t35_us) {
+    /* A frame already waiting goes first; one ended by this silence waits
+     * for the next poll. */
+    if (r->ready == 0u && (r->len[r->rx] > 0u || r->broken != 0u) &&
+        now_us - r->last_us >= r->t35_us) {
         end_frame(r);
     }
     if (r->ready == 0u) {

@@ -91,7 +91,9 @@ void piezo_rtu_rx(piezo_rtu_t *r, const uint8_t *data, size_t n, uint32_t now_us
 /* Ends a frame after t3.5 of silence, runs a complete request through the PDU
  * server and writes the reply frame (address, PDU, CRC) to reply. Returns the
  * reply length to transmit, or 0 when there is nothing to send (no complete
- * request, a dropped frame, a broadcast, or cap < PIEZO_RTU_ADU_MAX). */
+ * request, a dropped frame, a broadcast, or cap < PIEZO_RTU_ADU_MAX). One
+ * request per call: a frame ended by silence while another waited is
+ * processed by the next call. */
 size_t piezo_rtu_poll(piezo_rtu_t *r, uint32_t now_us, const piezo_mb_regs_t *regs,
                       uint8_t *reply, size_t cap);
 

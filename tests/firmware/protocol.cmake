@@ -5,3 +5,4 @@ target_link_libraries(test_modbus_regs PUBLIC piezo_protocol PRIVATE piezo_warni
 target_include_directories(test_modbus_regs PUBLIC ${CMAKE_CURRENT_SOURCE_DIR})
 
 piezo_add_cmocka_test(test_modbus_pdu SOURCES test_modbus_pdu.c LIBS test_modbus_regs)
+piezo_add_cmocka_test(test_modbus_rtu SOURCES test_modbus_rtu.c LIBS test_modbus_regs)
