@@ -1,0 +1,1 @@
+"""Benchmarks of the host tool (identification on real recordings, speed)."""
