@@ -50,6 +50,7 @@ static int64_t dcc_step(struct piezo_dcc *dcc, int16_t v_q15)
     int32_t *zo = dcc->zo_q15;
     const uint16_t n = g->n_ops;
     const int32_t v = v_q15;
+    const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
     int64_t acc = 0;
 
     if (v_q15 != dcc->v_prev_q15) {
@@ -66,7 +67,7 @@ static int64_t dcc_step(struct piezo_dcc *dcc, int16_t v_q15)
             const int16_t *th = g->n2_q15;
             for (uint16_t j = 0; j < n; j++) {
                 const int32_t x = v - th[j];
-                const int32_t cand = (x - piezo_kp_ridge_q15(g, x)) + th[j]; /* ro(x) + n2 */
+                const int32_t cand = (x - piezo_kp_ridge_k(x, slope, xsat, rmax)) + th[j]; /* ro(x) + n2 */
                 const int32_t lin = lin0 + zo[j];
                 const int32_t p = lin < cand ? lin : cand;
                 cpsi[j] = p;
@@ -76,7 +77,7 @@ static int64_t dcc_step(struct piezo_dcc *dcc, int16_t v_q15)
             const int16_t *th = g->n1_q15;
             for (uint16_t j = 0; j < n; j++) {
                 const int32_t x = v - th[j];
-                const int32_t cand = (x - piezo_kp_ridge_q15(g, x)) + th[j]; /* ro(x) + n1 */
+                const int32_t cand = (x - piezo_kp_ridge_k(x, slope, xsat, rmax)) + th[j]; /* ro(x) + n1 */
                 const int32_t lin = lin0 + zo[j];
                 const int32_t p = lin > cand ? lin : cand;
                 cpsi[j] = p;

@@ -63,12 +63,13 @@ int64_t piezo_kp_step(const struct piezo_kp_grid *g, int16_t *psi_q15, int16_t u
 {
     const uint16_t n = g->n_ops;
     const int32_t u = u_q15;
+    const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
     int64_t acc = 0;
     /* The direction is decided once per tick; each loop is branch-light. */
     if (u_q15 > u_prev_q15) {
         const int16_t *th = g->n2_q15;
         for (uint16_t j = 0; j < n; j++) {
-            const int32_t r = piezo_kp_ridge_q15(g, u - th[j]);
+            const int32_t r = piezo_kp_ridge_k(u - th[j], slope, xsat, rmax);
             int32_t p = psi_q15[j];
             if (r > p) {
                 p = r;
@@ -79,7 +80,7 @@ int64_t piezo_kp_step(const struct piezo_kp_grid *g, int16_t *psi_q15, int16_t u
     } else if (u_q15 < u_prev_q15) {
         const int16_t *th = g->n1_q15;
         for (uint16_t j = 0; j < n; j++) {
-            const int32_t r = piezo_kp_ridge_q15(g, u - th[j]);
+            const int32_t r = piezo_kp_ridge_k(u - th[j], slope, xsat, rmax);
             int32_t p = psi_q15[j];
             if (r < p) {
                 p = r;

@@ -81,16 +81,23 @@ struct piezo_kp {
     int16_t u_prev_q15;     /* previous input */
 };
 
-/** The ridge r(x) of a grid, x = input - threshold (|x| <= 65535). */
-static inline int32_t piezo_kp_ridge_q15(const struct piezo_kp_grid *g, int32_t x)
+/** The ridge with its constants passed in (loops keep them in registers). */
+static inline int32_t piezo_kp_ridge_k(int32_t x, int32_t slope_q16, int32_t xsat_q15,
+                                       int32_t rmax_q15)
 {
     if (x <= 0) {
         return 0;
     }
-    if (x >= g->xsat_q15) {
-        return g->rmax_q15;
+    if (x >= xsat_q15) {
+        return rmax_q15;
     }
-    return (x * g->slope_q16 + 32768) >> 16; /* rshift_rnd(x*slope, 16); < 2^31 */
+    return (x * slope_q16 + 32768) >> 16; /* rshift_rnd(x*slope, 16); < 2^31 */
+}
+
+/** The ridge r(x) of a grid, x = input - threshold (|x| <= 65535). */
+static inline int32_t piezo_kp_ridge_q15(const struct piezo_kp_grid *g, int32_t x)
+{
+    return piezo_kp_ridge_k(x, g->slope_q16, g->xsat_q15, g->rmax_q15);
 }
 
 /**
