@@ -106,6 +106,8 @@ def gen_c(d: dict, crc: int) -> tuple[str, str]:
     h.append(f"#define PIEZO_TABLE_HDR_BYTES {sum(field_bytes(f) for f in t['header'])}u")
     for k, v in t["section_types"].items():
         h.append(f"#define PIEZO_SECTION_TYPE_{k.upper()} {v}u")
+    for k, v in t["sections"].items():
+        h.append(f"#define PIEZO_SECTION_{k.upper()} {v['id']}u  /* {v['type']}: {v['doc']} */")
     for k, v in t["reasons"].items():
         h.append(f"#define PIEZO_TABLE_REASON_{k.upper()} {v}u")
     h.append("")
@@ -164,6 +166,8 @@ def gen_py(d: dict, crc: int) -> str:
         f"TABLE_HEADER_BYTES = {sum(field_bytes(f) for f in d['table']['header'])}",
         f"SECTION_TYPES = {json.dumps(d['table']['section_types'])}",
         f"TABLE_REASONS = {json.dumps(d['table']['reasons'])}",
+        "# section name -> (id, type, kinds)",
+        f"TABLE_SECTIONS = {({k: (v['id'], v['type'], v['kinds']) for k, v in d['table']['sections'].items()})!r}",
         f"MODBUS_UNIT_ID = {d['modbus']['unit_id']}",
         f"MODBUS_MAX_WRITE_REGISTERS = {d['modbus']['max_write_registers']}",
         f"MODBUS_MAX_READ_REGISTERS = {d['modbus']['max_read_registers']}",
@@ -186,6 +190,9 @@ def main(argv: list[str] | None = None) -> int:
         d = tomllib.load(fh)
     for space in ("input", "holding"):
         check_registers(space, d["modbus"][space])
+    ids = [v["id"] for v in d["table"]["sections"].values()]
+    if len(set(ids)) != len(ids):
+        raise SystemExit("gen-interface: duplicate table section id")
     crc = canonical_crc(d)
     h, c = gen_c(d, crc)
     outputs = {OUT_H: h, OUT_C: c, OUT_PY: gen_py(d, crc)}

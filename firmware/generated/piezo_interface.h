@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 1u
-#define PIEZO_INTERFACE_CRC32 0x36D4A9EAu
+#define PIEZO_INTERFACE_CRC32 0xB2DDA6D2u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -49,6 +49,23 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_TABLE_HDR_BYTES 56u
 #define PIEZO_SECTION_TYPE_INT16 1u
 #define PIEZO_SECTION_TYPE_INT32 2u
+#define PIEZO_SECTION_CTL_SCALARS 1u  /* int32: [open_loop_gain_q24, y_to_u_gain_q24]: drive per displacement (uncompensated mode); displacement to the DCC law's units */
+#define PIEZO_SECTION_KP_GRID 10u  /* int32: [nmin_q15, rmax_q15, slope_q16, xsat_q15] */
+#define PIEZO_SECTION_KP_N1_Q15 11u  /* int16: falling thresholds of the KP operators */
+#define PIEZO_SECTION_KP_N2_Q15 12u  /* int16: rising thresholds of the KP operators */
+#define PIEZO_SECTION_DCC_C_Q24 13u  /* int32: DCC weights c_j = g * w_j (KP density times the gain) */
+#define PIEZO_SECTION_DCC_G_Q24 14u  /* int32: [g]: DCC gain, 1 / sum of the density, >= 1 LSB */
+#define PIEZO_SECTION_RKP_THETA_Q24 20u  /* int32: g * Theta, Gaussian by Gaussian: theta[m * n_ops + j] (the DCC gain folded in) */
+#define PIEZO_SECTION_RKP_CENTER_Q24 21u  /* int32: rate centers [FS per sample] */
+#define PIEZO_SECTION_RKP_INV_WIDTH_Q16 22u  /* int32: inverse widths [samples per FS] */
+#define PIEZO_SECTION_RKP_ALPHA_Q16 23u  /* int32: [alpha_q16]: rate filter coefficient */
+#define PIEZO_SECTION_EUPI_INV_SCALARS 30u  /* int32: [a0_inv_q24, kex_q24, p0_q24, a0_q24]: a0_q24 is the forward a0, for the firmware's own small-gain check */
+#define PIEZO_SECTION_EUPI_CPI_INV_R_Q15 31u  /* int32: thresholds r' of the inverse CPI model */
+#define PIEZO_SECTION_EUPI_CPI_INV_W_Q24 32u  /* int32: weights b' of the inverse CPI model */
+#define PIEZO_SECTION_EUPI_UPI_R_Q15 33u  /* int32: UPI thresholds */
+#define PIEZO_SECTION_EUPI_UPI_A_Q24 34u  /* int32: UPI slopes */
+#define PIEZO_SECTION_EUPI_UPI_W_Q24 35u  /* int32: UPI weights d, row-major (threshold, slope) */
+#define PIEZO_SECTION_EUPI_POLY_Q24 36u  /* int32: polynomial coefficients of u^2 .. u^(n_p + 1) */
 #define PIEZO_TABLE_REASON_OK 0u
 #define PIEZO_TABLE_REASON_BAD_MAGIC 1u
 #define PIEZO_TABLE_REASON_BAD_LAYOUT_VERSION 2u
@@ -64,6 +81,7 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_TABLE_REASON_LOCKED 12u
 #define PIEZO_TABLE_REASON_STORAGE_FAILED 13u
 #define PIEZO_TABLE_REASON_NO_PREVIOUS 14u
+#define PIEZO_TABLE_REASON_BUSY 15u
 
 /* Modbus register map (0-based addresses; 32-bit values high word first) */
 #define PIEZO_MODBUS_UNIT_ID 1u

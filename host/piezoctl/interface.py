@@ -2,7 +2,7 @@
 
 # fmt: off
 LAYOUT_VERSION = 1
-INTERFACE_CRC32 = 0x36D4A9EA
+INTERFACE_CRC32 = 0xB2DDA6D2
 QFORMATS = {"q15": {"bits": 16, "frac": 15}, "q24": {"bits": 32, "frac": 24}, "q16": {"bits": 32, "frac": 16}}
 GAUSS_LUT_N = 257
 GAUSS_ZMAX = 4.0
@@ -16,7 +16,9 @@ TABLE_KINDS = {"kp_dcc": 1, "rkp": 2, "eupi_inverse": 3, "cascade": 4, "cross_co
 TABLE_HEADER = [('magic', 'uint32', 0, 1), ('layout_version', 'uint16', 4, 1), ('kind', 'uint16', 6, 1), ('interface_crc', 'uint32', 8, 1), ('header_bytes', 'uint16', 12, 1), ('n_sections', 'uint16', 14, 1), ('payload_len', 'uint32', 16, 1), ('table_version', 'uint32', 20, 1), ('q_signal_frac', 'uint16', 24, 1), ('q_coef_frac', 'uint16', 26, 1), ('fit_nrmse_ppm', 'uint32', 28, 1), ('tool_version', 'uint32', 32, 1), ('build_time', 'uint32', 36, 1), ('data_sha256', 'bytes', 40, 16)]
 TABLE_HEADER_BYTES = 56
 SECTION_TYPES = {"int16": 1, "int32": 2}
-TABLE_REASONS = {"ok": 0, "bad_magic": 1, "bad_layout_version": 2, "bad_interface_crc": 3, "bad_length": 4, "bad_crc": 5, "bad_kind": 6, "bad_section": 7, "out_of_range": 8, "not_monotonic": 9, "unstable_inverse": 10, "nothing_staged": 11, "locked": 12, "storage_failed": 13, "no_previous": 14}
+TABLE_REASONS = {"ok": 0, "bad_magic": 1, "bad_layout_version": 2, "bad_interface_crc": 3, "bad_length": 4, "bad_crc": 5, "bad_kind": 6, "bad_section": 7, "out_of_range": 8, "not_monotonic": 9, "unstable_inverse": 10, "nothing_staged": 11, "locked": 12, "storage_failed": 13, "no_previous": 14, "busy": 15}
+# section name -> (id, type, kinds)
+TABLE_SECTIONS = {'ctl_scalars': (1, 'int32', ['kp_dcc', 'rkp', 'eupi_inverse']), 'kp_grid': (10, 'int32', ['kp_dcc', 'rkp']), 'kp_n1_q15': (11, 'int16', ['kp_dcc', 'rkp']), 'kp_n2_q15': (12, 'int16', ['kp_dcc', 'rkp']), 'dcc_c_q24': (13, 'int32', ['kp_dcc']), 'dcc_g_q24': (14, 'int32', ['kp_dcc', 'rkp']), 'rkp_theta_q24': (20, 'int32', ['rkp']), 'rkp_center_q24': (21, 'int32', ['rkp']), 'rkp_inv_width_q16': (22, 'int32', ['rkp']), 'rkp_alpha_q16': (23, 'int32', ['rkp']), 'eupi_inv_scalars': (30, 'int32', ['eupi_inverse']), 'eupi_cpi_inv_r_q15': (31, 'int32', ['eupi_inverse']), 'eupi_cpi_inv_w_q24': (32, 'int32', ['eupi_inverse']), 'eupi_upi_r_q15': (33, 'int32', ['eupi_inverse']), 'eupi_upi_a_q24': (34, 'int32', ['eupi_inverse']), 'eupi_upi_w_q24': (35, 'int32', ['eupi_inverse']), 'eupi_poly_q24': (36, 'int32', ['eupi_inverse'])}
 MODBUS_UNIT_ID = 1
 MODBUS_MAX_WRITE_REGISTERS = 123
 MODBUS_MAX_READ_REGISTERS = 125

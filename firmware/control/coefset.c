@@ -1,0 +1,296 @@
+#include "coefset.h"
+
+#include <stddef.h>
+#include <string.h>
+
+#include "fixed_q.h"
+#include "piezo_interface.h"
+#include "table_image.h"
+
+/* Maps a kernel init error to the reason a commit reports. */
+static uint16_t reason_of(int err)
+{
+    switch (err) {
+    case PIEZO_OK:
+        return PIEZO_TABLE_REASON_OK;
+    case PIEZO_EORDER:
+        return PIEZO_TABLE_REASON_NOT_MONOTONIC;
+    case PIEZO_ERANGE:
+        return PIEZO_TABLE_REASON_BAD_LENGTH;
+    default:
+        return PIEZO_TABLE_REASON_OUT_OF_RANGE;
+    }
+}
+
+/* The section `id` with the given type and lo <= count <= hi, or a reason. */
+static uint16_t need(const piezo_table_info_t *info, uint16_t id, uint16_t type, uint32_t lo, uint32_t hi,
+                     const piezo_section_t **out)
+{
+    const piezo_section_t *s = piezo_table_section(info, id);
+    if (s == NULL || s->type != type) {
+        return PIEZO_TABLE_REASON_BAD_SECTION;
+    }
+    if (s->count < lo || s->count > hi) {
+        return PIEZO_TABLE_REASON_BAD_LENGTH;
+    }
+    *out = s;
+    return PIEZO_TABLE_REASON_OK;
+}
+
+static void copy_i32(int32_t *dst, const piezo_section_t *s)
+{
+    for (uint32_t i = 0; i < s->count; i++) {
+        dst[i] = piezo_section_i32(s, i);
+    }
+}
+
+static int fits_q15(int32_t v)
+{
+    return v >= PIEZO_Q15_MIN && v <= PIEZO_Q15_MAX;
+}
+
+/* The KP grid shared by kp_dcc and rkp: thresholds and ridge, up to max_ops. */
+static uint16_t load_grid(piezo_coefset_t *cs, const piezo_table_info_t *info, uint32_t max_ops)
+{
+    const piezo_section_t *g, *n1, *n2;
+    uint16_t r;
+    struct piezo_kp_grid *grid = &cs->dcc.grid;
+    if ((r = need(info, PIEZO_SECTION_KP_GRID, PIEZO_SECTION_TYPE_INT32, 4u, 4u, &g)) != 0u ||
+        (r = need(info, PIEZO_SECTION_KP_N1_Q15, PIEZO_SECTION_TYPE_INT16, 1u, max_ops, &n1)) != 0u ||
+        (r = need(info, PIEZO_SECTION_KP_N2_Q15, PIEZO_SECTION_TYPE_INT16, n1->count, n1->count, &n2)) != 0u) {
+        return r;
+    }
+    for (uint32_t i = 0; i < n1->count; i++) {
+        cs->n1_q15[i] = piezo_section_i16(n1, i);
+        cs->n2_q15[i] = piezo_section_i16(n2, i);
+    }
+    if (!fits_q15(piezo_section_i32(g, 0)) || !fits_q15(piezo_section_i32(g, 1))) {
+        return PIEZO_TABLE_REASON_OUT_OF_RANGE;
+    }
+    grid->n1_q15 = cs->n1_q15;
+    grid->n2_q15 = cs->n2_q15;
+    grid->n_ops = (uint16_t)n1->count;
+    grid->nmin_q15 = (int16_t)piezo_section_i32(g, 0);
+    grid->rmax_q15 = (int16_t)piezo_section_i32(g, 1);
+    grid->slope_q16 = piezo_section_i32(g, 2);
+    grid->xsat_q15 = piezo_section_i32(g, 3);
+    cs->rkp.grid = *grid;
+    return PIEZO_TABLE_REASON_OK;
+}
+
+static uint16_t load_dcc_gain(piezo_coefset_t *cs, const piezo_table_info_t *info)
+{
+    const piezo_section_t *s;
+    uint16_t r = need(info, PIEZO_SECTION_DCC_G_Q24, PIEZO_SECTION_TYPE_INT32, 1u, 1u, &s);
+    if (r == 0u) {
+        cs->dcc.g_q24 = piezo_section_i32(s, 0);
+    }
+    return r;
+}
+
+static uint16_t load_kp_dcc(piezo_coefset_t *cs, piezo_ff_state_t *ff, const piezo_table_info_t *info)
+{
+    const piezo_section_t *c;
+    uint16_t r;
+    if ((r = load_grid(cs, info, PIEZO_CS_MAX_KP_OPS)) != 0u || (r = load_dcc_gain(cs, info)) != 0u ||
+        (r = need(info, PIEZO_SECTION_DCC_C_Q24, PIEZO_SECTION_TYPE_INT32, cs->dcc.grid.n_ops,
+                  cs->dcc.grid.n_ops, &c)) != 0u) {
+        return r;
+    }
+    copy_i32(cs->c_q24, c);
+    cs->dcc.c_q24 = cs->c_q24;
+    return reason_of(piezo_dcc_init(&ff->dcc, &cs->dcc, ff->cpsi_q15, ff->zo_q15, PIEZO_CS_MAX_KP_OPS));
+}
+
+static uint16_t load_rkp(piezo_coefset_t *cs, piezo_ff_state_t *ff, const piezo_table_info_t *info)
+{
+    const piezo_section_t *th, *ce, *iw, *al;
+    uint16_t r;
+    uint32_t n;
+    if ((r = load_grid(cs, info, PIEZO_CS_MAX_RKP_OPS)) != 0u || (r = load_dcc_gain(cs, info)) != 0u ||
+        (r = need(info, PIEZO_SECTION_RKP_CENTER_Q24, PIEZO_SECTION_TYPE_INT32, 1u, PIEZO_CS_MAX_RBF, &ce)) != 0u ||
+        (r = need(info, PIEZO_SECTION_RKP_INV_WIDTH_Q16, PIEZO_SECTION_TYPE_INT32, ce->count, ce->count, &iw)) != 0u ||
+        (r = need(info, PIEZO_SECTION_RKP_ALPHA_Q16, PIEZO_SECTION_TYPE_INT32, 1u, 1u, &al)) != 0u) {
+        return r;
+    }
+    n = (uint32_t)cs->rkp.grid.n_ops * ce->count;
+    if ((r = need(info, PIEZO_SECTION_RKP_THETA_Q24, PIEZO_SECTION_TYPE_INT32, n, n, &th)) != 0u) {
+        return r;
+    }
+    copy_i32(cs->theta_q24, th);
+    copy_i32(cs->center_q24, ce);
+    copy_i32(cs->inv_width_q16, iw);
+    cs->rkp.theta_q24 = cs->theta_q24;
+    cs->rkp.center_q24 = cs->center_q24;
+    cs->rkp.inv_width_q16 = cs->inv_width_q16;
+    cs->rkp.n_rbf = (uint16_t)ce->count;
+    cs->rkp.alpha_q16 = piezo_section_i32(al, 0);
+    cs->dcc.c_q24 = cs->c_q24; /* replaced by the state's density in piezo_ff_bind */
+    memset(cs->c_q24, 0, sizeof cs->c_q24);
+    r = reason_of(piezo_rkp_init(&ff->rkp, &cs->rkp, ff->psi_q15, ff->w_q24, PIEZO_CS_MAX_RKP_OPS));
+    return r != 0u ? r : reason_of(piezo_dcc_init(&ff->dcc, &cs->dcc, ff->cpsi_q15, ff->zo_q15, PIEZO_CS_MAX_KP_OPS));
+}
+
+static uint64_t abs64(int64_t v)
+{
+    return v < 0 ? (uint64_t)(-v) : (uint64_t)v;
+}
+
+/* Small-gain condition in q48 (see coefset.h); valid after the kernel's own
+ * init check, which bounds the UPI weights and the polynomial.
+ * d(G_UPI + P)/du lies in [lo, hi] with lo = -Pb, hi = S + Pb, where
+ * S = sum_ij d_ij max(1, a_j) (every UPI slope is 0, 1 or a_j, weights >= 0)
+ * and Pb = sum_m (m + 2) |p_m| bounds |P'| for |u| <= 1. Then
+ * |d G2/du| <= max(hi - k_ex, k_ex - lo) must stay below a0 + k_ex. */
+static uint16_t check_small_gain(const piezo_coefset_t *cs)
+{
+    const struct piezo_eupi_inv_coef *k = &cs->inv;
+    int64_t big_a0 = (int64_t)cs->a0_q24 + k->kex_q24;
+    int64_t s = 0, pb = 0, kex = (int64_t)k->kex_q24 * PIEZO_Q24_ONE, bound, prod;
+    if (cs->a0_q24 <= 0 || big_a0 <= 0) {
+        return PIEZO_TABLE_REASON_UNSTABLE_INVERSE;
+    }
+    for (uint16_t i = 0; i < k->upi.n_r; i++) {
+        for (uint16_t j = 0; j < k->upi.n_a; j++) {
+            int64_t slope = k->upi.a_q24[j] > (int32_t)PIEZO_Q24_ONE ? k->upi.a_q24[j] : (int64_t)PIEZO_Q24_ONE;
+            s += (int64_t)k->upi.w_q24[(size_t)i * k->upi.n_a + j] * slope;
+        }
+    }
+    for (uint16_t m = 0; m < k->n_p; m++) {
+        pb += (int64_t)(m + 2u) * (int64_t)abs64(k->p_q24[m]) * PIEZO_Q24_ONE;
+    }
+    bound = s + pb - kex;
+    if (kex + pb > bound) {
+        bound = kex + pb;
+    }
+    if (big_a0 * PIEZO_Q24_ONE <= bound) {
+        return PIEZO_TABLE_REASON_UNSTABLE_INVERSE;
+    }
+    /* a0_inv must be 1 / (a0 + k_ex) to within the rounding of the three
+     * (half an LSB of a0_inv times a0 + k_ex, one LSB of a0 + k_ex times a0_inv) */
+    prod = (int64_t)k->a0_inv_q24 * big_a0 - ((int64_t)1 << 48);
+    if (abs64(prod) > (uint64_t)big_a0 + (uint64_t)k->a0_inv_q24) {
+        return PIEZO_TABLE_REASON_OUT_OF_RANGE;
+    }
+    return PIEZO_TABLE_REASON_OK;
+}
+
+static uint16_t load_eupi_inverse(piezo_coefset_t *cs, piezo_ff_state_t *ff, const piezo_table_info_t *info)
+{
+    const piezo_section_t *sc, *cr, *cw, *ur, *ua, *uw, *po;
+    struct piezo_eupi_inv_coef *k = &cs->inv;
+    uint16_t r;
+    if ((r = need(info, PIEZO_SECTION_EUPI_INV_SCALARS, PIEZO_SECTION_TYPE_INT32, 4u, 4u, &sc)) != 0u ||
+        (r = need(info, PIEZO_SECTION_EUPI_CPI_INV_R_Q15, PIEZO_SECTION_TYPE_INT32, 0u, PIEZO_CS_MAX_CPI, &cr)) != 0u ||
+        (r = need(info, PIEZO_SECTION_EUPI_CPI_INV_W_Q24, PIEZO_SECTION_TYPE_INT32, cr->count, cr->count, &cw)) != 0u ||
+        (r = need(info, PIEZO_SECTION_EUPI_UPI_R_Q15, PIEZO_SECTION_TYPE_INT32, 0u, PIEZO_CS_MAX_UPI_R, &ur)) != 0u ||
+        (r = need(info, PIEZO_SECTION_EUPI_UPI_A_Q24, PIEZO_SECTION_TYPE_INT32, ur->count ? 1u : 0u,
+                  ur->count ? PIEZO_CS_MAX_UPI_A : 0u, &ua)) != 0u ||
+        (r = need(info, PIEZO_SECTION_EUPI_UPI_W_Q24, PIEZO_SECTION_TYPE_INT32, ur->count * ua->count,
+                  ur->count * ua->count, &uw)) != 0u ||
+        (r = need(info, PIEZO_SECTION_EUPI_POLY_Q24, PIEZO_SECTION_TYPE_INT32, 0u, PIEZO_CS_MAX_POLY, &po)) != 0u) {
+        return r;
+    }
+    copy_i32(cs->cpi_r_q15, cr);
+    copy_i32(cs->cpi_w_q24, cw);
+    copy_i32(cs->upi_r_q15, ur);
+    copy_i32(cs->upi_a_q24, ua);
+    copy_i32(cs->upi_w_q24, uw);
+    copy_i32(cs->poly_q24, po);
+    k->cpi_inv.r_q15 = cs->cpi_r_q15;
+    k->cpi_inv.a_q24 = NULL;
+    k->cpi_inv.w_q24 = cs->cpi_w_q24;
+    k->cpi_inv.n_r = (uint16_t)cr->count;
+    k->cpi_inv.n_a = 0u;
+    k->upi.r_q15 = cs->upi_r_q15;
+    k->upi.a_q24 = cs->upi_a_q24;
+    k->upi.w_q24 = cs->upi_w_q24;
+    k->upi.n_r = (uint16_t)ur->count;
+    k->upi.n_a = (uint16_t)ua->count;
+    k->p_q24 = cs->poly_q24;
+    k->n_p = (uint16_t)po->count;
+    k->a0_inv_q24 = piezo_section_i32(sc, 0);
+    k->kex_q24 = piezo_section_i32(sc, 1);
+    k->p0_q24 = piezo_section_i32(sc, 2);
+    cs->a0_q24 = piezo_section_i32(sc, 3);
+    r = reason_of(piezo_eupi_inv_init(&ff->inv, k, ff->inv_state_q15,
+                                      sizeof ff->inv_state_q15 / sizeof ff->inv_state_q15[0],
+                                      ff->inv_work_q39, sizeof ff->inv_work_q39 / sizeof ff->inv_work_q39[0]));
+    return r != 0u ? r : check_small_gain(cs);
+}
+
+uint16_t piezo_coefset_load(piezo_coefset_t *cs, piezo_ff_state_t *ff, const uint8_t *img, uint32_t len)
+{
+    piezo_table_info_t info;
+    const piezo_section_t *ctl;
+    uint16_t r;
+    cs->kind = 0u;
+    if ((r = piezo_table_check(img, len, &info)) != 0u) {
+        return r;
+    }
+    if ((r = need(&info, PIEZO_SECTION_CTL_SCALARS, PIEZO_SECTION_TYPE_INT32, 2u, 2u, &ctl)) != 0u) {
+        return r;
+    }
+    cs->open_loop_gain_q24 = piezo_section_i32(ctl, 0);
+    cs->y_to_u_gain_q24 = piezo_section_i32(ctl, 1);
+    if (cs->open_loop_gain_q24 <= 0 || cs->y_to_u_gain_q24 <= 0) {
+        return PIEZO_TABLE_REASON_OUT_OF_RANGE;
+    }
+    switch (info.kind) {
+    case PIEZO_TABLE_KIND_KP_DCC:
+        r = load_kp_dcc(cs, ff, &info);
+        break;
+    case PIEZO_TABLE_KIND_RKP:
+        r = load_rkp(cs, ff, &info);
+        break;
+    case PIEZO_TABLE_KIND_EUPI_INVERSE:
+        r = load_eupi_inverse(cs, ff, &info);
+        break;
+    default:
+        r = PIEZO_TABLE_REASON_BAD_KIND;
+        break;
+    }
+    if (r == 0u) {
+        cs->kind = info.kind;
+        cs->crc = info.crc;
+        cs->version = info.table_version;
+    }
+    return r;
+}
+
+int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs)
+{
+    int rc;
+    switch (cs->kind) {
+    case PIEZO_TABLE_KIND_KP_DCC:
+        return piezo_dcc_init(&ff->dcc, &cs->dcc, ff->cpsi_q15, ff->zo_q15, PIEZO_CS_MAX_KP_OPS);
+    case PIEZO_TABLE_KIND_RKP:
+        ff->dcc_rate = cs->dcc;
+        ff->dcc_rate.c_q24 = ff->w_q24; /* this tick's density, g folded in */
+        rc = piezo_rkp_init(&ff->rkp, &cs->rkp, ff->psi_q15, ff->w_q24, PIEZO_CS_MAX_RKP_OPS);
+        return rc != PIEZO_OK ? rc : piezo_dcc_init(&ff->dcc, &ff->dcc_rate, ff->cpsi_q15, ff->zo_q15, PIEZO_CS_MAX_KP_OPS);
+    case PIEZO_TABLE_KIND_EUPI_INVERSE:
+        return piezo_eupi_inv_init(&ff->inv, &cs->inv, ff->inv_state_q15,
+                                   sizeof ff->inv_state_q15 / sizeof ff->inv_state_q15[0], ff->inv_work_q39,
+                                   sizeof ff->inv_work_q39 / sizeof ff->inv_work_q39[0]);
+    default:
+        return PIEZO_EINVAL;
+    }
+}
+
+int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15, int16_t u_applied_q15)
+{
+    switch (cs->kind) {
+    case PIEZO_TABLE_KIND_KP_DCC:
+        ff->dcc.u_last_q15 = u_applied_q15;
+        return piezo_dcc_process(&ff->dcc, piezo_mul_q15_q24(r_q15, cs->y_to_u_gain_q24));
+    case PIEZO_TABLE_KIND_RKP:
+        (void)piezo_rkp_process(&ff->rkp, u_applied_q15); /* the density of this rate */
+        ff->dcc.u_last_q15 = u_applied_q15;
+        return piezo_dcc_process(&ff->dcc, piezo_mul_q15_q24(r_q15, cs->y_to_u_gain_q24));
+    case PIEZO_TABLE_KIND_EUPI_INVERSE:
+        return piezo_eupi_inv_process(&ff->inv, r_q15);
+    default:
+        return piezo_mul_q15_q24(r_q15, cs->open_loop_gain_q24);
+    }
+}

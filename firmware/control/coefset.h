@@ -1,0 +1,103 @@
+/*
+ * coefset.h - a coefficient set: the kernels' coefficient structs and the
+ * arrays behind them, filled from a validated table image.
+ *
+ * The controller owns two sets: the active one (read by the tick) and a spare
+ * that a commit fills and validates; a valid spare becomes active at the next
+ * tick boundary. Loading never touches the active set, so a refused image
+ * leaves the running table as it was.
+ *
+ * Validation on load (reason codes from common/interface.toml):
+ *   - the image itself: piezo_table_check() (CRC, versions, lengths, sections);
+ *   - every section the kind needs, with the right type and count;
+ *   - ranges and order: each kernel's own init check (thresholds monotonic,
+ *     weights and gains in range) on a scratch instance;
+ *   - EUPI inverse: the small-gain condition in integers,
+ *       a0 + k_ex > max(S + Pb - k_ex, k_ex + Pb),
+ *       S = sum_ij d_ij max(1, a_j),  Pb = sum_m (m + 2) |p_m|,
+ *     a bound on |d(G_UPI + P - k_ex u)/du| for |u| <= 1 (normalized drive),
+ *     and a0_inv * (a0 + k_ex) = 1 within the rounding of a0_inv. The host
+ *     runs the same integer check before it builds a table
+ *     (piezoctl.tables.build.firmware_small_gain).
+ */
+#ifndef PIEZO_COEFSET_H
+#define PIEZO_COEFSET_H
+
+#include <stdint.h>
+
+#include "dcc.h"
+#include "eupi_inv.h"
+#include "kp.h"
+#include "rkp.h"
+
+/* Compile-time capacity of one set (a table beyond it is refused: bad_length). */
+#define PIEZO_CS_MAX_KP_OPS 465u   /* L = 30 */
+#define PIEZO_CS_MAX_RKP_OPS 120u  /* L = 15 */
+#define PIEZO_CS_MAX_RBF 16u
+#define PIEZO_CS_MAX_CPI 32u
+#define PIEZO_CS_MAX_UPI_R 16u
+#define PIEZO_CS_MAX_UPI_A 8u
+#define PIEZO_CS_MAX_POLY PIEZO_EUPI_MAX_POLY
+
+typedef struct {
+    uint16_t kind;                 /* PIEZO_TABLE_KIND_*, 0 = empty */
+    uint32_t crc;
+    uint32_t version;
+    int32_t open_loop_gain_q24;    /* drive per displacement, uncompensated */
+    int32_t y_to_u_gain_q24;       /* the same gain used by the DCC law */
+
+    /* KP operators: DCC (kp_dcc) and rate-dependent DCC (rkp). For rkp the
+     * DCC weights are the RKP density of the tick (g folded into Theta), so
+     * dcc.c_q24 is bound to the state's w_q24 by piezo_ff_bind(). */
+    struct piezo_dcc_coeffs dcc;
+    struct piezo_rkp_coeffs rkp;
+    int16_t n1_q15[PIEZO_CS_MAX_KP_OPS];
+    int16_t n2_q15[PIEZO_CS_MAX_KP_OPS];
+    int32_t c_q24[PIEZO_CS_MAX_KP_OPS];
+    int32_t theta_q24[PIEZO_CS_MAX_RKP_OPS * PIEZO_CS_MAX_RBF];
+    int32_t center_q24[PIEZO_CS_MAX_RBF];
+    int32_t inv_width_q16[PIEZO_CS_MAX_RBF];
+
+    /* EUPI inverse */
+    struct piezo_eupi_inv_coef inv;
+    int32_t a0_q24;
+    int32_t cpi_r_q15[PIEZO_CS_MAX_CPI];
+    int32_t cpi_w_q24[PIEZO_CS_MAX_CPI];
+    int32_t upi_r_q15[PIEZO_CS_MAX_UPI_R];
+    int32_t upi_a_q24[PIEZO_CS_MAX_UPI_A];
+    int32_t upi_w_q24[PIEZO_CS_MAX_UPI_R * PIEZO_CS_MAX_UPI_A];
+    int32_t poly_q24[PIEZO_CS_MAX_POLY];
+} piezo_coefset_t;
+
+/* Kernel state for running one set. */
+typedef struct {
+    struct piezo_dcc dcc;
+    struct piezo_dcc_coeffs dcc_rate;  /* rkp: the DCC weights are w_q24 below */
+    struct piezo_rkp rkp;
+    struct piezo_eupi_inv inv;
+    int32_t cpsi_q15[PIEZO_CS_MAX_KP_OPS];
+    int32_t zo_q15[PIEZO_CS_MAX_KP_OPS];
+    int16_t psi_q15[PIEZO_CS_MAX_RKP_OPS];
+    int32_t w_q24[PIEZO_CS_MAX_RKP_OPS];
+    int32_t inv_state_q15[PIEZO_CS_MAX_CPI + PIEZO_CS_MAX_UPI_R * PIEZO_CS_MAX_UPI_A];
+    int64_t inv_work_q39[PIEZO_CS_MAX_UPI_R * PIEZO_CS_MAX_UPI_A];
+} piezo_ff_state_t;
+
+/**
+ * Fill cs from an image (len bytes) and validate it; ff is scratch state for
+ * the kernel checks. Returns PIEZO_TABLE_REASON_OK or the reason; on failure
+ * cs->kind is 0 and cs must not be used.
+ */
+uint16_t piezo_coefset_load(piezo_coefset_t *cs, piezo_ff_state_t *ff, const uint8_t *img, uint32_t len);
+
+/** Bind the feedforward state to a loaded set and reset it. Returns a piezo_err code. */
+int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs);
+
+/**
+ * One tick of the feedforward: the drive (q15) for reference r (q15,
+ * displacement). u_applied is the drive the stage received last tick (after
+ * feedback, clamp and slew limit): the DCC operators follow it.
+ */
+int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15, int16_t u_applied_q15);
+
+#endif /* PIEZO_COEFSET_H */

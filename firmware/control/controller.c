@@ -1,0 +1,360 @@
+#include "controller.h"
+
+#include <stddef.h>
+#include <string.h>
+
+#include "fixed_q.h"
+#include "piezo_err.h"
+#include "piezo_interface.h"
+#include "table_image.h"
+
+int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
+{
+    int rc;
+    if (c == NULL || cfg == NULL || cfg->bad_limit == 0u || cfg->dac_min > cfg->dac_max ||
+        cfg->adc_min_ok > cfg->adc_max_ok || cfg->max_jump_q15 < 0) {
+        return PIEZO_EINVAL;
+    }
+    memset(c, 0, sizeof *c);
+    c->cfg = *cfg;
+    c->active = -1;
+    c->pending = -1;
+    c->previous = -1;
+    c->wave_cfg.kind = PIEZO_WAVE_OFF;
+    if ((rc = piezo_pid_init(&c->pid, &c->cfg.pid)) != PIEZO_OK ||
+        (rc = piezo_biquad_init(&c->notch, &c->cfg.notch)) != PIEZO_OK ||
+        (rc = piezo_limit_init(&c->limit, &c->cfg.limit, cfg->u_safe_q15)) != PIEZO_OK ||
+        (rc = piezo_wave_init(&c->wave, &c->wave_cfg)) != PIEZO_OK ||
+        (rc = piezo_rec_init(&c->rec, c->rec_buf, PIEZO_CTL_REC_SAMPLES, PIEZO_SIG_N)) != PIEZO_OK) {
+        return rc;
+    }
+    return PIEZO_OK;
+}
+
+/* Loads an image into the set that is neither active nor previous and binds
+ * its kernel state; neither of those is touched. */
+static uint16_t load_spare(piezo_ctl_t *c, const uint8_t *img, uint32_t len, int8_t *spare)
+{
+    uint16_t r;
+    int8_t i = 0;
+    while (i == c->active || i == c->previous) {
+        i++;
+    }
+    *spare = i;
+    r = piezo_coefset_load(&c->set[*spare], &c->ff[*spare], img, len);
+    if (r == PIEZO_TABLE_REASON_OK && piezo_ff_bind(&c->ff[*spare], &c->set[*spare]) != PIEZO_OK) {
+        c->set[*spare].kind = 0u;
+        r = PIEZO_TABLE_REASON_OUT_OF_RANGE;
+    }
+    return r;
+}
+
+uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io)
+{
+    uint32_t len;
+    int8_t spare;
+    uint16_t r;
+    if (piezo_store_open(&c->store, io, c->staged) != PIEZO_OK) {
+        return PIEZO_TABLE_REASON_STORAGE_FAILED;
+    }
+    c->have_store = 1u;
+    len = piezo_store_load(&c->store, 0, c->staged, sizeof c->staged);
+    if (len == 0u) {
+        return PIEZO_TABLE_REASON_OK; /* nothing stored yet */
+    }
+    r = load_spare(c, c->staged, len, &spare);
+    if (r != PIEZO_TABLE_REASON_OK) {
+        return r;
+    }
+    c->active = spare; /* before the first tick: no swap needed */
+    /* the previous table, kept loaded so a rollback needs no flash read */
+    len = piezo_store_load(&c->store, 1, c->staged, sizeof c->staged);
+    if (len != 0u && load_spare(c, c->staged, len, &spare) == PIEZO_TABLE_REASON_OK) {
+        c->previous = spare;
+    }
+    memset(c->staged, 0, sizeof c->staged);
+    return PIEZO_TABLE_REASON_OK;
+}
+
+static void reset_loop_state(piezo_ctl_t *c)
+{
+    piezo_pid_reset(&c->pid);
+    piezo_biquad_reset(&c->notch);
+    if (c->active >= 0) {
+        (void)piezo_ff_bind(&c->ff[c->active], &c->set[c->active]);
+    }
+}
+
+/* Sensor plausibility: a code outside the valid range, or a jump no stage can
+ * make in one tick. Bad samples hold the last good value. */
+static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
+{
+    const piezo_ctl_cfg_t *g = &c->cfg;
+    int16_t y = piezo_sat_q15(piezo_rshift_rnd64((int64_t)(code - g->adc_zero) * g->sensor_gain_q16, 16u));
+    int32_t jump = (int32_t)y - c->y_prev_q15;
+    int bad = code < g->adc_min_ok || code > g->adc_max_ok ||
+              (g->max_jump_q15 > 0 && c->have_y && (jump > g->max_jump_q15 || jump < -g->max_jump_q15));
+    if (bad) {
+        if (++c->bad_run >= g->bad_limit) {
+            c->bad_run = g->bad_limit;
+            c->st.faults |= PIEZO_FAULT_SENSOR_IMPLAUSIBLE;
+        }
+        return c->y_prev_q15;
+    }
+    c->bad_run = 0u;
+    c->y_prev_q15 = y;
+    c->have_y = 1u;
+    return y;
+}
+
+void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
+{
+    const piezo_ctl_cfg_t *g = &c->cfg;
+    int16_t y, r, u_ff = 0, u_fb = 0, u;
+    int8_t pend;
+    uint8_t mode = c->mode;
+    int run;
+
+    /* 1. a committed table takes over only here, between two ticks */
+    pend = c->pending;
+    if (pend >= 0) {
+        c->active = pend;
+        c->pending = -1;
+    }
+
+    /* 2-3. sensor */
+    y = read_sensor(c, adc[0]);
+    if (c->st.faults != 0u) {
+        c->st.armed = 0u; /* any fault disarms */
+    }
+    run = c->st.armed && mode != PIEZO_MODE_IDLE;
+
+    /* 4. reference */
+    r = (c->ref_source == PIEZO_REF_WAVE) ? piezo_wave_process(&c->wave) : c->setpoint_q15;
+
+    /* 5. feedforward */
+    if (run && mode != PIEZO_MODE_FEEDBACK) {
+        if (c->active >= 0 && (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK)) {
+            u_ff = piezo_ff_process(&c->ff[c->active], &c->set[c->active], r, c->limit.prev_q15);
+        } else {
+            int32_t gain = c->active >= 0 ? c->set[c->active].open_loop_gain_q24 : (int32_t)PIEZO_Q24_ONE;
+            u_ff = piezo_mul_q15_q24(r, gain);
+        }
+    }
+
+    /* 6. feedback */
+    if (run && (mode == PIEZO_MODE_FF_FEEDBACK || mode == PIEZO_MODE_FEEDBACK)) {
+        int16_t e = piezo_sat_q15((int32_t)r - y);
+        u_fb = piezo_pid_process(&c->pid, e);
+        if (g->notch_on) {
+            u_fb = piezo_biquad_process(&c->notch, u_fb);
+        }
+    }
+
+    /* 7-8. sum, clamp, slew limit (also while ramping down after a disarm), DAC */
+    u = run ? piezo_sat_q15((int32_t)u_ff + u_fb) : g->u_safe_q15;
+    u = piezo_limit_process(&c->limit, u);
+    if (c->limit.flags != 0u && run) {
+        c->st.clamps++;
+    }
+    {
+        int64_t code = (int64_t)g->dac_zero + piezo_rshift_rnd64((int64_t)u * g->dac_gain_q16, 16u);
+        *dac = (int32_t)(code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code));
+    }
+
+    /* 9. recorder and status */
+    c->sig[PIEZO_SIG_REF] = r;
+    c->sig[PIEZO_SIG_Y] = y;
+    c->sig[PIEZO_SIG_U] = u;
+    c->sig[PIEZO_SIG_ERR] = piezo_sat_q15((int32_t)r - y);
+    c->sig[PIEZO_SIG_FF] = u_ff;
+    c->sig[PIEZO_SIG_FB] = u_fb;
+    c->sig[PIEZO_SIG_Y2] = piezo_sat_q15(piezo_rshift_rnd64((int64_t)(adc[1] - g->adc_zero) * g->sensor_gain_q16, 16u));
+    c->sig[PIEZO_SIG_U2] = c->u2_q15;
+    piezo_rec_process(&c->rec, c->sig);
+    c->overrun_run = 0u;
+    c->st.ticks++;
+}
+
+void piezo_ctl_overrun(piezo_ctl_t *c)
+{
+    c->st.overruns++;
+    if (c->cfg.overrun_limit != 0u && ++c->overrun_run >= c->cfg.overrun_limit) {
+        c->st.faults |= PIEZO_FAULT_OVERRUN;
+    }
+}
+
+int piezo_ctl_set_mode(piezo_ctl_t *c, uint8_t mode)
+{
+    if (mode > PIEZO_MODE_FEEDBACK) {
+        return PIEZO_EINVAL;
+    }
+    if (c->st.armed) {
+        return PIEZO_EORDER; /* disarm first: a mode change under drive jumps */
+    }
+    c->mode = mode;
+    return PIEZO_OK;
+}
+
+int piezo_ctl_arm(piezo_ctl_t *c, uint8_t on)
+{
+    if (!on) {
+        c->st.armed = 0u;
+        return PIEZO_OK;
+    }
+    if (c->st.faults != 0u) {
+        return PIEZO_EORDER; /* clear the faults first */
+    }
+    reset_loop_state(c);
+    c->st.armed = 1u;
+    return PIEZO_OK;
+}
+
+void piezo_ctl_clear_faults(piezo_ctl_t *c)
+{
+    c->st.faults = 0u;
+    c->bad_run = 0u;
+    c->overrun_run = 0u;
+}
+
+int piezo_ctl_start_wave(piezo_ctl_t *c)
+{
+    piezo_wave_cfg_t *w = &c->wave_cfg;
+    int rc;
+    w->tones = c->tones;
+    w->levels_q15 = c->levels_q15;
+    w->durations = c->durations;
+    if (w->n_levels > PIEZO_CTL_WAVE_MAX_LEVELS) {
+        return PIEZO_ERANGE;
+    }
+    rc = piezo_wave_init(&c->wave, w);
+    if (rc != PIEZO_OK) {
+        w->kind = PIEZO_WAVE_OFF;
+        (void)piezo_wave_init(&c->wave, w);
+        return rc;
+    }
+    c->ref_source = PIEZO_REF_WAVE;
+    if (c->rec.state == PIEZO_REC_ARMED && c->rec.cfg.trigger == PIEZO_REC_SOFTWARE) {
+        piezo_rec_trigger(&c->rec);
+    }
+    return PIEZO_OK;
+}
+
+void piezo_ctl_stop_wave(piezo_ctl_t *c)
+{
+    c->wave.running = 0u;
+}
+
+int piezo_ctl_unlock(piezo_ctl_t *c, uint16_t key)
+{
+    if (key == 0u) {
+        c->unlocked = 0u;
+        return PIEZO_OK;
+    }
+    if (key != PIEZO_MODBUS_UNLOCK_KEY) {
+        c->unlocked = 0u;
+        c->st.bad_unlocks++;
+        return PIEZO_EINVAL;
+    }
+    c->unlocked = 1u;
+    return PIEZO_OK;
+}
+
+int piezo_ctl_stage_write(piezo_ctl_t *c, uint32_t offset, const uint8_t *data, uint32_t len)
+{
+    if (!c->unlocked) {
+        c->st.table_result = PIEZO_TABLE_REASON_LOCKED;
+        return PIEZO_EORDER;
+    }
+    if (offset > sizeof c->staged || len > sizeof c->staged - offset) {
+        c->st.table_result = PIEZO_TABLE_REASON_BAD_LENGTH;
+        return PIEZO_ERANGE;
+    }
+    memcpy(c->staged + offset, data, len);
+    if (offset + len > c->staged_len) {
+        c->staged_len = offset + len;
+    }
+    return PIEZO_OK;
+}
+
+/* The image length the staged header claims, or 0 if it cannot be one. */
+static uint32_t staged_image_len(const piezo_ctl_t *c)
+{
+    uint32_t payload;
+    if (c->staged_len < PIEZO_TABLE_HDR_BYTES + 4u) {
+        return 0u;
+    }
+    payload = piezo_le32(c->staged + PIEZO_TABLE_HDR_PAYLOAD_LEN_OFFSET);
+    if (payload > PIEZO_TABLE_MAX_BYTES || PIEZO_TABLE_HDR_BYTES + payload + 4u > c->staged_len) {
+        return 0u;
+    }
+    return PIEZO_TABLE_HDR_BYTES + payload + 4u;
+}
+
+uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len)
+{
+    uint16_t r;
+    int8_t spare;
+    if (!c->unlocked) {
+        r = PIEZO_TABLE_REASON_LOCKED;
+    } else if (c->pending >= 0) {
+        r = PIEZO_TABLE_REASON_BUSY;
+    } else if (c->staged_len == 0u) {
+        r = PIEZO_TABLE_REASON_NOTHING_STAGED;
+    } else {
+        if (len == 0u) {
+            len = staged_image_len(c);
+        }
+        if (len == 0u || len > c->staged_len) {
+            r = PIEZO_TABLE_REASON_BAD_LENGTH;
+        } else if ((r = load_spare(c, c->staged, len, &spare)) == PIEZO_TABLE_REASON_OK) {
+            if (c->have_store && (r = piezo_store_save(&c->store, c->staged, len)) != PIEZO_TABLE_REASON_OK) {
+                c->set[spare].kind = 0u;
+            } else {
+                c->staged_crc = c->set[spare].crc;
+                c->previous = c->active;
+                c->pending = spare;
+            }
+        }
+    }
+    if (r != PIEZO_TABLE_REASON_BUSY) {
+        c->staged_len = 0u; /* every commit consumes the upload, good or bad */
+    }
+    c->st.table_result = r;
+    return r;
+}
+
+uint16_t piezo_ctl_rollback(piezo_ctl_t *c)
+{
+    uint16_t r;
+    int8_t prev = c->previous;
+    if (!c->unlocked) {
+        r = PIEZO_TABLE_REASON_LOCKED;
+    } else if (c->pending >= 0) {
+        r = PIEZO_TABLE_REASON_BUSY;
+    } else if (c->active < 0 || prev < 0 || c->set[prev].kind == 0u) {
+        r = PIEZO_TABLE_REASON_NO_PREVIOUS;
+    } else if (c->have_store && (r = piezo_store_rollback(&c->store, c->staged)) != PIEZO_TABLE_REASON_OK) {
+        /* flash unchanged or consistent: keep running the active table */
+    } else {
+        (void)piezo_ff_bind(&c->ff[prev], &c->set[prev]);
+        c->previous = -1; /* one level: the rolled-back table is not kept */
+        c->pending = prev;
+        c->staged_len = 0u;
+        r = PIEZO_TABLE_REASON_OK;
+    }
+    c->st.table_result = r;
+    return r;
+}
+
+uint32_t piezo_ctl_active_crc(const piezo_ctl_t *c)
+{
+    int8_t a = c->pending >= 0 ? c->pending : c->active;
+    return a >= 0 ? c->set[a].crc : 0u;
+}
+
+uint32_t piezo_ctl_active_version(const piezo_ctl_t *c)
+{
+    int8_t a = c->pending >= 0 ? c->pending : c->active;
+    return a >= 0 ? c->set[a].version : 0u;
+}

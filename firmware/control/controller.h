@@ -1,0 +1,171 @@
+/*
+ * controller.h - one axis of the piezo controller: the 10 kHz tick and the
+ * commands the protocol layer issues between ticks.
+ *
+ * The tick, in this fixed order (controller.c):
+ *   1. swap in a committed coefficient set (only here: a tick boundary)
+ *   2. read the ADC code and check it (plausibility: inside the sensor's
+ *      valid code range, and no jump larger than max_jump per tick; bad_limit
+ *      consecutive bad samples raise the sensor fault)
+ *   3. scale the sensor: y = sat_q15(rshift_rnd((adc - adc_zero) * sensor_gain_q16, 16))
+ *   4. reference: the wave generator, or the host's setpoint
+ *   5. feedforward (modes FEEDFORWARD and FF_FEEDBACK): the active table's
+ *      EUPI inverse or DCC law, chosen by the table's kind; with no table, or
+ *      in OPEN_LOOP, u_ff = rshift_rnd(r * open_loop_gain_q24, 24)
+ *   6. feedback (FF_FEEDBACK, FEEDBACK): e = r - y, u_fb = notch(PID(e))
+ *   7. u = sat_q15(u_ff + u_fb); disarmed or IDLE: u = u_safe
+ *   8. clamp and slew-limit, then the DAC code:
+ *      code = clamp(dac_zero + rshift_rnd(u * dac_gain_q16, 16), dac_min, dac_max)
+ *   9. recorder, status counters
+ * A fault (sensor, repeated overruns) disarms: the drive ramps to u_safe at
+ * the slew limit and stays there until the host clears the faults and re-arms.
+ * The DCC operators follow the drive actually applied (after feedback, clamp
+ * and slew limit); they start from their reset state (the input rested at
+ * the bottom of the plane), which matches a stage resting at u_safe when
+ * u_safe is the bottom of the drive range.
+ *
+ * Commands (piezo_ctl_*) run in the main context, never inside the tick. The
+ * only data they share with the tick are single-word flags and indices.
+ */
+#ifndef PIEZO_CONTROLLER_H
+#define PIEZO_CONTROLLER_H
+
+#include <stdint.h>
+
+#include "coefset.h"
+#include "piezo_interface.h"
+#include "pid.h"
+#include "recorder.h"
+#include "store.h"
+#include "wave.h"
+
+enum piezo_mode {
+    PIEZO_MODE_IDLE = 0,
+    PIEZO_MODE_OPEN_LOOP = 1,
+    PIEZO_MODE_FEEDFORWARD = 2,
+    PIEZO_MODE_FF_FEEDBACK = 3,
+    PIEZO_MODE_FEEDBACK = 4
+};
+
+enum piezo_ref_source { PIEZO_REF_SETPOINT = 0, PIEZO_REF_WAVE = 1 };
+
+/* Signal ids: what the recorder can keep (all q15). */
+enum piezo_signal {
+    PIEZO_SIG_REF = 0,   /* reference r */
+    PIEZO_SIG_Y = 1,     /* scaled sensor y */
+    PIEZO_SIG_U = 2,     /* drive after clamp and slew limit */
+    PIEZO_SIG_ERR = 3,   /* r - y */
+    PIEZO_SIG_FF = 4,    /* feedforward output */
+    PIEZO_SIG_FB = 5,    /* feedback output */
+    PIEZO_SIG_Y2 = 6,    /* the other axis' sensor (second ADC channel) */
+    PIEZO_SIG_U2 = 7,    /* the other axis' drive as commanded by the host */
+    PIEZO_SIG_N = 8
+};
+
+#define PIEZO_CTL_REC_SAMPLES 65536u /* recorder buffer, samples of all channels */
+#define PIEZO_CTL_WAVE_MAX_LEVELS 256u
+
+typedef struct {
+    int32_t adc_zero;          /* ADC code of zero displacement */
+    int32_t sensor_gain_q16;   /* q15 LSB per ADC code */
+    int32_t adc_min_ok;        /* plausible ADC codes: [adc_min_ok, adc_max_ok] */
+    int32_t adc_max_ok;
+    int16_t max_jump_q15;      /* largest plausible change of y per tick; 0 = off */
+    uint16_t bad_limit;        /* consecutive implausible samples before the fault, >= 1 */
+    uint16_t overrun_limit;    /* consecutive overruns before the fault; 0 = never */
+    int16_t u_safe_q15;        /* drive while disarmed or idle (e.g. the code of 0 V) */
+    int32_t dac_zero;          /* DAC code of u = 0 */
+    int32_t dac_gain_q16;      /* DAC codes per q15 LSB of u */
+    int32_t dac_min;           /* DAC code range */
+    int32_t dac_max;
+    piezo_limit_coef_t limit;  /* output clamp and slew limit (q15) */
+    piezo_pid_coef_t pid;
+    piezo_biquad_coef_t notch;
+    uint8_t notch_on;
+} piezo_ctl_cfg_t;
+
+typedef struct {
+    uint8_t armed;
+    uint32_t faults;           /* PIEZO_FAULT_* bits (latched until cleared) */
+    uint32_t ticks;
+    uint32_t overruns;         /* ticks the target reported as late */
+    uint32_t clamps;           /* ticks whose drive was clamped or slew-limited */
+    uint32_t bad_unlocks;      /* wrong unlock keys */
+    uint16_t table_result;     /* reason code of the last table command */
+} piezo_ctl_status_t;
+
+typedef struct {
+    piezo_ctl_cfg_t cfg;
+    piezo_ctl_status_t st;
+    uint8_t mode;
+    uint8_t ref_source;
+    int16_t setpoint_q15;
+    int16_t u2_q15;            /* other axis' drive (host-commanded, recorded) */
+
+    /* feedforward tables: the active set, the previous one (rollback) and a
+     * free one that a commit fills; the tick swaps a committed set in */
+    piezo_coefset_t set[3];
+    piezo_ff_state_t ff[3];
+    volatile int8_t active;    /* index into set[], -1 = no table */
+    volatile int8_t pending;   /* committed set waiting for the tick, -1 = none */
+    int8_t previous;           /* rollback target, -1 = none */
+
+    /* staged bank: the image being uploaded */
+    uint8_t staged[PIEZO_TABLE_MAX_BYTES];
+    uint32_t staged_len;
+    uint32_t staged_crc;       /* CRC field of the last complete staged image */
+    uint8_t unlocked;
+    piezo_store_t store;
+    uint8_t have_store;
+
+    piezo_wave_cfg_t wave_cfg;
+    piezo_wave_t wave;
+    piezo_wave_tone_t tones[PIEZO_WAVE_MAX_TONES];
+    int16_t levels_q15[PIEZO_CTL_WAVE_MAX_LEVELS];
+    uint32_t durations[PIEZO_CTL_WAVE_MAX_LEVELS];
+
+    piezo_rec_t rec;
+    int16_t rec_buf[PIEZO_CTL_REC_SAMPLES];
+
+    piezo_pid_t pid;
+    piezo_biquad_t notch;
+    piezo_limit_t limit;
+
+    int16_t sig[PIEZO_SIG_N];
+    int16_t y_prev_q15;
+    uint16_t bad_run;
+    uint16_t overrun_run;
+    uint8_t have_y;
+} piezo_ctl_t;
+
+/** Initialize with a configuration; no table, disarmed, IDLE. Returns a piezo_err code. */
+int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg);
+
+/** Attach persistent storage and boot the stored active table, if any.
+ *  Returns the reason code of loading it (OK also when there is none). */
+uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io);
+
+/** The 10 kHz tick: adc[0] this axis' sensor code, adc[1] the other axis'
+ *  (or 0); writes this axis' DAC code. */
+void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac);
+
+/** The target reports that a tick started late or ran past its period. */
+void piezo_ctl_overrun(piezo_ctl_t *c);
+
+/* Commands (main context). Each returns 0 or a piezo_err code. */
+int piezo_ctl_set_mode(piezo_ctl_t *c, uint8_t mode);
+int piezo_ctl_arm(piezo_ctl_t *c, uint8_t on);
+void piezo_ctl_clear_faults(piezo_ctl_t *c);
+int piezo_ctl_start_wave(piezo_ctl_t *c);  /* from wave_cfg; triggers a SOFTWARE recorder */
+void piezo_ctl_stop_wave(piezo_ctl_t *c);
+
+/* Tables. Writes need piezo_ctl_unlock() with the key first. */
+int piezo_ctl_unlock(piezo_ctl_t *c, uint16_t key);
+int piezo_ctl_stage_write(piezo_ctl_t *c, uint32_t offset, const uint8_t *data, uint32_t len);
+uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len);
+uint16_t piezo_ctl_rollback(piezo_ctl_t *c);
+/** CRC and version of the active table (0, 0 when none). */
+uint32_t piezo_ctl_active_crc(const piezo_ctl_t *c);
+uint32_t piezo_ctl_active_version(const piezo_ctl_t *c);
+
+#endif /* PIEZO_CONTROLLER_H */

@@ -1,0 +1,305 @@
+/* The controller: feedforward bit-exact with the kernels' golden models,
+ * transactional table commits, rollback, persistence, safety. */
+#include <string.h>
+
+#include "piezo_test.h"
+#include "controller.h"
+#include "ctl_vectors.h"
+#include "nor_flash.h"
+#include "piezo_err.h"
+
+static piezo_ctl_t ctl; /* large: not on the stack */
+
+/* ADC and DAC codes equal q15 values; nothing clamps or slews. */
+static piezo_ctl_cfg_t unit_cfg(void)
+{
+    piezo_ctl_cfg_t c;
+    memset(&c, 0, sizeof c);
+    c.sensor_gain_q16 = 65536;
+    c.adc_min_ok = -32768;
+    c.adc_max_ok = 32767;
+    c.bad_limit = 3;
+    c.u_safe_q15 = -32768; /* the bottom of the drive range: the DCC reset state */
+    c.overrun_limit = 5;
+    c.dac_gain_q16 = 65536;
+    c.dac_min = -32768;
+    c.dac_max = 32767;
+    c.limit.min_q15 = -32768;
+    c.limit.max_q15 = 32767;
+    c.pid.out_min_q15 = -32768;
+    c.pid.out_max_q15 = 32767;
+    c.notch.b0_q24 = 1 << 24;
+    return c;
+}
+
+static int32_t tick(int16_t setpoint, int32_t adc)
+{
+    int32_t in[2] = {adc, 0}, dac = 0;
+    ctl.setpoint_q15 = setpoint;
+    piezo_ctl_tick(&ctl, in, &dac);
+    return dac;
+}
+
+static uint16_t upload(const uint8_t *img, uint32_t len)
+{
+    assert_int_equal(piezo_ctl_unlock(&ctl, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
+    /* in register-window sized chunks, as the protocol writes them */
+    for (uint32_t off = 0; off < len; off += 246u) {
+        uint32_t n = len - off < 246u ? len - off : 246u;
+        assert_int_equal(piezo_ctl_stage_write(&ctl, off, img + off, n), PIEZO_OK);
+    }
+    return piezo_ctl_commit(&ctl, 0);
+}
+
+static void setup_armed(uint8_t mode)
+{
+    piezo_ctl_cfg_t cfg = unit_cfg();
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, mode), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+}
+
+static void run_and_compare(const int16_t *want, const char *name)
+{
+    for (uint32_t k = 0; k < CTL_N; k++) {
+        assert_golden_i32(name, k, tick(ctl_ref_q15[k], 0), want[k]);
+    }
+}
+
+static void test_dcc_table_drives_bit_exact(void **state)
+{
+    (void)state;
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(upload(ctl_dcc_img, CTL_DCC_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    run_and_compare(ctl_dcc_u_q15, "dcc");
+    assert_int_equal(piezo_ctl_active_version(&ctl), 1);
+}
+
+static void test_eupi_inverse_table_drives_bit_exact(void **state)
+{
+    (void)state;
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(upload(ctl_eupi_img, CTL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    run_and_compare(ctl_eupi_u_q15, "eupi_inverse");
+}
+
+static void test_refused_images_leave_the_active_table_running(void **state)
+{
+    (void)state;
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(upload(ctl_dcc_img, CTL_DCC_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    uint32_t crc = piezo_ctl_active_crc(&ctl);
+    uint32_t half = CTL_N / 2u;
+    for (uint32_t k = 0; k < half; k++) {
+        assert_golden_i32("before", k, tick(ctl_ref_q15[k], 0), ctl_dcc_u_q15[k]);
+    }
+    for (unsigned i = 0; i < CTL_BAD_N; i++) {
+        uint16_t r = upload(ctl_bad[i].img, ctl_bad[i].len);
+        if (r != ctl_bad[i].reason) {
+            fail_msg("%s: reason %u, want %u", ctl_bad[i].name, r, ctl_bad[i].reason);
+        }
+        assert_int_equal(ctl.st.table_result, ctl_bad[i].reason);
+        assert_true(piezo_ctl_active_crc(&ctl) == crc);
+    }
+    /* a truncated upload and one with a flipped bit are refused too */
+    assert_int_equal(upload(ctl_dcc_img, CTL_DCC_IMG_LEN - 9u), PIEZO_TABLE_REASON_BAD_LENGTH);
+    static uint8_t flipped[CTL_DCC_IMG_LEN];
+    memcpy(flipped, ctl_dcc_img, sizeof flipped);
+    flipped[100] ^= 0x10;
+    assert_int_equal(upload(flipped, sizeof flipped), PIEZO_TABLE_REASON_BAD_CRC);
+    /* the drive carries on exactly as if nothing had been sent */
+    for (uint32_t k = half; k < CTL_N; k++) {
+        assert_golden_i32("after", k, tick(ctl_ref_q15[k], 0), ctl_dcc_u_q15[k]);
+    }
+}
+
+static void test_commit_needs_unlock_and_an_upload(void **state)
+{
+    (void)state;
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(piezo_ctl_commit(&ctl, 0), PIEZO_TABLE_REASON_LOCKED);
+    assert_int_equal(piezo_ctl_stage_write(&ctl, 0, ctl_dcc_img, 10), PIEZO_EORDER);
+    assert_int_equal(piezo_ctl_unlock(&ctl, 0x1234), PIEZO_EINVAL);
+    assert_int_equal(ctl.st.bad_unlocks, 1);
+    assert_int_equal(piezo_ctl_unlock(&ctl, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
+    assert_int_equal(piezo_ctl_commit(&ctl, 0), PIEZO_TABLE_REASON_NOTHING_STAGED);
+    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_NO_PREVIOUS);
+    assert_int_equal(piezo_ctl_active_crc(&ctl), 0);
+}
+
+static void test_swap_happens_at_the_next_tick_and_rolls_back(void **state)
+{
+    (void)state;
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(upload(ctl_dcc_img, CTL_DCC_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(ctl.active, -1);      /* not before a tick boundary */
+    (void)tick(0, 0);
+    assert_true(ctl.active >= 0);
+    uint32_t crc_dcc = piezo_ctl_active_crc(&ctl);
+    assert_int_equal(upload(ctl_eupi_img, CTL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(piezo_ctl_commit(&ctl, 0), PIEZO_TABLE_REASON_BUSY); /* swap pending */
+    (void)tick(0, 0);
+    assert_int_equal(piezo_ctl_commit(&ctl, 0), PIEZO_TABLE_REASON_NOTHING_STAGED);
+    assert_int_equal(ctl.set[ctl.active].kind, PIEZO_TABLE_KIND_EUPI_INVERSE);
+    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_BUSY);
+    (void)tick(0, 0);
+    assert_true(piezo_ctl_active_crc(&ctl) == crc_dcc);
+    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_NO_PREVIOUS); /* one level */
+}
+
+static void test_tables_persist_across_reboot(void **state)
+{
+    (void)state;
+    static uint8_t mem[2 * (PIEZO_STORE_RECORD_BYTES + PIEZO_TABLE_MAX_BYTES)];
+    nor_flash_t f;
+    nor_flash_init(&f, mem, sizeof mem);
+    piezo_storage_t io = nor_flash_storage(&f, PIEZO_STORE_RECORD_BYTES + PIEZO_TABLE_MAX_BYTES);
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(piezo_ctl_attach_store(&ctl, &io), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(upload(ctl_dcc_img, CTL_DCC_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    (void)tick(0, 0);
+    uint32_t crc_dcc = piezo_ctl_active_crc(&ctl);
+    assert_int_equal(upload(ctl_eupi_img, CTL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    (void)tick(0, 0);
+    uint32_t crc_eupi = piezo_ctl_active_crc(&ctl);
+    /* reboot: the EUPI table runs again, the DCC table is the rollback target */
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(piezo_ctl_attach_store(&ctl, &io), PIEZO_TABLE_REASON_OK);
+    assert_true(piezo_ctl_active_crc(&ctl) == crc_eupi);
+    run_and_compare(ctl_eupi_u_q15, "eupi after reboot");
+    assert_int_equal(piezo_ctl_unlock(&ctl, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
+    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_OK);
+    (void)tick(0, 0);
+    assert_true(piezo_ctl_active_crc(&ctl) == crc_dcc);
+    /* a flash write that fails refuses the commit and keeps the running table */
+    f.ops_left = 1;
+    assert_int_equal(upload(ctl_eupi_img, CTL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_STORAGE_FAILED);
+    (void)tick(0, 0);
+    assert_true(piezo_ctl_active_crc(&ctl) == crc_dcc);
+    f.dead = 0;
+    f.ops_left = -1;
+    /* after a reboot the DCC table runs; the slot the failed write erased held
+     * the only older copy, so there is nothing left to roll back to */
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(piezo_ctl_attach_store(&ctl, &io), PIEZO_TABLE_REASON_OK);
+    assert_true(piezo_ctl_active_crc(&ctl) == crc_dcc);
+    run_and_compare(ctl_dcc_u_q15, "dcc after reboot");
+    assert_int_equal(piezo_ctl_unlock(&ctl, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
+    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_NO_PREVIOUS);
+}
+
+static void test_sensor_fault_disarms_and_ramps_down(void **state)
+{
+    (void)state;
+    piezo_ctl_cfg_t cfg = unit_cfg();
+    cfg.u_safe_q15 = 0;
+    cfg.adc_min_ok = -30000;
+    cfg.adc_max_ok = 30000;
+    cfg.limit.max_step_q15 = 1000;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_OPEN_LOOP), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+    int32_t u = 0;
+    for (int k = 0; k < 20; k++) {
+        u = tick(10000, 0);
+    }
+    assert_int_equal(u, 10000); /* slewed up at 1000 per tick */
+    /* two bad samples are tolerated, the third raises the fault */
+    (void)tick(10000, 32767);
+    (void)tick(10000, 32767);
+    assert_true(ctl.st.armed);
+    u = tick(10000, 32767);
+    assert_true(ctl.st.faults & PIEZO_FAULT_SENSOR_IMPLAUSIBLE);
+    assert_false(ctl.st.armed);
+    assert_int_equal(u, 9000); /* ramping down, not jumping */
+    for (int k = 0; k < 20; k++) {
+        u = tick(10000, 0);
+    }
+    assert_int_equal(u, 0);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_EORDER); /* faults first */
+    piezo_ctl_clear_faults(&ctl);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+}
+
+static void test_overruns_are_counted_and_repeated_ones_fault(void **state)
+{
+    (void)state;
+    setup_armed(PIEZO_MODE_OPEN_LOOP);
+    for (int k = 0; k < 4; k++) {
+        piezo_ctl_overrun(&ctl);
+        (void)tick(0, 0);
+    }
+    assert_int_equal(ctl.st.overruns, 4);
+    assert_int_equal(ctl.st.faults, 0); /* isolated overruns only count */
+    for (int k = 0; k < 5; k++) {
+        piezo_ctl_overrun(&ctl);
+    }
+    assert_true(ctl.st.faults & PIEZO_FAULT_OVERRUN);
+    (void)tick(0, 0);
+    assert_false(ctl.st.armed);
+}
+
+static void test_feedback_removes_a_static_error(void **state)
+{
+    (void)state;
+    piezo_ctl_cfg_t cfg = unit_cfg();
+    cfg.pid.kp_q24 = 1 << 23;   /* 0.5 */
+    cfg.pid.ki_q24 = 1 << 21;   /* 0.125 per tick */
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_FEEDBACK), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+    /* plant: y = u / 2 + 500, one tick late */
+    int32_t y = 0, u = 0;
+    for (int k = 0; k < 400; k++) {
+        u = tick(8000, y);
+        y = u / 2 + 500;
+    }
+    assert_signed_in_range(y, 7999, 8001);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_IDLE), PIEZO_EORDER); /* not while armed */
+}
+
+static void test_recorder_captures_the_wave_run(void **state)
+{
+    (void)state;
+    setup_armed(PIEZO_MODE_OPEN_LOOP);
+    const int16_t peak = (int16_t)((20000 * 32767 + 16384) >> 15); /* triangle top is 32767 */
+    piezo_rec_cfg_t rc = {.n_channels = 2, .signal = {PIEZO_SIG_REF, PIEZO_SIG_U}, .decimation = 1,
+                          .trigger = PIEZO_REC_SOFTWARE};
+    assert_int_equal(piezo_rec_configure(&ctl.rec, &rc), PIEZO_OK);
+    piezo_rec_arm(&ctl.rec);
+    ctl.wave_cfg.kind = PIEZO_WAVE_TRIANGLE;
+    ctl.wave_cfg.amplitude_q15 = 20000;
+    ctl.wave_cfg.freq_word = 1u << 26; /* 64 ticks a period */
+    ctl.wave_cfg.cycles = 3;
+    assert_int_equal(piezo_ctl_start_wave(&ctl), PIEZO_OK);
+    for (int k = 0; k < 300; k++) {
+        int32_t in[2] = {0, 0}, dac;
+        piezo_ctl_tick(&ctl, in, &dac);
+    }
+    assert_int_equal(piezo_rec_frames(&ctl.rec), 300);
+    int16_t f[2];
+    assert_int_equal(piezo_rec_read(&ctl.rec, 16, f), PIEZO_OK);
+    assert_int_equal(f[0], peak);   /* triangle peak at a quarter period */
+    assert_int_equal(f[1], peak);   /* open loop with no table: u = r */
+    assert_int_equal(piezo_rec_read(&ctl.rec, 250, f), PIEZO_OK);
+    assert_int_equal(f[0], 0);      /* after 3 periods the wave has ended */
+    assert_int_equal(f[1], 0);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_dcc_table_drives_bit_exact),
+        cmocka_unit_test(test_eupi_inverse_table_drives_bit_exact),
+        cmocka_unit_test(test_refused_images_leave_the_active_table_running),
+        cmocka_unit_test(test_commit_needs_unlock_and_an_upload),
+        cmocka_unit_test(test_swap_happens_at_the_next_tick_and_rolls_back),
+        cmocka_unit_test(test_tables_persist_across_reboot),
+        cmocka_unit_test(test_sensor_fault_disarms_and_ramps_down),
+        cmocka_unit_test(test_overruns_are_counted_and_repeated_ones_fault),
+        cmocka_unit_test(test_feedback_removes_a_static_error),
+        cmocka_unit_test(test_recorder_captures_the_wave_run),
+    };
+    return cmocka_run_group_tests_name("controller", tests, NULL, NULL);
+}
