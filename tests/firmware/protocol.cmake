@@ -24,3 +24,22 @@ if(NOT CMAKE_CROSSCOMPILING)
                    -DLIB=$<TARGET_FILE:protocol_nodiv_check>
                    -P ${PROJECT_SOURCE_DIR}/cmake/CheckNoDivision.cmake)
 endif()
+
+# Interop with libmodbus's clients: the RTU framer behind a pseudo-terminal,
+# the TCP server loop on 127.0.0.1 (test servers also used by the pytest
+# interop tests with pymodbus, tests/host/test_rtu_interop.py).
+add_executable(rtu_pty_server rtu_pty_server.c)
+target_link_libraries(rtu_pty_server PRIVATE piezo_warnings test_modbus_regs util)
+if(TARGET piezo_protocol_tcp)
+  add_executable(tcp_modbus_server tcp_modbus_server.c)
+  target_link_libraries(tcp_modbus_server PRIVATE piezo_warnings test_modbus_regs piezo_protocol_tcp)
+  add_executable(test_modbus_libmodbus test_modbus_libmodbus.c test_modbus_spawn.c)
+  target_link_libraries(test_modbus_libmodbus PRIVATE piezo_warnings test_modbus_regs
+                        piezo_protocol_tcp piezo_cmocka)
+  add_test(NAME test_modbus_rtu_libmodbus
+           COMMAND test_modbus_libmodbus rtu $<TARGET_FILE:rtu_pty_server>)
+  add_test(NAME test_modbus_tcp_libmodbus
+           COMMAND test_modbus_libmodbus tcp $<TARGET_FILE:tcp_modbus_server>)
+  set_tests_properties(test_modbus_rtu_libmodbus test_modbus_tcp_libmodbus PROPERTIES
+                       ENVIRONMENT "CMOCKA_MESSAGE_OUTPUT=stdout" TIMEOUT 60)
+endif()
