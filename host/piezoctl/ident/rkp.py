@@ -11,9 +11,11 @@ of it (the paper uses 13 "neurons"). The KP part is exactly
 offset are this kind's additions (``--rkp-linear off`` drops the former).
 
 Since ``y = vec(Theta) . (psi (x) F)`` is linear in ``Theta`` the batch fit is
-ordinary least squares over the ``N M`` Kronecker features ``psi_j F_m``
-(ridge-regularized: a single-frequency recording excites only a few
-Gaussians, leaving the others' weights undetermined).
+least squares over the ``N M`` Kronecker features ``psi_j F_m``. A
+single-frequency recording excites only a few Gaussians and leaves the
+others' weights undetermined; a penalty on the differences of ``Theta``
+between neighbouring Gaussians (``--rkp-smooth``) makes them copy their
+neighbours instead of decaying to 0, plus a tiny ridge (``--rkp-ridge``).
 :func:`online_gradient` is the paper's adaptive law
 ``dTheta/dt = -g psi F^T e`` (``g = 0.8`` in the paper), integrated by Euler.
 
