@@ -2,10 +2,10 @@
 
 ``--model MODEL.json`` runs the model file's kind (``piezoctl.ident``) on the
 input recording's ``t``, ``u`` (and ``u2`` when present) and writes a CSV with
-header ``t,y``, one row per input row. ``--stage PARAMS.json`` is reserved for
-the C stage model (SIL): the two are mutually exclusive and ``--stage`` reports
-that it is not available until that simulator is plugged into
-:data:`STAGE_SIMULATOR`.
+header ``t,y``, one row per input row. ``--stage PARAMS.json`` runs the C stage
+model (SIL, :mod:`piezoctl.sil.stage`) instead, the same code the SIL build
+runs; for a two-axis stage it writes the first axis (``piezoctl stage
+simulate`` writes both). The two options are mutually exclusive.
 """
 
 from __future__ import annotations
@@ -19,8 +19,17 @@ from ..io.recording import load_recording, write_csv
 
 __all__ = ["add_parser", "run", "simulate_model", "STAGE_SIMULATOR"]
 
-# Hook for the stage simulator: a callable (params_path, t, u, u2) -> y [um], or None.
-STAGE_SIMULATOR = None
+
+def _simulate_stage(params_path, t, u, u2):
+    """The C stage model (piezoctl.sil.stage): this axis' measured displacement [um]."""
+    from ..sil.stage import simulate_stage
+    y = simulate_stage(params_path, t, u, u2)
+    return y[0] if isinstance(y, tuple) else y
+
+
+# The stage simulator: a callable (params_path, t, u, u2) -> y [um]. For a
+# two-axis stage the first axis is written; `piezoctl stage simulate` gives both.
+STAGE_SIMULATOR = _simulate_stage
 
 
 def add_parser(sub) -> None:
@@ -69,8 +78,6 @@ def simulate_model(model, t, u, u2=None) -> np.ndarray:
 def run(args) -> int:
     rec = load_recording(args.input)
     if args.stage:
-        if STAGE_SIMULATOR is None:
-            raise CliError("--stage: the C stage model simulator is not available in this build yet")
         y = np.asarray(STAGE_SIMULATOR(args.stage, rec.t, rec.u, rec.u2), dtype=np.float64)
     else:
         model = load_model(args.model)
