@@ -1,0 +1,80 @@
+"""Modbus TCP and RTU through pymodbus (3.x: the unit is ``device_id=``;
+pinned to pymodbus 3.16.1 in host/requirements.lock)."""
+
+from __future__ import annotations
+
+from .. import interface
+from .client import RegisterClient
+from .errors import (ModbusExceptionError, PortUnreachableError, ProtocolError,
+                     TransportTimeoutError, exception_text)
+from .spec import PortSpec
+
+__all__ = ["PymodbusClient"]
+
+_FUNCTION_NAMES = {3: "read holding", 4: "read input", 16: "write holding"}
+
+
+class PymodbusClient(RegisterClient):
+    """A controller behind a pymodbus TCP or RTU client."""
+
+    def __init__(self, spec: PortSpec, *, unit: int = interface.MODBUS_UNIT_ID,
+                 timeout: float = 1.0, retries: int = 1):
+        from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+        from pymodbus import FramerType
+
+        self.name = spec.text
+        self.unit = unit
+        if spec.kind == "tcp":
+            self._client = ModbusTcpClient(spec.host, port=spec.port, timeout=timeout,
+                                           retries=retries)
+        elif spec.kind == "rtu":
+            self._client = ModbusSerialClient(spec.device, framer=FramerType.RTU,
+                                              baudrate=spec.baud, parity=spec.parity,
+                                              bytesize=8, stopbits=1, timeout=timeout,
+                                              retries=retries)
+        else:
+            raise ValueError(f"pymodbus does not carry {spec.kind!r}")
+        if not self._client.connect():
+            what = ("cannot connect" if spec.kind == "tcp" else "cannot open serial device")
+            raise PortUnreachableError(f"{self.name}: {what}")
+
+    def close(self) -> None:
+        self._client.close()
+
+    def _call(self, function: int, address: int, count: int, call):
+        from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+
+        what = f"{self.name}: {_FUNCTION_NAMES[function]} {address:#06x}+{count}"
+        try:
+            rsp = call()
+        except ConnectionException as exc:
+            raise PortUnreachableError(f"{what}: connection lost ({exc})") from None
+        except ModbusIOException:
+            raise TransportTimeoutError(f"{what}: no answer within the timeout") from None
+        except ModbusException as exc:
+            raise ProtocolError(f"{what}: {exc}") from None
+        if rsp.isError():
+            code = getattr(rsp, "exception_code", None)
+            if code is None:
+                raise ProtocolError(f"{what}: error response {rsp}")
+            raise ModbusExceptionError(f"{what}: {exception_text(code)}", code, function)
+        return rsp
+
+    def _read(self, function: int, address: int, count: int) -> list[int]:
+        c = self._client
+        fn = c.read_holding_registers if function == 3 else c.read_input_registers
+        rsp = self._call(function, address, count,
+                         lambda: fn(address, count=count, device_id=self.unit))
+        regs = list(rsp.registers)
+        if len(regs) != count:
+            raise ProtocolError(f"{self.name}: asked {count} registers at {address:#06x}, "
+                                f"got {len(regs)}")
+        return regs
+
+    def _write(self, address: int, values: list[int]) -> None:
+        rsp = self._call(16, address, len(values),
+                         lambda: self._client.write_registers(address, values,
+                                                              device_id=self.unit))
+        if (rsp.address, rsp.count) != (address, len(values)):
+            raise ProtocolError(f"{self.name}: write of {len(values)} registers at "
+                                f"{address:#06x} confirmed as {rsp.count} at {rsp.address:#06x}")
