@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from piezoctl import cli
-from piezoctl.io.recording import load_recording, write_csv
+from piezoctl.io.recording import write_csv
 
 stage = pytest.importorskip("piezoctl.sil.stage")
 
@@ -28,7 +28,7 @@ def test_simulate_with_stage_matches_stage_simulate(tmp_path):
     assert cli.main(["stage", "simulate", "--stage", str(params), "--input", str(tmp_path / "x.csv"),
                      "--out", str(tmp_path / "b.csv")]) == 0
     a = np.genfromtxt(tmp_path / "a.csv", delimiter=",", names=True)
-    b = load_recording(tmp_path / "b.csv")
+    b = np.genfromtxt(tmp_path / "b.csv", delimiter=",", names=True, comments="#")
     assert a.dtype.names == ("t", "y")
-    assert np.array_equal(a["y"], b.y)
+    assert np.array_equal(a["y"], b["y"])
     assert np.ptp(a["y"]) > 5.0  # the stage moved by micrometres
