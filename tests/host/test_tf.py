@@ -136,11 +136,26 @@ def test_simulate_tf_starts_in_steady_state_and_matches_lsim():
     num, den = [2.0 * 100.0], [1.0, 100.0]
     t = np.arange(0, 0.2, 1e-4)
     u = 3.0 + np.sin(2 * np.pi * 5 * t)
-    y = tf.simulate_tf(num, den, t, u)
-    assert abs(y[0] - 6.0) < 1e-9
-    _, yl, _ = signal.lsim((num, den), u, t, X0=None, interp=False)
     # lsim starts at zero state: compare after its transient has died out
-    np.testing.assert_allclose(y[1800:], yl[1800:], atol=1e-6)
+    for method, interp in (("zoh", False), ("foh", True)):
+        y = tf.simulate_tf(num, den, t, u, method=method)
+        assert abs(y[0] - 6.0) < 1e-9
+        _, yl, _ = signal.lsim((num, den), u, t, X0=None, interp=interp)
+        np.testing.assert_allclose(y[1800:], yl[1800:], atol=1e-6)
+
+
+def test_simulate_tf_foh_keeps_biproper_high_gain_models_accurate():
+    # (1 + s/wz)^2 / (1 + s/wp)^2 with wp/wz ~ 58: high-frequency gain 3300
+    wz, wp = 2 * np.pi * 22.6, 2 * np.pi * 1300
+    num = np.polymul([1 / wz, 1], [1 / wz, 1]) * wp ** 2
+    den = np.polymul([1 / wp, 1], [1 / wp, 1]) * wp ** 2
+    t = np.arange(10000) / 5000.0
+    u = np.sin(2 * np.pi * t)
+    gain = abs(tf.freqresp(num, den, [2 * np.pi]))[0]
+    y = tf.simulate_tf(num, den, t, u)
+    assert abs(np.ptp(y[5000:]) / 2 - gain) < 1e-3 * gain
+    y_zoh = tf.simulate_tf(num, den, t, u, method="zoh")
+    assert np.ptp(y_zoh[5000:]) / 2 > 2 * gain  # every ZOH step excites the high-frequency gain
 
 
 # --- CLI contract -----------------------------------------------------------------

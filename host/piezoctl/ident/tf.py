@@ -50,7 +50,7 @@ PSO-WCLS (stable models)
     generation. The random generator is seeded, so a fit is reproducible.
 
 Also here: :func:`frf_from_time` (FRF estimate from time-domain records),
-:func:`freqresp`, :func:`discretize` and :func:`simulate_tf` (ZOH simulation).
+:func:`freqresp`, :func:`discretize` and :func:`simulate_tf` (FOH or ZOH simulation).
 """
 
 from __future__ import annotations
@@ -519,8 +519,8 @@ def frf_from_time(t, u, y, *, nperseg: int | None = None, fmin: float | None = N
     return FRF(f[keep], np.abs(h), np.rad2deg(np.unwrap(np.angle(h))), coh[keep])
 
 
-def discretize(num, den, dt: float):
-    """Zero-order-hold discretization of ``num/den`` to state space (scipy).
+def discretize(num, den, dt: float, method: str = "foh"):
+    """Discretize ``num/den`` to state space (``scipy.signal.cont2discrete``).
 
     Parameters
     ----------
@@ -528,6 +528,11 @@ def discretize(num, den, dt: float):
         Continuous coefficients, descending powers of s; proper (``len(num) <= len(den)``).
     dt : float
         Sample period [s].
+    method : str
+        ``"foh"`` (default: first-order hold, exact for a piecewise-linear input,
+        the right choice for sampled smooth signals), ``"zoh"`` (exact for a
+        staircase input: a biproper model with a large high-frequency gain then
+        responds to every step), or any other method of ``cont2discrete``.
 
     Returns
     -------
@@ -535,12 +540,12 @@ def discretize(num, den, dt: float):
         Discrete state-space matrices.
     """
     a, b, c, d = signal.tf2ss(num, den)
-    ad, bd, cd, dd, _ = signal.cont2discrete((a, b, c, d), dt, method="zoh")
+    ad, bd, cd, dd, _ = signal.cont2discrete((a, b, c, d), dt, method=method)
     return ad, bd, cd, dd
 
 
-def simulate_tf(num, den, t, u) -> np.ndarray:
-    """Response of ``num/den`` to ``u`` sampled at ``t`` (ZOH), starting in steady state.
+def simulate_tf(num, den, t, u, method: str = "foh") -> np.ndarray:
+    """Response of ``num/den`` to ``u`` sampled at ``t``, starting in steady state.
 
     The initial state is the equilibrium for the constant input ``u[0]``, so a
     record that starts at an offset shows no start-up transient.
@@ -554,17 +559,19 @@ def simulate_tf(num, den, t, u) -> np.ndarray:
         Uniform sample times [s].
     u : array_like
         Input samples.
+    method : str
+        Discretization, see :func:`discretize` (default first-order hold).
     """
     t = np.asarray(t, dtype=float)
     u = np.asarray(u, dtype=float)
     if t.size < 2:
         return np.polyval(num, 0) / np.polyval(den, 0) * u
     dt = float(np.mean(np.diff(t)))
-    ad, bd, cd, dd = discretize(num, den, dt)
+    ad, bd, cd, dd = discretize(num, den, dt, method)
     nx = ad.shape[0]
     if nx == 0:
         return dd[0, 0] * u
-    try:
+    try:  # equilibrium of the discrete system for the constant input u[0]
         x = np.linalg.solve(np.eye(nx) - ad, bd[:, 0] * u[0])
     except np.linalg.LinAlgError:
         x = np.zeros(nx)

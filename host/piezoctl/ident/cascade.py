@@ -1,0 +1,222 @@
+"""Model kind ``cascade``: rate-independent hysteresis (EUPI) followed by linear dynamics.
+
+    y = G(s)[ H[u] ],   H: EUPI (:mod:`piezoctl.ident.eupi`), G: continuous transfer function
+
+Identification (the paper's procedure)
+
+1. Split the recordings into quasi-static and dynamic ones: a recording is
+   quasi-static if the power-weighted mean frequency (spectral centroid) of its
+   detrended drive u is below ``--cascade-static-hz`` (default 2 Hz), dynamic
+   otherwise. ``--cascade-static`` lists the quasi-static files by index instead
+   (0-based, in ``--data`` order).
+2. Fit the EUPI hysteresis H on the quasi-static recordings (the ``eupi`` kind
+   with its default options).
+3. For each dynamic recording (in the paper: the stage driven by the EUPI
+   inverse of a chirp, so that H[u] is close to the chirp), compute the
+   hysteresis output w = H[u] and estimate the FRF from w to y
+   (:func:`piezoctl.ident.tf.frf_from_time`, Welch, lines with coherence >=
+   0.8 between ``--cascade-fmin`` and ``--cascade-fmax``). The FRFs of all
+   dynamic files are pooled (sorted by frequency; equal frequencies averaged).
+4. Fit G of order ``--cascade-order`` by ``--cascade-method`` (``pso-wcls``
+   default, or ``wcls``) (:mod:`piezoctl.ident.tf`).
+5. Joint refinement (``--cascade-refine`` function evaluations, 0 = off):
+   ``scipy.optimize.least_squares`` over the transfer function's coefficients
+   (scaled by the FRF's top frequency) and an affine correction
+   ``c1 H[u] + c0`` of the hysteresis output, on the time-domain data of all
+   recordings. The refined model is kept only if it is stable and lowers the
+   residual. (The EUPI operator weights themselves are only refined through
+   ``c1, c0``.)
+
+``simulate`` runs H, then G discretized with a first-order hold at the
+recording's sample period (:func:`piezoctl.ident.tf.simulate_tf`), starting at
+the equilibrium of the first sample.
+
+Parameters: ``hysteresis`` (the eupi parameters), ``num``, ``den`` [descending
+powers of s, den[0] = 1], ``poles`` [[re, im] rad/s], ``te``, ``c1``, ``c0``
+[um], ``static_files``, ``dynamic_files`` (indices), ``frf`` (f_hz, mag,
+phase_deg of the pooled estimate).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import optimize
+
+from . import eupi as eupi_kind
+from . import tf
+from .common import IdentError, Options
+
+KIND = "cascade"
+DESCRIPTION = "EUPI hysteresis followed by linear dynamics fitted by WCLS / PSO-WCLS"
+
+__all__ = ["KIND", "DESCRIPTION", "add_options", "fit", "simulate", "split_recordings",
+           "spectral_centroid"]
+
+DEFAULTS = {"order": 2, "num_order": None, "method": "pso-wcls", "static_hz": 2.0, "static": None,
+            "fmin": None, "fmax": None, "refine": 50, "seed": 0}
+
+
+def add_options(parser) -> None:
+    """``identify`` options of this kind (prefix ``--cascade-``)."""
+    parser.add_argument("--cascade-order", type=int, default=2, help="order n of the dynamics (default 2)")
+    parser.add_argument("--cascade-num-order", type=int, default=None,
+                        help="numerator order (default: n)")
+    parser.add_argument("--cascade-method", choices=("wcls", "pso-wcls"), default="pso-wcls")
+    parser.add_argument("--cascade-static-hz", type=float, default=2.0,
+                        help="drive spectral centroid [Hz] below which a file is quasi-static (default 2)")
+    parser.add_argument("--cascade-static", type=int, nargs="+", default=None, metavar="I",
+                        help="indices (0-based) of the quasi-static files, instead of the spectrum rule")
+    parser.add_argument("--cascade-fmin", type=float, default=None, help="lowest FRF frequency [Hz]")
+    parser.add_argument("--cascade-fmax", type=float, default=None, help="highest FRF frequency [Hz]")
+    parser.add_argument("--cascade-refine", type=int, default=50,
+                        help="function evaluations of the joint time-domain refinement (0: off)")
+    parser.add_argument("--cascade-seed", type=int, default=0, help="PSO seed")
+
+
+def _opt(options, name):
+    v = options.get(f"cascade_{name}") if options is not None else None
+    return DEFAULTS[name] if v is None else v
+
+
+def spectral_centroid(t, u) -> float:
+    """Power-weighted mean frequency [Hz] of the detrended drive ``u`` sampled at ``t`` [s]."""
+    u = np.asarray(u, dtype=float)
+    t = np.asarray(t, dtype=float)
+    if u.size < 4:
+        return 0.0
+    uu = u - np.polyval(np.polyfit(t - t[0], u, 1), t - t[0]) if np.ptp(u) > 0 else u * 0
+    p = np.abs(np.fft.rfft(uu * np.hanning(u.size))) ** 2
+    f = np.fft.rfftfreq(u.size, float(np.mean(np.diff(t))))
+    return float(np.sum(f * p) / np.sum(p)) if np.sum(p) > 0 else 0.0
+
+
+def split_recordings(recordings, options=None) -> tuple[list[int], list[int]]:
+    """Indices (quasi-static, dynamic) of the recordings (see the module notes)."""
+    idx = _opt(options, "static")
+    if idx is not None:
+        static = sorted(set(int(i) for i in idx))
+        if any(i < 0 or i >= len(recordings) for i in static):
+            raise IdentError(f"--cascade-static {idx}: indices must be in 0..{len(recordings) - 1}")
+    else:
+        lim = float(_opt(options, "static_hz"))
+        static = [i for i, r in enumerate(recordings) if spectral_centroid(r.t, r.u) < lim]
+    dynamic = [i for i in range(len(recordings)) if i not in static]
+    if not static or not dynamic:
+        raise IdentError(f"cascade needs quasi-static and dynamic recordings (got {len(static)} "
+                         f"quasi-static, {len(dynamic)} dynamic; see --cascade-static-hz / --cascade-static)")
+    return static, dynamic
+
+
+def _pool(frfs) -> tf.FRF:
+    f = np.concatenate([x.f_hz for x in frfs])
+    h = np.concatenate([x.h for x in frfs])
+    uf, inv = np.unique(f, return_inverse=True)
+    hh = np.array([h[inv == k].mean() for k in range(uf.size)])
+    return tf.FRF(uf, np.abs(hh), np.rad2deg(np.unwrap(np.angle(hh))))
+
+
+def _hyst_opts(options) -> Options:
+    o = Options({k: v for k, v in (options or {}).items() if not k.startswith("cascade_")})
+    o.setdefault("offset", "shared")
+    o.setdefault("max_fit_rows", 200_000)
+    o.setdefault("u_range", None)
+    return o
+
+
+def fit(recordings, options) -> dict:
+    """Fit the cascade (see the module notes).
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Quasi-static and dynamic recordings (``t`` [s], ``u`` [V], ``y`` [um]).
+    options : Options or mapping
+        ``cascade_*`` options and the common ones.
+
+    Returns
+    -------
+    dict
+        Parameters (see the module docstring).
+    """
+    static, dynamic = split_recordings(recordings, options)
+    hp = eupi_kind.fit([recordings[i] for i in static], _hyst_opts(options))
+    frfs = []
+    for i in dynamic:
+        r = recordings[i]
+        w = eupi_kind.simulate(hp, r.t, r.u)
+        try:
+            frfs.append(tf.frf_from_time(r.t, w, r.y, fmin=_opt(options, "fmin"), fmax=_opt(options, "fmax"),
+                                         coherence_min=0.8))
+        except ValueError as exc:
+            raise IdentError(f"cascade: recording {i}: {exc}") from None
+    frf = _pool(frfs)
+    order = int(_opt(options, "order"))
+    nb = _opt(options, "num_order")
+    try:
+        res = tf.fit_tf(frf, order, _opt(options, "method"), nb,
+                        **({"seed": int(_opt(options, "seed"))} if _opt(options, "method") == "pso-wcls" else {}))
+    except ValueError as exc:
+        raise IdentError(f"cascade: fitting the dynamics failed: {exc}") from None
+    params = {"hysteresis": hp, "num": res.num, "den": res.den, "te": res.te, "method": res.method,
+              "c1": 1.0, "c0": 0.0, "static_files": static, "dynamic_files": dynamic,
+              "frf": {"f_hz": frf.f_hz, "mag": frf.mag, "phase_deg": frf.phase_deg}}
+    n_eval = int(_opt(options, "refine"))
+    if n_eval > 0:
+        params.update(refine(params, recordings, n_eval, w0=float(frf.w.max())))
+    params["num"] = [float(v) for v in params["num"]]
+    params["den"] = [float(v) for v in params["den"]]
+    params["poles"] = [[float(p.real), float(p.imag)] for p in tf.poles_of(params["den"])]
+    params["stable"] = tf.is_stable(params["den"])
+    return params
+
+
+def refine(params: dict, recordings, max_nfev: int, w0: float) -> dict:
+    """Joint time-domain refinement of G's coefficients and the affine hysteresis correction.
+
+    Parameters
+    ----------
+    params : dict
+        A cascade parameter set (``num``, ``den``, ``c1``, ``c0``, ``hysteresis``).
+    recordings : sequence of Recording
+        Data (all of them).
+    max_nfev : int
+        Function evaluations of ``least_squares``.
+    w0 : float
+        Frequency scale [rad/s]: coefficients are optimized as ``b_k / w0^(n-k)``.
+
+    Returns
+    -------
+    dict
+        ``num``, ``den``, ``c1``, ``c0`` and ``refine_cost`` ([before, after] sum of
+        squared errors [um^2]); the input values if refinement did not help.
+    """
+    num, den = np.asarray(params["num"], float), np.asarray(params["den"], float)
+    n, nb = den.size - 1, num.size - 1
+    ws = [eupi_kind.simulate(params["hysteresis"], r.t, r.u) for r in recordings]
+    sc_b = w0 ** (n - np.arange(nb, -1, -1.0))
+    sc_a = w0 ** (n - np.arange(n - 1, -1, -1.0))
+
+    def unpack(z):
+        return z[: nb + 1] * sc_b, np.concatenate(([1.0], z[nb + 1: nb + 1 + n] * sc_a)), z[-2], z[-1]
+
+    def resid(z):
+        b, a, c1, c0 = unpack(z)
+        if not tf.is_stable(a):
+            return np.full(sum(len(r.y) for r in recordings), 1e3)
+        return np.concatenate([tf.simulate_tf(b, a, r.t, c1 * w + c0) - r.y for r, w in zip(recordings, ws)])
+
+    z0 = np.concatenate([num / sc_b, den[1:] / sc_a, [params["c1"], params["c0"]]])
+    cost0 = float(np.sum(resid(z0) ** 2))
+    sol = optimize.least_squares(resid, z0, x_scale="jac", max_nfev=max_nfev)
+    b, a, c1, c0 = unpack(sol.x)
+    cost1 = float(np.sum(resid(sol.x) ** 2))
+    if cost1 < cost0 and tf.is_stable(a):
+        return {"num": b, "den": a, "c1": float(c1), "c0": float(c0), "refine_cost": [cost0, cost1]}
+    return {"refine_cost": [cost0, cost0]}
+
+
+def simulate(params: dict, t, u, u2=None) -> np.ndarray:
+    """Model output y [um] for drive u [V]: EUPI, then the discretized dynamics (``u2`` unused)."""
+    w = eupi_kind.simulate(params["hysteresis"], t, u)
+    w = float(params.get("c1", 1.0)) * w + float(params.get("c0", 0.0))
+    return tf.simulate_tf(params["num"], params["den"], t, w)
