@@ -29,8 +29,8 @@ endif()
 # the TCP server loop on 127.0.0.1 (test servers also used by the pytest
 # interop tests with pymodbus, tests/host/test_rtu_interop.py). Host only.
 if(NOT CMAKE_CROSSCOMPILING)
-add_executable(rtu_pty_server rtu_pty_server.c)
-target_link_libraries(rtu_pty_server PRIVATE piezo_warnings test_modbus_regs util)
+  add_executable(rtu_pty_server rtu_pty_server.c)
+  target_link_libraries(rtu_pty_server PRIVATE piezo_warnings test_modbus_regs util)
 endif()
 if(TARGET piezo_protocol_tcp)
   add_executable(tcp_modbus_server tcp_modbus_server.c)
