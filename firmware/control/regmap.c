@@ -1,0 +1,465 @@
+#include "regmap.h"
+
+#include <stddef.h>
+#include <string.h>
+
+#include "piezo_err.h"
+#include "piezo_interface.h"
+
+#define FW_VERSION ((0u << 16) | (1u << 8) | 0u)
+
+void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl)
+{
+    memset(m, 0, sizeof *m);
+    m->ctl = ctl;
+    m->n_axes = 1u;
+    m->tick_hz = 10000u;
+    m->fw_version = FW_VERSION;
+    m->rec_cfg = ctl->rec.cfg;
+}
+
+/* The descriptor holding address a, and the word within it, or NULL. */
+static const piezo_reg_desc_t *find(const piezo_reg_desc_t *tab, unsigned n, uint16_t a, uint32_t *word)
+{
+    for (unsigned i = 0; i < n; i++) {
+        uint32_t span = (uint32_t)tab[i].words * tab[i].count;
+        if (a >= tab[i].addr && a < tab[i].addr + span) {
+            *word = a - tab[i].addr;
+            return &tab[i];
+        }
+    }
+    return NULL;
+}
+
+static uint16_t word_of(uint32_t v, const piezo_reg_desc_t *d, uint32_t word)
+{
+    if (d->words == 1u) {
+        return (uint16_t)v;
+    }
+    return (word & 1u) == 0u ? (uint16_t)(v >> 16) : (uint16_t)v; /* high word first */
+}
+
+static uint32_t u32_of_i(int32_t v)
+{
+    return (uint32_t)v;
+}
+
+static uint32_t input_value(const piezo_regmap_t *m, uint16_t id)
+{
+    const piezo_ctl_t *c = m->ctl;
+    switch (id) {
+    case PIEZO_IREG_DEVICE_ID: return 0x505Au;
+    case PIEZO_IREG_FW_VERSION: return m->fw_version;
+    case PIEZO_IREG_LAYOUT_VERSION: return PIEZO_LAYOUT_VERSION;
+    case PIEZO_IREG_INTERFACE_CRC: return PIEZO_INTERFACE_CRC32;
+    case PIEZO_IREG_N_AXES: return m->n_axes;
+    case PIEZO_IREG_AXIS: return m->axis;
+    case PIEZO_IREG_TICK_HZ: return m->tick_hz;
+    case PIEZO_IREG_DRIVE_MIN_MV: return u32_of_i(m->drive_min_mv);
+    case PIEZO_IREG_DRIVE_MAX_MV: return u32_of_i(m->drive_max_mv);
+    case PIEZO_IREG_POSITION_MIN_NM: return u32_of_i(m->position_min_nm);
+    case PIEZO_IREG_POSITION_MAX_NM: return u32_of_i(m->position_max_nm);
+    case PIEZO_IREG_REC_CAPACITY: return PIEZO_CTL_REC_SAMPLES;
+    case PIEZO_IREG_ARMED: return c->st.armed;
+    case PIEZO_IREG_FAULTS: return c->st.faults;
+    case PIEZO_IREG_TICK_COUNT: return c->st.ticks;
+    case PIEZO_IREG_OVERRUNS: return c->st.overruns;
+    case PIEZO_IREG_ACTIVE_TABLE_CRC: return piezo_ctl_active_crc(c);
+    case PIEZO_IREG_ACTIVE_TABLE_VERSION: return piezo_ctl_active_version(c);
+    case PIEZO_IREG_STAGED_TABLE_CRC: return c->staged_crc;
+    case PIEZO_IREG_BAD_UNLOCKS: return c->st.bad_unlocks;
+    case PIEZO_IREG_TABLE_RESULT: return c->st.table_result;
+    case PIEZO_IREG_MODE: return c->mode;
+    case PIEZO_IREG_POSITION_Q15: return (uint16_t)c->sig[PIEZO_SIG_Y];
+    case PIEZO_IREG_DRIVE_Q15: return (uint16_t)c->sig[PIEZO_SIG_U];
+    case PIEZO_IREG_REFERENCE_Q15: return (uint16_t)c->sig[PIEZO_SIG_REF];
+    case PIEZO_IREG_ERROR_Q15: return (uint16_t)c->sig[PIEZO_SIG_ERR];
+    case PIEZO_IREG_CLAMPS: return c->st.clamps;
+    case PIEZO_IREG_TICK_TIME_NS: return m->tick_time_ns;
+    case PIEZO_IREG_TICK_TIME_MAX_NS: return m->tick_time_max_ns;
+    case PIEZO_IREG_PREVIOUS_TABLE_CRC: return c->previous >= 0 ? c->set[c->previous].crc : 0u;
+    case PIEZO_IREG_WAVE_RUNNING: return (uint32_t)piezo_wave_running(&c->wave);
+    case PIEZO_IREG_REC_STATE: return c->rec.state;
+    case PIEZO_IREG_REC_FRAMES: return piezo_rec_frames(&c->rec);
+    case PIEZO_IREG_ACTIVE_TABLE_KIND: {
+        int8_t a = c->pending >= 0 ? c->pending : c->active;
+        return a >= 0 ? c->set[a].kind : 0u;
+    }
+    case PIEZO_IREG_STAGED_BYTES: return c->staged_len;
+    default: return 0u;
+    }
+}
+
+static uint8_t read_input(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
+{
+    const piezo_regmap_t *m = ctx;
+    for (uint16_t i = 0; i < count; i++) {
+        uint32_t w;
+        const piezo_reg_desc_t *d = find(piezo_input_regs, PIEZO_IREG_N, (uint16_t)(addr + i), &w);
+        if (d == NULL) {
+            return PIEZO_MB_EX_ILLEGAL_DATA_ADDRESS;
+        }
+        out[i] = word_of(input_value(m, d->id), d, w);
+    }
+    return 0u;
+}
+
+/* One recorded sample by flattened index (frame * channels + channel). */
+static int16_t rec_sample(const piezo_ctl_t *c, uint32_t index)
+{
+    int16_t frame[PIEZO_REC_MAX_CHANNELS];
+    uint32_t nch = c->rec.cfg.n_channels, k = 0u;
+    while (index >= nch) { /* no division: readout is not in the tick, but the core links none */
+        index -= nch;
+        k++;
+    }
+    if (piezo_rec_read(&c->rec, k, frame) != PIEZO_OK) {
+        return 0;
+    }
+    return frame[index];
+}
+
+/* Current value of holding element `elem` (32-bit values whole). */
+static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, uint32_t elem)
+{
+    const piezo_ctl_t *c = m->ctl;
+    const piezo_ctl_cfg_t *g = &c->cfg;
+    const piezo_wave_cfg_t *w = &c->wave_cfg;
+    switch (d->id) {
+    case PIEZO_HREG_UNLOCK: return c->unlocked;
+    case PIEZO_HREG_MODE: return c->mode;
+    case PIEZO_HREG_ARM: return c->st.armed;
+    case PIEZO_HREG_SETPOINT_Q15: return (uint16_t)c->setpoint_q15;
+    case PIEZO_HREG_COMMAND: return 0u;
+    case PIEZO_HREG_REF_SOURCE: return c->ref_source;
+    case PIEZO_HREG_U2_Q15: return (uint16_t)c->u2_q15;
+    case PIEZO_HREG_WAVE_KIND: return w->kind;
+    case PIEZO_HREG_WAVE_OFFSET_Q15: return (uint16_t)w->offset_q15;
+    case PIEZO_HREG_WAVE_AMPLITUDE_Q15: return (uint16_t)w->amplitude_q15;
+    case PIEZO_HREG_WAVE_FREQ_WORD: return w->freq_word;
+    case PIEZO_HREG_WAVE_CHIRP_RATE_WORD: return w->chirp_rate_word;
+    case PIEZO_HREG_WAVE_CHIRP_END_WORD: return w->chirp_end_word;
+    case PIEZO_HREG_WAVE_CYCLES: return w->cycles;
+    case PIEZO_HREG_WAVE_N_TONES: return w->n_tones;
+    case PIEZO_HREG_WAVE_N_LEVELS: return w->n_levels;
+    case PIEZO_HREG_WAVE_HOLD_TICKS: return w->hold_ticks;
+    case PIEZO_HREG_WAVE_TONES: {
+        /* 5 registers a tone: amplitude, freq high, freq low, phase high, phase low */
+        uint32_t t = 0u, r = elem;
+        while (r >= 5u) {
+            r -= 5u;
+            t++;
+        }
+        const piezo_wave_tone_t *tone = &c->tones[t];
+        switch (r) {
+        case 0: return (uint16_t)tone->amplitude_q15;
+        case 1: return tone->freq_word >> 16;
+        case 2: return tone->freq_word & 0xFFFFu;
+        case 3: return tone->phase_word >> 16;
+        default: return tone->phase_word & 0xFFFFu;
+        }
+    }
+    case PIEZO_HREG_WAVE_LEVELS: return (uint16_t)c->levels_q15[elem];
+    case PIEZO_HREG_WAVE_DURATIONS: return c->durations[elem];
+    case PIEZO_HREG_REC_N_CHANNELS: return m->rec_cfg.n_channels;
+    case PIEZO_HREG_REC_SIGNALS: return m->rec_cfg.signal[elem];
+    case PIEZO_HREG_REC_DECIMATION: return m->rec_cfg.decimation;
+    case PIEZO_HREG_REC_PRETRIGGER: return m->rec_cfg.pretrigger;
+    case PIEZO_HREG_REC_TRIGGER: return m->rec_cfg.trigger;
+    case PIEZO_HREG_REC_TRIGGER_SIGNAL: return m->rec_cfg.trigger_signal;
+    case PIEZO_HREG_REC_TRIGGER_LEVEL_Q15: return (uint16_t)m->rec_cfg.trigger_level_q15;
+    case PIEZO_HREG_REC_READ_INDEX: return m->rec_read_index;
+    case PIEZO_HREG_REC_WINDOW: return (uint16_t)rec_sample(c, m->rec_read_index + elem);
+    case PIEZO_HREG_TABLE_OFFSET: return m->table_offset;
+    case PIEZO_HREG_TABLE_WINDOW: {
+        uint32_t off = m->table_offset + 2u * elem;
+        uint32_t lo = off < sizeof c->staged ? c->staged[off] : 0u;
+        uint32_t hi = off + 1u < sizeof c->staged ? c->staged[off + 1u] : 0u;
+        return lo | (hi << 8);
+    }
+    case PIEZO_HREG_TABLE_COMMAND: return 0u;
+    case PIEZO_HREG_PID_KP_Q24: return u32_of_i(g->pid.kp_q24);
+    case PIEZO_HREG_PID_KI_Q24: return u32_of_i(g->pid.ki_q24);
+    case PIEZO_HREG_PID_KD_Q24: return u32_of_i(g->pid.kd_q24);
+    case PIEZO_HREG_PID_OUT_MIN_Q15: return (uint16_t)g->pid.out_min_q15;
+    case PIEZO_HREG_PID_OUT_MAX_Q15: return (uint16_t)g->pid.out_max_q15;
+    case PIEZO_HREG_LIMIT_MIN_Q15: return (uint16_t)g->limit.min_q15;
+    case PIEZO_HREG_LIMIT_MAX_Q15: return (uint16_t)g->limit.max_q15;
+    case PIEZO_HREG_LIMIT_MAX_STEP_Q15: return (uint16_t)g->limit.max_step_q15;
+    case PIEZO_HREG_NOTCH_ON: return g->notch_on;
+    case PIEZO_HREG_NOTCH_B0_Q24: return u32_of_i(g->notch.b0_q24);
+    case PIEZO_HREG_NOTCH_B1_Q24: return u32_of_i(g->notch.b1_q24);
+    case PIEZO_HREG_NOTCH_B2_Q24: return u32_of_i(g->notch.b2_q24);
+    case PIEZO_HREG_NOTCH_A1_Q24: return u32_of_i(g->notch.a1_q24);
+    case PIEZO_HREG_NOTCH_A2_Q24: return u32_of_i(g->notch.a2_q24);
+    case PIEZO_HREG_MAX_JUMP_Q15: return (uint16_t)g->max_jump_q15;
+    case PIEZO_HREG_BAD_LIMIT: return g->bad_limit;
+    case PIEZO_HREG_OVERRUN_LIMIT: return g->overrun_limit;
+    default: return 0u;
+    }
+}
+
+static uint8_t read_holding(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
+{
+    const piezo_regmap_t *m = ctx;
+    for (uint16_t i = 0; i < count; i++) {
+        uint32_t w;
+        const piezo_reg_desc_t *d = find(piezo_holding_regs, PIEZO_HREG_N, (uint16_t)(addr + i), &w);
+        if (d == NULL) {
+            return PIEZO_MB_EX_ILLEGAL_DATA_ADDRESS;
+        }
+        out[i] = word_of(holding_value(m, d, d->words == 2u ? w >> 1 : w), d, w);
+    }
+    return 0u;
+}
+
+/* A pending write of one holding element: its new value, composed from the
+ * request's words and, for a half-written 32-bit value, the current other half. */
+typedef struct {
+    const piezo_reg_desc_t *d;
+    uint32_t elem;
+    uint32_t value;
+} pending_t;
+
+#define MAX_PENDING 125u
+
+static int16_t s16(uint32_t v) { return (int16_t)(uint16_t)v; }
+static int32_t s32(uint32_t v) { return (int32_t)v; }
+
+/* Is the new value legal for its register, given the unit's state? */
+static int legal(const piezo_regmap_t *m, const pending_t *p)
+{
+    const piezo_ctl_t *c = m->ctl;
+    uint32_t v = p->value;
+    switch (p->d->id) {
+    case PIEZO_HREG_MODE: return v <= PIEZO_MODE_FEEDBACK && !c->st.armed;
+    case PIEZO_HREG_ARM: return v <= 1u && (v == 0u || c->st.faults == 0u);
+    case PIEZO_HREG_COMMAND:
+        if (v == 4u) {
+            /* arming applies the recorder configuration: it must fit */
+            piezo_rec_t trial = c->rec;
+            trial.state = PIEZO_REC_IDLE;
+            return piezo_rec_configure(&trial, &m->rec_cfg) == PIEZO_OK;
+        }
+        return v >= 1u && v <= 6u;
+    case PIEZO_HREG_REF_SOURCE: return v <= PIEZO_REF_WAVE;
+    case PIEZO_HREG_WAVE_KIND: return v <= PIEZO_WAVE_ARBITRARY;
+    case PIEZO_HREG_WAVE_N_TONES: return v <= PIEZO_WAVE_MAX_TONES;
+    case PIEZO_HREG_WAVE_N_LEVELS: return v <= PIEZO_CTL_WAVE_MAX_LEVELS;
+    case PIEZO_HREG_REC_N_CHANNELS: return v >= 1u && v <= PIEZO_REC_MAX_CHANNELS;
+    case PIEZO_HREG_REC_SIGNALS:
+    case PIEZO_HREG_REC_TRIGGER_SIGNAL: return v < PIEZO_SIG_N;
+    case PIEZO_HREG_REC_DECIMATION: return v >= 1u && v <= 0xFFFFu;
+    case PIEZO_HREG_REC_TRIGGER: return v <= PIEZO_REC_FALLING;
+    case PIEZO_HREG_TABLE_OFFSET: return v < PIEZO_TABLE_MAX_BYTES && (v & 1u) == 0u;
+    case PIEZO_HREG_TABLE_WINDOW: return c->unlocked;
+    case PIEZO_HREG_TABLE_COMMAND: return v >= 1u && v <= 3u && c->unlocked;
+    case PIEZO_HREG_BAD_LIMIT: return v >= 1u;
+    case PIEZO_HREG_MAX_JUMP_Q15:
+    case PIEZO_HREG_LIMIT_MAX_STEP_Q15: return s16(v) >= 0;
+    default: return 1;
+    }
+}
+
+/* Stores a configuration value into g; 0 if p is not a configuration register. */
+static int apply_config(piezo_ctl_cfg_t *g, const pending_t *p)
+{
+    uint32_t v = p->value;
+    switch (p->d->id) {
+    case PIEZO_HREG_PID_KP_Q24: g->pid.kp_q24 = s32(v); break;
+    case PIEZO_HREG_PID_KI_Q24: g->pid.ki_q24 = s32(v); break;
+    case PIEZO_HREG_PID_KD_Q24: g->pid.kd_q24 = s32(v); break;
+    case PIEZO_HREG_PID_OUT_MIN_Q15: g->pid.out_min_q15 = s16(v); break;
+    case PIEZO_HREG_PID_OUT_MAX_Q15: g->pid.out_max_q15 = s16(v); break;
+    case PIEZO_HREG_LIMIT_MIN_Q15: g->limit.min_q15 = s16(v); break;
+    case PIEZO_HREG_LIMIT_MAX_Q15: g->limit.max_q15 = s16(v); break;
+    case PIEZO_HREG_LIMIT_MAX_STEP_Q15: g->limit.max_step_q15 = s16(v); break;
+    case PIEZO_HREG_NOTCH_ON: g->notch_on = (uint8_t)(v != 0u); break;
+    case PIEZO_HREG_NOTCH_B0_Q24: g->notch.b0_q24 = s32(v); break;
+    case PIEZO_HREG_NOTCH_B1_Q24: g->notch.b1_q24 = s32(v); break;
+    case PIEZO_HREG_NOTCH_B2_Q24: g->notch.b2_q24 = s32(v); break;
+    case PIEZO_HREG_NOTCH_A1_Q24: g->notch.a1_q24 = s32(v); break;
+    case PIEZO_HREG_NOTCH_A2_Q24: g->notch.a2_q24 = s32(v); break;
+    case PIEZO_HREG_MAX_JUMP_Q15: g->max_jump_q15 = s16(v); break;
+    case PIEZO_HREG_BAD_LIMIT: g->bad_limit = (uint16_t)v; break;
+    case PIEZO_HREG_OVERRUN_LIMIT: g->overrun_limit = (uint16_t)v; break;
+    default: return 0;
+    }
+    return 1;
+}
+
+/* Would the controller accept this configuration? (its modules' own checks) */
+static int config_ok(const piezo_ctl_cfg_t *g)
+{
+    piezo_pid_t pid;
+    piezo_biquad_t bq;
+    piezo_limit_t lim;
+    return piezo_pid_init(&pid, &g->pid) == PIEZO_OK && piezo_biquad_init(&bq, &g->notch) == PIEZO_OK &&
+           piezo_limit_init(&lim, &g->limit, 0) == PIEZO_OK && g->bad_limit >= 1u;
+}
+
+/* Stores a checked value; runs its action. */
+static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd)
+{
+    piezo_ctl_t *c = m->ctl;
+    piezo_wave_cfg_t *w = &c->wave_cfg;
+    uint32_t v = p->value;
+    if (apply_config(&c->cfg, p)) {
+        return;
+    }
+    switch (p->d->id) {
+    case PIEZO_HREG_UNLOCK: (void)piezo_ctl_unlock(c, (uint16_t)v); break;
+    case PIEZO_HREG_MODE: (void)piezo_ctl_set_mode(c, (uint8_t)v); break;
+    case PIEZO_HREG_ARM: (void)piezo_ctl_arm(c, (uint8_t)v); break;
+    case PIEZO_HREG_SETPOINT_Q15: c->setpoint_q15 = s16(v); break;
+    case PIEZO_HREG_COMMAND:
+        switch (v) {
+        case 1: piezo_ctl_clear_faults(c); break;
+        case 2: (void)piezo_ctl_start_wave(c); break;
+        case 3: piezo_ctl_stop_wave(c); break;
+        case 4:
+            piezo_rec_reset(&c->rec);
+            (void)piezo_rec_configure(&c->rec, &m->rec_cfg); /* checked in legal() */
+            piezo_rec_arm(&c->rec);
+            break;
+        case 5: piezo_rec_trigger(&c->rec); break;
+        default: piezo_rec_reset(&c->rec); break;
+        }
+        break;
+    case PIEZO_HREG_REF_SOURCE: c->ref_source = (uint8_t)v; break;
+    case PIEZO_HREG_U2_Q15: c->u2_q15 = s16(v); break;
+    case PIEZO_HREG_WAVE_KIND: w->kind = (uint8_t)v; break;
+    case PIEZO_HREG_WAVE_OFFSET_Q15: w->offset_q15 = s16(v); break;
+    case PIEZO_HREG_WAVE_AMPLITUDE_Q15: w->amplitude_q15 = s16(v); break;
+    case PIEZO_HREG_WAVE_FREQ_WORD: w->freq_word = v; break;
+    case PIEZO_HREG_WAVE_CHIRP_RATE_WORD: w->chirp_rate_word = v; break;
+    case PIEZO_HREG_WAVE_CHIRP_END_WORD: w->chirp_end_word = v; break;
+    case PIEZO_HREG_WAVE_CYCLES: w->cycles = v; break;
+    case PIEZO_HREG_WAVE_N_TONES: w->n_tones = (uint16_t)v; break;
+    case PIEZO_HREG_WAVE_N_LEVELS: w->n_levels = (uint16_t)v; break;
+    case PIEZO_HREG_WAVE_HOLD_TICKS: w->hold_ticks = v; break;
+    case PIEZO_HREG_WAVE_TONES: {
+        uint32_t t = 0u, r = p->elem;
+        while (r >= 5u) {
+            r -= 5u;
+            t++;
+        }
+        piezo_wave_tone_t *tone = &c->tones[t];
+        if (r == 0u) {
+            tone->amplitude_q15 = s16(v);
+        } else if (r == 1u) {
+            tone->freq_word = (tone->freq_word & 0xFFFFu) | (v << 16);
+        } else if (r == 2u) {
+            tone->freq_word = (tone->freq_word & 0xFFFF0000u) | (v & 0xFFFFu);
+        } else if (r == 3u) {
+            tone->phase_word = (tone->phase_word & 0xFFFFu) | (v << 16);
+        } else {
+            tone->phase_word = (tone->phase_word & 0xFFFF0000u) | (v & 0xFFFFu);
+        }
+        break;
+    }
+    case PIEZO_HREG_WAVE_LEVELS: c->levels_q15[p->elem] = s16(v); break;
+    case PIEZO_HREG_WAVE_DURATIONS: c->durations[p->elem] = v; break;
+    case PIEZO_HREG_REC_N_CHANNELS: m->rec_cfg.n_channels = (uint8_t)v; break;
+    case PIEZO_HREG_REC_SIGNALS: m->rec_cfg.signal[p->elem] = (uint8_t)v; break;
+    case PIEZO_HREG_REC_DECIMATION: m->rec_cfg.decimation = (uint16_t)v; break;
+    case PIEZO_HREG_REC_PRETRIGGER: m->rec_cfg.pretrigger = v; break;
+    case PIEZO_HREG_REC_TRIGGER: m->rec_cfg.trigger = (uint8_t)v; break;
+    case PIEZO_HREG_REC_TRIGGER_SIGNAL: m->rec_cfg.trigger_signal = (uint8_t)v; break;
+    case PIEZO_HREG_REC_TRIGGER_LEVEL_Q15: m->rec_cfg.trigger_level_q15 = s16(v); break;
+    case PIEZO_HREG_REC_READ_INDEX: m->rec_read_index = v; break;
+    case PIEZO_HREG_TABLE_OFFSET: m->table_offset = v; break;
+    case PIEZO_HREG_TABLE_WINDOW: {
+        uint8_t b[2] = {(uint8_t)v, (uint8_t)(v >> 8)};
+        (void)piezo_ctl_stage_write(c, m->table_offset + 2u * p->elem, b, 2u); /* bounds checked */
+        break;
+    }
+    case PIEZO_HREG_TABLE_COMMAND: *table_cmd = (uint16_t)v; break;
+    default: break;
+    }
+}
+
+static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uint16_t *values)
+{
+    piezo_regmap_t *m = ctx;
+    piezo_ctl_t *c = m->ctl;
+    pending_t p[MAX_PENDING];
+    unsigned n = 0u;
+    uint16_t table_cmd = 0u;
+    int config = 0;
+    uint32_t offset = m->table_offset;
+    if (count > MAX_PENDING) {
+        return PIEZO_MB_EX_ILLEGAL_DATA_VALUE;
+    }
+    /* 1. every register exists and is writable; compose element values */
+    for (uint16_t i = 0; i < count; i++) {
+        uint32_t w;
+        const piezo_reg_desc_t *d = find(piezo_holding_regs, PIEZO_HREG_N, (uint16_t)(addr + i), &w);
+        uint32_t elem;
+        if (d == NULL || (d->flags & PIEZO_REG_READONLY)) {
+            return PIEZO_MB_EX_ILLEGAL_DATA_ADDRESS;
+        }
+        elem = d->words == 2u ? w >> 1 : w;
+        if (n == 0u || p[n - 1u].d != d || p[n - 1u].elem != elem) {
+            p[n].d = d;
+            p[n].elem = elem;
+            p[n].value = holding_value(m, d, elem);
+            n++;
+        }
+        if (d->words == 1u) {
+            p[n - 1u].value = values[i];
+        } else if ((w & 1u) == 0u) {
+            p[n - 1u].value = (p[n - 1u].value & 0xFFFFu) | ((uint32_t)values[i] << 16);
+        } else {
+            p[n - 1u].value = (p[n - 1u].value & 0xFFFF0000u) | values[i];
+        }
+        config |= (d->flags & PIEZO_REG_CONFIG) != 0u;
+    }
+    /* 2. state and values: configuration needs the key (written by an
+     *    earlier request) and a disarmed unit; every value must be legal */
+    if (config && (!c->unlocked || c->st.armed)) {
+        return PIEZO_MB_EX_ILLEGAL_DATA_VALUE;
+    }
+    for (unsigned i = 0; i < n; i++) {
+        if (!legal(m, &p[i])) {
+            return PIEZO_MB_EX_ILLEGAL_DATA_VALUE;
+        }
+        if (p[i].d->id == PIEZO_HREG_TABLE_OFFSET) {
+            offset = p[i].value; /* a window in the same request lands here */
+        } else if (p[i].d->id == PIEZO_HREG_TABLE_WINDOW && offset + 2u * p[i].elem + 2u > PIEZO_TABLE_MAX_BYTES) {
+            return PIEZO_MB_EX_ILLEGAL_DATA_VALUE;
+        }
+    }
+    if (config) {
+        piezo_ctl_cfg_t trial = c->cfg;
+        for (unsigned i = 0; i < n; i++) {
+            (void)apply_config(&trial, &p[i]);
+        }
+        if (!config_ok(&trial)) {
+            return PIEZO_MB_EX_ILLEGAL_DATA_VALUE;
+        }
+    }
+    /* 3. store and act, in address order */
+    for (unsigned i = 0; i < n; i++) {
+        apply(m, &p[i], &table_cmd);
+    }
+    if (config) {
+        /* checked above; re-binding resets filter and integrator (disarmed) */
+        (void)piezo_pid_init(&c->pid, &c->cfg.pid);
+        (void)piezo_biquad_init(&c->notch, &c->cfg.notch);
+        (void)piezo_limit_init(&c->limit, &c->cfg.limit, c->limit.prev_q15);
+    }
+    switch (table_cmd) {
+    case 1: (void)piezo_ctl_commit(c, 0u); break;
+    case 2: (void)piezo_ctl_rollback(c); break;
+    case 3: c->staged_len = 0u; break;
+    default: break;
+    }
+    return 0u;
+}
+
+piezo_mb_regs_t piezo_regmap_regs(piezo_regmap_t *m)
+{
+    piezo_mb_regs_t r = {m, read_input, read_holding, write_holding};
+    return r;
+}

@@ -1,0 +1,46 @@
+/*
+ * regmap.h - the Modbus register map (common/interface.toml) of one axis'
+ * controller, behind the protocol layer's register-access callbacks.
+ *
+ * Reads return live values (status is read between ticks, so a 32-bit value
+ * is never torn). A write request is checked whole before anything changes:
+ * every register must exist and be writable, configuration registers need the
+ * unlock key and a disarmed unit, every new value must be legal; then the
+ * values are stored and their actions run in address order. A refused write
+ * changes nothing and answers ILLEGAL DATA ADDRESS (no such register, or
+ * read-only) or ILLEGAL DATA VALUE (value, lock or state).
+ *
+ * Table upload: table_offset and table_window are adjacent, so one FC 16
+ * request writes a chunk at its offset, and one FC 23 request reads a chunk
+ * back. Recorder readout: rec_read_index and rec_window likewise, with FC 23.
+ */
+#ifndef PIEZO_REGMAP_H
+#define PIEZO_REGMAP_H
+
+#include <stdint.h>
+
+#include "controller.h"
+#include "modbus_pdu.h"
+
+typedef struct {
+    piezo_ctl_t *ctl;
+    uint16_t axis;
+    uint16_t n_axes;
+    uint32_t tick_hz;
+    uint32_t fw_version;
+    int32_t drive_min_mv, drive_max_mv;       /* physical value of q15 -32768 / +32768 */
+    int32_t position_min_nm, position_max_nm;
+    uint32_t tick_time_ns;                    /* the target keeps these two current */
+    uint32_t tick_time_max_ns;
+    uint32_t table_offset;
+    uint32_t rec_read_index;
+    piezo_rec_cfg_t rec_cfg;                  /* applied when the recorder is armed */
+} piezo_regmap_t;
+
+/** Bind a map to a controller; identity fields are set by the caller after. */
+void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl);
+
+/** The callbacks for piezo_mb_pdu_process() and the transports. */
+piezo_mb_regs_t piezo_regmap_regs(piezo_regmap_t *m);
+
+#endif /* PIEZO_REGMAP_H */
