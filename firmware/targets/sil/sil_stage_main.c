@@ -1,0 +1,310 @@
+/*
+ * sil-stage: a virtual controller. The firmware controller runs against the C
+ * stage model, paced at 10 kHz of wall time, and serves its register map over
+ * Modbus TCP (libmodbus, 127.0.0.1 unless told otherwise) and Modbus RTU on a
+ * pseudo-terminal, until SIGINT or SIGTERM.
+ *
+ *   sil-stage --modbus-tcp HOST:PORT [--modbus-rtu-pty LINK] [--stage PARAMS.json]
+ *             [--flash FILE] [--seed N] [--rtu-baud BAUD]
+ *
+ * PORT 0 picks a free port. Axis i (two-axis stages) is served on TCP port
+ * PORT + i and on RTU unit id i + 1. Tables persist in FILE (a flash
+ * emulation; default $TMPDIR/piezoctl-sil-<port>.flash). One line on stdout
+ * says when it is ready and where; on exit it prints the tick statistics.
+ *
+ * Each period: sleep to the deadline (clock_nanosleep, TIMER_ABSTIME), tick
+ * every axis and the stage, then serve the protocol without blocking. A tick
+ * that starts more than one period late is an overrun: the missed ticks run
+ * at once so that the stage's time keeps up with the wall clock.
+ */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <inttypes.h>
+#include <sched.h>
+#include <sys/prctl.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "flash_file.h"
+#include "modbus_rtu.h"
+#include "piezo_interface.h"
+#include "regmap.h"
+#include "sil_loop.h"
+#include "tcp_server_libmodbus.h"
+
+#define PERIOD_NS 100000L
+#define HIST_BINS 20000 /* 1 us bins up to 20 ms of lateness */
+
+static volatile sig_atomic_t g_stop;
+static piezo_sil_t g_sil; /* large: static */
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    g_stop = 1;
+}
+
+static int64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static void usage(FILE *f)
+{
+    fprintf(f, "usage: sil-stage --modbus-tcp HOST:PORT [--modbus-rtu-pty LINK] [--stage PARAMS.json]\n"
+               "                 [--flash FILE] [--seed N] [--rtu-baud BAUD]\n");
+}
+
+static int open_pty(const char *link, int *slave_keep)
+{
+    int m = posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK);
+    struct termios t;
+    const char *name;
+    if (m < 0 || grantpt(m) != 0 || unlockpt(m) != 0 || (name = ptsname(m)) == NULL) {
+        return -1;
+    }
+    /* keep the slave open (raw) so a client closing it does not hang up the line */
+    *slave_keep = open(name, O_RDWR | O_NOCTTY);
+    if (*slave_keep >= 0 && tcgetattr(*slave_keep, &t) == 0) {
+        cfmakeraw(&t);
+        (void)tcsetattr(*slave_keep, TCSANOW, &t);
+    }
+    (void)unlink(link);
+    if (symlink(name, link) != 0) {
+        close(m);
+        return -1;
+    }
+    return m;
+}
+
+static long percentile(const uint32_t *hist, uint64_t n, double q)
+{
+    uint64_t want = (uint64_t)(q * (double)n), seen = 0;
+    for (long i = 0; i < HIST_BINS; i++) {
+        seen += hist[i];
+        if (seen > want) {
+            return i;
+        }
+    }
+    return HIST_BINS;
+}
+
+int main(int argc, char **argv)
+{
+    const char *tcp_spec = NULL, *pty_link = NULL, *stage_path = NULL, *flash_path = NULL;
+    uint64_t seed = 1;
+    uint32_t baud = 115200;
+    char host[64] = "127.0.0.1", errbuf[256], flash_default[512];
+    long port = -1;
+    stage_params params;
+    piezo_regmap_t map[STAGE_MAX_AXES];
+    piezo_mb_regs_t regs[STAGE_MAX_AXES];
+    piezo_tcp_server_t tcp[STAGE_MAX_AXES];
+    piezo_rtu_t rtu[STAGE_MAX_AXES];
+    piezo_flash_file_t flash[STAGE_MAX_AXES];
+    piezo_storage_t store[STAGE_MAX_AXES];
+    int pty = -1, pty_slave = -1;
+    static uint32_t hist[HIST_BINS + 1];
+    uint64_t ticks = 0, overruns = 0;
+    int64_t max_late = 0;
+
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            usage(stdout);
+            return 0;
+        }
+        if (v == NULL) {
+            fprintf(stderr, "sil-stage: %s needs a value\n", a);
+            usage(stderr);
+            return 2;
+        }
+        if (strcmp(a, "--modbus-tcp") == 0) {
+            tcp_spec = v;
+        } else if (strcmp(a, "--modbus-rtu-pty") == 0) {
+            pty_link = v;
+        } else if (strcmp(a, "--stage") == 0) {
+            stage_path = v;
+        } else if (strcmp(a, "--flash") == 0) {
+            flash_path = v;
+        } else if (strcmp(a, "--seed") == 0) {
+            seed = strtoull(v, NULL, 10);
+        } else if (strcmp(a, "--rtu-baud") == 0) {
+            baud = (uint32_t)strtoul(v, NULL, 10);
+        } else {
+            fprintf(stderr, "sil-stage: unknown option %s\n", a);
+            usage(stderr);
+            return 2;
+        }
+        i++;
+    }
+    if (tcp_spec == NULL) {
+        fprintf(stderr, "sil-stage: --modbus-tcp HOST:PORT is required\n");
+        usage(stderr);
+        return 2;
+    }
+    {
+        const char *colon = strrchr(tcp_spec, ':');
+        char *end;
+        if (colon == NULL || (size_t)(colon - tcp_spec) >= sizeof host) {
+            fprintf(stderr, "sil-stage: --modbus-tcp wants HOST:PORT, got %s\n", tcp_spec);
+            return 2;
+        }
+        memcpy(host, tcp_spec, (size_t)(colon - tcp_spec));
+        host[colon - tcp_spec] = '\0';
+        port = strtol(colon + 1, &end, 10);
+        if (*end != '\0' || port < 0 || port > 65535) {
+            fprintf(stderr, "sil-stage: bad port in %s\n", tcp_spec);
+            return 2;
+        }
+    }
+    if (stage_path != NULL) {
+        if (stage_params_load_json(stage_path, &params, errbuf, sizeof errbuf) != STAGE_OK) {
+            fprintf(stderr, "sil-stage: %s\n", errbuf);
+            return 2;
+        }
+    } else {
+        params = stage_params_default();
+    }
+    if (piezo_sil_init(&g_sil, &params, seed) != 0) {
+        fprintf(stderr, "sil-stage: the stage parameters cannot drive a controller\n");
+        return 2;
+    }
+    for (int i = 0; i < g_sil.n_axes; i++) {
+        const piezo_sil_scale_t *sc = &g_sil.scale[i];
+        piezo_regmap_init(&map[i], &g_sil.ctl[i]);
+        map[i].axis = (uint16_t)i;
+        map[i].n_axes = (uint16_t)g_sil.n_axes;
+        map[i].tick_hz = (uint32_t)params.sample_rate_hz;
+        map[i].drive_min_mv = (int32_t)(sc->drive_min_v * 1000.0);
+        map[i].drive_max_mv = (int32_t)(sc->drive_max_v * 1000.0);
+        map[i].position_min_nm = (int32_t)(sc->position_min_um * 1000.0);
+        map[i].position_max_nm = (int32_t)(sc->position_max_um * 1000.0);
+        regs[i] = piezo_regmap_regs(&map[i]);
+        if (piezo_tcp_server_open(&tcp[i], host, port == 0 ? 0 : (uint16_t)(port + i), (uint8_t)(i + 1), &regs[i]) != 0) {
+            fprintf(stderr, "sil-stage: cannot listen on %s:%ld: %s\n", host, port + i, strerror(errno));
+            return 1;
+        }
+        if (piezo_rtu_init(&rtu[i], (uint8_t)(i + 1), baud) != 0) {
+            fprintf(stderr, "sil-stage: bad RTU baud rate %u\n", baud);
+            return 2;
+        }
+        if (flash_path == NULL) {
+            const char *tmp = getenv("TMPDIR");
+            snprintf(flash_default, sizeof flash_default, "%s/piezoctl-sil-%u.flash", tmp ? tmp : "/tmp",
+                     (unsigned)piezo_tcp_server_port(&tcp[0]));
+        }
+        {
+            char path[600];
+            snprintf(path, sizeof path, "%s%s", flash_path ? flash_path : flash_default,
+                     i == 0 ? "" : ".axis2");
+            uint32_t slot = PIEZO_STORE_RECORD_BYTES + PIEZO_TABLE_MAX_BYTES;
+            if (piezo_flash_file_open(&flash[i], path, 2u * slot) != 0) {
+                fprintf(stderr, "sil-stage: cannot open flash file %s: %s\n", path, strerror(errno));
+                return 1;
+            }
+            store[i] = piezo_flash_file_storage(&flash[i], slot);
+            uint16_t r = piezo_ctl_attach_store(&g_sil.ctl[i], &store[i]);
+            if (r != PIEZO_TABLE_REASON_OK) {
+                fprintf(stderr, "sil-stage: stored table of axis %d not loaded (reason %u)\n", i + 1, r);
+            }
+        }
+    }
+    if (pty_link != NULL && (pty = open_pty(pty_link, &pty_slave)) < 0) {
+        fprintf(stderr, "sil-stage: cannot make the pseudo-terminal %s: %s\n", pty_link, strerror(errno));
+        return 1;
+    }
+    {
+        struct sigaction sa;
+        memset(&sa, 0, sizeof sa);
+        sa.sa_handler = on_signal;
+        sigaction(SIGINT, &sa, NULL);
+        sigaction(SIGTERM, &sa, NULL);
+        signal(SIGPIPE, SIG_IGN);
+    }
+    {
+        struct sched_param sp = {.sched_priority = 50};
+        (void)sched_setscheduler(0, SCHED_FIFO, &sp); /* where permitted */
+        (void)prctl(PR_SET_TIMERSLACK, 1UL);          /* default slack is 50 us */
+    }
+    printf("sil-stage: ready tcp=%s:%u axes=%d rtu=%s\n", host, (unsigned)piezo_tcp_server_port(&tcp[0]),
+           g_sil.n_axes, pty_link ? pty_link : "-");
+    fflush(stdout);
+
+    int64_t next = now_ns();
+    while (!g_stop) {
+        struct timespec ts = {(time_t)(next / 1000000000LL), (long)(next % 1000000000LL)};
+        if (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR) {
+            continue;
+        }
+        int64_t start = now_ns(), late = start - next;
+        hist[late < 0 ? 0 : (late / 1000 >= HIST_BINS ? HIST_BINS : late / 1000)]++;
+        if (late > max_late) {
+            max_late = late;
+        }
+        /* the ticks due by now: one, or more after a stall */
+        do {
+            piezo_sil_tick(&g_sil);
+            ticks++;
+            next += PERIOD_NS;
+            if (late > PERIOD_NS) {
+                overruns++;
+                for (int i = 0; i < g_sil.n_axes; i++) {
+                    piezo_ctl_overrun(&g_sil.ctl[i]);
+                }
+            }
+        } while (next <= start);
+        int64_t dur = now_ns() - start;
+        for (int i = 0; i < g_sil.n_axes; i++) {
+            map[i].tick_time_ns = (uint32_t)dur;
+            if ((uint32_t)dur > map[i].tick_time_max_ns) {
+                map[i].tick_time_max_ns = (uint32_t)dur;
+            }
+            (void)piezo_tcp_server_poll(&tcp[i], 0);
+        }
+        if (pty >= 0) {
+            uint8_t buf[256], reply[PIEZO_RTU_ADU_MAX];
+            uint32_t us = (uint32_t)(now_ns() / 1000);
+            ssize_t n = read(pty, buf, sizeof buf);
+            for (int i = 0; i < g_sil.n_axes; i++) {
+                if (n > 0) {
+                    piezo_rtu_rx(&rtu[i], buf, (size_t)n, us);
+                }
+                size_t r = piezo_rtu_poll(&rtu[i], us, &regs[i], reply, sizeof reply);
+                if (r > 0 && write(pty, reply, r) != (ssize_t)r) {
+                    /* a client that went away: nothing to do */
+                }
+            }
+        }
+    }
+
+    uint64_t n = 0;
+    for (int i = 0; i <= HIST_BINS; i++) {
+        n += hist[i];
+    }
+    printf("sil-stage: stopped after %" PRIu64 " ticks (%.1f s), overruns %" PRIu64 ", "
+           "tick lateness p50 %ld us, p99 %ld us, max %.1f us\n",
+           ticks, (double)ticks / 10000.0, overruns, percentile(hist, n, 0.50), percentile(hist, n, 0.99),
+           (double)max_late / 1000.0);
+    for (int i = 0; i < g_sil.n_axes; i++) {
+        piezo_tcp_server_close(&tcp[i]);
+        piezo_flash_file_close(&flash[i]);
+    }
+    if (pty >= 0) {
+        close(pty);
+        if (pty_slave >= 0) {
+            close(pty_slave);
+        }
+        (void)unlink(pty_link);
+    }
+    return 0;
+}
