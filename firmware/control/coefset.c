@@ -228,12 +228,17 @@ uint16_t piezo_coefset_load(piezo_coefset_t *cs, piezo_ff_state_t *ff, const uin
     if ((r = piezo_table_check(img, len, &info)) != 0u) {
         return r;
     }
-    if ((r = need(&info, PIEZO_SECTION_CTL_SCALARS, PIEZO_SECTION_TYPE_INT32, 2u, 2u, &ctl)) != 0u) {
+    if ((r = need(&info, PIEZO_SECTION_CTL_SCALARS, PIEZO_SECTION_TYPE_INT32, 4u, 4u, &ctl)) != 0u) {
         return r;
     }
     cs->open_loop_gain_q24 = piezo_section_i32(ctl, 0);
-    cs->y_to_u_gain_q24 = piezo_section_i32(ctl, 1);
-    if (cs->open_loop_gain_q24 <= 0 || cs->y_to_u_gain_q24 <= 0) {
+    cs->open_loop_offset_q15 = piezo_section_i32(ctl, 1);
+    cs->y_to_u_gain_q24 = piezo_section_i32(ctl, 2);
+    cs->y_offset_q15 = piezo_section_i32(ctl, 3);
+    /* gains positive; offsets within +-2 FS so that r g + o 2^24 fits int64 easily */
+    if (cs->open_loop_gain_q24 <= 0 || cs->y_to_u_gain_q24 <= 0 ||
+        cs->open_loop_offset_q15 < -65536 || cs->open_loop_offset_q15 > 65536 ||
+        cs->y_offset_q15 < -65536 || cs->y_offset_q15 > 65536) {
         return PIEZO_TABLE_REASON_OUT_OF_RANGE;
     }
     switch (info.kind) {
@@ -278,19 +283,24 @@ int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs)
     }
 }
 
+int16_t piezo_line_q15(int16_t r_q15, int32_t gain_q24, int32_t offset_q15)
+{
+    return piezo_sat_q15(piezo_rshift_rnd64((int64_t)r_q15 * gain_q24 + (int64_t)offset_q15 * PIEZO_Q24_ONE, 24u));
+}
+
 int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15, int16_t u_applied_q15)
 {
     switch (cs->kind) {
     case PIEZO_TABLE_KIND_KP_DCC:
         ff->dcc.u_last_q15 = u_applied_q15;
-        return piezo_dcc_process(&ff->dcc, piezo_mul_q15_q24(r_q15, cs->y_to_u_gain_q24));
+        return piezo_dcc_process(&ff->dcc, piezo_line_q15(r_q15, cs->y_to_u_gain_q24, cs->y_offset_q15));
     case PIEZO_TABLE_KIND_RKP:
         (void)piezo_rkp_process(&ff->rkp, u_applied_q15); /* the density of this rate */
         ff->dcc.u_last_q15 = u_applied_q15;
-        return piezo_dcc_process(&ff->dcc, piezo_mul_q15_q24(r_q15, cs->y_to_u_gain_q24));
+        return piezo_dcc_process(&ff->dcc, piezo_line_q15(r_q15, cs->y_to_u_gain_q24, cs->y_offset_q15));
     case PIEZO_TABLE_KIND_EUPI_INVERSE:
         return piezo_eupi_inv_process(&ff->inv, r_q15);
     default:
-        return piezo_mul_q15_q24(r_q15, cs->open_loop_gain_q24);
+        return piezo_line_q15(r_q15, cs->open_loop_gain_q24, cs->open_loop_offset_q15);
     }
 }

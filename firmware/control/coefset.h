@@ -43,8 +43,13 @@ typedef struct {
     uint16_t kind;                 /* PIEZO_TABLE_KIND_*, 0 = empty */
     uint32_t crc;
     uint32_t version;
-    int32_t open_loop_gain_q24;    /* drive per displacement, uncompensated */
-    int32_t y_to_u_gain_q24;       /* the same gain used by the DCC law */
+    /* Straight-line maps of the reference r (q15 position):
+     *   uncompensated drive  u  = sat_q15(rshift_rnd(r g_ol + o_ol 2^24, 24))
+     *   DCC law input        yd = sat_q15(rshift_rnd(r g_y + o_y 2^24, 24)) */
+    int32_t open_loop_gain_q24;
+    int32_t open_loop_offset_q15;
+    int32_t y_to_u_gain_q24;
+    int32_t y_offset_q15;
 
     /* KP operators: DCC (kp_dcc) and rate-dependent DCC (rkp). For rkp the
      * DCC weights are the RKP density of the tick (g folded into Theta), so
@@ -99,5 +104,8 @@ int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs);
  * feedback, clamp and slew limit): the DCC operators follow it.
  */
 int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15, int16_t u_applied_q15);
+
+/** r g + o with one rounding, saturated: the straight-line maps above. */
+int16_t piezo_line_q15(int16_t r_q15, int32_t gain_q24, int32_t offset_q15);
 
 #endif /* PIEZO_COEFSET_H */

@@ -136,9 +136,10 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     if (run && mode != PIEZO_MODE_FEEDBACK) {
         if (c->active >= 0 && (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK)) {
             u_ff = piezo_ff_process(&c->ff[c->active], &c->set[c->active], r, c->limit.prev_q15);
+        } else if (c->active >= 0) {
+            u_ff = piezo_line_q15(r, c->set[c->active].open_loop_gain_q24, c->set[c->active].open_loop_offset_q15);
         } else {
-            int32_t gain = c->active >= 0 ? c->set[c->active].open_loop_gain_q24 : (int32_t)PIEZO_Q24_ONE;
-            u_ff = piezo_mul_q15_q24(r, gain);
+            u_ff = r; /* no table: the reference is the drive */
         }
     }
 

@@ -10,8 +10,8 @@
  *   3. scale the sensor: y = sat_q15(rshift_rnd((adc - adc_zero) * sensor_gain_q16, 16))
  *   4. reference: the wave generator, or the host's setpoint
  *   5. feedforward (modes FEEDFORWARD and FF_FEEDBACK): the active table's
- *      EUPI inverse or DCC law, chosen by the table's kind; with no table, or
- *      in OPEN_LOOP, u_ff = rshift_rnd(r * open_loop_gain_q24, 24)
+ *      EUPI inverse or DCC law, chosen by the table's kind; in OPEN_LOOP the
+ *      table's straight line u_ff = r g + o (coefset.h); no table: u_ff = r
  *   6. feedback (FF_FEEDBACK, FEEDBACK): e = r - y, u_fb = notch(PID(e))
  *   7. u = sat_q15(u_ff + u_fb); disarmed or IDLE: u = u_safe
  *   8. clamp and slew-limit, then the DAC code:

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 1u
-#define PIEZO_INTERFACE_CRC32 0xADDA98A4u
+#define PIEZO_INTERFACE_CRC32 0x44E6C531u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -49,7 +49,7 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_TABLE_HDR_BYTES 56u
 #define PIEZO_SECTION_TYPE_INT16 1u
 #define PIEZO_SECTION_TYPE_INT32 2u
-#define PIEZO_SECTION_CTL_SCALARS 1u  /* int32: [open_loop_gain_q24, y_to_u_gain_q24]: drive per displacement (uncompensated mode); displacement to the DCC law's units */
+#define PIEZO_SECTION_CTL_SCALARS 1u  /* int32: [open_loop_gain_q24, open_loop_offset_q15, y_to_u_gain_q24, y_offset_q15]: u = r g + o uncompensated; yd = r g' + o' into the DCC law */
 #define PIEZO_SECTION_KP_GRID 10u  /* int32: [nmin_q15, rmax_q15, slope_q16, xsat_q15] */
 #define PIEZO_SECTION_KP_N1_Q15 11u  /* int16: falling thresholds of the KP operators */
 #define PIEZO_SECTION_KP_N2_Q15 12u  /* int16: rising thresholds of the KP operators */

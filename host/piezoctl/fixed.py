@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 __all__ = [
-    "QFormat", "Q15", "Q24", "Q16", "QOverflowError",
+    "QFormat", "Q15", "Q24", "Q16", "Q15W", "QOverflowError",
     "rshift_rnd", "sat_q15", "sat_i32", "mul_q15_q24", "to_q", "from_q",
 ]
 
@@ -47,6 +47,7 @@ class QFormat:
 Q15 = QFormat("q15", 16, 15)
 Q24 = QFormat("q24", 32, 24)
 Q16 = QFormat("q16", 32, 16)
+Q15W = QFormat("q15 in int32", 32, 15)  # q15-scaled values that may exceed 1 FS
 
 
 def rshift_rnd(x, s: int):

@@ -32,13 +32,24 @@ def _sec(name: str, values) -> Section:
     return Section(sid, np.asarray(values, dtype=np.int64).ravel(), _I16 if typ == "int16" else _I32)
 
 
-def ctl_section(open_loop_gain: float, y_to_u_gain: float = 1.0) -> Section:
-    """Controller scalars: drive per displacement for the uncompensated mode,
-    and the displacement-to-drive gain of the DCC law (both > 0, normalized)."""
+def ctl_section(open_loop_gain: float, open_loop_offset: float = 0.0,
+                y_to_u_gain: float = 1.0, y_offset: float = 0.0) -> Section:
+    """Controller scalars: the straight lines from the reference r (position, FS).
+
+    Parameters
+    ----------
+    open_loop_gain, open_loop_offset : float
+        Uncompensated drive ``u = g r + o`` [FS/FS, FS].
+    y_to_u_gain, y_offset : float
+        The DCC law's input ``yd = g' r + o'`` (the model's output units) [FS/FS, FS].
+    """
     g = [fixed.to_q(open_loop_gain, Q24), fixed.to_q(y_to_u_gain, Q24)]
+    o = [fixed.to_q(open_loop_offset, fixed.Q15W), fixed.to_q(y_offset, fixed.Q15W)]
     if min(g) <= 0:
         raise TableImageError("out_of_range", "controller gains must be positive")
-    return _sec("ctl_scalars", g)
+    if max(abs(v) for v in o) > 65536:
+        raise TableImageError("out_of_range", "controller offsets must be within +-2 FS")
+    return _sec("ctl_scalars", [g[0], o[0], g[1], o[1]])
 
 
 def _grid_sections(g: KPGridQ) -> list[Section]:
