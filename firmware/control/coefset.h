@@ -30,10 +30,17 @@
 #include "kp.h"
 #include "rkp.h"
 
-/* Compile-time capacity of one set (a table beyond it is refused: bad_length). */
+/* Compile-time capacity of one set (a table beyond it is refused: bad_length).
+ * A target may override them (-D) to fit its RAM. */
+#ifndef PIEZO_CS_MAX_KP_OPS
 #define PIEZO_CS_MAX_KP_OPS 465u   /* L = 30 */
+#endif
+#ifndef PIEZO_CS_MAX_RKP_OPS
 #define PIEZO_CS_MAX_RKP_OPS 120u  /* L = 15 */
+#endif
+#ifndef PIEZO_CS_MAX_RBF
 #define PIEZO_CS_MAX_RBF 16u
+#endif
 #define PIEZO_CS_MAX_CPI 32u
 #define PIEZO_CS_MAX_UPI_R 16u
 #define PIEZO_CS_MAX_UPI_A 8u

@@ -62,7 +62,11 @@ enum piezo_signal {
     PIEZO_SIG_N = 8
 };
 
+/* Sizes a target may override (-D): the host's defaults fill a 10 kHz run of
+ * 6.5 s on one channel; a 128 KiB microcontroller takes fewer. */
+#ifndef PIEZO_CTL_REC_SAMPLES
 #define PIEZO_CTL_REC_SAMPLES 65536u /* recorder buffer, samples of all channels */
+#endif
 #define PIEZO_CTL_WAVE_MAX_LEVELS 256u
 
 typedef struct {
