@@ -3,11 +3,14 @@
 # can run under QEMU.
 find_package(PkgConfig REQUIRED)
 
-# piezo_add_cmocka_test(NAME SOURCES src... [LIBS lib...] [GOLDEN kernel...])
+# piezo_add_cmocka_test(NAME SOURCES src... [LIBS lib...] [GOLDEN kernel...]
+#                       [DEPENDS target...] [ENV VAR=value...])
 # GOLDEN kernel: generate golden/<kernel>_vectors.h from the host golden model
 # (python -m piezoctl.golden.export <kernel>) and put it on the include path.
+# DEPENDS: targets the export needs built first (e.g. a library it loads);
+# ENV: environment of the export command (may use generator expressions).
 function(piezo_add_cmocka_test name)
-  cmake_parse_arguments(T "" "" "SOURCES;LIBS;GOLDEN" ${ARGN})
+  cmake_parse_arguments(T "" "" "SOURCES;LIBS;GOLDEN;DEPENDS;ENV" ${ARGN})
   if(CMAKE_CROSSCOMPILING)
     # A library that is neither a target of this build nor the toolchain's
     # own (PIEZO_TARGET_SYSTEM_LIBS) is host-only: skip the test, visibly.
@@ -28,7 +31,7 @@ function(piezo_add_cmocka_test name)
   add_executable(${name} ${T_SOURCES})
   target_link_libraries(${name} PRIVATE piezo_warnings ${T_LIBS} piezo_cmocka)
   foreach(kernel IN LISTS T_GOLDEN)
-    piezo_golden_header(${kernel} header)
+    piezo_golden_header(${kernel} header DEPENDS ${T_DEPENDS} ENV ${T_ENV})
     target_sources(${name} PRIVATE ${header})
   endforeach()
   target_include_directories(${name} PRIVATE ${CMAKE_BINARY_DIR}/golden)
@@ -40,6 +43,7 @@ function(piezo_add_cmocka_test name)
 endfunction()
 
 function(piezo_golden_header kernel outvar)
+  cmake_parse_arguments(G "" "" "DEPENDS;ENV" ${ARGN})
   set(out ${CMAKE_BINARY_DIR}/golden/${kernel}_vectors.h)
   if(NOT TARGET golden_${kernel})
     file(GLOB_RECURSE host_sources CONFIGURE_DEPENDS
@@ -47,8 +51,8 @@ function(piezo_golden_header kernel outvar)
     add_custom_command(
       OUTPUT ${out}
       COMMAND ${CMAKE_COMMAND} -E make_directory ${CMAKE_BINARY_DIR}/golden
-      COMMAND ${PIEZOCTL_PYTHON} -m piezoctl.golden.export ${kernel} -o ${out}
-      DEPENDS ${host_sources}
+      COMMAND ${CMAKE_COMMAND} -E env ${G_ENV} ${PIEZOCTL_PYTHON} -m piezoctl.golden.export ${kernel} -o ${out}
+      DEPENDS ${host_sources} ${G_DEPENDS}
       COMMENT "Golden vectors for ${kernel} from the host golden model"
       VERBATIM)
     add_custom_target(golden_${kernel} DEPENDS ${out})
