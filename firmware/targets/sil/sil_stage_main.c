@@ -21,6 +21,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>
+#include <pty.h>
 #include <sched.h>
 #include <sys/prctl.h>
 #include <signal.h>
@@ -65,18 +66,18 @@ static void usage(FILE *f)
 
 static int open_pty(const char *link, int *slave_keep)
 {
-    int m = posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK);
+    int m;
+    char name[128];
     struct termios t;
-    const char *name;
-    if (m < 0 || grantpt(m) != 0 || unlockpt(m) != 0 || (name = ptsname(m)) == NULL) {
+    if (openpty(&m, slave_keep, name, NULL, NULL) != 0) {
         return -1;
     }
-    /* keep the slave open (raw) so a client closing it does not hang up the line */
-    *slave_keep = open(name, O_RDWR | O_NOCTTY);
-    if (*slave_keep >= 0 && tcgetattr(*slave_keep, &t) == 0) {
+    /* raw line; the slave stays open so a client closing it does not hang up the line */
+    if (tcgetattr(*slave_keep, &t) == 0) {
         cfmakeraw(&t);
         (void)tcsetattr(*slave_keep, TCSANOW, &t);
     }
+    (void)fcntl(m, F_SETFL, fcntl(m, F_GETFL) | O_NONBLOCK);
     (void)unlink(link);
     if (symlink(name, link) != 0) {
         close(m);

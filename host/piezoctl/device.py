@@ -1,0 +1,310 @@
+"""A controller seen through its register map (``common/interface.toml``).
+
+:class:`Controller` wraps a transport (:func:`piezoctl.transport.open_port`)
+and speaks in the map's terms: identity, status, modes, the wave generator,
+the recorder, table upload/verify/commit/rollback. Values are decoded by the
+types the interface definition gives (32-bit values high word first).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from . import interface
+from .errors import CliError
+from .tables.from_model import Scale
+from .transport import open_port
+
+__all__ = ["Controller", "DeviceError", "MODES", "SIGNALS", "WAVE_KINDS", "REC_TRIGGERS",
+           "REASON_NAMES", "freq_word", "connect"]
+
+MODES = {"idle": 0, "open_loop": 1, "feedforward": 2, "ff_feedback": 3, "feedback": 4}
+SIGNALS = {"ref": 0, "y": 1, "u": 2, "err": 3, "ff": 4, "fb": 5, "y2": 6, "u2": 7}
+WAVE_KINDS = {"off": 0, "sine": 1, "triangle": 2, "multisine": 3, "chirp": 4, "steps": 5, "arbitrary": 6}
+REC_TRIGGERS = {"immediate": 0, "software": 1, "rising": 2, "falling": 3}
+REASON_NAMES = {v: k for k, v in interface.TABLE_REASONS.items()}
+FAULT_NAMES = {1 << v: k for k, v in interface.FAULT_BITS.items()}
+WINDOW = interface.HOLDING_REGISTERS["table_window"][2]      # registers per table chunk
+REC_WINDOW = interface.HOLDING_REGISTERS["rec_window"][2]
+
+
+class DeviceError(CliError):
+    """The controller refused or reported something the user must act on."""
+
+
+def freq_word(f_hz: float, tick_hz: float = 10000.0) -> int:
+    """Phase increment of the wave generator for frequency ``f_hz`` [Hz]."""
+    w = int(np.floor(f_hz / tick_hz * 2.0**32 + 0.5))
+    if not 0 <= w < 2**32:
+        raise ValueError(f"frequency {f_hz} Hz outside [0, {tick_hz}) Hz")
+    return w
+
+
+def _decode(block_start: int, words: list[int], regs: dict) -> dict:
+    out = {}
+    for name, (addr, typ, count) in regs.items():
+        off = addr - block_start
+        n = (2 if typ.endswith("32") else 1)
+        if off < 0 or off + n * count > len(words) or count != 1:
+            continue
+        w = words[off:off + n]
+        if n == 2:
+            v = (w[0] << 16) | w[1]
+            if typ == "int32" and v >= 2**31:
+                v -= 2**32
+        else:
+            v = w[0]
+            if typ == "int16" and v >= 2**15:
+                v -= 2**16
+        out[name] = v
+    return out
+
+
+def _block(regs: dict, lo: int, hi: int) -> dict:
+    return {k: v for k, v in regs.items() if lo <= v[0] < hi}
+
+
+def _u16(v: int) -> int:
+    return int(v) & 0xFFFF
+
+
+@dataclass
+class Identity:
+    device_id: int
+    fw_version: int
+    layout_version: int
+    interface_crc: int
+    n_axes: int
+    axis: int
+    tick_hz: int
+    scale: Scale
+    rec_capacity: int
+
+
+class Controller:
+    """One axis of a controller.
+
+    Parameters
+    ----------
+    client : RegisterClient
+        An open transport.
+    check : bool
+        Refuse a controller whose layout version or interface CRC differs
+        from this tool's (the table layout and register map would not agree).
+    """
+
+    def __init__(self, client, *, check: bool = True):
+        self.client = client
+        self.identity = self.read_identity()
+        if check:
+            if self.identity.device_id != 0x505A:
+                raise DeviceError(f"{client.name}: not a piezoctl controller (device id {self.identity.device_id:#06x})")
+            if (self.identity.layout_version != interface.LAYOUT_VERSION
+                    or self.identity.interface_crc != interface.INTERFACE_CRC32):
+                raise DeviceError(
+                    f"{client.name}: interface mismatch: controller layout {self.identity.layout_version} "
+                    f"crc {self.identity.interface_crc:#010x}, this tool layout {interface.LAYOUT_VERSION} "
+                    f"crc {interface.INTERFACE_CRC32:#010x}: update the firmware or the tool")
+
+    # ------------------------------------------------------------ reading
+    def read_identity(self) -> Identity:
+        regs = _block(interface.INPUT_REGISTERS, 0, 0x100)
+        lo = min(a for a, _, _ in regs.values())
+        hi = max(a + (2 if t.endswith("32") else 1) for a, t, _ in regs.values())
+        d = _decode(lo, self.client.read_input(lo, hi - lo), regs)
+        scale = Scale(d["drive_min_mv"] / 1e3, d["drive_max_mv"] / 1e3,
+                      d["position_min_nm"] / 1e3, d["position_max_nm"] / 1e3)
+        return Identity(d["device_id"], d["fw_version"], d["layout_version"], d["interface_crc"],
+                        d["n_axes"], d["axis"], d["tick_hz"], scale, d["rec_capacity"])
+
+    @property
+    def scale(self) -> Scale:
+        return self.identity.scale
+
+    def status(self) -> dict:
+        """Every status register, decoded; ``faults_names`` and ``table_result_name`` added."""
+        regs = _block(interface.INPUT_REGISTERS, 0x100, 0x200)
+        lo = min(a for a, _, _ in regs.values())
+        hi = max(a + (2 if t.endswith("32") else 1) for a, t, _ in regs.values())
+        d = _decode(lo, self.client.read_input(lo, hi - lo), regs)
+        d["faults_names"] = [n for bit, n in FAULT_NAMES.items() if d["faults"] & bit]
+        d["table_result_name"] = REASON_NAMES.get(d["table_result"], str(d["table_result"]))
+        d["position_um"] = float(self.scale.position_from_fs(d["position_q15"] / 32768.0))
+        d["drive_v"] = float(self.scale.drive_from_fs(d["drive_q15"] / 32768.0))
+        return d
+
+    # ------------------------------------------------------------ writing
+    def _h(self, name: str) -> int:
+        return interface.HOLDING_REGISTERS[name][0]
+
+    def write(self, name: str, value: int) -> None:
+        addr, typ, _ = interface.HOLDING_REGISTERS[name]
+        if typ.endswith("32"):
+            v = int(value) & 0xFFFFFFFF
+            self.client.write_holding(addr, [v >> 16, v & 0xFFFF])
+        else:
+            self.client.write_holding(addr, [_u16(value)])
+
+    def unlock(self) -> None:
+        self.write("unlock", interface.MODBUS_UNLOCK_KEY)
+
+    def set_mode(self, mode: str) -> None:
+        self.write("mode", MODES[mode])
+
+    def arm(self, on: bool = True) -> None:
+        self.write("arm", 1 if on else 0)
+        if on and not self.status()["armed"]:
+            raise DeviceError("the controller did not arm (clear its faults first)")
+
+    def command(self, name: str) -> None:
+        codes = {"clear_faults": 1, "start_wave": 2, "stop_wave": 3, "arm_recorder": 4,
+                 "trigger_recorder": 5, "reset_recorder": 6}
+        self.write("command", codes[name])
+
+    def set_setpoint_um(self, y_um: float) -> None:
+        self.write("setpoint_q15", self.q15_position(y_um))
+        self.write("ref_source", 0)
+
+    def q15_position(self, y_um) -> int:
+        return int(np.clip(np.floor(self.scale.position_to_fs(y_um) * 32768 + 0.5), -32768, 32767))
+
+    def q15_drive(self, u_v) -> int:
+        return int(np.clip(np.floor(self.scale.drive_to_fs(u_v) * 32768 + 0.5), -32768, 32767))
+
+    # ------------------------------------------------------------ feedback configuration
+    def configure_feedback(self, *, kp: float = 0.0, ki: float = 0.0, kd: float = 0.0,
+                           notch: tuple | None = None, out_limit: float = 1.0) -> None:
+        """PID gains [FS/FS, per tick] and an optional notch (b0, b1, b2, a1, a2); unit disarmed."""
+        q24 = lambda x: int(np.floor(x * 2**24 + 0.5))
+        self.unlock()
+        lim = int(np.clip(np.floor(out_limit * 32768 + 0.5), 0, 32767))
+        vals = [q24(kp), q24(ki), q24(kd)]
+        regs = []
+        for v in vals:
+            v &= 0xFFFFFFFF
+            regs += [v >> 16, v & 0xFFFF]
+        regs += [_u16(-lim), _u16(lim)]
+        self.client.write_holding(self._h("pid_kp_q24"), regs)
+        if notch is not None:
+            nregs = []
+            for c in notch:
+                v = q24(c) & 0xFFFFFFFF
+                nregs += [v >> 16, v & 0xFFFF]
+            self.write("notch_on", 1)
+            self.client.write_holding(self._h("notch_b0_q24"), nregs)
+        else:
+            self.write("notch_on", 0)
+
+    # ------------------------------------------------------------ wave generator
+    def configure_wave(self, kind: str, *, offset_q15: int = 0, amplitude_q15: int = 0, f_hz: float = 0.0,
+                       f_end_hz: float | None = None, duration_s: float | None = None, cycles: int = 0,
+                       tones: list[tuple[int, float, float]] | None = None,
+                       levels_q15: list[int] | None = None, durations_ticks: list[int] | None = None,
+                       hold_ticks: int = 1) -> None:
+        """Load the wave generator (not started). Frequencies [Hz], amplitudes q15."""
+        tick = float(self.identity.tick_hz)
+        fw = freq_word(f_hz, tick)
+        rate = end = 0
+        if kind == "chirp":
+            end = freq_word(f_end_hz, tick)
+            n = max(1, int(round(duration_s * tick)))
+            rate = max(1, (end - fw) // n)
+        tones = tones or []
+        levels = levels_q15 or []
+        if len(tones) > 8 or len(levels) > interface.HOLDING_REGISTERS["wave_levels"][2]:
+            raise DeviceError("too many tones or levels for the wave generator")
+        head = [WAVE_KINDS[kind], _u16(offset_q15), _u16(amplitude_q15), fw >> 16, fw & 0xFFFF,
+                rate >> 16, rate & 0xFFFF, end >> 16, end & 0xFFFF, cycles >> 16, cycles & 0xFFFF,
+                len(tones), len(levels), hold_ticks >> 16, hold_ticks & 0xFFFF]
+        self.client.write_holding(self._h("wave_kind"), head)
+        if tones:
+            regs = []
+            for amp, f, ph in tones:
+                w, p = freq_word(f, tick), int(np.floor((ph / (2 * np.pi)) % 1.0 * 2**32)) & 0xFFFFFFFF
+                regs += [_u16(amp), w >> 16, w & 0xFFFF, p >> 16, p & 0xFFFF]
+            self.client.write_holding(self._h("wave_tones"), regs)
+        if levels:
+            self.client.write_holding(self._h("wave_levels"), [_u16(v) for v in levels])
+        if durations_ticks:
+            regs = []
+            for d in durations_ticks:
+                regs += [(int(d) >> 16) & 0xFFFF, int(d) & 0xFFFF]
+            self.client.write_holding(self._h("wave_durations"), regs)
+        self.write("ref_source", 1)
+
+    # ------------------------------------------------------------ recorder
+    def configure_recorder(self, signals: list[str], *, decimation: int = 1, pretrigger: int = 0,
+                           trigger: str = "software", trigger_signal: str = "ref", level_q15: int = 0) -> None:
+        if not 1 <= len(signals) <= 8:
+            raise DeviceError("the recorder keeps 1 to 8 signals")
+        sig = [SIGNALS[s] for s in signals] + [0] * (8 - len(signals))
+        regs = [len(signals)] + sig + [decimation, pretrigger >> 16, pretrigger & 0xFFFF,
+                                       REC_TRIGGERS[trigger], SIGNALS[trigger_signal], _u16(level_q15)]
+        self.client.write_holding(self._h("rec_n_channels"), regs)
+        self.rec_channels = len(signals)
+
+    def read_recording(self, n_channels: int | None = None,
+                       progress: Callable[[int, int], None] | None = None) -> np.ndarray:
+        """The recorded frames, shape (frames, channels), q15 integers."""
+        st = self.status()
+        frames = st["rec_frames"]
+        nch = n_channels or self.client.read_holding(self._h("rec_n_channels"))[0]
+        total = frames * nch
+        out = np.empty(total, dtype=np.int64)
+        idx = self._h("rec_read_index")
+        for start in range(0, total, REC_WINDOW):
+            n = min(REC_WINDOW, total - start)
+            self.client.write_holding(idx, [start >> 16, start & 0xFFFF])
+            w = self.client.read_holding(self._h("rec_window"), n)
+            out[start:start + n] = np.array(w, dtype=np.int64)
+            if progress:
+                progress(start + n, total)
+        out = np.where(out >= 32768, out - 65536, out)
+        return out.reshape(frames, nch)
+
+    # ------------------------------------------------------------ tables
+    def upload_table(self, img: bytes, progress: Callable[[int, int], None] | None = None) -> None:
+        """Write an image to the staged bank: offset and data in one request per chunk."""
+        self.unlock()
+        self.write("table_command", 3)  # clear staged
+        chunk = 2 * WINDOW
+        for off in range(0, len(img), chunk):
+            part = img[off:off + chunk]
+            if len(part) % 2:
+                part += b"\0"
+            words = list(struct.unpack(f"<{len(part) // 2}H", part))
+            self.client.write_holding(self._h("table_offset"), [off >> 16, off & 0xFFFF] + words)
+            if progress:
+                progress(min(off + chunk, len(img)), len(img))
+
+    def read_staged(self, n: int, progress: Callable[[int, int], None] | None = None) -> bytes:
+        """Read back the first n bytes of the staged bank."""
+        out = bytearray()
+        chunk = 2 * WINDOW
+        for off in range(0, n, chunk):
+            self.client.write_holding(self._h("table_offset"), [off >> 16, off & 0xFFFF])
+            m = min(chunk, n - off)
+            words = self.client.read_holding(self._h("table_window"), (m + 1) // 2)
+            out += struct.pack(f"<{len(words)}H", *words)[:m]
+            if progress:
+                progress(off + m, n)
+        return bytes(out)
+
+    def commit_table(self) -> str:
+        """Commit the staged image; returns the reason name ('ok' when it runs)."""
+        self.write("table_command", 1)
+        return REASON_NAMES.get(self.status()["table_result"], "unknown")
+
+    def rollback_table(self) -> str:
+        self.unlock()
+        self.write("table_command", 2)
+        return REASON_NAMES.get(self.status()["table_result"], "unknown")
+
+
+def connect(port: str, *, unit: int = interface.MODBUS_UNIT_ID, timeout: float = 1.0) -> Controller:
+    """Open PORT and check that a compatible controller answers."""
+    return Controller(open_port(port, unit=unit, timeout=timeout))
