@@ -134,7 +134,9 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 5. feedforward */
     if (run && mode != PIEZO_MODE_FEEDBACK) {
-        if (c->active >= 0 && (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK)) {
+        if (mode == PIEZO_MODE_DIRECT) {
+            u_ff = r;
+        } else if (c->active >= 0 && (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK)) {
             u_ff = piezo_ff_process(&c->ff[c->active], &c->set[c->active], r, c->limit.prev_q15);
         } else if (c->active >= 0) {
             u_ff = piezo_line_q15(r, c->set[c->active].open_loop_gain_q24, c->set[c->active].open_loop_offset_q15);
@@ -187,7 +189,7 @@ void piezo_ctl_overrun(piezo_ctl_t *c)
 
 int piezo_ctl_set_mode(piezo_ctl_t *c, uint8_t mode)
 {
-    if (mode > PIEZO_MODE_FEEDBACK) {
+    if (mode > PIEZO_MODE_DIRECT) {
         return PIEZO_EINVAL;
     }
     if (c->st.armed) {

@@ -11,7 +11,8 @@
  *   4. reference: the wave generator, or the host's setpoint
  *   5. feedforward (modes FEEDFORWARD and FF_FEEDBACK): the active table's
  *      EUPI inverse or DCC law, chosen by the table's kind; in OPEN_LOOP the
- *      table's straight line u_ff = r g + o (coefset.h); no table: u_ff = r
+ *      table's straight line u_ff = r g + o (coefset.h); no table, or
+ *      DIRECT: u_ff = r (the reference read as a drive)
  *   6. feedback (FF_FEEDBACK, FEEDBACK): e = r - y, u_fb = notch(PID(e))
  *   7. u = sat_q15(u_ff + u_fb); disarmed or IDLE: u = u_safe
  *   8. clamp and slew-limit, then the DAC code:
@@ -44,7 +45,8 @@ enum piezo_mode {
     PIEZO_MODE_OPEN_LOOP = 1,
     PIEZO_MODE_FEEDFORWARD = 2,
     PIEZO_MODE_FF_FEEDBACK = 3,
-    PIEZO_MODE_FEEDBACK = 4
+    PIEZO_MODE_FEEDBACK = 4,
+    PIEZO_MODE_DIRECT = 5    /* the reference is the drive (q15): excitation for identification */
 };
 
 enum piezo_ref_source { PIEZO_REF_SETPOINT = 0, PIEZO_REF_WAVE = 1 };

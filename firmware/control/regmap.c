@@ -232,7 +232,7 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     const piezo_ctl_t *c = m->ctl;
     uint32_t v = p->value;
     switch (p->d->id) {
-    case PIEZO_HREG_MODE: return v <= PIEZO_MODE_FEEDBACK && !c->st.armed;
+    case PIEZO_HREG_MODE: return v <= PIEZO_MODE_DIRECT && !c->st.armed;
     case PIEZO_HREG_ARM: return v <= 1u && (v == 0u || c->st.faults == 0u);
     case PIEZO_HREG_COMMAND:
         if (v == 4u) {

@@ -22,7 +22,7 @@ from .transport import open_port
 __all__ = ["Controller", "DeviceError", "MODES", "SIGNALS", "WAVE_KINDS", "REC_TRIGGERS",
            "REASON_NAMES", "freq_word", "connect"]
 
-MODES = {"idle": 0, "open_loop": 1, "feedforward": 2, "ff_feedback": 3, "feedback": 4}
+MODES = {"idle": 0, "open_loop": 1, "feedforward": 2, "ff_feedback": 3, "feedback": 4, "direct": 5}
 SIGNALS = {"ref": 0, "y": 1, "u": 2, "err": 3, "ff": 4, "fb": 5, "y2": 6, "u2": 7}
 WAVE_KINDS = {"off": 0, "sine": 1, "triangle": 2, "multisine": 3, "chirp": 4, "steps": 5, "arbitrary": 6}
 REC_TRIGGERS = {"immediate": 0, "software": 1, "rising": 2, "falling": 3}

@@ -2,7 +2,7 @@
 
 # fmt: off
 LAYOUT_VERSION = 1
-INTERFACE_CRC32 = 0x44E6C531
+INTERFACE_CRC32 = 0x06E00B73
 QFORMATS = {"q15": {"bits": 16, "frac": 15}, "q24": {"bits": 32, "frac": 24}, "q16": {"bits": 32, "frac": 16}}
 GAUSS_LUT_N = 257
 GAUSS_ZMAX = 4.0
