@@ -4,6 +4,7 @@
  * line.
  */
 #include "board.h"
+#include "control.h"
 #include "tick.h"
 #include "uart.h"
 
@@ -22,6 +23,9 @@ int main(void)
 {
     piezo_board_init();
     piezo_uart_init(PIEZO_UART_BRR(PIEZO_MODBUS_BAUD));
+    if (piezo_control_init() != 0) {
+        piezo_board_fault("control init", 0);
+    }
     piezo_tick_start(PIEZO_TICK_RELOAD);
     piezo_irq_enable();
     for (;;) {

@@ -24,7 +24,8 @@ uint32_t piezo_tick_count(void)
     return tick_count;
 }
 
-/* Until the control loop provides it. */
+/* Test images without the control loop (src/control.c defines it in the
+ * firmware image and the benchmark). */
 __attribute__((weak)) void piezo_control_tick(void)
 {
 }

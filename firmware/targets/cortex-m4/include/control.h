@@ -1,0 +1,28 @@
+/*
+ * control.h - the firmware image's control loop (src/control.c): one
+ * controller instance, its boot configuration, and the ADC/DAC seams.
+ */
+#ifndef PIEZO_CM4_CONTROL_H
+#define PIEZO_CM4_CONTROL_H
+
+#include <stdint.h>
+
+#include "controller.h"
+
+/** The axis the tick runs (piezo_control_tick() in tick.h). */
+extern piezo_ctl_t piezo_axis;
+
+/** The boot configuration: 16-bit ADC and DAC codes, mid-scale zero, full
+ *  drive range, PID output unlimited, notch pass-through, u_safe = 0. */
+void piezo_control_default_cfg(piezo_ctl_cfg_t *cfg);
+
+/** piezo_ctl_init() with the boot configuration: disarmed, IDLE, no table. */
+int piezo_control_init(void);
+
+/** ADC codes of this axis' sensor and the other axis' (weak default: zero codes). */
+void piezo_adc_read(int32_t adc[2]);
+
+/** The DAC code of this tick (weak default: discarded). */
+void piezo_dac_write(int32_t code);
+
+#endif /* PIEZO_CM4_CONTROL_H */
