@@ -9,6 +9,7 @@ types the interface definition gives (32-bit values high word first).
 from __future__ import annotations
 
 import struct
+import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -265,6 +266,52 @@ class Controller:
                 progress(start + n, total)
         out = np.where(out >= 32768, out - 65536, out)
         return out.reshape(frames, nch)
+
+    def to_physical(self, signal: str, q15) -> np.ndarray:
+        """A recorded signal in physical units: positions [um], drives [V], error [um]."""
+        fs = np.asarray(q15, dtype=np.float64) / 32768.0
+        sc = self.scale
+        if signal in ("y", "ref", "y2"):
+            return sc.position_from_fs(fs)
+        if signal in ("u", "u2", "ff"):
+            return sc.drive_from_fs(fs)
+        if signal == "err":
+            return fs * sc.p_half
+        return fs * 0.5 * (sc.drive_max_v - sc.drive_min_v)  # fb: a drive difference
+
+    def capture(self, signals: list[str], frames: int, *, decimation: int = 1, trigger: str = "immediate",
+                level_q15: int = 0, trigger_signal: str = "ref", start_wave: bool = False,
+                timeout_s: float | None = None) -> dict:
+        """Record ``frames`` frames of ``signals`` and return them in physical units with ``t`` [s].
+
+        ``trigger``: ``immediate``; ``software`` (fired by the wave start when
+        ``start_wave``); ``rising``/``falling`` (``trigger_signal`` crosses
+        ``level_q15``). The wave, if started here, keeps running afterwards.
+        """
+        tick = self.identity.tick_hz
+        cap = self.identity.rec_capacity // len(signals)
+        if not 1 <= frames <= cap:
+            raise DeviceError(f"{frames} frames of {len(signals)} signals: the recorder holds 1..{cap}")
+        self.configure_recorder(signals, decimation=decimation, trigger=trigger,
+                                trigger_signal=trigger_signal, level_q15=level_q15)
+        self.command("arm_recorder")
+        if start_wave:
+            self.command("start_wave")
+        wait = timeout_s if timeout_s is not None else frames * decimation / tick * 3 + 5
+        deadline = time.monotonic() + wait
+        while True:
+            st = self.status()
+            if st["rec_frames"] >= frames or st["rec_state"] == 3:
+                break
+            if time.monotonic() > deadline:
+                raise DeviceError("the recorder did not fill in time (is the controller ticking? "
+                                  "did the trigger condition occur?)")
+            time.sleep(0.02)
+        data = self.read_recording(len(signals))[:frames]
+        cols = {"t": np.arange(data.shape[0]) * decimation / tick}
+        for i, sname in enumerate(signals):
+            cols[sname] = self.to_physical(sname, data[:, i])
+        return cols
 
     # ------------------------------------------------------------ tables
     def upload_table(self, img: bytes, progress: Callable[[int, int], None] | None = None) -> None:

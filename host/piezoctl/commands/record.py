@@ -20,54 +20,16 @@ from ..device import MODES, SIGNALS, WAVE_KINDS, connect
 from ..errors import CliError
 from ..io.recording import write_csv
 
-# recorder signal -> (recording column, physical kind)
-COLUMNS = {"u": ("u", "drive"), "y": ("y", "position"), "ref": ("reference", "position"),
-           "u2": ("u2", "drive"), "y2": ("x2", "position"), "err": ("err", "delta"),
-           "ff": ("ff", "drive"), "fb": ("fb", "drive_delta")}
+# recorder signal -> recording column (docs/recordings.md)
+COLUMNS = {"u": "u", "y": "y", "ref": "reference", "u2": "u2", "y2": "x2", "err": "err", "ff": "ff", "fb": "fb"}
 
 
-def to_physical(ctl, name: str, q15: np.ndarray) -> np.ndarray:
-    fs = q15.astype(np.float64) / 32768.0
-    kind = COLUMNS[name][1]
-    if kind == "position":
-        return ctl.scale.position_from_fs(fs)
-    if kind == "drive":
-        return ctl.scale.drive_from_fs(fs)
-    if kind == "delta":
-        return fs * ctl.scale.p_half
-    return fs * 0.5 * (ctl.scale.drive_max_v - ctl.scale.drive_min_v)
-
-
-def capture(ctl, signals: list[str], duration_s: float, *, decimation: int = 1, start_wave: bool = False,
-            quiet: bool = True) -> dict:
-    """Record ``signals`` for ``duration_s`` [s] (the recorder's own clock).
-
-    With ``start_wave`` the recorder is armed first and the wave start
-    triggers it, so sample 0 is the wave's first sample. Returns columns in
-    physical units and ``t``.
-    """
-    tick = ctl.identity.tick_hz
-    frames_cap = ctl.identity.rec_capacity // len(signals)
-    frames = int(round(duration_s * tick / decimation))
-    if frames > frames_cap:
-        raise CliError(f"{duration_s} s of {len(signals)} signals at 1/{decimation} of {tick} Hz needs "
-                       f"{frames} frames; the recorder holds {frames_cap}: record fewer signals or decimate")
-    if frames < 1:
-        raise CliError("the recording would be empty")
-    ctl.configure_recorder(signals, decimation=decimation, trigger="software" if start_wave else "immediate")
-    ctl.command("arm_recorder")
-    if start_wave:
-        ctl.command("start_wave")
-    deadline = time.monotonic() + duration_s * 3 + 5
-    while ctl.status()["rec_frames"] < frames:
-        if time.monotonic() > deadline:
-            raise CliError("the recorder did not fill in time (is the controller ticking?)")
-        time.sleep(min(0.05, duration_s / 10 + 0.001))
-    data = ctl.read_recording(len(signals))[:frames]
-    cols = {"t": np.arange(frames) * decimation / tick}
-    for i, s in enumerate(signals):
-        cols[COLUMNS[s][0]] = to_physical(ctl, s, data[:, i])
-    return cols
+def capture(ctl, signals: list[str], duration_s: float, *, decimation: int = 1, start_wave: bool = False) -> dict:
+    """Record ``signals`` for ``duration_s`` [s]; columns named as in a recording CSV."""
+    frames = int(round(duration_s * ctl.identity.tick_hz / decimation))
+    cols = ctl.capture(signals, frames, decimation=decimation,
+                       trigger="software" if start_wave else "immediate", start_wave=start_wave)
+    return {"t": cols["t"], **{COLUMNS[s]: cols[s] for s in signals}}
 
 
 def write_recording(path: str, cols: dict, ctl) -> None:
