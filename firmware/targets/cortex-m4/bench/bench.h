@@ -26,12 +26,13 @@ extern int16_t piezo_bench_u[PIEZO_BENCH_TICKS];
 extern volatile int32_t piezo_bench_sink;
 extern uint32_t piezo_bench_failures; /* cases whose set-up failed */
 
-/* Cases: each kernel of the core alone (bench_kernels.c). */
+/* Cases: each kernel of the core alone (bench_kernels.c), each hysteresis
+ * model of the reference configuration alone (bench_models.c). */
 void piezo_bench_kernels(void);
+void piezo_bench_models(void);
 
-/* The reference configuration: the whole control tick. Defined by
- * bench_reference.c once the control loop runs on this target; tools/bench-target
- * then prints its count first, as "instructions_per_tick: N". */
+/* The reference configuration: the whole control tick (bench_reference.c);
+ * tools/bench-target prints its count first, as "instructions_per_tick: N". */
 void piezo_bench_reference(void) __attribute__((weak));
 
 #endif /* PIEZO_BENCH_H */

@@ -58,6 +58,7 @@ int main(void)
         piezo_bench_reference();
     }
     piezo_bench_kernels();
+    piezo_bench_models();
     piezo_sh_write0("bench done\n");
     return (int)piezo_bench_failures + (marks_begin == marks_end ? 0 : 1);
 }

@@ -1,0 +1,149 @@
+/*
+ * bench_reference.c - the reference configuration of the "Targets" issue,
+ * one control tick as the firmware runs it plus the EUPI kernels:
+ *
+ *   1. piezo_control_tick(), the function SysTick_Handler calls (control.c):
+ *      the ADC seam, piezo_ctl_tick() on the firmware's own instance with a
+ *      committed kp_dcc table (KP plane L = 10, 55 operators) in FF_FEEDBACK
+ *      mode: wave generator (sine) as reference, the DCC law, PI feedback
+ *      (kd = 0) with the notch, clamp and slew limit, the DAC code, the
+ *      recorder on (4 channels every tick, triggered at the start), the DAC
+ *      seam;
+ *   2. the EUPI model (10 CPI + 10 x 3 UPI + 3 polynomial terms) on the
+ *      applied drive: the stage observer. Its output is the next tick's ADC
+ *      code (the benchmark's stage), so the feedback acts on a hysteretic
+ *      plant;
+ *   3. the EUPI inverse of the same model (committed as an eupi_inverse
+ *      table through piezo_coefset_load, run by piezo_ff_process) on the
+ *      reference scaled to 2/3 (0.6 FS, inside the model's range).
+ *
+ * The controller runs one feedforward table per tick; the contract's
+ * reference counts KP + DCC and EUPI + inverse together, so the DCC table
+ * runs inside the controller and the EUPI pair beside it.
+ */
+#include <stddef.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "bench.h"
+#include "bench_tables.h"
+#include "coefset.h"
+#include "control.h"
+#include "eupi.h"
+#include "piezo_interface.h"
+#include "semihost.h"
+#include "tick.h"
+
+/* The stage of the benchmark: the EUPI observer's output of the last tick. */
+static int32_t stage_code = 1 << 15;
+static int32_t dac_code;
+
+void piezo_adc_read(int32_t adc[2])
+{
+    adc[0] = stage_code;
+    adc[1] = 1 << 15;
+}
+
+void piezo_dac_write(int32_t code)
+{
+    dac_code = code;
+}
+
+/* The EUPI reference model (forward). */
+static const struct piezo_eupi_coef eupi_coef = {
+    .cpi = {bench_eupi_r_cpi_q15, NULL, bench_eupi_b_q24, BENCH_EUPI_NCPI, 0},
+    .upi = {bench_eupi_r_upi_q15, bench_eupi_a_upi_q24, bench_eupi_d_q24, BENCH_EUPI_NUR, BENCH_EUPI_NUA},
+    .p_q24 = bench_eupi_p_q24,
+    .a0_q24 = BENCH_EUPI_A0_Q24,
+    .p0_q24 = BENCH_EUPI_P0_Q24,
+    .n_p = BENCH_EUPI_NP,
+};
+static struct piezo_eupi eupi;
+static int32_t eupi_state[PIEZO_EUPI_STATE_LEN(BENCH_EUPI_NCPI, BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
+static int64_t eupi_work[PIEZO_EUPI_WORK_LEN(BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
+
+/* The EUPI inverse, loaded from its table image as a commit would. */
+piezo_coefset_t bench_inv_set;
+piezo_ff_state_t bench_inv_ff;
+
+static void reference_tick(uint32_t k)
+{
+    (void)k;
+    piezo_control_tick();
+    const int16_t u = piezo_axis.sig[PIEZO_SIG_U];
+    const int16_t y = piezo_eupi_process(&eupi, u);
+    stage_code = (1 << 15) + y;
+    const int16_t yr = (int16_t)(((int32_t)piezo_axis.sig[PIEZO_SIG_REF] * 43691) >> 16); /* 2/3 */
+    piezo_bench_sink = piezo_ff_process(&bench_inv_ff, &bench_inv_set, yr, 0);
+}
+
+static int commit(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
+{
+    if (piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY) != 0 || piezo_ctl_stage_write(c, 0u, img, len) != 0) {
+        return -1;
+    }
+    return piezo_ctl_commit(c, len) == PIEZO_TABLE_REASON_OK ? 0 : -1;
+}
+
+static int setup(void)
+{
+    piezo_ctl_t *c = &piezo_axis;
+    piezo_ctl_cfg_t cfg;
+    piezo_control_default_cfg(&cfg);
+    cfg.pid = (piezo_pid_coef_t){.kp_q24 = 1 << 22, .ki_q24 = 1 << 19, .kd_q24 = 0,
+                                 .out_min_q15 = -8192, .out_max_q15 = 8192};
+    /* the notch of bench_kernels.c: about 700 Hz at 10 kHz */
+    cfg.notch = (piezo_biquad_coef_t){.b0_q24 = 16106127, .b1_q24 = -28882000, .b2_q24 = 16106127,
+                                      .a1_q24 = -28882000, .a2_q24 = 15435038};
+    cfg.notch_on = 1u;
+    cfg.limit = (piezo_limit_coef_t){.min_q15 = -32000, .max_q15 = 32000, .max_step_q15 = 4000};
+    cfg.u_safe_q15 = -32000;
+    if (piezo_ctl_init(c, &cfg) != 0 || commit(c, bench_dcc_img, BENCH_DCC_IMG_LEN) != 0) {
+        return -1;
+    }
+    c->wave_cfg = (piezo_wave_cfg_t){.kind = PIEZO_WAVE_SINE, .amplitude_q15 = 29491, /* 0.9 FS */
+                                     .freq_word = 21474836u /* 50 Hz */};
+    const piezo_rec_cfg_t rc = {.n_channels = 4,
+                                .signal = {PIEZO_SIG_REF, PIEZO_SIG_Y, PIEZO_SIG_U, PIEZO_SIG_FF},
+                                .decimation = 1, .pretrigger = 0, .trigger = PIEZO_REC_IMMEDIATE};
+    if (piezo_rec_configure(&c->rec, &rc) != 0 || piezo_ctl_set_mode(c, PIEZO_MODE_FF_FEEDBACK) != 0 ||
+        piezo_ctl_start_wave(c) != 0 || piezo_ctl_arm(c, 1u) != 0) {
+        return -1;
+    }
+    if (piezo_eupi_init(&eupi, &eupi_coef, eupi_state, sizeof eupi_state / sizeof eupi_state[0], eupi_work,
+                        sizeof eupi_work / sizeof eupi_work[0]) != 0) {
+        return -1;
+    }
+    /* the stage has rested at u_safe */
+    stage_code = (1 << 15) + piezo_eupi_process(&eupi, cfg.u_safe_q15);
+    piezo_rec_arm(&c->rec);
+    piezo_control_tick(); /* the committed table takes over at a tick boundary */
+    if (c->active < 0 || c->set[c->active].kind != PIEZO_TABLE_KIND_KP_DCC || c->rec.state != PIEZO_REC_TRIGGERED) {
+        return -1;
+    }
+    if (piezo_coefset_load(&bench_inv_set, &bench_inv_ff, bench_eupi_inv_img, BENCH_EUPI_INV_IMG_LEN) !=
+            PIEZO_TABLE_REASON_OK ||
+        piezo_ff_bind(&bench_inv_ff, &bench_inv_set) != 0) {
+        return -1;
+    }
+    return 0;
+}
+
+void piezo_bench_reference(void)
+{
+    if (setup() != 0) {
+        piezo_bench_failures++;
+        piezo_bench_run("reference", 0u, NULL);
+        return;
+    }
+    piezo_bench_run("reference", PIEZO_BENCH_TICKS, reference_tick);
+    /* the loop really ran: armed, no fault, the recorder still recording */
+    if (!piezo_axis.st.armed || piezo_axis.st.faults != 0u || piezo_axis.rec.state != PIEZO_REC_TRIGGERED) {
+        char line[96];
+        snprintf(line, sizeof line, "reference: armed %u faults 0x%lx recorder state %u\n",
+                 (unsigned)piezo_axis.st.armed, (unsigned long)piezo_axis.st.faults,
+                 (unsigned)piezo_axis.rec.state);
+        piezo_sh_write0(line);
+        piezo_bench_failures++;
+    }
+}
