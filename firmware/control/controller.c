@@ -12,7 +12,8 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
 {
     int rc;
     if (c == NULL || cfg == NULL || cfg->bad_limit == 0u || cfg->dac_min > cfg->dac_max ||
-        cfg->adc_min_ok > cfg->adc_max_ok || cfg->max_jump_q15 < 0) {
+        cfg->adc_min_ok > cfg->adc_max_ok || cfg->max_jump_q15 < 0 || cfg->preview_ticks > PIEZO_CTL_MAX_PREVIEW ||
+        cfg->shaper_ticks > PIEZO_CTL_MAX_SHAPER) {
         return PIEZO_EINVAL;
     }
     memset(c, 0, sizeof *c);
@@ -78,11 +79,42 @@ uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io)
 
 static void reset_loop_state(piezo_ctl_t *c)
 {
+    /* the preview line starts full of the present reference: no jump at arm */
+    int16_t r0 = (c->ref_source == PIEZO_REF_WAVE) ? c->wave_cfg.offset_q15 : c->setpoint_q15;
+    for (uint8_t i = 0; i < PIEZO_CTL_MAX_PREVIEW; i++) {
+        c->ref_fifo[i] = r0;
+    }
+    for (uint8_t i = 0; i < 2u * PIEZO_CTL_MAX_SHAPER + 1u; i++) {
+        c->shaper_hist[i] = r0;
+    }
+    c->fifo_pos = 0u;
+    c->shaper_pos = 0u;
     piezo_pid_reset(&c->pid);
     piezo_biquad_reset(&c->notch);
     if (c->active >= 0) {
         (void)piezo_ff_bind(&c->ff[c->active], &c->set[c->active]);
     }
+}
+
+/* Three-tap input shaper on the early reference: sum_i a_i r(k - i m), one
+ * rounding, saturated. The history is a ring of 2m + 1 samples. */
+static int16_t shape(piezo_ctl_t *c, int16_t r)
+{
+    const piezo_ctl_cfg_t *g = &c->cfg;
+    uint8_t m = g->shaper_ticks, n = (uint8_t)(2u * m + 1u), i1, i2;
+    int64_t acc;
+    if (m == 0u) {
+        return r;
+    }
+    c->shaper_hist[c->shaper_pos] = r;
+    i1 = (uint8_t)(c->shaper_pos >= m ? c->shaper_pos - m : c->shaper_pos + n - m);
+    i2 = (uint8_t)(i1 >= m ? i1 - m : i1 + n - m);
+    acc = (int64_t)g->shaper_q15[0] * r + (int64_t)g->shaper_q15[1] * c->shaper_hist[i1] +
+          (int64_t)g->shaper_q15[2] * c->shaper_hist[i2];
+    if (++c->shaper_pos >= n) {
+        c->shaper_pos = 0u;
+    }
+    return piezo_sat_q15(piezo_rshift_rnd64(acc, 15u));
 }
 
 /* Sensor plausibility: a code outside the valid range, or a jump no stage can
@@ -110,7 +142,7 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
 void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 {
     const piezo_ctl_cfg_t *g = &c->cfg;
-    int16_t y, r, u_ff = 0, u_fb = 0, u;
+    int16_t y, r, r_ahead, u_ff = 0, u_fb = 0, u;
     int8_t pend;
     uint8_t mode = c->mode;
     int run;
@@ -129,19 +161,29 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     }
     run = c->st.armed && mode != PIEZO_MODE_IDLE;
 
-    /* 4. reference */
-    r = (c->ref_source == PIEZO_REF_WAVE) ? piezo_wave_process(&c->wave) : c->setpoint_q15;
+    /* 4. reference: r_ahead for the feedforward, r (preview_ticks later) for the rest */
+    r_ahead = (c->ref_source == PIEZO_REF_WAVE) ? piezo_wave_process(&c->wave) : c->setpoint_q15;
+    r = r_ahead;
+    if (g->preview_ticks != 0u) {
+        r = c->ref_fifo[c->fifo_pos];
+        c->ref_fifo[c->fifo_pos] = r_ahead;
+        if (++c->fifo_pos >= g->preview_ticks) {
+            c->fifo_pos = 0u;
+        }
+    }
 
-    /* 5. feedforward */
+    /* 5. feedforward (of the shaped early reference) */
+    r_ahead = shape(c, r_ahead);
     if (run && mode != PIEZO_MODE_FEEDBACK) {
         if (mode == PIEZO_MODE_DIRECT) {
-            u_ff = r;
+            u_ff = r_ahead;
         } else if (c->active >= 0 && (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK)) {
-            u_ff = piezo_ff_process(&c->ff[c->active], &c->set[c->active], r, c->limit.prev_q15);
+            u_ff = piezo_ff_process(&c->ff[c->active], &c->set[c->active], r_ahead, c->limit.prev_q15);
         } else if (c->active >= 0) {
-            u_ff = piezo_line_q15(r, c->set[c->active].open_loop_gain_q24, c->set[c->active].open_loop_offset_q15);
+            u_ff = piezo_line_q15(r_ahead, c->set[c->active].open_loop_gain_q24,
+                                  c->set[c->active].open_loop_offset_q15);
         } else {
-            u_ff = r; /* no table: the reference is the drive */
+            u_ff = r_ahead; /* no table: the reference is the drive */
         }
     }
 

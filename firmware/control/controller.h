@@ -8,7 +8,15 @@
  *      valid code range, and no jump larger than max_jump per tick; bad_limit
  *      consecutive bad samples raise the sensor fault)
  *   3. scale the sensor: y = sat_q15(rshift_rnd((adc - adc_zero) * sensor_gain_q16, 16))
- *   4. reference: the wave generator, or the host's setpoint
+ *   4. reference: the wave generator, or the host's setpoint. With a preview
+ *      of D ticks the feedforward sees the reference D ticks early and
+ *      everything else (error, feedback, recorder) sees it on time, so the
+ *      stage's own lag (transport delay, amplifier, the tick) is cancelled for
+ *      any reference the controller generates itself. An input shaper
+ *      (three taps at 0, m and 2m ticks, e.g. zero-vibration-derivative for
+ *      the first mode) smooths the early reference before the feedforward,
+ *      so the compensated drive does not excite the resonance; its delay of
+ *      m ticks is part of what the preview cancels
  *   5. feedforward (modes FEEDFORWARD and FF_FEEDBACK): the active table's
  *      EUPI inverse or DCC law, chosen by the table's kind; in OPEN_LOOP the
  *      table's straight line u_ff = r g + o (coefset.h); no table, or
@@ -88,7 +96,13 @@ typedef struct {
     piezo_pid_coef_t pid;
     piezo_biquad_coef_t notch;
     uint8_t notch_on;
+    uint8_t preview_ticks;     /* feedforward look-ahead, 0..PIEZO_CTL_MAX_PREVIEW */
+    uint8_t shaper_ticks;      /* tap spacing m, 0 = no shaper, 1..PIEZO_CTL_MAX_SHAPER */
+    int16_t shaper_q15[3];     /* taps at 0, m, 2m; they should sum to 32768 (unity DC gain) */
 } piezo_ctl_cfg_t;
+
+#define PIEZO_CTL_MAX_PREVIEW 32u
+#define PIEZO_CTL_MAX_SHAPER 16u
 
 typedef struct {
     uint8_t armed;
@@ -137,6 +151,10 @@ typedef struct {
     piezo_biquad_t notch;
     piezo_limit_t limit;
 
+    int16_t ref_fifo[PIEZO_CTL_MAX_PREVIEW]; /* the reference, preview_ticks behind */
+    uint8_t fifo_pos;
+    int16_t shaper_hist[2u * PIEZO_CTL_MAX_SHAPER + 1u]; /* early reference history */
+    uint8_t shaper_pos;
     int16_t sig[PIEZO_SIG_N];
     int16_t y_prev_q15;
     uint16_t bad_run;

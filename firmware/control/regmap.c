@@ -195,6 +195,9 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
     case PIEZO_HREG_MAX_JUMP_Q15: return (uint16_t)g->max_jump_q15;
     case PIEZO_HREG_BAD_LIMIT: return g->bad_limit;
     case PIEZO_HREG_OVERRUN_LIMIT: return g->overrun_limit;
+    case PIEZO_HREG_PREVIEW_TICKS: return g->preview_ticks;
+    case PIEZO_HREG_SHAPER_TICKS: return g->shaper_ticks;
+    case PIEZO_HREG_SHAPER_Q15: return (uint16_t)g->shaper_q15[elem];
     default: return 0u;
     }
 }
@@ -255,6 +258,8 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     case PIEZO_HREG_TABLE_WINDOW: return c->unlocked;
     case PIEZO_HREG_TABLE_COMMAND: return v >= 1u && v <= 3u && c->unlocked;
     case PIEZO_HREG_BAD_LIMIT: return v >= 1u;
+    case PIEZO_HREG_PREVIEW_TICKS: return v <= PIEZO_CTL_MAX_PREVIEW;
+    case PIEZO_HREG_SHAPER_TICKS: return v <= PIEZO_CTL_MAX_SHAPER;
     case PIEZO_HREG_MAX_JUMP_Q15:
     case PIEZO_HREG_LIMIT_MAX_STEP_Q15: return s16(v) >= 0;
     default: return 1;
@@ -283,6 +288,9 @@ static int apply_config(piezo_ctl_cfg_t *g, const pending_t *p)
     case PIEZO_HREG_MAX_JUMP_Q15: g->max_jump_q15 = s16(v); break;
     case PIEZO_HREG_BAD_LIMIT: g->bad_limit = (uint16_t)v; break;
     case PIEZO_HREG_OVERRUN_LIMIT: g->overrun_limit = (uint16_t)v; break;
+    case PIEZO_HREG_PREVIEW_TICKS: g->preview_ticks = (uint8_t)v; break;
+    case PIEZO_HREG_SHAPER_TICKS: g->shaper_ticks = (uint8_t)v; break;
+    case PIEZO_HREG_SHAPER_Q15: g->shaper_q15[p->elem] = s16(v); break;
     default: return 0;
     }
     return 1;
@@ -444,7 +452,9 @@ static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uin
         apply(m, &p[i], &table_cmd);
     }
     if (config) {
-        /* checked above; re-binding resets filter and integrator (disarmed) */
+        /* checked above; re-binding resets filter, integrator and preview line (disarmed) */
+        c->fifo_pos = 0u;
+        c->shaper_pos = 0u;
         (void)piezo_pid_init(&c->pid, &c->cfg.pid);
         (void)piezo_biquad_init(&c->notch, &c->cfg.notch);
         (void)piezo_limit_init(&c->limit, &c->cfg.limit, c->limit.prev_q15);

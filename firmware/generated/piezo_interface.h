@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 1u
-#define PIEZO_INTERFACE_CRC32 0x06E00B73u
+#define PIEZO_INTERFACE_CRC32 0x32C075D7u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -178,6 +178,10 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_HOLDING_MAX_JUMP_Q15 0x3016u  /* int16 */
 #define PIEZO_HOLDING_BAD_LIMIT 0x3017u  /* uint16 */
 #define PIEZO_HOLDING_OVERRUN_LIMIT 0x3018u  /* uint16 */
+#define PIEZO_HOLDING_PREVIEW_TICKS 0x3019u  /* uint16 */
+#define PIEZO_HOLDING_SHAPER_TICKS 0x301Au  /* uint16 */
+#define PIEZO_HOLDING_SHAPER_Q15 0x301Bu  /* int16 x3 */
+#define PIEZO_HOLDING_SHAPER_Q15_COUNT 3u
 
 /* Register descriptors, sorted by address: words per element (1 or 2),
  * elements, and flags. */
@@ -280,6 +284,9 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_MAX_JUMP_Q15,
     PIEZO_HREG_BAD_LIMIT,
     PIEZO_HREG_OVERRUN_LIMIT,
+    PIEZO_HREG_PREVIEW_TICKS,
+    PIEZO_HREG_SHAPER_TICKS,
+    PIEZO_HREG_SHAPER_Q15,
     PIEZO_HREG_N
 };
 extern const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N];

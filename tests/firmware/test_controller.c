@@ -287,6 +287,55 @@ static void test_recorder_captures_the_wave_run(void **state)
     assert_int_equal(f[1], 0);
 }
 
+static void test_preview_feeds_the_reference_early(void **state)
+{
+    (void)state;
+    piezo_ctl_cfg_t cfg = unit_cfg();
+    cfg.preview_ticks = 3;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_DIRECT), PIEZO_OK);
+    ctl.wave_cfg.kind = PIEZO_WAVE_TRIANGLE;
+    ctl.wave_cfg.amplitude_q15 = 20000;
+    ctl.wave_cfg.freq_word = 1u << 26;
+    assert_int_equal(piezo_ctl_start_wave(&ctl), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+    int16_t u_hist[64], r_hist[64];
+    for (int k = 0; k < 64; k++) {
+        int32_t in[2] = {0, 0}, dac;
+        piezo_ctl_tick(&ctl, in, &dac);
+        u_hist[k] = ctl.sig[PIEZO_SIG_U];
+        r_hist[k] = ctl.sig[PIEZO_SIG_REF];
+    }
+    for (int k = 0; k < 3; k++) {
+        assert_int_equal(r_hist[k], 0); /* the line starts at the wave's offset */
+    }
+    for (int k = 3; k < 64; k++) {
+        assert_int_equal(r_hist[k], u_hist[k - 3]); /* drive leads the reference by 3 ticks */
+    }
+    cfg.preview_ticks = PIEZO_CTL_MAX_PREVIEW + 1u;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_EINVAL);
+}
+
+static void test_shaper_spreads_a_step_over_its_taps(void **state)
+{
+    (void)state;
+    piezo_ctl_cfg_t cfg = unit_cfg();
+    cfg.shaper_ticks = 2;
+    cfg.shaper_q15[0] = 8192;  /* ZVD of an undamped mode: 1/4, 1/2, 1/4 */
+    cfg.shaper_q15[1] = 16384;
+    cfg.shaper_q15[2] = 8192;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_DIRECT), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+    const int32_t want[7] = {4000, 4000, 12000, 12000, 16000, 16000, 16000};
+    for (int k = 0; k < 7; k++) {
+        assert_int_equal(tick(16000, 0), want[k]);
+        assert_int_equal(ctl.sig[PIEZO_SIG_REF], 16000); /* the reference itself is not shaped */
+    }
+    cfg.shaper_ticks = PIEZO_CTL_MAX_SHAPER + 1u;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_EINVAL);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -300,6 +349,8 @@ int main(void)
         cmocka_unit_test(test_overruns_are_counted_and_repeated_ones_fault),
         cmocka_unit_test(test_feedback_removes_a_static_error),
         cmocka_unit_test(test_recorder_captures_the_wave_run),
+        cmocka_unit_test(test_preview_feeds_the_reference_early),
+        cmocka_unit_test(test_shaper_spreads_a_step_over_its_taps),
     };
     return cmocka_run_group_tests_name("controller", tests, NULL, NULL);
 }

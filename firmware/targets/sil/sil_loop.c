@@ -50,7 +50,7 @@ int piezo_sil_ctl_config(const stage_params *p, int axis, piezo_ctl_cfg_t *cfg, 
     cfg->sensor_gain_q16 = (int32_t)(1L << (32 - ab));
     cfg->adc_min_ok = 1;
     cfg->adc_max_ok = (1 << ab) - 2;
-    cfg->max_jump_q15 = 8192; /* a quarter of the range in 100 us: no real stage */
+    cfg->max_jump_q15 = 16384; /* half the range in 100 us: no stage, even ringing */
     cfg->bad_limit = 3;
     cfg->overrun_limit = 100;
     cfg->limit.min_q15 = -32768;
