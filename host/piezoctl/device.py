@@ -157,6 +157,10 @@ class Controller:
         self.write("mode", MODES[mode])
 
     def arm(self, on: bool = True) -> None:
+        if on and self.status()["faults"]:
+            st = self.status()
+            raise DeviceError(f"cannot arm: the controller reports faults: {', '.join(st['faults_names'])} "
+                              "(clear them first)")
         self.write("arm", 1 if on else 0)
         if on and not self.status()["armed"]:
             raise DeviceError("the controller did not arm (clear its faults first)")
@@ -199,6 +203,16 @@ class Controller:
             self.client.write_holding(self._h("notch_b0_q24"), nregs)
         else:
             self.write("notch_on", 0)
+
+    def configure(self, name: str, value: int) -> None:
+        """Write one configuration register (unlocks; the unit must be disarmed)."""
+        self.unlock()
+        self.write(name, value)
+
+    def configure_shaper(self, ticks: int = 0, taps_q15=(32768, 0, 0), preview_ticks: int = 0) -> None:
+        """Input shaper (tap spacing [ticks], three q15 taps) and reference preview [ticks]."""
+        self.unlock()
+        self.client.write_holding(self._h("preview_ticks"), [preview_ticks, ticks] + [_u16(t) for t in taps_q15])
 
     # ------------------------------------------------------------ wave generator
     def configure_wave(self, kind: str, *, offset_q15: int = 0, amplitude_q15: int = 0, f_hz: float = 0.0,

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..golden import dcc as gdcc
+from ..models import kp as kpref
+from ..models.eupi import eupi_inverse
 from ..golden import eupi_inv as ginv
 from ..ident import get_kind
 from ..ident.eupi import to_params as eupi_to_params
@@ -41,7 +43,7 @@ from ..models.eupi import EUPIParams, apply_kex, choose_kex, small_gain_margin
 from .build import ctl_section, eupi_inverse_sections, kp_dcc_sections
 from .image import TableImageError, build_image
 
-__all__ = ["Scale", "table_from_model", "SUPPORTED_KINDS"]
+__all__ = ["Scale", "Compiled", "compile_model", "table_from_model", "SUPPORTED_KINDS"]
 
 SUPPORTED_KINDS = {"eupi": "eupi_inverse", "kp": "kp_dcc"}
 
@@ -139,7 +141,10 @@ def _eupi_sections(model: Model, scale: Scale, margin: float):
         q = ginv.quantize_eupi_inv(scaled)
     except ValueError as exc:
         raise TableImageError("out_of_range", str(exc)) from None
-    return eupi_inverse_sections(q, scaled.a0), {"k_ex": kex, "small_gain_margin": small_gain_margin(scaled, -1, 1)}
+    info = {"k_ex": kex, "small_gain_margin": small_gain_margin(scaled, -1, 1),
+            "fixed": lambda r_q15: ginv.eupi_inv_run(q, r_q15),
+            "float": lambda r_fs: eupi_inverse(r_fs, scaled)}
+    return eupi_inverse_sections(q, scaled.a0), info
 
 
 def _kp_sections(model: Model, scale: Scale):
@@ -156,7 +161,70 @@ def _kp_sections(model: Model, scale: Scale):
         d = gdcc.quantize(grid, w, gain=1.0 / big_w)
     except ValueError as exc:
         raise TableImageError("out_of_range", str(exc)) from None
-    return kp_dcc_sections(d), {"dcc_gain": 1.0 / big_w, "y_offset": -c}
+    g = 1.0 / big_w
+
+    def fixed(r_q15):
+        yd = np.clip(np.floor(np.asarray(r_q15, dtype=np.float64) - c * 32768 + 0.5), -32768, 32767)
+        return gdcc.dcc_process_q(yd.astype(np.int64), d)
+
+    def flt(r_fs):
+        # the linear term c1 v acts as one more operator with Psi = 0 (psi = v)
+        return kpref.dcc_law(np.asarray(r_fs, dtype=np.float64) - c, grid, w, gain=g)
+
+    return kp_dcc_sections(d), {"dcc_gain": g, "y_offset": -c, "fixed": fixed, "float": flt}
+
+
+@dataclass
+class Compiled:
+    """A model compiled for a controller: what the table will make it do.
+
+    Attributes
+    ----------
+    table_kind : str
+    sections : list
+        Payload sections (controller scalars first).
+    inverse_fixed : callable
+        Reference q15 -> drive q15, bit-exact with the firmware (golden model).
+    inverse_float : callable
+        Reference [FS] -> drive [FS], float64.
+    line : tuple of float
+        The uncompensated straight line (gain, offset) [FS].
+    info : dict
+        Kind-specific figures (k_ex, small-gain margin, DCC gain...).
+    """
+
+    table_kind: str
+    sections: list
+    inverse_fixed: object
+    inverse_float: object
+    line: tuple
+    info: dict
+
+
+def compile_model(model: Model, scale: Scale, *, margin: float = 0.02) -> Compiled:
+    """Map, quantize and check a model for a controller (see the module docstring).
+
+    Raises
+    ------
+    TableImageError
+        With the firmware's reason name, before anything is flashed.
+    """
+    if model.kind not in SUPPORTED_KINDS:
+        raise TableImageError("bad_kind", f"no firmware table for model kind {model.kind!r} "
+                                          f"(tables exist for: {', '.join(SUPPORTED_KINDS)})")
+    if float(model.params.get("input_delay_s", 0.0)) != 0.0:
+        raise TableImageError("out_of_range", "the model was fitted with an input delay; the firmware "
+                                              "compensator has none: identify without --delay-s")
+    if model.kind == "eupi":
+        sections, info = _eupi_sections(model, scale, margin)
+        y_gain, y_off = 1.0, 0.0
+    else:
+        sections, info = _kp_sections(model, scale)
+        y_gain, y_off = 1.0, info["y_offset"]
+    g, o = _open_loop_line(model, scale)
+    sections = [ctl_section(g, o, y_gain, y_off)] + sections
+    fixed, flt = info.pop("fixed"), info.pop("float")
+    return Compiled(SUPPORTED_KINDS[model.kind], sections, fixed, flt, (g, o), info)
 
 
 def table_from_model(model: Model, scale: Scale, *, table_version: int | None = None,
@@ -172,31 +240,18 @@ def table_from_model(model: Model, scale: Scale, *, table_version: int | None = 
     table_version : int, optional
         Version stamped into the header (default: Unix time).
     margin : float
-        Small-gain margin the EUPI inverse must keep [um per V-scale, in the model's units].
+        Small-gain margin the EUPI inverse must keep [FS per FS, in the model's output units].
 
     Raises
     ------
     TableImageError
         With the firmware's reason name, before anything is flashed.
     """
-    if model.kind not in SUPPORTED_KINDS:
-        raise TableImageError("bad_kind", f"no firmware table for model kind {model.kind!r} "
-                                          f"(tables exist for: {', '.join(SUPPORTED_KINDS)})")
-    if float(model.params.get("input_delay_s", 0.0)) != 0.0:
-        raise TableImageError("out_of_range", "the model was fitted with an input delay; the firmware "
-                                              "compensator has none: identify without --delay-s")
-    if model.kind == "eupi":
-        sections, _info = _eupi_sections(model, scale, margin)
-        y_gain, y_off = 1.0, 0.0
-    else:
-        sections, info = _kp_sections(model, scale)
-        y_gain, y_off = 1.0, info["y_offset"]
-    g, o = _open_loop_line(model, scale)
-    sections = [ctl_section(g, o, y_gain, y_off)] + sections
+    comp = compile_model(model, scale, margin=margin)
     data = model.provenance.get("data", [])
     digest = hashlib.sha256("".join(d.get("sha256", "") for d in data).encode()).digest()
     nrmse = max([float(d.get("nrmse", 0.0)) for d in data] or [0.0])
     now = int(time.time())
-    return build_image(SUPPORTED_KINDS[model.kind], sections,
+    return build_image(comp.table_kind, comp.sections,
                        table_version=int(table_version if table_version is not None else now),
                        fit_nrmse=nrmse, build_time=now, data_sha256=digest)

@@ -1,0 +1,80 @@
+"""Excitation played by the firmware's wave generator and captured by its
+recorder, over the protocol: nothing here reaches into the simulation.
+
+- :func:`forc_sweeps`: quasi-static triangles that all start at the bottom of
+  the drive range and reach decreasing tops (first-order reversal curves):
+  the major loop and nested minor loops. Each recording starts when the
+  reference rises through the bottom after a full period, so the stage's
+  memory was wiped at the bottom, as the models' reset state assumes.
+- :func:`chirp`: a small-amplitude linear chirp around mid-range for the
+  frequency response.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["forc_sweeps", "chirp", "triangle_run", "multitone_run"]
+
+
+def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: int = 2,
+                decimation: int = 4) -> list[dict]:
+    """Triangles from the drive's bottom to ``tops`` (fractions of the range), in DIRECT mode.
+
+    Returns one dict per top with ``t`` [s], ``u`` [V], ``y`` [um].
+    """
+    out = []
+    tick = ctl.identity.tick_hz
+    frames = int(round(periods / f_hz * tick / decimation))
+    for top in tops:
+        amp = int(np.floor(top * 32767.0))
+        offset = -32768 + amp
+        level = -32768 + int(0.02 * 2 * amp)
+        ctl.configure_wave("triangle", offset_q15=offset, amplitude_q15=amp, f_hz=f_hz)
+        cols = ctl.capture(["u", "y"], frames, decimation=decimation, trigger="rising",
+                           trigger_signal="ref", level_q15=level, start_wave=True,
+                           timeout_s=(periods + 2) / f_hz * 3 + 5)
+        ctl.command("stop_wave")
+        out.append({"t": cols["t"], "u": cols["u"], "y": cols["y"], "top": top})
+    return out
+
+
+def chirp(ctl, *, f0: float = 5.0, f1: float = 2000.0, duration_s: float = 3.0, amp_frac: float = 0.01,
+          centre_frac: float = 0.5) -> dict:
+    """A linear chirp in DIRECT mode; ``t`` [s], ``u`` [V], ``y`` [um] at the full tick rate."""
+    amp = int(amp_frac * 32767)
+    offset = int((2 * centre_frac - 1) * 32767)
+    frames = int(duration_s * ctl.identity.tick_hz)
+    ctl.configure_wave("chirp", offset_q15=offset, amplitude_q15=amp, f_hz=f0, f_end_hz=f1, duration_s=duration_s)
+    cols = ctl.capture(["u", "y"], frames, trigger="software", start_wave=True)
+    ctl.command("stop_wave")
+    return {"t": cols["t"], "u": cols["u"], "y": cols["y"]}
+
+
+def _settled_capture(ctl, period_s: float, periods: int, settle_periods: int) -> dict:
+    tick = ctl.identity.tick_hz
+    total_s = period_s * (periods + settle_periods)
+    cap = ctl.identity.rec_capacity // 2
+    dec = max(1, int(np.ceil(total_s * tick / cap)))
+    frames = int(round(total_s * tick / dec))
+    cols = ctl.capture(["ref", "y"], frames, decimation=dec, trigger="software", start_wave=True)
+    ctl.command("stop_wave")
+    keep = cols["t"] >= settle_periods * period_s - 1e-12
+    return {"t": cols["t"][keep] - cols["t"][keep][0], "ref": cols["ref"][keep], "y": cols["y"][keep]}
+
+
+def triangle_run(ctl, f_hz: float, centre_um: float, amp_um: float, *, periods: int = 2,
+                 settle_periods: int = 1) -> dict:
+    """Play a position triangle in the current mode; ``ref`` and ``y`` [um] over whole periods after settling."""
+    ctl.configure_wave("triangle", offset_q15=ctl.q15_position(centre_um),
+                       amplitude_q15=int(round(amp_um / ctl.scale.p_half * 32768)), f_hz=f_hz)
+    return _settled_capture(ctl, 1.0 / f_hz, periods, settle_periods)
+
+
+def multitone_run(ctl, freqs=(1.0, 7.0, 23.0), centre_um: float = 0.0, amp_um: float = 1.0,
+                  *, periods: int = 1, settle_periods: int = 1) -> dict:
+    """A multitone (equal amplitudes summing to ``amp_um``) over whole periods of the lowest tone."""
+    each = int(round(amp_um / len(freqs) / ctl.scale.p_half * 32768))
+    ctl.configure_wave("multisine", offset_q15=ctl.q15_position(centre_um),
+                       tones=[(each, f, 0.0) for f in freqs])
+    return _settled_capture(ctl, 1.0 / min(freqs), periods, settle_periods)

@@ -1,0 +1,99 @@
+"""Dynamics-derived settings: reference preview and the feedback loop.
+
+- Preview: the group delay of the measured frequency response below a
+  tenth of the resonance (transport delay, amplifier, the tick itself), in
+  ticks; the controller then feeds the reference that many ticks early.
+- Input shaper: a zero-vibration-derivative shaper (taps 1, 2K, K^2 over
+  (1 + K)^2 at 0, half and one damped period, K = exp(-zeta pi / sqrt(1 -
+  zeta^2))) on the feedforward reference, so the compensated drive does not
+  ring the first mode; the preview also covers its delay of half a period.
+- Feedback: an integral controller (plus a small proportional part) with
+  crossover ``fc`` well below the resonance, and a wide notch at the
+  resonance (the magnitude peak of the measured response) so the loop gain
+  stays below one there. The integral gain per tick is
+  ``Ki = 2 pi fc Ts / G0`` with ``G0`` the static gain in q15 units.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["group_delay_ticks", "resonance_hz", "damping", "zvd_shaper", "notch", "design_feedback"]
+
+
+def group_delay_ticks(frf, tick_hz: float, f_max: float) -> int:
+    """Ticks of delay: slope of the unwrapped phase [deg] over 0 < f < f_max [Hz],
+    weighted by magnitude (the low end of a small chirp is noisy)."""
+    sel = frf.f_hz < f_max
+    if np.count_nonzero(sel) < 3:
+        return 0
+    slope = np.polyfit(frf.f_hz[sel], frf.phase_deg[sel], 1, w=frf.mag[sel])[0]  # deg per Hz
+    tau = -slope / 360.0
+    return int(np.clip(np.round(tau * tick_hz), 0, 32))
+
+
+def resonance_hz(frf) -> float:
+    """Frequency of the largest magnitude above 10x the lowest measured frequency [Hz]."""
+    sel = frf.f_hz > 10 * frf.f_hz[0]
+    i = int(np.argmax(np.where(sel, frf.mag, 0.0)))
+    return float(frf.f_hz[i])
+
+
+def damping(frf, f_res: float, default: float = 0.02) -> float:
+    """Damping ratio from the half-power width of the resonance peak (default if unresolved)."""
+    i = int(np.argmin(np.abs(frf.f_hz - f_res)))
+    half = frf.mag[i] / np.sqrt(2.0)
+    lo = i
+    while lo > 0 and frf.mag[lo] > half:
+        lo -= 1
+    hi = i
+    while hi < frf.f_hz.size - 1 and frf.mag[hi] > half:
+        hi += 1
+    if lo == 0 or hi == frf.f_hz.size - 1 or hi - lo < 2:
+        return default
+    return float(np.clip((frf.f_hz[hi] - frf.f_hz[lo]) / (2.0 * f_res), 0.002, 0.3))
+
+
+def zvd_shaper(f_res: float, zeta: float, tick_hz: float) -> tuple[int, list[int]]:
+    """Tap spacing m [ticks] and q15 taps (summing to 32768) of a ZVD shaper."""
+    fd = f_res * np.sqrt(1.0 - zeta * zeta)
+    m = int(np.round(tick_hz / (2.0 * fd)))
+    if not 1 <= m <= 16:
+        return 0, [32768, 0, 0]
+    k = np.exp(-zeta * np.pi / np.sqrt(1.0 - zeta * zeta))
+    a = np.array([1.0, 2 * k, k * k]) / (1.0 + k) ** 2
+    q = [int(np.floor(x * 32768 + 0.5)) for x in a]
+    q[1] += 32768 - sum(q)
+    return m, q
+
+
+def notch(f0: float, fs: float, q: float = 0.7) -> tuple[float, float, float, float, float]:
+    """Notch biquad (b0, b1, b2, a1, a2), a0 = 1, unity gain at DC."""
+    w0 = 2 * np.pi * f0 / fs
+    alpha = np.sin(w0) / (2 * q)
+    a0 = 1 + alpha
+    return (1 / a0, -2 * np.cos(w0) / a0, 1 / a0, -2 * np.cos(w0) / a0, (1 - alpha) / a0)
+
+
+def design_feedback(frf, line_gain: float, tick_hz: float, *, fc_max: float = 120.0) -> dict:
+    """Preview, PI gains and notch for a stage.
+
+    Parameters
+    ----------
+    frf : FRF
+        Measured drive -> position response (V -> um); only its shape is used.
+    line_gain : float
+        Drive per position of the uncompensated line [FS/FS]: 1 / static gain.
+    tick_hz : float
+        Control rate [Hz].
+    """
+    f_res = resonance_hz(frf)
+    zeta = damping(frf, f_res)
+    fc = min(fc_max, f_res / 8.0)
+    ts = 1.0 / tick_hz
+    ki = 2 * np.pi * fc * ts * line_gain
+    m, taps = zvd_shaper(f_res, zeta, tick_hz)
+    delay = group_delay_ticks(frf, tick_hz, f_res / 3.0)
+    return {"resonance_hz": f_res, "damping": zeta, "crossover_hz": fc, "kp": 0.2 * line_gain, "ki": ki,
+            "notch": notch(f_res, tick_hz), "delay_ticks": delay, "shaper_ticks": m, "shaper_q15": taps,
+            "preview_ticks": int(min(32, delay + m))}
