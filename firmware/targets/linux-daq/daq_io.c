@@ -79,9 +79,14 @@ static int open_chan(piezo_daq_t *d, const piezo_daq_config_t *cfg, const comedi
         }
     } else {
         sd = cc->subdevice;
+        n = comedi_get_n_subdevices(d->dev);
+        if (n < 0 || sd >= n) {
+            return fail(err, len, "%s: axis %d %s: no subdevice %d (the device has %d)", cfg->device, axis, what, sd,
+                        n);
+        }
         n = comedi_get_subdevice_type(d->dev, (unsigned)sd);
         if (n < 0) {
-            return fail(err, len, "%s: axis %d %s: no subdevice %d (%s)", cfg->device, axis, what, sd, cerr());
+            return fail(err, len, "%s: axis %d %s: subdevice %d: %s", cfg->device, axis, what, sd, cerr());
         }
         if (n != type) {
             return fail(err, len, "%s: axis %d %s: subdevice %d is not an %s (type %d)", cfg->device, axis, what,
@@ -372,7 +377,7 @@ int piezo_daq_ctl_config(piezo_daq_t *d, const piezo_daq_config_t *cfg, int axis
     ctl->sensor_gain_q16 = 65536;
     ctl->adc_min_ok = 1;
     ctl->adc_max_ok = PIEZO_DAQ_CODE_MAX - 1;
-    ctl->max_jump_q15 = 8192;
+    ctl->max_jump_q15 = 16384; /* half the range in 100 us: no stage, even ringing */
     ctl->bad_limit = 3;
     ctl->overrun_limit = 100;
     ctl->pid.out_min_q15 = -32768;
