@@ -15,15 +15,14 @@
  * Each period: sleep to the deadline (clock_nanosleep, TIMER_ABSTIME), tick
  * every axis and the stage, then serve the protocol without blocking. A tick
  * that starts more than one period late is an overrun: the missed ticks run
- * at once so that the stage's time keeps up with the wall clock.
+ * at once so that the stage's time keeps up with the wall clock (the pacer's
+ * CATCH_UP policy, firmware/targets/common/pacer.h).
  */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>
 #include <pty.h>
-#include <sched.h>
-#include <sys/prctl.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -34,28 +33,22 @@
 
 #include "flash_file.h"
 #include "modbus_rtu.h"
+#include "pacer.h"
 #include "piezo_interface.h"
 #include "regmap.h"
 #include "sil_loop.h"
 #include "tcp_server_libmodbus.h"
 
 #define PERIOD_NS 100000L
-#define HIST_BINS 20000 /* 1 us bins up to 20 ms of lateness */
 
 static volatile sig_atomic_t g_stop;
 static piezo_sil_t g_sil; /* large: static */
+static piezo_pacer_t g_pacer;
 
 static void on_signal(int sig)
 {
     (void)sig;
     g_stop = 1;
-}
-
-static int64_t now_ns(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
 }
 
 static void usage(FILE *f)
@@ -86,18 +79,6 @@ static int open_pty(const char *link, int *slave_keep)
     return m;
 }
 
-static long percentile(const uint32_t *hist, uint64_t n, double q)
-{
-    uint64_t want = (uint64_t)(q * (double)n), seen = 0;
-    for (long i = 0; i < HIST_BINS; i++) {
-        seen += hist[i];
-        if (seen > want) {
-            return i;
-        }
-    }
-    return HIST_BINS;
-}
-
 int main(int argc, char **argv)
 {
     const char *tcp_spec = NULL, *pty_link = NULL, *stage_path = NULL, *flash_path = NULL;
@@ -113,9 +94,6 @@ int main(int argc, char **argv)
     piezo_flash_file_t flash[STAGE_MAX_AXES];
     piezo_storage_t store[STAGE_MAX_AXES];
     int pty = -1, pty_slave = -1;
-    static uint32_t hist[HIST_BINS + 1];
-    uint64_t ticks = 0, overruns = 0;
-    int64_t max_late = 0;
 
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
@@ -153,20 +131,14 @@ int main(int argc, char **argv)
         usage(stderr);
         return 2;
     }
-    {
-        const char *colon = strrchr(tcp_spec, ':');
-        char *end;
-        if (colon == NULL || (size_t)(colon - tcp_spec) >= sizeof host) {
-            fprintf(stderr, "sil-stage: --modbus-tcp wants HOST:PORT, got %s\n", tcp_spec);
-            return 2;
-        }
-        memcpy(host, tcp_spec, (size_t)(colon - tcp_spec));
-        host[colon - tcp_spec] = '\0';
-        port = strtol(colon + 1, &end, 10);
-        if (*end != '\0' || port < 0 || port > 65535) {
-            fprintf(stderr, "sil-stage: bad port in %s\n", tcp_spec);
-            return 2;
-        }
+    switch (piezo_parse_host_port(tcp_spec, host, sizeof host, &port)) {
+    case 0: break;
+    case -1:
+        fprintf(stderr, "sil-stage: --modbus-tcp wants HOST:PORT, got %s\n", tcp_spec);
+        return 2;
+    default:
+        fprintf(stderr, "sil-stage: bad port in %s\n", tcp_spec);
+        return 2;
     }
     if (stage_path != NULL) {
         if (stage_params_load_json(stage_path, &params, errbuf, sizeof errbuf) != STAGE_OK) {
@@ -232,49 +204,37 @@ int main(int argc, char **argv)
         sigaction(SIGTERM, &sa, NULL);
         signal(SIGPIPE, SIG_IGN);
     }
-    {
-        struct sched_param sp = {.sched_priority = 50};
-        (void)sched_setscheduler(0, SCHED_FIFO, &sp); /* where permitted */
-        (void)prctl(PR_SET_TIMERSLACK, 1UL);          /* default slack is 50 us */
-    }
+    (void)piezo_rt_setup(50, 0); /* SCHED_FIFO where permitted, timer slack 1 ns */
     printf("sil-stage: ready tcp=%s:%u axes=%d rtu=%s\n", host, (unsigned)piezo_tcp_server_port(&tcp[0]),
            g_sil.n_axes, pty_link ? pty_link : "-");
     fflush(stdout);
 
-    int64_t next = now_ns();
+    piezo_pacer_init(&g_pacer, PERIOD_NS, PIEZO_PACE_CATCH_UP, piezo_now_ns());
     while (!g_stop) {
-        struct timespec ts = {(time_t)(next / 1000000000LL), (long)(next % 1000000000LL)};
-        if (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR) {
+        if (piezo_pacer_sleep(&g_pacer) == EINTR) {
             continue;
         }
-        int64_t start = now_ns(), late = start - next;
-        hist[late < 0 ? 0 : (late / 1000 >= HIST_BINS ? HIST_BINS : late / 1000)]++;
-        if (late > max_late) {
-            max_late = late;
-        }
+        int64_t start = piezo_now_ns();
+        int over = 0;
         /* the ticks due by now: one, or more after a stall */
-        do {
+        uint32_t due = piezo_pacer_wake(&g_pacer, start, &over);
+        for (uint32_t k = 0; k < due; k++) {
             piezo_sil_tick(&g_sil);
-            ticks++;
-            next += PERIOD_NS;
-            if (late > PERIOD_NS) {
-                overruns++;
+            if (over) {
                 for (int i = 0; i < g_sil.n_axes; i++) {
                     piezo_ctl_overrun(&g_sil.ctl[i]);
                 }
             }
-        } while (next <= start);
-        int64_t dur = now_ns() - start;
+        }
+        (void)piezo_pacer_done(&g_pacer, start, piezo_now_ns());
         for (int i = 0; i < g_sil.n_axes; i++) {
-            map[i].tick_time_ns = (uint32_t)dur;
-            if ((uint32_t)dur > map[i].tick_time_max_ns) {
-                map[i].tick_time_max_ns = (uint32_t)dur;
-            }
+            map[i].tick_time_ns = g_pacer.tick_time_ns;
+            map[i].tick_time_max_ns = g_pacer.tick_time_max_ns;
             (void)piezo_tcp_server_poll(&tcp[i], 0);
         }
         if (pty >= 0) {
             uint8_t buf[256], reply[PIEZO_RTU_ADU_MAX];
-            uint32_t us = (uint32_t)(now_ns() / 1000);
+            uint32_t us = (uint32_t)(piezo_now_ns() / 1000);
             ssize_t n = read(pty, buf, sizeof buf);
             for (int i = 0; i < g_sil.n_axes; i++) {
                 if (n > 0) {
@@ -288,14 +248,10 @@ int main(int argc, char **argv)
         }
     }
 
-    uint64_t n = 0;
-    for (int i = 0; i <= HIST_BINS; i++) {
-        n += hist[i];
-    }
     printf("sil-stage: stopped after %" PRIu64 " ticks (%.1f s), overruns %" PRIu64 ", "
            "tick lateness p50 %ld us, p99 %ld us, max %.1f us\n",
-           ticks, (double)ticks / 10000.0, overruns, percentile(hist, n, 0.50), percentile(hist, n, 0.99),
-           (double)max_late / 1000.0);
+           g_pacer.ticks, (double)g_pacer.ticks / 10000.0, g_pacer.overruns, piezo_pacer_percentile_us(&g_pacer, 0.50),
+           piezo_pacer_percentile_us(&g_pacer, 0.99), (double)g_pacer.max_late_ns / 1000.0);
     for (int i = 0; i < g_sil.n_axes; i++) {
         piezo_tcp_server_close(&tcp[i]);
         piezo_flash_file_close(&flash[i]);
