@@ -41,45 +41,62 @@ void piezo_dcc_reset(struct piezo_dcc *dcc)
     dcc->dir = -1;
 }
 
-/* Advance the operators with v and return sum_j Psi_j * c_j (scaled by 2^39). */
+/*
+ * Advance the operators with v and return sum_j Psi_j * c_j (scaled by 2^39).
+ *
+ * The defining equations (dcc.h) take the minimum (rising) or maximum
+ * (falling) of v - xi + zo_j and v - r(v - n_j). Since v_prev - xi + zo_j
+ * is Psi_j[k-1] whenever Psi_j[k-1] took that branch, and the other branch
+ * only ever lowers (rising) or raises (falling) it further in the same run,
+ * v - xi + zo_j may be replaced by Psi_j[k-1] + (v - v_prev) without changing
+ * a single result (docs/kernels-kp.md, "DCC without the reversal copy"):
+ *
+ *   rising:  Psi_j = min(Psi_j + dv, v - r(v - n2_j))
+ *   falling: Psi_j = max(Psi_j + dv, v - r(v - n1_j))
+ *
+ * so a reversal copies nothing. With psi_j = v - Psi_j in [0, rmax] the
+ * ridge is needed only where it is not flat: rising, v - r(x) >= Psi_j + dv
+ * for x <= 0; falling, v - rmax <= Psi_j + dv for x >= xsat.
+ */
 static int64_t dcc_step(struct piezo_dcc *dcc, int16_t v_q15)
 {
     const struct piezo_kp_grid *g = &dcc->coeffs->grid;
     const int32_t *c = dcc->coeffs->c_q24;
     int32_t *cpsi = dcc->cpsi_q15;
-    int32_t *zo = dcc->zo_q15;
     const uint16_t n = g->n_ops;
     const int32_t v = v_q15;
-    const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
+    const int32_t slope = g->slope_q16, xsat = g->xsat_q15;
     int64_t acc = 0;
 
     if (v_q15 != dcc->v_prev_q15) {
-        const int8_t dir = (v_q15 > dcc->v_prev_q15) ? 1 : -1;
-        if (dir != dcc->dir) { /* reversal: remember where it happened */
+        const int32_t dv = v - dcc->v_prev_q15;
+        const int8_t dir = dv > 0 ? 1 : -1;
+        if (dir != dcc->dir) { /* reversal: where it happened (kept for the record) */
             dcc->xi_q15 = dcc->v_prev_q15;
-            for (uint16_t j = 0; j < n; j++) {
-                zo[j] = cpsi[j];
-            }
             dcc->dir = dir;
         }
-        const int32_t lin0 = v - dcc->xi_q15; /* v - xi, shared by all operators */
         if (dir > 0) {
             const int16_t *th = g->n2_q15;
+            const int32_t v_top = v - g->rmax_q15;
             for (uint16_t j = 0; j < n; j++) {
+                int32_t p = cpsi[j] + dv;
                 const int32_t x = v - th[j];
-                const int32_t cand = (x - piezo_kp_ridge_k(x, slope, xsat, rmax)) + th[j]; /* ro(x) + n2 */
-                const int32_t lin = lin0 + zo[j];
-                const int32_t p = lin < cand ? lin : cand;
+                if (x > 0) {
+                    const int32_t cand = x >= xsat ? v_top : v - ((x * slope + 32768) >> 16);
+                    p = cand < p ? cand : p;
+                }
                 cpsi[j] = p;
                 acc += (int64_t)p * c[j];
             }
         } else {
             const int16_t *th = g->n1_q15;
             for (uint16_t j = 0; j < n; j++) {
+                int32_t p = cpsi[j] + dv;
                 const int32_t x = v - th[j];
-                const int32_t cand = (x - piezo_kp_ridge_k(x, slope, xsat, rmax)) + th[j]; /* ro(x) + n1 */
-                const int32_t lin = lin0 + zo[j];
-                const int32_t p = lin > cand ? lin : cand;
+                if (x < xsat) {
+                    const int32_t cand = x <= 0 ? v : v - ((x * slope + 32768) >> 16);
+                    p = cand > p ? cand : p;
+                }
                 cpsi[j] = p;
                 acc += (int64_t)p * c[j];
             }

@@ -3,6 +3,27 @@
 
 #include "fixed_q.h"
 
+/*
+ * The upper branch (off + a u) >> 24 in three instructions: a value x is
+ * split into its high part x >> 24 (int32) and its low 24 bits shifted to the
+ * top of a word, stored as one int64 (high part in the upper word). Then
+ * (x + y) >> 24 = xh + yh + carry of the 32-bit sum xl + yl.
+ */
+static int64_t split24(int64_t x)
+{
+    const uint32_t lo = ((uint32_t)x & 0xFFFFFFu) << 8;
+    const int32_t hi = (int32_t)(x >> 24);
+    return (int64_t)(((uint64_t)(uint32_t)hi << 32) | lo);
+}
+
+static inline int32_t upper(int64_t off_split, uint32_t au_lo, int32_t au_hi)
+{
+    const uint32_t ol = (uint32_t)off_split;
+    const int32_t oh = (int32_t)(off_split >> 32);
+    const uint32_t sum = ol + au_lo;
+    return oh + au_hi + (int32_t)(sum < ol);
+}
+
 int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
                     int32_t *f_q15, size_t f_len, int64_t *off_q39, size_t off_len)
 {
@@ -42,12 +63,13 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
     p->f_q15 = f_q15;
     p->off_q39 = coef->n_a > 0u ? off_q39 : NULL;
     p->n_ops = n_ops;
-    /* Constants of the upper branch: a_j * r_i with the rounding half folded
-     * in, so that (off + a * u) >> 24 == piezo_rshift_rnd64(a * (u + r), 24). */
+    /* Constants of the upper branch: off = a_j * r_i with the rounding half
+     * folded in, so that (off + a * u) >> 24 == piezo_rshift_rnd64(a * (u + r), 24),
+     * stored split (see upper()) and column by column: slot j * n_r + i. */
     for (size_t i = 0; i < coef->n_r && coef->n_a > 0u; i++) {
         for (size_t j = 0; j < coef->n_a; j++) {
-            off_q39[i * coef->n_a + j] =
-                (int64_t)coef->a_q24[j] * coef->r_q15[i] + ((int64_t)1 << 23);
+            off_q39[j * coef->n_r + i] =
+                split24((int64_t)coef->a_q24[j] * coef->r_q15[i] + ((int64_t)1 << 23));
         }
     }
     piezo_play_reset(p);
@@ -59,19 +81,22 @@ void piezo_play_reset(struct piezo_play *p)
     for (size_t k = 0; k < p->n_ops; k++) {
         p->f_q15[k] = 0;
     }
+    p->acc_q39 = 0;
+    p->u_prev_q15 = 0;
+    p->primed = 0u;
 }
 
-int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
+/* The formula on every operator, the sum from scratch (first sample). */
+static int64_t play_full(struct piezo_play *p, int32_t u_q15)
 {
     const struct piezo_play_coef *c = p->coef;
     const int32_t *r = c->r_q15;
     const int32_t *w = c->w_q24;
     int32_t *f = p->f_q15;
+    const size_t n_a = c->n_a, n_r = c->n_r;
     int64_t acc = 0;
-
-    if (c->n_a == 0u) {
-        /* Classical: F = max(u - r, min(u + r, F)), exact. */
-        for (size_t i = 0; i < c->n_r; i++) {
+    if (n_a == 0u) {
+        for (size_t i = 0; i < n_r; i++) {
             const int32_t lo = u_q15 - r[i];
             const int32_t hi = u_q15 + r[i];
             int32_t y = f[i];
@@ -82,16 +107,12 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
         }
         return acc;
     }
-
-    /* Unparallel: F = max(u - r_i, min(round(a_j * (u + r_i)), F)). */
-    const int32_t *a = c->a_q24;
-    const int64_t *off = p->off_q39;
-    const size_t n_a = c->n_a;
-    size_t k = 0;
-    for (size_t i = 0; i < c->n_r; i++) {
-        const int32_t lo = u_q15 - r[i];
-        for (size_t j = 0; j < n_a; j++, k++) {
-            const int32_t hi = (int32_t)((off[k] + (int64_t)a[j] * u_q15) >> 24);
+    for (size_t j = 0; j < n_a; j++) {
+        const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
+        const int64_t *off = p->off_q39 + j * n_r;
+        for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
+            const int32_t hi = upper(off[i], (uint32_t)au, (int32_t)(au >> 32));
+            const int32_t lo = u_q15 - r[i];
             int32_t y = f[k];
             y = y < hi ? y : hi;
             y = y > lo ? y : lo;
@@ -99,5 +120,96 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
             acc += (int64_t)w[k] * y;
         }
     }
+    return acc;
+}
+
+int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
+{
+    if (!p->primed) {
+        p->primed = 1u;
+        p->u_prev_q15 = u_q15;
+        p->acc_q39 = play_full(p, u_q15);
+        return p->acc_q39;
+    }
+    const int32_t u_prev = p->u_prev_q15;
+    if (u_q15 == u_prev) {
+        return p->acc_q39; /* the update is idempotent */
+    }
+    p->u_prev_q15 = u_q15;
+
+    const struct piezo_play_coef *c = p->coef;
+    const int32_t *r = c->r_q15;
+    const int32_t *w = c->w_q24;
+    int32_t *f = p->f_q15;
+    const size_t n_r = c->n_r;
+    int64_t acc = p->acc_q39;
+
+    if (c->n_a == 0u) {
+        /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
+         * the operators that move are a prefix in both directions. */
+        if (u_q15 > u_prev) {
+            for (size_t i = 0; i < n_r; i++) {
+                const int32_t lo = u_q15 - r[i];
+                const int32_t y = f[i];
+                if (lo <= y) {
+                    break;
+                }
+                f[i] = lo;
+                acc += (int64_t)w[i] * (lo - y);
+            }
+        } else {
+            for (size_t i = 0; i < n_r; i++) {
+                const int32_t hi = u_q15 + r[i];
+                const int32_t y = f[i];
+                if (hi >= y) {
+                    break;
+                }
+                f[i] = hi;
+                acc += (int64_t)w[i] * (hi - y);
+            }
+        }
+        p->acc_q39 = acc;
+        return acc;
+    }
+
+    /* Unparallel, column by column (slope a_j, thresholds ascending). */
+    const size_t n_a = c->n_a;
+    if (u_q15 > u_prev) {
+        /* F = max(u - r_i, F): the upper branch cannot bind while rising. */
+        for (size_t j = 0; j < n_a; j++) {
+            for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
+                const int32_t lo = u_q15 - r[i];
+                const int32_t y = f[k];
+                if (lo <= y) {
+                    break;
+                }
+                f[k] = lo;
+                acc += (int64_t)w[k] * (lo - y);
+            }
+        }
+    } else {
+        /* F moves iff F > hi, to max(u - r_i, hi); stop at F - hi <= -1. */
+        for (size_t j = 0; j < n_a; j++) {
+            const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
+            const uint32_t au_lo = (uint32_t)au;
+            const int32_t au_hi = (int32_t)(au >> 32);
+            const int64_t *off = p->off_q39 + j * n_r;
+            for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
+                const int32_t hi = upper(off[i], au_lo, au_hi);
+                const int32_t y = f[k];
+                if (y <= hi) {
+                    if (y < hi) {
+                        break;
+                    }
+                    continue;
+                }
+                const int32_t lo = u_q15 - r[i];
+                const int32_t v = hi > lo ? hi : lo;
+                f[k] = v;
+                acc += (int64_t)w[k] * (v - y);
+            }
+        }
+    }
+    p->acc_q39 = acc;
     return acc;
 }

@@ -28,10 +28,23 @@
  * piezo_rshift_rnd64(a * (u + r), 24). init precomputes
  * off_q39 = a_q24 * r_q15 + 2^23 per operator, so that process() forms
  * (off_q39 + a_q24 * u_q15) >> 24, which is the same integer with one
- * multiply-accumulate and no per-tick constant. The lower branch and the
+ * product per slope and tick and an add per operator. The lower branch and the
  * classical upper branch u +- r are exact. The weighted sum is exact.
  *
  * Saturation: none; nothing can overflow within the documented ranges.
+ *
+ * Work per sample (docs/kernels-pi.md, "Operators that move"): the results
+ * are those of the formula applied to every operator, but process() touches
+ * only the operators that can change and keeps the weighted sum up to date
+ * by w_k * (F_new - F_old). With the thresholds non-decreasing, for each
+ * slope (column) the operators that move form a prefix in threshold order:
+ * rising input, F = max(u - r, F) moves iff u - r > F, and F + r is
+ * non-decreasing in r; falling input, F moves iff F > hi = a (u + r) rounded
+ * (then F = max(u - r, hi)), and F - hi is non-increasing in r up to one LSB
+ * of the rounding, so the scan stops at the first F - hi <= -1. An unchanged
+ * input changes nothing (the update is idempotent). The first sample after
+ * init or reset updates every operator. Worst case (every operator moves):
+ * linear in the operator count.
  *
  * Initial state: every operator output is 0 after init and reset (relaxed,
  * demagnetized actuator at u = 0).
@@ -72,8 +85,12 @@ struct piezo_play_coef {
 struct piezo_play {
     const struct piezo_play_coef *coef;
     int32_t *f_q15;        /* [n_ops] operator outputs (state) */
-    int64_t *off_q39;      /* [n_ops] a_j * r_i + 2^23 (UPI banks only) */
+    int64_t *off_q39;      /* [n_ops] a_j * r_i + 2^23 (UPI banks only), column by
+                            * column and split for a carry add (play.c) */
     size_t n_ops;
+    int64_t acc_q39;       /* sum_k w_k F_k of the current outputs */
+    int32_t u_prev_q15;    /* input of the last sample */
+    uint8_t primed;        /* 0 after reset: the next sample updates every operator */
 };
 
 /*
