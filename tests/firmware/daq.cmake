@@ -43,9 +43,6 @@ if(TARGET piezo_daq_io AND TARGET piezo_stage AND TARGET PkgConfig::COMEDILIB)
     add_dependencies(test_daq_closed_loop golden_sil_tables) # the export may live in another directory
     target_compile_definitions(test_daq_closed_loop PRIVATE
       STAGE_FILE="${PROJECT_SOURCE_DIR}/firmware/targets/sil/stages/default.json")
-    if(CMAKE_C_FLAGS MATCHES "-fsanitize=")
-      target_compile_definitions(test_daq_closed_loop PRIVATE DAQ_CL_SHORT=1)
-    endif()
     set_tests_properties(test_daq_closed_loop PROPERTIES LABELS sil TIMEOUT 300)
   endfunction()
   cmake_language(DEFER CALL piezo_daq_closed_loop_test)

@@ -20,8 +20,6 @@
  *    position on the setpoint, so the sensor's true output sits on the
  *    setpoint with the calibration file and off it by exactly the input
  *    converter's error without.
- *
- * DAQ_CL_SHORT (sanitize build): the 1 Hz run is left out.
  */
 #include <math.h>
 #include <stdio.h>
@@ -33,10 +31,6 @@
 #include "piezo_test.h"
 #include "sil_loop.h"
 #include "sil_tables_vectors.h"
-
-#ifndef DAQ_CL_SHORT
-#define DAQ_CL_SHORT 0
-#endif
 
 #define RAMP_TICKS 2500u
 #define SEED 4242u
@@ -252,9 +246,6 @@ static void test_tracking_10hz_same_as_sil(void **state)
 static void test_tracking_1hz_same_as_sil(void **state)
 {
     (void)state;
-    if (DAQ_CL_SHORT) {
-        skip();
-    }
     tracking_at(1.0, 10.0);
 }
 
