@@ -209,6 +209,9 @@ class Feedback:
     phase_margin_deg: float
     ms: float
     loop_gain_50hz: float
+    preview_ticks: int = 0       # feedforward look-ahead: the stage's delay plus the shaper's
+    shaper_ticks: int = 0        # ZVD input shaper at the first mode (calibrate.feedback)
+    shaper_q15: tuple = (32768, 0, 0)
 
 
 def measure_frf(sc: Scale, path: Path | None = None, seed: int = 5, n: int = 1 << 16,
@@ -287,7 +290,16 @@ def design_feedback(sc: Scale, path: Path | None = None) -> Feedback:
                                                   loop_gain_50hz=float(abs(L[i50]))))
     if best is None:
         raise ValueError("no PI + notch meets the margins on the measured response")
-    return best[1]
+    # the feedforward path: a ZVD shaper at the mode, and a preview of the
+    # stage's group delay (below a third of the mode) plus the shaper's delay
+    import dataclasses
+    import types
+    from ..calibrate.feedback import damping, group_delay_ticks, zvd_shaper
+    frf = types.SimpleNamespace(f_hz=f, mag=np.abs(P), phase_deg=np.degrees(np.unwrap(np.angle(P))))
+    m, taps = zvd_shaper(f0, damping(frf, f0), FS)
+    delay = group_delay_ticks(frf, FS, f0 / 3.0)
+    return dataclasses.replace(best[1], preview_ticks=int(min(32, delay + m)), shaper_ticks=m,
+                               shaper_q15=tuple(taps))
 
 
 # ------------------------------------------------------------- tables
@@ -390,6 +402,11 @@ def c_header() -> str:
     h.comment(f"feedback: PI kp {fb.kp:.3f}, ki {fb.ki:.5f} per tick ({fb.ki * FS:.1f} /s); notch "
               f"{fb.notch_hz:.1f} Hz, Q {fb.notch_q:g}; crossover {fb.crossover_hz:.1f} Hz, phase "
               f"margin {fb.phase_margin_deg:.1f} deg, Ms {fb.ms:.3f}, |L(50 Hz)| {fb.loop_gain_50hz:.2f}")
+    h.comment(f"feedforward: preview {fb.preview_ticks} ticks, ZVD shaper every {fb.shaper_ticks} ticks")
+    h.define("SIL_PREVIEW_TICKS", fb.preview_ticks)
+    h.define("SIL_SHAPER_TICKS", fb.shaper_ticks)
+    for i, v in enumerate(fb.shaper_q15):
+        h.define(f"SIL_SHAPER_Q15_{i}", v)
     h.define("SIL_FB_KP_Q24", _q24(fb.kp))
     h.define("SIL_FB_KI_Q24", _q24(fb.ki))
     h.define("SIL_FB_KD_Q24", 0)
