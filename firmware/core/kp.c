@@ -56,6 +56,7 @@ void piezo_kp_reset(struct piezo_kp *kp)
         kp->psi_q15[j] = 0;
     }
     kp->u_prev_q15 = g->nmin_q15;
+    kp->acc = 0;
 }
 
 int64_t piezo_kp_step(const struct piezo_kp_grid *g, int16_t *psi_q15, int16_t u_q15,
@@ -99,7 +100,51 @@ int64_t piezo_kp_step(const struct piezo_kp_grid *g, int16_t *psi_q15, int16_t u
 int16_t piezo_kp_process(struct piezo_kp *kp, int16_t u_q15)
 {
     const struct piezo_kp_coeffs *c = kp->coeffs;
-    const int64_t acc = piezo_kp_step(&c->grid, kp->psi_q15, u_q15, kp->u_prev_q15, c->w_q24);
+    const struct piezo_kp_grid *g = &c->grid;
+    const int32_t *w = c->w_q24;
+    int16_t *psi = kp->psi_q15;
+    const uint16_t n = g->n_ops;
+    const int32_t u = u_q15;
+    const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
+    int64_t acc = kp->acc;
+    if (u_q15 > kp->u_prev_q15) {
+        /* psi = max(psi, r(u - n2)): r = 0 for u <= n2, nothing above rmax */
+        const int16_t *th = g->n2_q15;
+        for (uint16_t j = 0; j < n; j++) {
+            const int32_t x = u - th[j];
+            if (x <= 0) {
+                continue;
+            }
+            const int32_t p = psi[j];
+            if (p >= rmax) {
+                continue;
+            }
+            const int32_t r = x >= xsat ? rmax : (x * slope + 32768) >> 16;
+            if (r > p) {
+                psi[j] = (int16_t)r;
+                acc += (int64_t)(r - p) * w[j];
+            }
+        }
+    } else if (u_q15 < kp->u_prev_q15) {
+        /* psi = min(psi, r(u - n1)): r = rmax for u - n1 >= xsat, nothing below 0 */
+        const int16_t *th = g->n1_q15;
+        for (uint16_t j = 0; j < n; j++) {
+            const int32_t x = u - th[j];
+            if (x >= xsat) {
+                continue;
+            }
+            const int32_t p = psi[j];
+            if (p == 0) {
+                continue;
+            }
+            const int32_t r = x <= 0 ? 0 : (x * slope + 32768) >> 16;
+            if (r < p) {
+                psi[j] = (int16_t)r;
+                acc += (int64_t)(r - p) * w[j];
+            }
+        }
+    }
+    kp->acc = acc;
     kp->u_prev_q15 = u_q15;
     return piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
 }

@@ -78,6 +78,7 @@ struct piezo_kp_coeffs {
 struct piezo_kp {
     const struct piezo_kp_coeffs *coeffs;
     int16_t *psi_q15;       /* caller's state array, n_ops entries */
+    int64_t acc;            /* sum_j psi_j * w_j of the current state */
     int16_t u_prev_q15;     /* previous input */
 };
 
@@ -118,7 +119,14 @@ enum piezo_err piezo_kp_init(struct piezo_kp *kp, const struct piezo_kp_coeffs *
 /** Reset state: psi = 0, u_prev = nmin. */
 void piezo_kp_reset(struct piezo_kp *kp);
 
-/** One sample: advance the operators with u and return y (q15, saturated). */
+/**
+ * One sample: advance the operators with u and return y (q15, saturated).
+ * The same integers as the equations on every operator; the work is spent
+ * only where an operator can move (docs/kernels-kp.md, "Work per tick"):
+ * rising, operators with u > n2 below rmax; falling, operators with
+ * u - n1 < xsat above 0. The sum is kept in the instance and changed by
+ * w_j (psi_new - psi_old); an unchanged input returns it at once.
+ */
 int16_t piezo_kp_process(struct piezo_kp *kp, int16_t u_q15);
 
 /**

@@ -126,6 +126,9 @@ static int setup(void)
         piezo_ff_bind(&bench_inv_ff, &bench_inv_set) != 0) {
         return -1;
     }
+    /* one sample each before the measured ticks, like the controller's set-up
+     * tick: the first sample after a reset updates every operator */
+    (void)piezo_ff_process(&bench_inv_ff, &bench_inv_set, 0, 0);
     return 0;
 }
 
