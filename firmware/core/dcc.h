@@ -12,7 +12,11 @@
  *   unchanged:  Psi_j holds
  *
  * A reversal (the direction differs from the last move) first sets
- * xi = v[k-1] and zo_j = Psi_j[k-1]. With the integer ridge of kp.h this gives
+ * xi = v[k-1] and zo_j = Psi_j[k-1]. The kernel computes the same integers
+ * as min/max(Psi_j[k-1] + v - v[k-1], v - r(v - n_j)), which needs no copy at
+ * a reversal (docs/kernels-kp.md, "DCC without the reversal copy"): it keeps
+ * xi and dir, and leaves zo_q15 at its reset value.
+ * With the integer ridge of kp.h this gives
  * psi_j + Psi_j == v exactly, in integers, for the KP operators driven by the
  * same input from reset (tests/firmware/test_dcc.c proves it sample by sample).
  *
@@ -29,7 +33,7 @@
  *
  * Formats:
  *   yd_q15, u_q15, v       q15 (int16).
- *   cpsi_q15, zo_q15       Psi_j and its value at the last reversal, q15 LSB
+ *   cpsi_q15, zo_q15       Psi_j and (equations) its value at the last reversal, q15 LSB
  *                          in int32: Psi_j = v - psi_j is in [v - rmax, v],
  *                          i.e. [-65535, 32767].
  *   c_q24                  g * w_j, q24 (int32), any value.
@@ -67,7 +71,7 @@ struct piezo_dcc_coeffs {
 struct piezo_dcc {
     const struct piezo_dcc_coeffs *coeffs;
     int32_t *cpsi_q15;   /* caller's state: Psi_j, n_ops entries */
-    int32_t *zo_q15;     /* caller's state: Psi_j at the last reversal, n_ops entries */
+    int32_t *zo_q15;     /* caller's array, n_ops entries: nmin (reset); unused by the kernel */
     int16_t xi_q15;      /* operator input at the last reversal */
     int16_t v_prev_q15;  /* previous operator input */
     int16_t u_last_q15;  /* previous law output: the operators' next input */
