@@ -44,10 +44,11 @@ static uint32_t u32_of_i(int32_t v)
     return (uint32_t)v;
 }
 
-static uint32_t input_value(const piezo_regmap_t *m, uint16_t id)
+static uint32_t input_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, uint32_t elem)
 {
     const piezo_ctl_t *c = m->ctl;
-    switch (id) {
+    (void)elem; /* no input register is an array */
+    switch (d->id) {
     case PIEZO_IREG_DEVICE_ID: return 0x505Au;
     case PIEZO_IREG_FW_VERSION: return m->fw_version;
     case PIEZO_IREG_LAYOUT_VERSION: return PIEZO_LAYOUT_VERSION;
@@ -90,18 +91,27 @@ static uint32_t input_value(const piezo_regmap_t *m, uint16_t id)
     }
 }
 
-static uint8_t read_input(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
+typedef uint32_t (*value_fn)(const piezo_regmap_t *m, const piezo_reg_desc_t *d, uint32_t elem);
+
+/* Reads `count` registers of one space: each word of each element (32-bit
+ * values high word first); an unmapped address refuses the whole read. */
+static uint8_t read_space(const piezo_regmap_t *m, const piezo_reg_desc_t *tab, unsigned n, value_fn value,
+                          uint16_t addr, uint16_t count, uint16_t *out)
 {
-    const piezo_regmap_t *m = ctx;
     for (uint16_t i = 0; i < count; i++) {
         uint32_t w;
-        const piezo_reg_desc_t *d = find(piezo_input_regs, PIEZO_IREG_N, (uint16_t)(addr + i), &w);
+        const piezo_reg_desc_t *d = find(tab, n, (uint16_t)(addr + i), &w);
         if (d == NULL) {
             return PIEZO_MB_EX_ILLEGAL_DATA_ADDRESS;
         }
-        out[i] = word_of(input_value(m, d->id), d, w);
+        out[i] = word_of(value(m, d, d->words == 2u ? w >> 1 : w), d, w);
     }
     return 0u;
+}
+
+static uint8_t read_input(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
+{
+    return read_space(ctx, piezo_input_regs, PIEZO_IREG_N, input_value, addr, count, out);
 }
 
 /* One recorded sample by flattened index (frame * channels + channel). */
@@ -204,16 +214,7 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
 
 static uint8_t read_holding(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
 {
-    const piezo_regmap_t *m = ctx;
-    for (uint16_t i = 0; i < count; i++) {
-        uint32_t w;
-        const piezo_reg_desc_t *d = find(piezo_holding_regs, PIEZO_HREG_N, (uint16_t)(addr + i), &w);
-        if (d == NULL) {
-            return PIEZO_MB_EX_ILLEGAL_DATA_ADDRESS;
-        }
-        out[i] = word_of(holding_value(m, d, d->words == 2u ? w >> 1 : w), d, w);
-    }
-    return 0u;
+    return read_space(ctx, piezo_holding_regs, PIEZO_HREG_N, holding_value, addr, count, out);
 }
 
 /* A pending write of one holding element: its new value, composed from the
