@@ -4,33 +4,12 @@
 
 #include "piezo_test.h"
 #include "controller.h"
+#include "ctl_test_cfg.h"
 #include "ctl_vectors.h"
 #include "nor_flash.h"
 #include "piezo_err.h"
 
 static piezo_ctl_t ctl; /* large: not on the stack */
-
-/* ADC and DAC codes equal q15 values; nothing clamps or slews. */
-static piezo_ctl_cfg_t unit_cfg(void)
-{
-    piezo_ctl_cfg_t c;
-    memset(&c, 0, sizeof c);
-    c.sensor_gain_q16 = 65536;
-    c.adc_min_ok = -32768;
-    c.adc_max_ok = 32767;
-    c.bad_limit = 3;
-    c.u_safe_q15 = -32768; /* the bottom of the drive range: the DCC reset state */
-    c.overrun_limit = 5;
-    c.dac_gain_q16 = 65536;
-    c.dac_min = -32768;
-    c.dac_max = 32767;
-    c.limit.min_q15 = -32768;
-    c.limit.max_q15 = 32767;
-    c.pid.out_min_q15 = -32768;
-    c.pid.out_max_q15 = 32767;
-    c.notch.b0_q24 = 1 << 24;
-    return c;
-}
 
 static int32_t tick(int16_t setpoint, int32_t adc)
 {

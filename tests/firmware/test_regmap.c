@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "piezo_test.h"
+#include "ctl_test_cfg.h"
 #include "ctl_vectors.h"
 #include "modbus_pdu.h"
 #include "regmap.h"
@@ -14,21 +15,7 @@ static uint8_t rsp[PIEZO_MB_PDU_MAX];
 
 static void setup(void)
 {
-    piezo_ctl_cfg_t c;
-    memset(&c, 0, sizeof c);
-    c.sensor_gain_q16 = 65536;
-    c.adc_min_ok = -32768;
-    c.adc_max_ok = 32767;
-    c.bad_limit = 3;
-    c.dac_gain_q16 = 65536;
-    c.dac_min = -32768;
-    c.dac_max = 32767;
-    c.u_safe_q15 = -32768;
-    c.limit.min_q15 = -32768;
-    c.limit.max_q15 = 32767;
-    c.pid.out_min_q15 = -32768;
-    c.pid.out_max_q15 = 32767;
-    c.notch.b0_q24 = 1 << 24;
+    piezo_ctl_cfg_t c = unit_cfg();
     assert_int_equal(piezo_ctl_init(&ctl, &c), 0);
     piezo_regmap_init(&map, &ctl);
     map.drive_min_mv = 0;
