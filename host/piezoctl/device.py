@@ -273,8 +273,8 @@ class Controller:
         idx = self._h("rec_read_index")
         for start in range(0, total, REC_WINDOW):
             n = min(REC_WINDOW, total - start)
-            self.client.write_holding(idx, [start >> 16, start & 0xFFFF])
-            w = self.client.read_holding(self._h("rec_window"), n)
+            # index and window in one FC 23 request (the write is done first)
+            w = self.client.read_write(self._h("rec_window"), n, idx, [start >> 16, start & 0xFFFF])
             out[start:start + n] = np.array(w, dtype=np.int64)
             if progress:
                 progress(start + n, total)
@@ -343,13 +343,14 @@ class Controller:
                 progress(min(off + chunk, len(img)), len(img))
 
     def read_staged(self, n: int, progress: Callable[[int, int], None] | None = None) -> bytes:
-        """Read back the first n bytes of the staged bank."""
+        """Read back the first n bytes of the staged bank: offset and window
+        in one FC 23 request per chunk (the offset is written before the read)."""
         out = bytearray()
         chunk = 2 * WINDOW
         for off in range(0, n, chunk):
-            self.client.write_holding(self._h("table_offset"), [off >> 16, off & 0xFFFF])
             m = min(chunk, n - off)
-            words = self.client.read_holding(self._h("table_window"), (m + 1) // 2)
+            words = self.client.read_write(self._h("table_window"), (m + 1) // 2,
+                                           self._h("table_offset"), [off >> 16, off & 0xFFFF])
             out += struct.pack(f"<{len(words)}H", *words)[:m]
             if progress:
                 progress(off + m, n)

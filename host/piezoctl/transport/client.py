@@ -1,5 +1,5 @@
-"""The register client every transport returns: reads, chunked writes and
-32-bit helpers over three primitive Modbus requests.
+"""The register client every transport returns: reads, chunked writes, one
+write-then-read request and 32-bit helpers over the primitive Modbus requests.
 
 32-bit values take two registers, high word first (common/interface.toml).
 They are packed here with integer arithmetic, not by a library's float or
@@ -13,10 +13,11 @@ from collections.abc import Iterable, Sequence
 from .. import interface
 
 __all__ = ["RegisterClient", "u32_to_regs", "regs_to_u32", "i32_to_regs", "regs_to_i32",
-           "MAX_READ", "MAX_WRITE"]
+           "MAX_READ", "MAX_WRITE", "MAX_RW_WRITE"]
 
 MAX_READ = interface.MODBUS_MAX_READ_REGISTERS    # 125, Modbus AP v1.1b3 6.3
 MAX_WRITE = interface.MODBUS_MAX_WRITE_REGISTERS  # 123, Modbus AP v1.1b3 6.12
+MAX_RW_WRITE = 121  # FC 23 write quantity, Modbus AP v1.1b3 6.17 (the request fits 253 bytes)
 
 
 def u32_to_regs(value: int) -> list[int]:
@@ -55,7 +56,9 @@ class RegisterClient:
 
     Subclasses implement ``_read(function, address, count)`` (function 3 or 4,
     ``count <= 125``) and ``_write(address, values)`` (``len(values) <= 123``)
-    and raise :mod:`piezoctl.transport.errors` exceptions. Longer reads and
+    and raise :mod:`piezoctl.transport.errors` exceptions; they may implement
+    ``_read_write`` (FC 23), which otherwise takes an FC 16 and an FC 3
+    request. Longer reads and
     writes are split here into requests within the limits, in address order;
     a write that fails part-way raises after the chunks before it were written.
     """
@@ -68,6 +71,12 @@ class RegisterClient:
 
     def _write(self, address: int, values: list[int]) -> None:
         raise NotImplementedError
+
+    def _read_write(self, read_address: int, read_count: int, write_address: int,
+                    values: list[int]) -> list[int]:
+        """FC 23 where the transport has it; here the same in two requests."""
+        self._write(write_address, values)
+        return self._read(3, read_address, read_count)
 
     def close(self) -> None:
         """Releases the port."""
@@ -105,6 +114,23 @@ class RegisterClient:
         _check_span(address, len(vals))
         for off in range(0, len(vals), MAX_WRITE):
             self._write(address + off, vals[off:off + MAX_WRITE])
+
+    def read_write(self, read_address: int, read_count: int, write_address: int,
+                   values: Iterable[int]) -> list[int]:
+        """Writes holding registers from ``write_address`` on, then reads
+        ``read_count`` holding registers from ``read_address``: one FC 23
+        request (Modbus AP 6.17: the write is done before the read), at most
+        121 written and 125 read. A refused write raises and reads nothing."""
+        vals = [int(v) for v in values]
+        for v in vals:
+            if not 0 <= v <= 0xFFFF:
+                raise ValueError(f"register value {v} does not fit 16 bits")
+        if not 1 <= len(vals) <= MAX_RW_WRITE or not 1 <= read_count <= MAX_READ:
+            raise ValueError(f"read/write of {read_count} read and {len(vals)} written registers: "
+                             f"FC 23 carries 1..{MAX_READ} and 1..{MAX_RW_WRITE}")
+        _check_span(write_address, len(vals))
+        _check_span(read_address, read_count)
+        return self._read_write(read_address, read_count, write_address, vals)
 
     # -- 32-bit values, high word first
     def read_input_u32(self, address: int) -> int:

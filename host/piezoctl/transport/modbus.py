@@ -11,7 +11,8 @@ from .spec import PortSpec
 
 __all__ = ["PymodbusClient"]
 
-_FUNCTION_NAMES = {3: "read holding", 4: "read input", 16: "write holding"}
+_FUNCTION_NAMES = {3: "read holding", 4: "read input", 16: "write holding",
+                   23: "read/write holding"}
 
 
 class PymodbusClient(RegisterClient):
@@ -78,3 +79,15 @@ class PymodbusClient(RegisterClient):
         if (rsp.address, rsp.count) != (address, len(values)):
             raise ProtocolError(f"{self.name}: write of {len(values)} registers at "
                                 f"{address:#06x} confirmed as {rsp.count} at {rsp.address:#06x}")
+
+    def _read_write(self, read_address: int, read_count: int, write_address: int,
+                    values: list[int]) -> list[int]:
+        rsp = self._call(23, read_address, read_count,
+                         lambda: self._client.readwrite_registers(
+                             read_address=read_address, read_count=read_count,
+                             write_address=write_address, values=values, device_id=self.unit))
+        regs = list(rsp.registers)
+        if len(regs) != read_count:
+            raise ProtocolError(f"{self.name}: asked {read_count} registers at {read_address:#06x} "
+                                f"(FC 23), got {len(regs)}")
+        return regs

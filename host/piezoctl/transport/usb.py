@@ -31,6 +31,15 @@ VENDOR_CLASS = 0xFF
 _FUNCTION_NAMES = {3: "read holding", 4: "read input", 16: "write holding"}
 
 
+def read_write_request(read_address: int, read_count: int, write_address: int,
+                       values: list[int]) -> bytes:
+    """FC 23 [AP 6.17]: function, read start, read quantity, write start,
+    write quantity, byte count, values (big-endian)."""
+    n = len(values)
+    return struct.pack(f">BHHHHB{n}H", 23, read_address, read_count, write_address, n, 2 * n,
+                       *values)
+
+
 def frame(seq: int, pdu: bytes) -> bytes:
     """Header + PDU."""
     if not 1 <= len(pdu) <= PDU_MAX:
@@ -135,3 +144,10 @@ class UsbClient(RegisterClient):
         what = f"{self.name}: write holding {address:#06x}+{len(values)}"
         pdu = self.transact(write_request(address, values), what)
         parse_write_response(pdu, address, len(values), what)
+
+    def _read_write(self, read_address: int, read_count: int, write_address: int,
+                    values: list[int]) -> list[int]:
+        what = (f"{self.name}: read/write holding {read_address:#06x}+{read_count}, "
+                f"{write_address:#06x}+{len(values)}")
+        pdu = self.transact(read_write_request(read_address, read_count, write_address, values), what)
+        return parse_read_response(pdu, 23, read_count, what)
