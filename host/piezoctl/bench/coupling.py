@@ -220,7 +220,7 @@ def markdown(res: dict) -> str:
              "| Preisach avg / worst [%] | avg error cut [%] (paper) | worst H / P, paper [%] |",
              "|---:|---|---:|---:|---:|---:|---|"]
     for row in res["rows"]:
-        pc, pred, pwh, pwp = PAPER[row["f"]]
+        pc, pred, pwh, pwp = PAPER.get(row["f"], ("-", "-", None, None))
         for label in ("train", "between"):
             r = row[label]
             paper_worst = f"{pwh} / {pwp}" if pwh is not None else "-"
@@ -244,6 +244,15 @@ def main(argv=None) -> int:
     ap.add_argument("--channels", type=int, default=2)
     ap.add_argument("--m", type=int, default=2, help="Laguerre filters")
     ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
+    ap.add_argument("--data", choices=("generator", "stage"), default="generator",
+                    help="generator: this module's Python generator; stage: the C two-axis stage "
+                         "model (piezoctl.bench.coupling_stage; takes --stage and --freqs too)")
+    args, rest = ap.parse_known_args(argv)
+    if args.data == "stage":
+        from .coupling_stage import main as stage_main
+        return stage_main([f"--refine={args.refine}", f"--channels={args.channels}", f"--m={args.m}",
+                           f"--seed={args.seed}", *rest])
+    if rest:
+        ap.error(f"unrecognized arguments: {' '.join(rest)}")
     run({"refine": args.refine, "channels": args.channels, "m": args.m}, seed=args.seed)
     return 0

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import inspect
 import time
 
 import numpy as np
@@ -161,7 +162,9 @@ def identify(kind: str, data_paths: list[str], options: Options, out: str | None
     scores = []
     scores_off = []
     for r in recs:
-        yhat = np.asarray(mod.simulate(params, r.t, r.u, r.u2), dtype=np.float64)
+        # the other axis' position (column x2) for kinds whose simulate takes it (hammerstein)
+        x2 = {"x2": r.x2} if r.x2 is not None and "x2" in inspect.signature(mod.simulate).parameters else {}
+        yhat = np.asarray(mod.simulate(params, r.t, r.u, r.u2, **x2), dtype=np.float64)
         scores.append(nrmse(r.y, yhat))
         e = yhat - r.y
         scores_off.append(nrmse(r.y, yhat - e.mean()))

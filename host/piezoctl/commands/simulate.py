@@ -10,6 +10,8 @@ simulate`` writes both). The two options are mutually exclusive.
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 
 from ..errors import CliError
@@ -45,8 +47,11 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
-def simulate_model(model, t, u, u2=None) -> np.ndarray:
+def simulate_model(model, t, u, u2=None, x2=None) -> np.ndarray:
     """Output y [um] of a loaded model for drive u [V] at times t [s].
+
+    ``x2`` (the other axis' position [um], column x2) is passed to kinds whose
+    ``simulate`` takes it (hammerstein) and is not delayed.
 
     Applies the model's ``input_delay_s`` (written by ``identify --delay-s``):
     the kind sees ``u`` delayed by that many samples, ``u(0)`` held before.
@@ -64,7 +69,9 @@ def simulate_model(model, t, u, u2=None) -> np.ndarray:
                 u2 = np.asarray(u2, dtype=np.float64)
                 u2 = np.concatenate([np.full(d, u2[0]), u2[:u2.size - d]])
     try:
-        y = np.asarray(mod.simulate(model.params, t, u, u2), dtype=np.float64)
+        kw = {"x2": np.asarray(x2, dtype=np.float64)} \
+            if x2 is not None and "x2" in inspect.signature(mod.simulate).parameters else {}
+        y = np.asarray(mod.simulate(model.params, t, u, u2, **kw), dtype=np.float64)
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, CliError):
             raise
@@ -81,6 +88,6 @@ def run(args) -> int:
         y = np.asarray(STAGE_SIMULATOR(args.stage, rec.t, rec.u, rec.u2), dtype=np.float64)
     else:
         model = load_model(args.model)
-        y = simulate_model(model, rec.t, rec.u, rec.u2)
+        y = simulate_model(model, rec.t, rec.u, rec.u2, rec.x2)
     write_csv(args.out, {"t": rec.t, "y": y})
     return 0
