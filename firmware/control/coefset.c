@@ -268,7 +268,11 @@ int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs)
     int rc;
     switch (cs->kind) {
     case PIEZO_TABLE_KIND_KP_DCC:
-        return piezo_dcc_init(&ff->dcc, &cs->dcc, ff->cpsi_q15, ff->zo_q15, PIEZO_CS_MAX_KP_OPS);
+        rc = piezo_dcc_init(&ff->dcc, &cs->dcc, ff->cpsi_q15, ff->zo_q15, PIEZO_CS_MAX_KP_OPS);
+        if (rc == PIEZO_OK) {
+            piezo_dcc_const_weights(&ff->dcc); /* the table's weights: sums kept incrementally */
+        }
+        return rc;
     case PIEZO_TABLE_KIND_RKP:
         ff->dcc_rate = cs->dcc;
         ff->dcc_rate.c_q24 = ff->w_q24; /* this tick's density, g folded in */

@@ -3,121 +3,257 @@
 
 #include "fixed_q.h"
 
-enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coeffs *coeffs,
-                              int32_t *cpsi_q15, int32_t *zo_q15, size_t n_state)
+/* The order entries: n2 in the upper half, the operator index in the lower
+ * (n_ops <= 4096 < 2^16); as signed integers they sort by n2 first. */
+static int32_t order_entry(int16_t n2, uint16_t j)
 {
-    if (dcc == NULL || coeffs == NULL || cpsi_q15 == NULL || zo_q15 == NULL ||
+    return (int32_t)((uint32_t)(uint16_t)n2 << 16 | j);
+}
+
+/* Heap sort of the order entries (init only; no recursion, no allocation). */
+static void sift_down(int32_t *a, size_t i, size_t n)
+{
+    const int32_t x = a[i];
+    for (size_t c = 2u * i + 1u; c < n; c = 2u * i + 1u) {
+        if (c + 1u < n && a[c + 1u] > a[c]) {
+            c++;
+        }
+        if (a[c] <= x) {
+            break;
+        }
+        a[i] = a[c];
+        i = c;
+    }
+    a[i] = x;
+}
+
+static void sort_entries(int32_t *a, size_t n)
+{
+    for (size_t i = n / 2u; i-- > 0u;) {
+        sift_down(a, i, n);
+    }
+    for (size_t m = n; m-- > 1u;) {
+        const int32_t t = a[0];
+        a[0] = a[m];
+        a[m] = t;
+        sift_down(a, 0u, m);
+    }
+}
+
+enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coeffs *coeffs,
+                              int32_t *psi_q15, int32_t *order, size_t n_state)
+{
+    if (dcc == NULL || coeffs == NULL || psi_q15 == NULL || order == NULL ||
         coeffs->c_q24 == NULL) {
         return PIEZO_EINVAL;
     }
     dcc->coeffs = NULL;
-    const enum piezo_err err = piezo_kp_grid_check(&coeffs->grid);
+    const struct piezo_kp_grid *g = &coeffs->grid;
+    const enum piezo_err err = piezo_kp_grid_check(g);
     if (err != PIEZO_OK) {
         return err;
     }
-    if (n_state < coeffs->grid.n_ops) {
+    if (n_state < g->n_ops) {
         return PIEZO_ERANGE;
     }
     if (coeffs->g_q24 < 1) {
         return PIEZO_EINVAL;
     }
     dcc->coeffs = coeffs;
-    dcc->cpsi_q15 = cpsi_q15;
-    dcc->zo_q15 = zo_q15;
+    dcc->psi_q15 = psi_q15;
+    dcc->order = order;
+    dcc->const_w = 0u;
+    dcc->csum = 0;
+    dcc->n1_sorted = 1u;
+    dcc->n2_banded = 1u;
+    for (uint16_t j = 0; j < g->n_ops; j++) {
+        order[j] = order_entry(g->n2_q15[j], j);
+        if (j > 0u && g->n1_q15[j] < g->n1_q15[j - 1u]) {
+            dcc->n1_sorted = 0u;
+        }
+        if ((int32_t)g->n2_q15[j] <= (int32_t)g->nmin_q15 - g->xsat_q15) {
+            dcc->n2_banded = 0u;
+        }
+    }
+    sort_entries(order, g->n_ops);
     piezo_dcc_reset(dcc);
     return PIEZO_OK;
+}
+
+void piezo_dcc_const_weights(struct piezo_dcc *dcc)
+{
+    const struct piezo_dcc_coeffs *c = dcc->coeffs;
+    int64_t csum = 0, kacc = 0;
+    for (uint16_t j = 0; j < c->grid.n_ops; j++) {
+        csum += c->c_q24[j];
+        kacc += (int64_t)dcc->psi_q15[j] * c->c_q24[j];
+    }
+    dcc->csum = csum;
+    dcc->kacc = kacc;
+    dcc->const_w = 1u;
 }
 
 void piezo_dcc_reset(struct piezo_dcc *dcc)
 {
     const struct piezo_kp_grid *g = &dcc->coeffs->grid;
     for (uint16_t j = 0; j < g->n_ops; j++) {
-        dcc->cpsi_q15[j] = g->nmin_q15;
-        dcc->zo_q15[j] = g->nmin_q15;
+        dcc->psi_q15[j] = 0;
     }
+    dcc->kacc = 0;
     dcc->xi_q15 = g->nmin_q15;
     dcc->v_prev_q15 = g->nmin_q15;
     dcc->u_last_q15 = g->nmin_q15;
     dcc->dir = -1;
 }
 
+/* First index in [lo, n) of a non-decreasing key whose key exceeds t. */
+static uint16_t first_n1_above(const int16_t *key, uint16_t n, int32_t t)
+{
+    uint16_t lo = 0u, hi = n;
+    while (lo < hi) {
+        const uint16_t mid = (uint16_t)((lo + hi) >> 1);
+        if (key[mid] > t) {
+            hi = mid;
+        } else {
+            lo = (uint16_t)(mid + 1u);
+        }
+    }
+    return lo;
+}
+
+static uint16_t first_n2_above(const int32_t *order, uint16_t n, int32_t t)
+{
+    uint16_t lo = 0u, hi = n;
+    while (lo < hi) {
+        const uint16_t mid = (uint16_t)((lo + hi) >> 1);
+        if ((order[mid] >> 16) > t) {
+            hi = mid;
+        } else {
+            lo = (uint16_t)(mid + 1u);
+        }
+    }
+    return lo;
+}
+
 /*
- * Advance the operators with v and return sum_j Psi_j * c_j (scaled by 2^39).
+ * Advance the operators with v; return the change of sum_j psi_j c_j.
  *
- * The defining equations (dcc.h) take the minimum (rising) or maximum
- * (falling) of v - xi + zo_j and v - r(v - n_j). Since v_prev - xi + zo_j
- * is Psi_j[k-1] whenever Psi_j[k-1] took that branch, and the other branch
- * only ever lowers (rising) or raises (falling) it further in the same run,
- * v - xi + zo_j may be replaced by Psi_j[k-1] + (v - v_prev) without changing
- * a single result (docs/kernels-kp.md, "DCC without the reversal copy"):
- *
- *   rising:  Psi_j = min(Psi_j + dv, v - r(v - n2_j))
- *   falling: Psi_j = max(Psi_j + dv, v - r(v - n1_j))
- *
- * so a reversal copies nothing. With psi_j = v - Psi_j in [0, rmax] the
- * ridge is needed only where it is not flat: rising, v - r(x) >= Psi_j + dv
- * for x <= 0; falling, v - rmax <= Psi_j + dv for x >= xsat.
+ * psi_j is the KP operator (dcc.h): rising psi = max(psi, r(v - n2)),
+ * falling psi = min(psi, r(v - n1)), Psi_j = v - psi_j. Only operators that
+ * can move are visited (docs/kernels-kp.md, "DCC: work per tick"), by two
+ * invariants that hold after every update from reset (v_prev the last input):
+ *   (A) psi_j > 0 implies n1_j < v_prev;
+ *   (B) psi_j < rmax implies n2_j > v_prev - xsat (given n2_j > nmin - xsat
+ *       for every operator, which init records as n2_banded).
+ * Falling to v: a move needs psi > 0 (n1 < v_prev by A) and r(v - n1) < rmax
+ * (n1 > v - xsat); with n1 non-decreasing that is one index range.
+ * Rising to v: a move needs r(v - n2) > 0 (n2 < v) and psi < rmax
+ * (n2 > v_prev - xsat by B); one range of the n2 order.
  */
-static int64_t dcc_step(struct piezo_dcc *dcc, int16_t v_q15)
+static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
 {
     const struct piezo_kp_grid *g = &dcc->coeffs->grid;
     const int32_t *c = dcc->coeffs->c_q24;
-    int32_t *cpsi = dcc->cpsi_q15;
+    int32_t *psi = dcc->psi_q15;
     const uint16_t n = g->n_ops;
     const int32_t v = v_q15;
-    const int32_t slope = g->slope_q16, xsat = g->xsat_q15;
-    int64_t acc = 0;
+    const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
+    const int32_t dv = v - dcc->v_prev_q15;
+    int64_t dk = 0;
 
-    if (v_q15 != dcc->v_prev_q15) {
-        const int32_t dv = v - dcc->v_prev_q15;
-        const int8_t dir = dv > 0 ? 1 : -1;
-        if (dir != dcc->dir) { /* reversal: where it happened (kept for the record) */
-            dcc->xi_q15 = dcc->v_prev_q15;
-            dcc->dir = dir;
-        }
-        if (dir > 0) {
-            const int16_t *th = g->n2_q15;
-            const int32_t v_top = v - g->rmax_q15;
-            for (uint16_t j = 0; j < n; j++) {
-                int32_t p = cpsi[j] + dv;
-                const int32_t x = v - th[j];
-                if (x > 0) {
-                    const int32_t cand = x >= xsat ? v_top : v - ((x * slope + 32768) >> 16);
-                    p = cand < p ? cand : p;
-                }
-                cpsi[j] = p;
-                acc += (int64_t)p * c[j];
+    if (dv == 0) {
+        return 0;
+    }
+    const int8_t dir = dv > 0 ? 1 : -1;
+    if (dir != dcc->dir) { /* reversal: where it happened (kept for the record) */
+        dcc->xi_q15 = dcc->v_prev_q15;
+        dcc->dir = dir;
+    }
+    /* Operators with the same threshold share x and the ridge r: r is
+     * computed once per threshold, each operator then costs a compare (and
+     * the update if it moves). */
+    if (dir > 0) {
+        const int32_t *ord = dcc->order;
+        uint16_t k = dcc->n2_banded ? first_n2_above(ord, n, dcc->v_prev_q15 - xsat) : 0u;
+        while (k < n) {
+            int32_t e = ord[k];
+            const int32_t n2 = e >> 16;
+            const int32_t x = v - n2;
+            if (x <= 0) {
+                break; /* n2 >= v from here on: r = 0 */
             }
-        } else {
-            const int16_t *th = g->n1_q15;
-            for (uint16_t j = 0; j < n; j++) {
-                int32_t p = cpsi[j] + dv;
-                const int32_t x = v - th[j];
-                if (x < xsat) {
-                    const int32_t cand = x <= 0 ? v : v - ((x * slope + 32768) >> 16);
-                    p = cand > p ? cand : p;
+            const int32_t r = x >= xsat ? rmax : (x * slope + 32768) >> 16;
+            for (;;) {
+                const uint32_t j = (uint16_t)e;
+                const int32_t p = psi[j];
+                if (r > p) {
+                    psi[j] = r;
+                    dk += (int64_t)(r - p) * c[j];
                 }
-                cpsi[j] = p;
-                acc += (int64_t)p * c[j];
+                if (++k >= n) {
+                    break;
+                }
+                e = ord[k];
+                if ((e >> 16) != n2) {
+                    break;
+                }
             }
         }
-        dcc->v_prev_q15 = v_q15;
     } else {
-        for (uint16_t j = 0; j < n; j++) {
-            acc += (int64_t)cpsi[j] * c[j];
+        const int16_t *th = g->n1_q15;
+        uint16_t j = 0u;
+        int32_t stop = INT32_MIN; /* unsorted n1: visit every operator */
+        if (dcc->n1_sorted) {
+            j = first_n1_above(th, n, v - xsat);
+            stop = dv; /* x <= dv: n1 >= v_prev, psi = 0 by (A), and so on */
+        }
+        while (j < n) {
+            const int32_t n1 = th[j];
+            const int32_t x = v - n1;
+            if (x <= stop) {
+                break;
+            }
+            const int32_t r = x >= xsat ? rmax : x <= 0 ? 0 : (x * slope + 32768) >> 16;
+            for (;;) {
+                const int32_t p = psi[j];
+                if (r < p) {
+                    psi[j] = r;
+                    dk += (int64_t)(r - p) * c[j];
+                }
+                if (++j >= n || th[j] != n1) {
+                    break;
+                }
+            }
         }
     }
-    return acc;
+    dcc->v_prev_q15 = v_q15;
+    return dk;
 }
 
 void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
 {
-    (void)dcc_step(dcc, v_q15);
+    const int64_t dk = dcc_ops(dcc, v_q15);
+    if (dcc->const_w) {
+        dcc->kacc += dk;
+    }
 }
 
 int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
 {
-    int64_t acc = dcc_step(dcc, dcc->u_last_q15);
+    const int16_t v = dcc->u_last_q15;
+    piezo_dcc_ops_update(dcc, v);
+    /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
+    int64_t acc;
+    if (dcc->const_w) {
+        acc = (int64_t)v * dcc->csum - dcc->kacc;
+    } else {
+        const int32_t *c = dcc->coeffs->c_q24;
+        const int32_t *psi = dcc->psi_q15;
+        acc = 0;
+        for (uint16_t j = 0; j < dcc->coeffs->grid.n_ops; j++) {
+            acc += (int64_t)(v - psi[j]) * c[j];
+        }
+    }
     acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
     const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
     dcc->u_last_q15 = u;

@@ -12,13 +12,23 @@
  *   unchanged:  Psi_j holds
  *
  * A reversal (the direction differs from the last move) first sets
- * xi = v[k-1] and zo_j = Psi_j[k-1]. The kernel computes the same integers
- * as min/max(Psi_j[k-1] + v - v[k-1], v - r(v - n_j)), which needs no copy at
- * a reversal (docs/kernels-kp.md, "DCC without the reversal copy"): it keeps
- * xi and dir, and leaves zo_q15 at its reset value.
- * With the integer ridge of kp.h this gives
- * psi_j + Psi_j == v exactly, in integers, for the KP operators driven by the
- * same input from reset (tests/firmware/test_dcc.c proves it sample by sample).
+ * xi = v[k-1] and zo_j = Psi_j[k-1]. With the integer ridge of kp.h this
+ * gives psi_j + Psi_j == v exactly, in integers, for the KP operators driven
+ * by the same input from reset: by induction, min(Psi_j[k-1] + dv, v - r) =
+ * v - max(psi_j[k-1], r) (rising, the falling case alike), and the equations
+ * above equal min/max(Psi_j[k-1] + dv, v - r(v - n_j)) (docs/kernels-kp.md,
+ * "DCC without the reversal copy"). The kernel therefore keeps the KP
+ * operators psi_j (state array psi_q15; Psi_j = v_prev - psi_j, read through
+ * piezo_dcc_cpsi()) and computes the same integers as the equations;
+ * tests/firmware/test_dcc.c checks the identity sample by sample.
+ *
+ * Work per tick (docs/kernels-kp.md, "DCC: work per tick"): only operators
+ * whose thresholds lie in the band where they can move are visited, found
+ * from the thresholds in order (n1 as stored when non-decreasing, n2 through
+ * the order array built by init), and sum_j Psi_j c_j = v C - sum_j psi_j c_j
+ * (C = sum_j c_j) is kept incrementally when the caller declares the weights
+ * constant (piezo_dcc_const_weights(), e.g. a kp_dcc table); otherwise (the
+ * RKP density changes every tick) the sum is formed in full every tick.
  *
  * Control law, one sample per tick (the operators see the previous drive, which
  * avoids an algebraic loop):
@@ -33,9 +43,11 @@
  *
  * Formats:
  *   yd_q15, u_q15, v       q15 (int16).
- *   cpsi_q15, zo_q15       Psi_j and (equations) its value at the last reversal, q15 LSB
- *                          in int32: Psi_j = v - psi_j is in [v - rmax, v],
- *                          i.e. [-65535, 32767].
+ *   Psi_j                  q15 LSB in int32: Psi_j = v - psi_j is in [v - rmax, v],
+ *                          i.e. [-65535, 32767] (piezo_dcc_cpsi()).
+ *   psi_q15 (state)        the KP operators psi_j in [0, rmax], int32.
+ *   order (work)           init's: the operators by rising threshold n2,
+ *                          n2 * 2^16 + j per entry (int32).
  *   c_q24                  g * w_j, q24 (int32), any value.
  *   g_q24                  gain g, q24, >= 1 (positive).
  *
@@ -50,7 +62,9 @@
  * Scaling and overflow: |Psi_j| <= 65535 < 2^16 and |c_j| <= 2^31, so each
  * product is below 2^47; n_ops <= 2^12 operators sum below 2^59, plus
  * |yd * g| < 2^46: the int64 accumulator (value scaled by 2^39) cannot overflow.
- * v - xi + zo_j and the candidates stay within +-2^17 in int32.
+ * Incremental form: |C| <= 2^43 and |v| <= 2^15, so |v C| <= 2^58;
+ * |sum psi_j c_j| < 2^15 * 2^31 * 2^12 = 2^58; their difference is the sum
+ * above (exact in int64). The candidates v - r stay within +-2^17 in int32.
  */
 #ifndef PIEZO_DCC_H
 #define PIEZO_DCC_H
@@ -70,24 +84,46 @@ struct piezo_dcc_coeffs {
 /* Caller-owned instance; the coefficients may be shared, the state may not. */
 struct piezo_dcc {
     const struct piezo_dcc_coeffs *coeffs;
-    int32_t *cpsi_q15;   /* caller's state: Psi_j, n_ops entries */
-    int32_t *zo_q15;     /* caller's array, n_ops entries: nmin (reset); unused by the kernel */
+    int32_t *psi_q15;    /* caller's state: the KP operators psi_j = v_prev - Psi_j */
+    int32_t *order;      /* caller's work array: n2_j * 2^16 + j by rising n2 (init) */
+    int64_t csum;        /* C = sum_j c_j (constant weights only) */
+    int64_t kacc;        /* sum_j psi_j c_j (constant weights only) */
     int16_t xi_q15;      /* operator input at the last reversal */
     int16_t v_prev_q15;  /* previous operator input */
     int16_t u_last_q15;  /* previous law output: the operators' next input */
     int8_t dir;          /* last move: +1 rising, -1 falling */
+    uint8_t const_w;     /* 1: c_q24 constant, sums kept incrementally */
+    uint8_t n1_sorted;   /* n1 non-decreasing: the falling band is an index range */
+    uint8_t n2_banded;   /* every n2 > nmin - xsat: the rising band may skip saturated ones */
 };
 
 /**
- * Bind an instance to coefficients and two state arrays of n_state entries
- * (n_state >= n_ops, else PIEZO_ERANGE), check the coefficients and reset.
+ * Bind an instance to coefficients, a state array and a work array of
+ * n_state entries each (n_state >= n_ops, else PIEZO_ERANGE), check the
+ * coefficients, order the operators by n2 into the work array and reset.
+ * The weights are taken as changing every tick until
+ * piezo_dcc_const_weights() says otherwise.
  * Errors: PIEZO_EINVAL (NULL pointer, g_q24 < 1) and the grid's errors.
  */
 enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coeffs *coeffs,
-                              int32_t *cpsi_q15, int32_t *zo_q15, size_t n_state);
+                              int32_t *psi_q15, int32_t *order, size_t n_state);
+
+/**
+ * Declare the weights c_q24 constant from now on (until the next init): the
+ * kernel then keeps sum_j psi_j c_j and C = sum_j c_j and updates them only
+ * for the operators that move. Call it for tables whose weights never change
+ * (kp_dcc); not when c_q24 is a density rewritten every tick (RKP).
+ */
+void piezo_dcc_const_weights(struct piezo_dcc *dcc);
 
 /** Reset state (see above). */
 void piezo_dcc_reset(struct piezo_dcc *dcc);
+
+/** Psi_j of the last operator update (v_prev - psi_j), j < n_ops. */
+static inline int32_t piezo_dcc_cpsi(const struct piezo_dcc *dcc, uint16_t j)
+{
+    return (int32_t)dcc->v_prev_q15 - dcc->psi_q15[j];
+}
 
 /** Advance the compensation operators with input v (the law does this itself). */
 void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15);

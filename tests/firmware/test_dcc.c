@@ -65,6 +65,10 @@ static void test_golden_cases(void **state)
         struct piezo_dcc d;
         assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
         run_block(&d, &cases[i], 0, cases[i].n);
+        /* the same with the weights declared constant (kept sums) */
+        assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+        piezo_dcc_const_weights(&d);
+        run_block(&d, &cases[i], 0, cases[i].n);
     }
 }
 
@@ -78,15 +82,16 @@ static void check_identity(const struct piezo_dcc_coeffs *dc, const int16_t *v, 
     assert_int_equal(piezo_kp_init(&kp, &kc, psi_k, PIEZO_KP_MAX_OPS), PIEZO_OK);
     assert_int_equal(piezo_dcc_init(&d, dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
     for (uint16_t j = 0; j < dc->grid.n_ops; j++) {
-        assert_int_equal(psi_k[j] + cpsi_a[j], dc->grid.nmin_q15);
+        assert_int_equal(psi_k[j] + piezo_dcc_cpsi(&d, j), dc->grid.nmin_q15);
     }
     for (size_t k = 0; k < n; k++) {
         (void)piezo_kp_process(&kp, v[k]);
         piezo_dcc_ops_update(&d, v[k]);
         for (uint16_t j = 0; j < dc->grid.n_ops; j++) {
-            if ((int32_t)psi_k[j] + cpsi_a[j] != v[k]) {
+            const int32_t cpsi = piezo_dcc_cpsi(&d, j);
+            if ((int32_t)psi_k[j] + cpsi != v[k]) {
                 fail_msg("%s: sample %lu operator %u: psi %d + Psi %ld != v %d", name,
-                         (unsigned long)k, (unsigned)j, psi_k[j], (long)cpsi_a[j], v[k]);
+                         (unsigned long)k, (unsigned)j, psi_k[j], (long)cpsi, v[k]);
             }
         }
     }
@@ -132,9 +137,8 @@ static void test_reset_restores_initial_state(void **state)
     piezo_dcc_reset(&d);
     assert_int_equal(d.u_last_q15, dcc_std_NMIN);
     assert_int_equal(d.dir, -1);
-    for (size_t j = 0; j < dcc_std_NOPS; j++) {
-        assert_int_equal(cpsi_a[j], dcc_std_NMIN);
-        assert_int_equal(zo_a[j], dcc_std_NMIN);
+    for (uint16_t j = 0; j < dcc_std_NOPS; j++) {
+        assert_int_equal(piezo_dcc_cpsi(&d, j), dcc_std_NMIN);
     }
     const struct dcc_case *c = find_case("steps");
     run_block(&d, c, 0, c->n);

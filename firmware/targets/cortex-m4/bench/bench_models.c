@@ -48,6 +48,15 @@ static void dcc_tick(uint32_t k)
     piezo_bench_sink = piezo_dcc_process(&dcc, piezo_bench_u[k]);
 }
 
+static enum piezo_err dcc_init_const(void)
+{
+    const enum piezo_err rc = piezo_dcc_init(&dcc, &dcc_coeffs, dcc_cpsi, dcc_zo, bench_dcc_NOPS);
+    if (rc == PIEZO_OK) {
+        piezo_dcc_const_weights(&dcc);
+    }
+    return rc;
+}
+
 /* --- play banks of the EUPI reference model --- */
 static const struct piezo_play_coef cpi_coef = {bench_eupi_r_cpi_q15, NULL, bench_eupi_b_q24, BENCH_EUPI_NCPI, 0};
 static const struct piezo_play_coef upi_coef = {bench_eupi_r_upi_q15, bench_eupi_a_upi_q24, bench_eupi_d_q24,
@@ -97,8 +106,10 @@ void piezo_bench_models(void)
     }
     run_or_fail("rkp_L10", piezo_rkp_init(&rkp, &rkp_coeffs, rkp_psi, rkp_w, bench_rkp_NOPS) == PIEZO_OK,
                 rkp_tick);
-    run_or_fail("dcc_L10", piezo_dcc_init(&dcc, &dcc_coeffs, dcc_cpsi, dcc_zo, bench_dcc_NOPS) == PIEZO_OK,
-                dcc_tick);
+    /* constant weights (a kp_dcc table), then as bound to a rate-dependent density */
+    run_or_fail("dcc_L10", dcc_init_const() == PIEZO_OK, dcc_tick);
+    run_or_fail("dcc_L10_varying_w",
+                piezo_dcc_init(&dcc, &dcc_coeffs, dcc_cpsi, dcc_zo, bench_dcc_NOPS) == PIEZO_OK, dcc_tick);
     run_or_fail("play_cpi10", piezo_play_init(&play, &cpi_coef, play_f, BENCH_EUPI_NCPI, NULL, 0u) == PIEZO_OK,
                 play_tick);
     run_or_fail("play_upi10x3",

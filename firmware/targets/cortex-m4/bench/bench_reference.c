@@ -77,6 +77,38 @@ static void reference_tick(uint32_t k)
     piezo_bench_sink = piezo_ff_process(&bench_inv_ff, &bench_inv_set, yr, 0);
 }
 
+/* The reference tick again, with the markers around one of its three parts
+ * only: where the reference's count goes. */
+static unsigned ref_part;
+
+static void reference_part_tick(void)
+{
+    if (ref_part == 0u) {
+        piezo_bench_begin();
+    }
+    piezo_control_tick();
+    if (ref_part == 0u) {
+        piezo_bench_end();
+    }
+    const int16_t u = piezo_axis.sig[PIEZO_SIG_U];
+    if (ref_part == 1u) {
+        piezo_bench_begin();
+    }
+    const int16_t y = piezo_eupi_process(&eupi, u);
+    if (ref_part == 1u) {
+        piezo_bench_end();
+    }
+    stage_code = (1 << 15) + y;
+    const int16_t yr = (int16_t)(((int32_t)piezo_axis.sig[PIEZO_SIG_REF] * 43691) >> 16); /* 2/3 */
+    if (ref_part == 2u) {
+        piezo_bench_begin();
+    }
+    piezo_bench_sink = piezo_ff_process(&bench_inv_ff, &bench_inv_set, yr, 0);
+    if (ref_part == 2u) {
+        piezo_bench_end();
+    }
+}
+
 static int commit(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
 {
     if (piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY) != 0 || piezo_ctl_stage_write(c, 0u, img, len) != 0) {
@@ -148,5 +180,19 @@ void piezo_bench_reference(void)
                  (unsigned)piezo_axis.rec.state);
         piezo_sh_write0(line);
         piezo_bench_failures++;
+    }
+    static const char *const part_name[3] = {"ref_control", "ref_eupi", "ref_eupi_inv"};
+    for (ref_part = 0u; ref_part < 3u; ref_part++) {
+        if (setup() != 0) {
+            piezo_bench_failures++;
+            piezo_bench_run(part_name[ref_part], 0u, NULL);
+            continue;
+        }
+        char line[48];
+        snprintf(line, sizeof line, "bench %s %u\n", part_name[ref_part], PIEZO_BENCH_TICKS);
+        piezo_sh_write0(line);
+        for (uint32_t k = 0; k < PIEZO_BENCH_TICKS; k++) {
+            reference_part_tick();
+        }
     }
 }
