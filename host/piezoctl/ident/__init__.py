@@ -23,6 +23,7 @@ MODEL_KINDS = {
     "preisach": "piezoctl.ident.preisach",
     "cascade": "piezoctl.ident.cascade",
     "hammerstein": "piezoctl.ident.hammerstein",
+    "refined": "piezoctl.ident.refined",
 }
 
 

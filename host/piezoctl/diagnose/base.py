@@ -1,0 +1,203 @@
+"""The diagnosis' base model: hysteresis plus linear dynamics fitted on calibration recordings.
+
+H[u] = sum_i w_i P_ri(v) + c1 v + c2 v^2 + c3 v^3 + offset  (play operators P with
+thresholds evenly spread up to 0.8, v the drive normalized over the calibration range;
+ridge 1e-6 of the mean diagonal on unit-RMS columns, so that a barely moving wide play
+cannot take a huge weight), followed by a discrete transfer function G of
+unit static gain. The fit alternates two linear problems:
+
+1. H with G = 1 on zero-phase low-passed (20 Hz) data (least squares over at most
+   ``max_rows`` evenly strided samples);
+2. G as an ARX model from H's output to y, refined for output error (least squares on
+   the simulation error); order 0 (static), 2 or 4, a higher order kept only if it
+   lowers the simulation error by 5 %;
+3. H again, on features filtered by G; then G once more.
+
+Everything runs at the recordings' sample rate (all calibration files must share it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import optimize
+from scipy import signal as sig
+
+from ..ident.common import IdentError
+from ..ident.refined import filt
+from ..models.play import play_outputs
+
+__all__ = ["fit_base", "block_masks", "MAX_ROWS"]
+
+MAX_ROWS = 200_000
+ORDERS = (0, 2, 4)
+LP_FIRST_HZ = 20.0
+RIDGE = 1e-6
+R_MAX = 0.8
+
+
+def block_masks(n: int, n_blocks: int) -> np.ndarray:
+    """Block index (0..n_blocks-1) of each of n samples (contiguous, equal blocks)."""
+    return np.minimum((np.arange(n) * n_blocks) // max(n, 1), n_blocks - 1)
+
+
+def _features(v, r, v_rest) -> np.ndarray:
+    P = play_outputs(v, r, y0=np.full(r.size, v_rest))
+    return np.column_stack([P, v, v ** 2, v ** 3])
+
+
+def _lstsq(X, y, ridge: float = 0.0):
+    """Least squares on unit-RMS columns, with an optional ridge ``ridge * trace / k``."""
+    sc = np.sqrt(np.mean(X ** 2, axis=0))
+    sc[sc == 0] = 1.0
+    Xs = X / sc
+    if ridge > 0:
+        A = Xs.T @ Xs
+        A[np.diag_indices_from(A)] += ridge * np.trace(A) / A.shape[0]
+        th = np.linalg.solve(A, Xs.T @ y)
+    else:
+        th, *_ = np.linalg.lstsq(Xs, y, rcond=1e-10)
+    return th / sc
+
+
+def _arx(x_list, y_list, order, rows):
+    """ARX fit y[k] + a1 y[k-1].. = b0 x[k] + .. + b_n x[k-n] + c; returns (b, a) or None."""
+    if order == 0:
+        return np.array([1.0]), np.array([1.0])
+    Xs, ys = [], []
+    for x, y in zip(x_list, y_list):
+        n = y.size
+        k = np.arange(order, n)
+        if rows is not None and k.size > rows:
+            k = k[:: int(np.ceil(k.size / rows))]
+        cols = [-y[k - i] for i in range(1, order + 1)] + [x[k - i] for i in range(0, order + 1)]
+        cols.append(np.ones(k.size))
+        Xs.append(np.column_stack(cols))
+        ys.append(y[k])
+    th = _lstsq(np.vstack(Xs), np.concatenate(ys))
+    a = np.concatenate([[1.0], th[:order]])
+    b = th[order: 2 * order + 1]
+    if np.any(np.abs(np.roots(a)) >= 0.9999) or abs(np.sum(b)) < 1e-12:
+        return None
+    b = b * (np.sum(a) / np.sum(b))  # unit static gain: H carries the gain
+    return b, a
+
+
+def _sim_rmse(m, xs, ys, k0s) -> float:
+    err = sum(float(np.sum((filt(m[0], m[1], x) - y)[k0:] ** 2)) for x, y, k0 in zip(xs, ys, k0s))
+    return float(np.sqrt(err / sum(y.size - k0 for y, k0 in zip(ys, k0s))))
+
+
+def _oe_refine(m, xs, ys, k0s, max_nfev: int = 30):
+    """Output-error refinement of an ARX model (b, a): least squares on the simulation error."""
+    b0, a0 = m
+    n = a0.size - 1
+    stride = max(1, int(np.ceil(sum(y.size for y in ys) / 100_000)))
+
+    def unpack(z):
+        a = np.concatenate([[1.0], z[:n]])
+        b = z[n:]
+        return b * (np.sum(a) / np.sum(b)), a
+
+    def resid(z):
+        b, a = unpack(z)
+        if np.any(np.abs(np.roots(a)) >= 0.9999):
+            return np.full(sum((y.size - k0 + stride - 1) // stride for y, k0 in zip(ys, k0s)), 1e3)
+        return np.concatenate([(filt(b, a, x) - y)[k0::stride] for x, y, k0 in zip(xs, ys, k0s)])
+
+    z0 = np.concatenate([a0[1:], b0])
+    try:
+        sol = optimize.least_squares(resid, z0, max_nfev=max_nfev, x_scale="jac")
+    except (ValueError, np.linalg.LinAlgError):
+        return m
+    if np.sum(resid(sol.x) ** 2) < np.sum(resid(z0) ** 2):
+        return unpack(sol.x)
+    return m
+
+
+def _fit_h(Fs, ys, rows, k0s):
+    X = np.vstack([np.column_stack([F[k0:], np.ones(F.shape[0] - k0)]) for F, k0 in zip(Fs, k0s)])
+    y = np.concatenate([y[k0:] for y, k0 in zip(ys, k0s)])
+    if X.shape[0] > rows:
+        s = int(np.ceil(X.shape[0] / rows))
+        X, y = X[::s], y[::s]
+    return _lstsq(X, y, RIDGE)
+
+
+def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: float = 0.0,
+             settle_s: float = 0.5) -> dict:
+    """Fit the base model (kind ``refined`` without terms) to calibration recordings.
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Calibration data: ``t`` [s], ``u`` [V], ``y`` [um], one sample rate.
+    n_plays : int
+        Number of play operators (thresholds evenly spread over the normalized range).
+    max_rows : int
+        Samples entering each least-squares problem (evenly strided).
+    u_rest : float
+        Rest drive [V] the stage starts from (plays relaxed there; 0 V at power-up).
+    settle_s : float
+        The first ``settle_s`` seconds of each recording [s] (the stage settling
+        from an unknown state) do not enter the fits.
+
+    Returns
+    -------
+    dict
+        Parameters of kind ``refined`` (``terms`` empty) plus ``base_info``: the
+        chosen dynamics order and the cross-validated simulation NRMSE per order.
+    """
+    if not recordings:
+        raise IdentError("base model: no calibration recordings")
+    fs = [r.sample_rate_hz for r in recordings]
+    if max(fs) / min(fs) - 1 > 0.01:
+        raise IdentError(f"base model: calibration recordings have different sample rates {fs}")
+    umin = min(float(np.min(r.u)) for r in recordings)
+    umax = max(float(np.max(r.u)) for r in recordings)
+    if umax - umin <= 0:
+        raise IdentError("base model: the calibration drive is constant; nothing to identify")
+    mid, half = 0.5 * (umax + umin), 0.5 * (umax - umin)
+    r = R_MAX * (np.arange(n_plays) + 0.5) / n_plays
+    v_rest = (u_rest - mid) / half
+    Fs = [_features((rec.u - mid) / half, r, v_rest) for rec in recordings]
+    ys = [np.asarray(rec.y, float) for rec in recordings]
+    # first pass on zero-phase low-passed data: a resonance in the data must not bend H
+    fs0 = float(np.mean(fs))
+    k0s = [min(int(round(settle_s * fs0)), len(y) // 2) for y in ys]
+    sos = sig.butter(2, min(LP_FIRST_HZ, 0.2 * fs0), fs=fs0, output="sos")
+    th = _fit_h([sig.sosfiltfilt(sos, F, axis=0) for F in Fs], [sig.sosfiltfilt(sos, y) for y in ys], max_rows, k0s)
+    b, a = np.array([1.0]), np.array([1.0])
+    info = {}
+    for it in range(2):
+        xs = [F @ th[:-1] for F in Fs]
+        yo = [y - th[-1] for y in ys]
+        # order by simulation error on all calibration data: each step up in order must
+        # lower it by 5 % (interleaved time blocks cannot cross-validate a chirp's band)
+        scores = {}
+        models = {}
+        for order in ORDERS:
+            m = _arx([x[k0:] for x, k0 in zip(xs, k0s)], [y[k0:] for y, k0 in zip(yo, k0s)], order, max_rows)
+            if m is not None and order > 0 and it == 1:
+                m = _oe_refine(m, xs, yo, k0s)
+            models[order] = m
+            scores[order] = _sim_rmse(m, xs, yo, k0s) if m is not None else float("inf")
+        best = 0
+        for order in ORDERS[1:]:
+            if models[order] is not None and scores[order] < 0.95 * scores[best]:
+                best = order
+        b, a = models[best]
+        info = {"dynamics_order": best, "cv_sim_rmse_um": {str(k): v for k, v in scores.items()}}
+        Gs = [filt(b, a, F) for F in Fs]
+        th = _fit_h(Gs, ys, max_rows, k0s)
+    n = n_plays
+    params = {
+        "fs_hz": float(np.mean(fs)),
+        "u_mid": mid, "u_half": half,
+        "hysteresis": {"r": r.tolist(), "w": th[:n].tolist(), "poly": th[n:n + 3].tolist(),
+                       "v_lo": -1.0, "v_hi": 1.0, "offset": float(th[-1]),
+                       "v_rest": float(v_rest)},
+        "dynamics": {"b": np.asarray(b).tolist(), "a": np.asarray(a).tolist()},
+        "terms": {},
+        "base_info": info,
+    }
+    return params

@@ -1,0 +1,374 @@
+"""The vocabulary: one entry per missing-physics effect, with its signature and model term.
+
+Every effect is a family of regressors computed from the base model's signals (its
+drive, H output, hysteretic part, output) and the recording (t, u2). Given a setting of
+the effect's nonlinear parameter (a time constant, a frequency, a limit; searched on a
+grid on the training data only), the term is *linear* in its coefficients, so adding it
+to the model is a least-squares problem on the residual. Terms that act on the drive
+(delay, bandwidth, slew limit, saturation) are linearized around the base model for
+the search; the refined model applies them exactly and its held-out error is computed
+by simulation.
+
+``where`` describes, from the fitted contribution, where the effect acts; ``evidence``
+is one sentence for the user.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+import numpy as np
+
+from ..ident.refined import filt, lowpass, lowpass_tau, mode_filter, slew_limit, drive_rate, RATE_CUTOFF_HZ
+
+__all__ = ["VOCABULARY", "Effect", "EFFECTS", "Signals"]
+
+VOCABULARY = ("creep", "thermal_drift", "sensor_offset", "cross_coupling", "rate_dependent_hysteresis",
+              "unmodeled_resonance", "delay", "amplifier_slew_limit", "amplifier_bandwidth",
+              "sensor_nonlinearity", "saturation", "asymmetric_hysteresis")
+
+
+@dataclasses.dataclass
+class Signals:
+    """One recording with the base model's signals (all arrays of the recording's length)."""
+
+    name: str
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    u2: np.ndarray | None
+    x2: np.ndarray | None
+    temp: np.ndarray | None
+    dt: float
+    v: np.ndarray          # normalized drive of the base model
+    h: np.ndarray          # H output [um]
+    hyst: np.ndarray       # hysteretic part of H [um]
+    yb: np.ndarray         # base model output [um]
+    ydyn: np.ndarray       # base output before the offset [um]
+    index: int = 0
+
+
+@dataclasses.dataclass
+class Effect:
+    """A vocabulary entry.
+
+    ``settings(ctx)`` lists the nonlinear parameter values to search;
+    ``regressors(ctx, s, setting)`` gives the (n, k) regressors for one recording;
+    ``term(ctx, setting, coef)`` turns a fit into the refined model's term parameters;
+    ``describe(ctx, setting, coef)`` gives the fitted values with units (dict) and a
+    phrase for the evidence sentence.
+    """
+
+    name: str
+    signature: str
+    settings: Callable
+    regressors: Callable
+    term: Callable
+    describe: Callable
+    applicable: Callable = lambda ctx: True
+
+
+def _G(ctx, x):
+    return filt(ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"], x)
+
+
+# --- creep -----------------------------------------------------------------------------
+CREEP_TAUS = (0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0)
+
+
+def _creep_reg(ctx, s, setting):
+    taus = [tau for tau in CREEP_TAUS if tau < 2.0 * ctx.duration]
+    return np.column_stack([_G(ctx, lowpass_tau(s.h, tau, s.dt) - s.h) for tau in taus])
+
+
+def _creep_term(ctx, setting, coef):
+    taus = [tau for tau in CREEP_TAUS if tau < 2.0 * ctx.duration]
+    return {"tau_s": list(taus), "gain": [float(c) for c in coef]}
+
+
+def _creep_desc(ctx, setting, coef):
+    taus = [tau for tau in CREEP_TAUS if tau < 2.0 * ctx.duration]
+    g = np.asarray(coef)
+    main = taus[int(np.argmax(np.abs(g)))]
+    return ({"tau_s": taus, "gain": [round(float(c), 5) for c in g], "total_gain": round(float(g.sum()), 5)},
+            f"the residual follows the low-passed drive history (Kelvin-Voigt creep, total {100 * g.sum():.2f} % "
+            f"of the hysteresis output, strongest time constant {main:g} s), largest in the seconds after a step")
+
+
+# --- thermal drift ---------------------------------------------------------------------
+THERMAL_TAUS = (5.0, 15.0, 50.0, 150.0, 500.0)
+
+
+def _th_reg(ctx, s, tau):
+    tt = s.t - s.t[0]
+    return np.column_stack([1.0 - np.exp(-tt / tau), tt])
+
+
+def _th_term(ctx, tau, coef):
+    return {"amplitude_um": float(coef[0]), "tau_s": float(tau), "slope_um_per_s": float(coef[1])}
+
+
+def _th_desc(ctx, tau, coef):
+    return ({"amplitude_um": round(float(coef[0]), 4), "tau_s": tau, "slope_um_per_s": float(coef[1])},
+            f"the residual drifts with time since the start of each recording ({coef[0]:+.3f} um with time "
+            f"constant {tau:g} s, {coef[1] * 60:+.3f} um/min), whatever the drive does")
+
+
+# --- sensor offset ---------------------------------------------------------------------
+def _off_reg(ctx, s, setting):
+    X = np.zeros((s.t.size, ctx.n_rec))
+    X[:, s.index] = 1.0
+    return X
+
+
+def _off_term(ctx, setting, coef):
+    per = {n: float(c) for n, c in zip(ctx.names, coef)}
+    return {"offset_um": float(np.mean(coef)), "per_recording": per}
+
+
+def _off_desc(ctx, setting, coef):
+    per = {n: round(float(c), 4) for n, c in zip(ctx.names, coef)}
+    return ({"offset_um_per_recording": per},
+            "the residual is a constant per recording (" + ", ".join(f"{n}: {c:+.3f} um" for n, c in per.items())
+            + "): the sensor's zero moved between sessions")
+
+
+# --- cross coupling --------------------------------------------------------------------
+def _cc_app(ctx):
+    return any(s.u2 is not None and np.ptp(s.u2) > 1e-6 for s in ctx.signals)
+
+
+def _cc_reg(ctx, s, setting):
+    n = s.t.size
+    if s.u2 is None:
+        return np.zeros((n, 3))
+    x = _G(ctx, s.u2) - ctx.u2_ref
+    acc = np.gradient(np.gradient(x + ctx.u2_ref, s.dt), s.dt)
+    return np.column_stack([x, acc, x * (s.yb - ctx.y_center)])
+
+
+def _cc_term(ctx, setting, coef):
+    return {"c_static_um_per_v": float(coef[0]), "c_accel_um_per_v_s2": float(coef[1]),
+            "c_pos_per_um_v": float(coef[2]), "y_center_um": float(ctx.y_center), "u2_ref_v": float(ctx.u2_ref)}
+
+
+def _cc_desc(ctx, setting, coef):
+    return ({"static_um_per_v": float(coef[0]), "accel_um_per_v_s2": float(coef[1]),
+             "position_dependence_per_um_v": float(coef[2])},
+            f"the residual follows the other axis' motion (u2): {1000 * coef[0]:+.2f} nm per volt of u2 plus a "
+            f"term in its acceleration, i.e. coupling that grows with frequency")
+
+
+# --- rate-dependent hysteresis -----------------------------------------------------------
+RATE_REFS = (0.3, 1.0, 3.0, 10.0, 30.0, 100.0)  # FS/s
+
+
+def _rd_reg(ctx, s, ref):
+    r = drive_rate(s.v, s.dt, RATE_CUTOFF_HZ)
+    return _G(ctx, r / (r + ref) * s.hyst)[:, None]
+
+
+def _rd_term(ctx, ref, coef):
+    return {"gain": float(coef[0]), "ref_fs_per_s": float(ref), "rate_cutoff_hz": RATE_CUTOFF_HZ}
+
+
+def _rd_desc(ctx, ref, coef):
+    vps = ref * ctx.base["u_half"]
+    return ({"gain": round(float(coef[0]), 4), "ref_v_per_s": round(vps, 1)},
+            f"the hysteresis loop widens with the drive rate (width x (1 + {coef[0]:.2f} r / (r + {vps:.0f} V/s))); "
+            f"the residual grows with |du/dt| and changes sign with the direction")
+
+
+# --- unmodeled resonance -----------------------------------------------------------------
+DAMPINGS = (0.005, 0.01, 0.02, 0.05)
+
+
+def _res_settings(ctx):
+    return [(f, z) for f in ctx.peak_freqs for z in DAMPINGS]
+
+
+def _res_reg(ctx, s, setting):
+    f, z = setting
+    bm, am = mode_filter(f, z, s.dt)
+    return (filt(bm, am, s.ydyn) - s.ydyn)[:, None]
+
+
+def _res_term(ctx, setting, coef):
+    return {"freq_hz": float(setting[0]), "damping": float(setting[1]), "gain": float(coef[0])}
+
+
+def _res_desc(ctx, setting, coef):
+    return ({"freq_hz": round(setting[0], 1), "damping": setting[1], "gain": round(float(coef[0]), 4)},
+            f"the residual rings at {setting[0]:.0f} Hz (damping {setting[1]:g}) after fast edges and triangle "
+            f"corners, above the calibration's band: a mode with {100 * coef[0]:.1f} % of the static gain")
+
+
+def _res_app(ctx):
+    return bool(ctx.peak_freqs)
+
+
+# --- delay -------------------------------------------------------------------------------
+DELAYS = (0.5, 1, 2, 3, 4, 6, 8, 10, 12, 16, 20, 25, 32, 40, 50, 64)
+
+
+def _shift(x, d):
+    idx = np.arange(x.size) - d
+    return np.interp(idx, np.arange(x.size), x, left=x[0])
+
+
+def _del_reg(ctx, s, d):
+    return (_shift(s.yb, d) - s.yb)[:, None]
+
+
+def _del_term(ctx, d, coef):
+    return {"samples": float(max(0.0, d * coef[0]))}
+
+
+def _del_desc(ctx, d, coef):
+    ds = max(0.0, d * coef[0])
+    return ({"samples": round(ds, 2), "seconds": ds * ctx.dt},
+            f"the measurement lags the model by {ds:.1f} samples ({1000 * ds * ctx.dt:.2f} ms) at every "
+            f"frequency: the residual is proportional to the output's rate, with a constant lag")
+
+
+# --- amplifier bandwidth ---------------------------------------------------------------------
+def _bw_settings(ctx):
+    fs = 1.0 / ctx.dt
+    return [float(f) for f in np.geomspace(fs / 500.0, fs / 3.0, 16)]
+
+
+def _bw_reg(ctx, s, fc):
+    return (lowpass(s.yb, fc, s.dt) - s.yb)[:, None]
+
+
+def _bw_term(ctx, fc, coef):
+    c = float(np.clip(coef[0], 0.2, 5.0))
+    return {"hz": float(fc / c)}
+
+
+def _bw_desc(ctx, fc, coef):
+    hz = fc / float(np.clip(coef[0], 0.2, 5.0))
+    return ({"hz": round(hz, 1)},
+            f"the drive is low-passed before the actuator (first order, {hz:.0f} Hz): edges are rounded and "
+            f"fast content is attenuated and delayed")
+
+
+# --- slew limit --------------------------------------------------------------------------
+def _sl_settings(ctx):
+    rmax = ctx.max_step
+    return [float(rmax * q) for q in (0.05, 0.1, 0.2, 0.35, 0.5, 0.7)]
+
+
+def _sl_reg(ctx, s, step):
+    ue = s.u
+    return _G(ctx, slew_limit(ue, step) - ue)[:, None]
+
+
+def _sl_term(ctx, step, coef):
+    return {"v_per_s": float(step / ctx.dt)}
+
+
+def _sl_desc(ctx, step, coef):
+    return ({"v_per_s": round(step / ctx.dt, 1)},
+            f"large fast drive changes are rate limited at about {step / ctx.dt / 1000:.1f} V/ms "
+            f"(amplifier current limit): the residual appears only where |du/dt| exceeds it")
+
+
+def _sl_app(ctx):
+    return ctx.max_step > 0
+
+
+# --- saturation --------------------------------------------------------------------------
+def _sat_settings(ctx):
+    lo, hi = ctx.u_lo, ctx.u_hi
+    span = hi - lo
+    out = [(None, hi - q * span) for q in (0.02, 0.05, 0.1, 0.15, 0.2, 0.3)]
+    out += [(lo + q * span, None) for q in (0.02, 0.05, 0.1, 0.15, 0.2, 0.3)]
+    return out
+
+
+def _sat_reg(ctx, s, setting):
+    lo, hi = setting
+    uc = np.clip(s.u, -np.inf if lo is None else lo, np.inf if hi is None else hi)
+    return _G(ctx, uc - s.u)[:, None]
+
+
+def _sat_term(ctx, setting, coef):
+    return {"lo_v": setting[0], "hi_v": setting[1]}
+
+
+def _sat_desc(ctx, setting, coef):
+    lo, hi = setting
+    where = f"above {hi:.1f} V" if hi is not None else f"below {lo:.1f} V"
+    return ({"lo_v": lo, "hi_v": hi},
+            f"the displacement stops following the drive {where}: the residual is zero inside that range and "
+            f"grows with the excess (a clipped drive)")
+
+
+# --- sensor nonlinearity -----------------------------------------------------------------
+def _sn_reg(ctx, s, setting):
+    q = (s.yb - ctx.y_center) / ctx.y_half
+    return np.column_stack([q ** 2, q ** 3])
+
+
+def _sn_term(ctx, setting, coef):
+    return {"c2_um": float(coef[0]), "c3_um": float(coef[1]), "mid_um": float(ctx.y_center),
+            "half_um": float(ctx.y_half)}
+
+
+def _sn_desc(ctx, setting, coef):
+    return ({"c2_um": round(float(coef[0]), 4), "c3_um": round(float(coef[1]), 4)},
+            f"the residual is a static function of the displacement itself ({coef[0]:+.3f} um q^2 "
+            f"{coef[1]:+.3f} um q^3 over the stroke), the same on rising and falling branches at equal y")
+
+
+# --- asymmetric hysteresis ---------------------------------------------------------------
+def _ah_reg(ctx, s, setting):
+    q = (s.u - ctx.u_mid_all) / ctx.u_half_all
+    return _G(ctx, np.column_stack([q ** 2, q ** 3]))
+
+
+def _ah_term(ctx, setting, coef):
+    return {"c2_um": float(coef[0]), "c3_um": float(coef[1]), "mid_v": float(ctx.u_mid_all),
+            "half_v": float(ctx.u_half_all)}
+
+
+def _ah_desc(ctx, setting, coef):
+    return ({"c2_um": round(float(coef[0]), 4), "c3_um": round(float(coef[1]), 4)},
+            f"the loop is not point-symmetric: an even function of the drive ({coef[0]:+.3f} um s^2) is missing, "
+            f"largest at the ends of the stroke that calibration did not reach")
+
+
+def _one(ctx):
+    return [None]
+
+
+EFFECTS = {
+    "creep": Effect("creep", "residual correlated with the low-passed drive history; large after steps and dwells",
+                    _one, _creep_reg, _creep_term, _creep_desc),
+    "thermal_drift": Effect("thermal_drift", "slow trend with time (or temperature), independent of the drive",
+                            lambda ctx: list(THERMAL_TAUS), _th_reg, _th_term, _th_desc),
+    "sensor_offset": Effect("sensor_offset", "a constant per recording (session)", _one, _off_reg, _off_term,
+                            _off_desc),
+    "cross_coupling": Effect("cross_coupling", "residual explained by the other axis' drive/motion, growing "
+                             "with its frequency", _one, _cc_reg, _cc_term, _cc_desc, _cc_app),
+    "rate_dependent_hysteresis": Effect("rate_dependent_hysteresis", "residual grows with |du/dt| times the "
+                                        "hysteretic part (loop width grows with rate)",
+                                        lambda ctx: list(RATE_REFS), _rd_reg, _rd_term, _rd_desc),
+    "unmodeled_resonance": Effect("unmodeled_resonance", "residual energy in a narrow band above the calibration "
+                                  "band, ringing after corners", _res_settings, _res_reg, _res_term, _res_desc,
+                                  _res_app),
+    "delay": Effect("delay", "residual proportional to the output's rate with a constant lag",
+                    lambda ctx: list(DELAYS), _del_reg, _del_term, _del_desc),
+    "amplifier_slew_limit": Effect("amplifier_slew_limit", "residual only where |du/dt| exceeds a limit",
+                                   _sl_settings, _sl_reg, _sl_term, _sl_desc, _sl_app),
+    "amplifier_bandwidth": Effect("amplifier_bandwidth", "high-frequency attenuation and phase lag of a "
+                                  "first-order pole", _bw_settings, _bw_reg, _bw_term, _bw_desc),
+    "sensor_nonlinearity": Effect("sensor_nonlinearity", "static function of the measured displacement",
+                                  _one, _sn_reg, _sn_term, _sn_desc),
+    "saturation": Effect("saturation", "residual only beyond a drive threshold, growing with the excess",
+                         _sat_settings, _sat_reg, _sat_term, _sat_desc),
+    "asymmetric_hysteresis": Effect("asymmetric_hysteresis", "even function of the drive (loop not "
+                                    "point-symmetric)", _one, _ah_reg, _ah_term, _ah_desc),
+}

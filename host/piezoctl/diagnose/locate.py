@@ -1,0 +1,165 @@
+"""Locating a mismatch: where the residual (measured - simulated) lives.
+
+Per recording and time window, frequency band, drive amplitude, drive rate, direction
+and other-axis motion; plus the whiteness and input-independence tests MATLAB's
+``resid`` does (here on the residual decimated to 1 kHz at most).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal as sig
+
+__all__ = ["locate", "where_of", "peak_frequencies", "binned_rms"]
+
+
+def binned_rms(x: np.ndarray, e: np.ndarray, n_bins: int = 8) -> dict:
+    """RMS of ``e`` in quantile bins of ``x``: ``{"edges": [...], "rms": [...]}``."""
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, n_bins + 1)))
+    if edges.size < 2:
+        return {"edges": [float(x.min()), float(x.max())], "rms": [float(np.sqrt(np.mean(e ** 2)))]}
+    idx = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, edges.size - 2)
+    rms = [float(np.sqrt(np.mean(e[idx == k] ** 2))) if np.any(idx == k) else 0.0 for k in range(edges.size - 1)]
+    return {"edges": [float(v) for v in edges], "rms": rms}
+
+
+def _windows(t, e, n_top=3):
+    n = e.size
+    w = max(16, n // 20)
+    k = n // w
+    if k < 2:
+        return []
+    rms = np.sqrt(np.mean(e[: k * w].reshape(k, w) ** 2, axis=1))
+    med = float(np.median(rms))
+    order = np.argsort(rms)[::-1][:n_top]
+    return [{"t0_s": float(t[i * w]), "t1_s": float(t[min((i + 1) * w, n - 1)]), "rms_um": float(rms[i]),
+             "x_median": float(rms[i] / med) if med > 0 else float("inf")} for i in sorted(order)]
+
+
+def _bands(e, dt, n_top=2):
+    fs = 1.0 / dt
+    f, p = sig.welch(e, fs=fs, nperseg=min(e.size, 8192))
+    edges = [0.0, 1.0, 10.0, 100.0, 1000.0, fs / 2]
+    edges = sorted(set(x for x in edges if x <= fs / 2))
+    out = []
+    tot = float(np.sum(p)) or 1.0
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        m = (f >= lo) & (f < hi)
+        out.append({"f_lo_hz": lo, "f_hi_hz": hi, "share": float(np.sum(p[m]) / tot)})
+    out.sort(key=lambda b: -b["share"])
+    return out[:n_top]
+
+
+def peak_frequencies(es, dt, f_min: float = 80.0, n_peaks: int = 3) -> list[float]:
+    """Frequencies [Hz] of narrow peaks of the residual spectrum above ``f_min``."""
+    fs = 1.0 / dt
+    ps = []
+    f = None
+    for e in es:
+        if e.size < 256:
+            continue
+        f, p = sig.welch(e, fs=fs, nperseg=min(e.size, 4096))
+        ps.append(p)
+    if not ps:
+        return []
+    p = np.mean(ps, axis=0)
+    m = (f > f_min) & (f < 0.45 * fs)
+    if np.sum(m) < 8:
+        return []
+    lp = np.log(p[m] + 1e-30)
+    base = sig.medfilt(lp, 31)
+    pk, props = sig.find_peaks(lp - base, height=np.log(10.0))
+    if pk.size == 0:
+        return []
+    best = pk[np.argsort(props["peak_heights"])[::-1][:n_peaks]]
+    return [float(f[m][i]) for i in best]
+
+
+def where_of(sigs, contribs, dt) -> dict:
+    """Where a fitted contribution acts: recordings, time windows, band, amplitude and rate bins."""
+    energy = [float(np.sum(c ** 2)) for c in contribs]
+    tot = sum(energy) or 1.0
+    recs = sorted(({"recording": s.name, "share": e / tot} for s, e in zip(sigs, energy)),
+                  key=lambda d: -d["share"])
+    i = int(np.argmax(energy))
+    s, c = sigs[i], contribs[i]
+    amp = binned_rms(s.u, c, 5)
+    rate = binned_rms(np.abs(np.gradient(s.u, dt)), c, 5)
+    ka, kr = int(np.argmax(amp["rms"])), int(np.argmax(rate["rms"]))
+    return {"recordings": [dict(r, share=round(r["share"], 3)) for r in recs if r["share"] > 0.01],
+            "time_windows": [dict(w, recording=s.name) for w in _windows(s.t, c, 3)],
+            "frequency_bands": _bands(c, dt, 2),
+            "amplitude_v": [amp["edges"][ka], amp["edges"][ka + 1]],
+            "rate_v_per_s": [rate["edges"][kr], rate["edges"][kr + 1]]}
+
+
+def _xcorr_max(a, b, max_lag):
+    a = (a - a.mean()) / (a.std() or 1.0)
+    b = (b - b.mean()) / (b.std() or 1.0)
+    n = a.size
+    c = sig.correlate(a, b, mode="full", method="fft") / n
+    mid = n - 1
+    c = c[mid - max_lag: mid + max_lag + 1]
+    return float(np.max(np.abs(c)))
+
+
+def locate(sigs, residuals, dt) -> dict:
+    """Residual analysis of the base model on every recording.
+
+    Parameters
+    ----------
+    sigs : list of Signals
+        Recordings with the base model's signals (settled part).
+    residuals : list of ndarray
+        Measured minus simulated [um], per recording.
+    dt : float
+        Sample period [s].
+
+    Returns
+    -------
+    dict
+        ``per_recording`` (NRMSE, RMS, mean, top windows, bands, direction means),
+        ``amplitude``, ``rate``, ``other_axis`` binned RMS, and ``tests`` (whiteness:
+        fraction of autocorrelations outside the 99 % band; input independence:
+        largest cross-correlation with u, |du/dt|, u2 against its 99 % bound).
+    """
+    per = []
+    for s, e in zip(sigs, residuals):
+        du = np.gradient(s.u, dt)
+        rising, falling = du > 0, du < 0
+        span = float(np.ptp(s.y)) or 1.0
+        per.append({"recording": s.name, "nrmse": float(np.sqrt(np.mean(e ** 2)) / span),
+                    "rms_um": float(np.sqrt(np.mean(e ** 2))), "mean_um": float(np.mean(e)),
+                    "windows": _windows(s.t, e), "bands": _bands(e, dt),
+                    "mean_rising_um": float(np.mean(e[rising])) if rising.any() else 0.0,
+                    "mean_falling_um": float(np.mean(e[falling])) if falling.any() else 0.0})
+    u = np.concatenate([s.u for s in sigs])
+    e = np.concatenate(residuals)
+    rate = np.concatenate([np.abs(np.gradient(s.u, dt)) for s in sigs])
+    out = {"per_recording": per, "amplitude": binned_rms(u, e), "rate": binned_rms(rate, e)}
+    if any(s.u2 is not None for s in sigs):
+        m2 = np.concatenate([np.abs(np.gradient(s.u2, dt)) if s.u2 is not None else np.zeros(s.u.size)
+                             for s in sigs])
+        moving = m2 > 1e-3 * (np.max(m2) or 1.0)
+        out["other_axis"] = {"rms_moving_um": float(np.sqrt(np.mean(e[moving] ** 2))) if moving.any() else 0.0,
+                             "rms_still_um": float(np.sqrt(np.mean(e[~moving] ** 2))) if (~moving).any() else 0.0}
+    step = max(1, int(round(1e-3 / dt)))
+    tests = {"whiteness_outside_99": [], "xcorr_u": [], "xcorr_rate": [], "xcorr_u2": [], "bound_99": []}
+    for s, r in zip(sigs, residuals):
+        rd = r[::step]
+        n = rd.size
+        if n < 64:
+            continue
+        rr = rd - rd.mean()
+        ac = np.correlate(rr[: min(n, 20000)], rr[: min(n, 20000)], "full")
+        m = min(n, 20000)
+        ac = ac[m - 1: m + 25] / (ac[m - 1] or 1.0)
+        bound = 2.58 / np.sqrt(n)
+        tests["whiteness_outside_99"].append(float(np.mean(np.abs(ac[1:]) > bound)))
+        tests["xcorr_u"].append(_xcorr_max(rd, s.u[::step], 25))
+        tests["xcorr_rate"].append(_xcorr_max(rd, np.abs(np.gradient(s.u, dt))[::step], 25))
+        if s.u2 is not None and np.ptp(s.u2) > 0:
+            tests["xcorr_u2"].append(_xcorr_max(rd, s.u2[::step], 25))
+        tests["bound_99"].append(float(bound))
+    out["tests"] = tests
+    return out

@@ -1,0 +1,286 @@
+"""Model kind ``refined``: hysteresis plus linear dynamics, with named physical terms added.
+
+This is the model ``piezoctl diagnose`` writes (docs/diagnose.md). With no
+terms it is the diagnosis' *base model*: a Prandtl-Ishlinskii hysteresis
+(classical play operators) with a polynomial of the drive, followed by
+discrete linear dynamics of unit static gain. Each term the diagnosis adds
+is a block of the C stage model (docs/stage-model.md) placed where the
+stage has it::
+
+    u -> delay -> amplifier bandwidth -> slew limit -> saturation
+      -> hysteresis H (+ asymmetric polynomial, + rate-dependent width)
+      -> creep (Kelvin-Voigt chain) -> dynamics G (+ extra mode)
+      -> + coupling from u2 -> + thermal drift -> + sensor offset
+      -> sensor nonlinearity -> y
+
+Parameters (JSON, physical units where they have one)
+-----------------------------------------------------
+``fs_hz``
+    Sample rate [Hz] the discrete dynamics were fitted at; ``simulate``
+    refuses another rate (more than 1 % apart).
+``u_mid``, ``u_half``
+    Drive normalization [V]: ``v = (u - u_mid) / u_half``.
+``hysteresis``
+    ``r`` play thresholds [normalized drive], ``w`` their weights [um],
+    ``poly`` [um] coefficients of ``v, v^2, v^3``, evaluated with ``v``
+    clamped to ``[v_lo, v_hi]`` (the calibration range) and continued
+    linearly outside it, ``offset`` [um], ``v_rest`` [normalized drive]: the
+    plays start relaxed at the rest drive (0 V: a stage is powered up from
+    0 V), so the first sample is reached along the initial loading curve.
+``dynamics``
+    ``b``, ``a``: discrete transfer function at ``fs_hz`` (``a[0] = 1``),
+    static gain 1; ``[1], [1]`` for a static model.
+``terms``
+    Object keyed by the vocabulary name, each with its parameters:
+
+    - ``delay``: ``samples`` (may be fractional; linear interpolation).
+    - ``amplifier_bandwidth``: ``hz`` (first-order low-pass on the drive).
+    - ``amplifier_slew_limit``: ``v_per_s`` (rate limit of the drive).
+    - ``saturation``: ``lo_v``, ``hi_v`` (clip of the drive; null = no limit).
+    - ``asymmetric_hysteresis``: ``c2_um``, ``c3_um`` on ``s = (u - mid) / half``
+      with the term's own ``mid_v``, ``half_v``.
+    - ``rate_dependent_hysteresis``: ``gain`` [1] and ``ref_fs_per_s``: the
+      hysteretic part of H is scaled by ``1 + gain r / (r + ref)``, r the
+      magnitude of the normalized drive rate [FS/s] low-passed at
+      ``rate_cutoff_hz``.
+    - ``creep``: ``tau_s`` (list) and ``gain`` (list, [1]): ``w + sum g_i
+      (lowpass_tau_i(w) - w)``.
+    - ``unmodeled_resonance``: ``freq_hz``, ``damping``, ``gain`` [1]: y
+      becomes ``y + gain (M(y) - y)``, M a unit-gain second-order mode.
+    - ``cross_coupling``: ``c_static_um_per_v``, ``c_accel_um_per_v_s2``,
+      ``c_pos_per_um_v`` and ``y_center_um``: ``x = G u2`` (this axis'
+      dynamics as a proxy for the other's), ``y += c_s x + c_a x'' +
+      c_p x (y - y_center)``.
+    - ``thermal_drift``: ``amplitude_um``, ``tau_s``, ``slope_um_per_s``:
+      ``A (1 - exp(-(t - t0)/tau)) + slope (t - t0)``.
+    - ``sensor_offset``: ``offset_um`` (used by ``simulate``) and
+      ``per_recording`` (the fitted value per recording, for reading).
+    - ``sensor_nonlinearity``: ``c2_um``, ``c3_um`` on ``q = (y - mid) / half``
+      with ``mid_um``, ``half_um``.
+
+Initial state: plays relaxed (output 0), every filter at the equilibrium of
+its first input sample.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+from ..models.play import play_outputs
+from .common import IdentError
+
+KIND = "refined"
+DESCRIPTION = "hysteresis + linear dynamics with named physical terms (written by piezoctl diagnose)"
+
+__all__ = ["KIND", "DESCRIPTION", "add_options", "fit", "simulate", "simulate_parts", "slew_limit",
+           "lowpass", "mode_filter", "drive_rate", "apply_drive_terms", "filt", "TERM_ORDER"]
+
+TERM_ORDER = ("delay", "amplifier_bandwidth", "amplifier_slew_limit", "saturation",
+              "asymmetric_hysteresis", "rate_dependent_hysteresis", "creep", "unmodeled_resonance",
+              "cross_coupling", "thermal_drift", "sensor_offset", "sensor_nonlinearity")
+
+RATE_CUTOFF_HZ = 50.0
+
+
+def add_options(parser) -> None:
+    """``identify`` options of this kind (prefix ``--refined-``)."""
+    parser.add_argument("--refined-plays", type=int, default=None,
+                        help="number of play operators of the base hysteresis (default 10)")
+
+
+def fit(recordings, options) -> dict:
+    """Fit the base model (no terms) to recordings; see :func:`piezoctl.diagnose.base.fit_base`."""
+    from ..diagnose.base import fit_base
+    n = options.get("refined_plays") if options is not None else None
+    return fit_base(recordings, n_plays=int(n) if n else 10)
+
+
+def filt(b, a, x) -> np.ndarray:
+    """``lfilter(b, a, x)`` starting at the equilibrium of ``x[0]`` (static gain ``sum b / sum a``)."""
+    b = np.asarray(b, float)
+    a = np.asarray(a, float)
+    x = np.asarray(x, float)
+    if b.size == 1 and a.size == 1:
+        return x * (b[0] / a[0])
+    zi = signal.lfilter_zi(b, a)
+    if x.ndim == 1:
+        return signal.lfilter(b, a, x, zi=zi * x[0])[0]
+    return signal.lfilter(b, a, x, axis=0, zi=zi[:, None] * x[0][None, :])[0]
+
+
+def lowpass(x, hz: float, dt: float) -> np.ndarray:
+    """First-order low-pass (pole ``hz`` [Hz], exact for a held input), from equilibrium."""
+    c = 1.0 - np.exp(-2.0 * np.pi * float(hz) * dt)
+    return filt([c], [1.0, c - 1.0], x)
+
+
+def lowpass_tau(x, tau_s: float, dt: float) -> np.ndarray:
+    """First-order low-pass with time constant ``tau_s`` [s], from equilibrium."""
+    c = 1.0 - np.exp(-dt / float(tau_s))
+    return filt([c], [1.0, c - 1.0], x)
+
+
+def mode_filter(freq_hz: float, damping: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Discrete (zero-order hold) unit-gain mode ``w^2 / (s^2 + 2 z w s + w^2)``: (b, a)."""
+    w = 2.0 * np.pi * float(freq_hz)
+    bd, ad, _ = signal.cont2discrete(([w * w], [1.0, 2.0 * damping * w, w * w]), dt, method="zoh")
+    bd = np.ravel(bd)
+    return bd, np.ravel(ad)
+
+
+def slew_limit(u, max_step: float) -> np.ndarray:
+    """Limit the change of ``u`` per sample to ``max_step`` (the amplifier's slew rate times dt).
+
+    Only the stretches where the limit acts are stepped in Python; the rest is copied.
+    """
+    u = np.asarray(u, dtype=float)
+    out = u.copy()
+    if u.size < 2 or not np.isfinite(max_step):
+        return out
+    viol = np.flatnonzero(np.abs(np.diff(u)) > max_step) + 1
+    if viol.size == 0:
+        return out
+    n = u.size
+    i = int(viol[0])
+    prev = float(out[i - 1])
+    while i < n:
+        d = u[i] - prev
+        if d > max_step:
+            prev += max_step
+        elif d < -max_step:
+            prev -= max_step
+        else:
+            prev = float(u[i])
+            out[i] = prev
+            k = int(np.searchsorted(viol, i, side="right"))
+            if k >= viol.size:
+                break
+            i = int(viol[k])
+            prev = float(out[i - 1])
+            continue
+        out[i] = prev
+        i += 1
+    return out
+
+
+def drive_rate(v, dt: float, cutoff_hz: float = RATE_CUTOFF_HZ) -> np.ndarray:
+    """Magnitude of the drive rate [FS/s], low-passed at ``cutoff_hz`` [Hz]."""
+    r = np.abs(np.gradient(np.asarray(v, float), dt)) if len(v) > 1 else np.zeros(len(v))
+    return lowpass(r, cutoff_hz, dt)
+
+
+def apply_drive_terms(terms: dict, u, dt: float) -> np.ndarray:
+    """The drive after delay, amplifier bandwidth, slew limit and saturation [V]."""
+    u = np.asarray(u, dtype=float)
+    if "delay" in terms:
+        d = float(terms["delay"]["samples"])
+        if d > 0:
+            idx = np.arange(u.size) - d
+            u = np.interp(idx, np.arange(u.size), u, left=u[0])
+    if "amplifier_bandwidth" in terms:
+        u = lowpass(u, terms["amplifier_bandwidth"]["hz"], dt)
+    if "amplifier_slew_limit" in terms:
+        u = slew_limit(u, float(terms["amplifier_slew_limit"]["v_per_s"]) * dt)
+    if "saturation" in terms:
+        s = terms["saturation"]
+        lo = -np.inf if s.get("lo_v") is None else float(s["lo_v"])
+        hi = np.inf if s.get("hi_v") is None else float(s["hi_v"])
+        u = np.clip(u, lo, hi)
+    return u
+
+
+def _poly_clamped(v, poly, v_lo, v_hi) -> np.ndarray:
+    c1, c2, c3 = (list(poly) + [0.0, 0.0, 0.0])[:3]
+    vc = np.clip(v, v_lo, v_hi)
+    p = c1 * vc + c2 * vc ** 2 + c3 * vc ** 3
+    slope = c1 + 2 * c2 * vc + 3 * c3 * vc ** 2
+    return p + slope * (v - vc)
+
+
+def hysteresis_parts(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
+    """(H[v] without offset, hysteretic part sum w_i (P_i(v) - v)) [um] for normalized drive v."""
+    r = np.asarray(hp["r"], float)
+    w = np.asarray(hp["w"], float)
+    v_rest = float(hp.get("v_rest", 0.0))
+    P = play_outputs(v, r, y0=np.full(r.size, v_rest)) if v.size else np.zeros((0, r.size))
+    hyst = P @ w - float(w.sum()) * v
+    out = float(w.sum()) * v + hyst + _poly_clamped(v, hp["poly"], hp["v_lo"], hp["v_hi"])
+    return out, hyst
+
+
+def _check_rate(params, t) -> float:
+    t = np.asarray(t, float)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0 / float(params["fs_hz"])
+    fs = 1.0 / dt
+    if abs(fs / float(params["fs_hz"]) - 1.0) > 0.01:
+        raise IdentError(f"refined: the model's dynamics are for {params['fs_hz']:g} Hz, the input is "
+                         f"sampled at {fs:g} Hz")
+    return dt
+
+
+def simulate_parts(params: dict, t, u, u2=None) -> dict:
+    """Run the model and return its intermediate signals.
+
+    Returns
+    -------
+    dict
+        ``u_eff`` drive after the drive terms [V], ``v`` normalized drive,
+        ``h`` H output [um] (no offset), ``hyst`` its hysteretic part [um],
+        ``w`` after creep [um], ``y_dyn`` after the dynamics and any extra mode
+        [um], ``y`` the model output [um].
+    """
+    terms = params.get("terms", {}) or {}
+    unknown = set(terms) - set(TERM_ORDER)
+    if unknown:
+        raise IdentError(f"refined: unknown terms {sorted(unknown)}; known: {', '.join(TERM_ORDER)}")
+    t = np.asarray(t, float)
+    dt = _check_rate(params, t)
+    ue = apply_drive_terms(terms, u, dt)
+    v = (ue - float(params["u_mid"])) / float(params["u_half"])
+    hp = params["hysteresis"]
+    h, hyst = hysteresis_parts(hp, v)
+    if "asymmetric_hysteresis" in terms:
+        a = terms["asymmetric_hysteresis"]
+        s = (ue - float(a["mid_v"])) / float(a["half_v"])
+        h = h + float(a["c2_um"]) * s ** 2 + float(a["c3_um"]) * s ** 3
+    if "rate_dependent_hysteresis" in terms:
+        rd = terms["rate_dependent_hysteresis"]
+        r = drive_rate(v, dt, float(rd.get("rate_cutoff_hz", RATE_CUTOFF_HZ)))
+        h = h + float(rd["gain"]) * r / (r + float(rd["ref_fs_per_s"])) * hyst
+    w = h
+    if "creep" in terms:
+        c = terms["creep"]
+        w = h + sum(float(g) * (lowpass_tau(h, tau, dt) - h) for tau, g in zip(c["tau_s"], c["gain"]))
+    dyn = params["dynamics"]
+    y = filt(dyn["b"], dyn["a"], w)
+    if "unmodeled_resonance" in terms:
+        m = terms["unmodeled_resonance"]
+        bm, am = mode_filter(m["freq_hz"], m["damping"], dt)
+        y = y + float(m["gain"]) * (filt(bm, am, y) - y)
+    y_dyn = y
+    y = y + float(hp.get("offset", 0.0))
+    if "cross_coupling" in terms and u2 is not None:
+        c = terms["cross_coupling"]
+        x = filt(dyn["b"], dyn["a"], np.asarray(u2, float))
+        acc = np.gradient(np.gradient(x, dt), dt)
+        y = y + float(c["c_static_um_per_v"]) * (x - float(c.get("u2_ref_v", 0.0))) \
+            + float(c["c_accel_um_per_v_s2"]) * acc \
+            + float(c["c_pos_per_um_v"]) * (x - float(c.get("u2_ref_v", 0.0))) * (y - float(c["y_center_um"]))
+    if "thermal_drift" in terms:
+        th = terms["thermal_drift"]
+        tt = t - t[0]
+        y = y + float(th["amplitude_um"]) * (1.0 - np.exp(-tt / float(th["tau_s"]))) \
+            + float(th.get("slope_um_per_s", 0.0)) * tt
+    if "sensor_offset" in terms:
+        y = y + float(terms["sensor_offset"]["offset_um"])
+    if "sensor_nonlinearity" in terms:
+        sn = terms["sensor_nonlinearity"]
+        q = (y - float(sn["mid_um"])) / float(sn["half_um"])
+        y = y + float(sn["c2_um"]) * q ** 2 + float(sn["c3_um"]) * q ** 3
+    return {"u_eff": ue, "v": v, "h": h, "hyst": hyst, "w": w, "y_dyn": y_dyn, "y": y}
+
+
+def simulate(params: dict, t, u, u2=None) -> np.ndarray:
+    """Model output y [um] for drive u [V] at times t [s]; ``u2`` [V] feeds a coupling term."""
+    return simulate_parts(params, t, u, u2)["y"]
