@@ -110,13 +110,14 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
     for (size_t j = 0; j < n_a; j++) {
         const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
         const int64_t *off = p->off_q39 + j * n_r;
+        int32_t *fc = f + j * n_r; /* column j, outputs column by column */
         for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
             const int32_t hi = upper(off[i], (uint32_t)au, (int32_t)(au >> 32));
             const int32_t lo = u_q15 - r[i];
-            int32_t y = f[k];
+            int32_t y = fc[i];
             y = y < hi ? y : hi;
             y = y > lo ? y : lo;
-            f[k] = y;
+            fc[i] = y;
             acc += (int64_t)w[k] * y;
         }
     }
@@ -172,19 +173,24 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
         return acc;
     }
 
-    /* Unparallel, column by column (slope a_j, thresholds ascending). */
+    /* Unparallel, column by column (slope a_j, thresholds ascending); the
+     * outputs are stored column by column too (slot j * n_r + i), so that a
+     * column's outputs, thresholds and branch constants are walked in step;
+     * only the weights (row-major, as given) are read with a stride. */
     const size_t n_a = c->n_a;
     if (u_q15 > u_prev) {
         /* F = max(u - r_i, F): the upper branch cannot bind while rising. */
         for (size_t j = 0; j < n_a; j++) {
-            for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
+            int32_t *fc = f + j * n_r;
+            const int32_t *wk = w + j;
+            for (size_t i = 0; i < n_r; i++, wk += n_a) {
                 const int32_t lo = u_q15 - r[i];
-                const int32_t y = f[k];
+                const int32_t y = fc[i];
                 if (lo <= y) {
                     break;
                 }
-                f[k] = lo;
-                acc += (int64_t)w[k] * (lo - y);
+                fc[i] = lo;
+                acc += (int64_t)*wk * (lo - y);
             }
         }
     } else {
@@ -193,20 +199,23 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
             const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
             const uint32_t au_lo = (uint32_t)au;
             const int32_t au_hi = (int32_t)(au >> 32);
-            const int64_t *off = p->off_q39 + j * n_r;
-            for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
-                const int32_t hi = upper(off[i], au_lo, au_hi);
-                const int32_t y = f[k];
-                if (y <= hi) {
-                    if (y < hi) {
-                        break;
-                    }
-                    continue;
+            const int64_t *op = p->off_q39 + j * n_r;
+            int32_t *fp = f + j * n_r;
+            const int32_t *rp = r;
+            const int32_t *wp = w + j;
+            /* F == hi goes through the update too: F >= u - r while
+             * falling, so then max(hi, u - r) == F and nothing changes. */
+            for (size_t i = n_r; i != 0u; i--) {
+                const int32_t hi = upper(*op++, au_lo, au_hi);
+                const int32_t y = *fp;
+                if (y < hi) {
+                    break;
                 }
-                const int32_t lo = u_q15 - r[i];
+                const int32_t lo = u_q15 - *rp++;
                 const int32_t v = hi > lo ? hi : lo;
-                f[k] = v;
-                acc += (int64_t)w[k] * (v - y);
+                *fp++ = v;
+                acc += (int64_t)*wp * (v - y);
+                wp += n_a;
             }
         }
     }

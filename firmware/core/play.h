@@ -84,7 +84,9 @@ struct piezo_play_coef {
 /* Instance: caller-owned; the arrays are the caller's too. */
 struct piezo_play {
     const struct piezo_play_coef *coef;
-    int32_t *f_q15;        /* [n_ops] operator outputs (state) */
+    int32_t *f_q15;        /* [n_ops] operator outputs (state); UPI banks store
+                            * them column by column: read them with
+                            * piezo_play_output() */
     int64_t *off_q39;      /* [n_ops] a_j * r_i + 2^23 (UPI banks only), column by
                             * column and split for a carry add (play.c) */
     size_t n_ops;
@@ -109,8 +111,16 @@ void piezo_play_reset(struct piezo_play *p);
 
 /*
  * One sample: update every operator with u_q15 (|u_q15| <= WIDE_MAX) and
- * return sum_k w_q24[k] * F_k in Q39. The outputs stay readable in p->f_q15.
+ * return sum_k w_q24[k] * F_k in Q39. The outputs stay readable through
+ * piezo_play_output().
  */
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15);
+
+/* Output F_k of operator k = i * n_a + j (row-major, as the weights). */
+static inline int32_t piezo_play_output(const struct piezo_play *p, size_t k)
+{
+    const size_t n_a = p->coef->n_a;
+    return n_a == 0u ? p->f_q15[k] : p->f_q15[(k % n_a) * p->coef->n_r + k / n_a];
+}
 
 #endif /* PIEZO_PLAY_H */
