@@ -10,7 +10,8 @@
  * PORT 0 picks a free port. Axis i (two-axis stages) is served on TCP port
  * PORT + i and on RTU unit id i + 1. Tables persist in FILE (a flash
  * emulation; default $TMPDIR/piezoctl-sil-<port>.flash). One line on stdout
- * says when it is ready and where; on exit it prints the tick statistics.
+ * says when it is ready and where; on exit it prints the tick statistics, as
+ * a sentence and as a `sil-stage: stats key=value ...` line.
  *
  * Each period: sleep to the deadline (clock_nanosleep, TIMER_ABSTIME), tick
  * every axis and the stage, then serve the protocol without blocking. A tick
@@ -252,6 +253,13 @@ int main(int argc, char **argv)
            "tick lateness p50 %ld us, p99 %ld us, max %.1f us\n",
            g_pacer.ticks, (double)g_pacer.ticks / 10000.0, g_pacer.overruns, piezo_pacer_percentile_us(&g_pacer, 0.50),
            piezo_pacer_percentile_us(&g_pacer, 0.99), (double)g_pacer.max_late_ns / 1000.0);
+    /* the same, machine-readable (tools/bench-sil): key=value, lateness in us */
+    printf("sil-stage: stats ticks=%" PRIu64 " wakeups=%" PRIu64 " overruns=%" PRIu64 " long_ticks=%" PRIu64
+           " late_p50_us=%ld late_p99_us=%ld late_p999_us=%ld late_max_us=%.1f tick_time_max_us=%.1f\n",
+           g_pacer.ticks, g_pacer.wakeups, g_pacer.overruns, g_pacer.long_ticks,
+           piezo_pacer_percentile_us(&g_pacer, 0.50), piezo_pacer_percentile_us(&g_pacer, 0.99),
+           piezo_pacer_percentile_us(&g_pacer, 0.999), (double)g_pacer.max_late_ns / 1000.0,
+           (double)g_pacer.tick_time_max_ns / 1000.0);
     for (int i = 0; i < g_sil.n_axes; i++) {
         piezo_tcp_server_close(&tcp[i]);
         piezo_flash_file_close(&flash[i]);
