@@ -23,7 +23,7 @@ from scipy import optimize
 from scipy import signal as sig
 
 from ..ident.common import IdentError
-from ..ident.refined import filt
+from ..ident.refined import bouc_wen_h, filt
 from ..models.play import play_outputs
 
 __all__ = ["fit_base", "block_masks", "MAX_ROWS"]
@@ -33,6 +33,8 @@ ORDERS = (0, 2, 4)
 LP_FIRST_HZ = 20.0
 RIDGE = 1e-6
 R_MAX = 0.8
+BW_BETAS = tuple(float(x) for x in np.geomspace(0.5, 40.0, 10))
+BW_GAMMA_RATIOS = (-0.6, -0.3, 0.0, 0.3, 0.6)
 
 
 def block_masks(n: int, n_blocks: int) -> np.ndarray:
@@ -80,6 +82,30 @@ def _arx(x_list, y_list, order, rows):
         return None
     b = b * (np.sum(a) / np.sum(b))  # unit static gain: H carries the gain
     return b, a
+
+
+def _bw_features(v, beta, gamma, v_rest) -> np.ndarray:
+    h = bouc_wen_h(v, beta, gamma, v_rest)
+    return np.column_stack([h, v, v ** 2, v ** 3])
+
+
+def _cv_h(Fs, ys, k0s, rows) -> float:
+    """RMS error [um] of the static H fit, 2-fold over interleaved blocks (8 per recording)."""
+    err, n = 0.0, 0
+    for f in (0, 1):
+        tr = [np.column_stack([F, np.ones(F.shape[0])]) for F in Fs]
+        m = [(block_masks(y.size, 8) % 2 == f) & (np.arange(y.size) >= k0) for y, k0 in zip(ys, k0s)]
+        X = np.vstack([x[mm] for x, mm in zip(tr, m)])
+        yy = np.concatenate([y[mm] for y, mm in zip(ys, m)])
+        if X.shape[0] > rows:
+            st = int(np.ceil(X.shape[0] / rows))
+            X, yy = X[::st], yy[::st]
+        th = _lstsq(X, yy, RIDGE)
+        for x, y, mm, k0 in zip(tr, ys, m, k0s):
+            t = (~mm) & (np.arange(y.size) >= k0)
+            err += float(np.sum((x[t] @ th - y[t]) ** 2))
+            n += int(np.sum(t))
+    return float(np.sqrt(err / max(n, 1)))
 
 
 def _sim_rmse(m, xs, ys, k0s) -> float:
@@ -159,13 +185,30 @@ def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: fl
     mid, half = 0.5 * (umax + umin), 0.5 * (umax - umin)
     r = R_MAX * (np.arange(n_plays) + 0.5) / n_plays
     v_rest = (u_rest - mid) / half
-    Fs = [_features((rec.u - mid) / half, r, v_rest) for rec in recordings]
+    vs = [(rec.u - mid) / half for rec in recordings]
     ys = [np.asarray(rec.y, float) for rec in recordings]
     # first pass on zero-phase low-passed data: a resonance in the data must not bend H
     fs0 = float(np.mean(fs))
     k0s = [min(int(round(settle_s * fs0)), len(y) // 2) for y in ys]
     sos = sig.butter(2, min(LP_FIRST_HZ, 0.2 * fs0), fs=fs0, output="sos")
-    th = _fit_h([sig.sosfiltfilt(sos, F, axis=0) for F in Fs], [sig.sosfiltfilt(sos, y) for y in ys], max_rows, k0s)
+    ylp = [sig.sosfiltfilt(sos, y) for y in ys]
+    lp = (lambda F: sig.sosfiltfilt(sos, F, axis=0))
+    # hysteresis class: PI (plays) or Bouc-Wen (beta, gamma on a grid), by 2-fold block CV
+    Fpi = [_features(v, r, v_rest) for v in vs]
+    cls = {"pi": (_cv_h([lp(F) for F in Fpi], ylp, k0s, max_rows), Fpi, None)}
+    best_bw = None
+    polys = [lp(np.column_stack([v, v ** 2, v ** 3])) for v in vs]
+    for beta in BW_BETAS:
+        for gr in BW_GAMMA_RATIOS:
+            hs = [sig.sosfiltfilt(sos, bouc_wen_h(v, beta, gr * beta, v_rest)) for v in vs]
+            sc = _cv_h([np.column_stack([h, p]) for h, p in zip(hs, polys)], ylp, k0s, max_rows)
+            if best_bw is None or sc < best_bw[0]:
+                best_bw = (sc, None, (beta, gr * beta))
+    best_bw = (best_bw[0], [_bw_features(v, *best_bw[2], v_rest) for v in vs], best_bw[2])
+    cls["bouc_wen"] = best_bw
+    htype = "bouc_wen" if cls["bouc_wen"][0] < cls["pi"][0] else "pi"
+    Fs = cls[htype][1]
+    th = _fit_h([lp(F) for F in Fs], ylp, max_rows, k0s)
     b, a = np.array([1.0]), np.array([1.0])
     info = {}
     for it in range(2):
@@ -189,13 +232,18 @@ def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: fl
         info = {"dynamics_order": best, "cv_sim_rmse_um": {str(k): v for k, v in scores.items()}}
         Gs = [filt(b, a, F) for F in Fs]
         th = _fit_h(Gs, ys, max_rows, k0s)
-    n = n_plays
+    n = n_plays if htype == "pi" else 1
+    hyst = {"type": htype, "poly": th[n:n + 3].tolist(), "v_lo": -1.0, "v_hi": 1.0, "offset": float(th[-1]),
+            "v_rest": float(v_rest)}
+    if htype == "pi":
+        hyst.update(r=r.tolist(), w=th[:n].tolist())
+    else:
+        hyst.update(beta=float(cls["bouc_wen"][2][0]), gamma=float(cls["bouc_wen"][2][1]), c_h=float(th[0]))
+    info["hysteresis_cv_rmse_um"] = {"pi": float(cls["pi"][0]), "bouc_wen": float(cls["bouc_wen"][0])}
     params = {
         "fs_hz": float(np.mean(fs)),
         "u_mid": mid, "u_half": half,
-        "hysteresis": {"r": r.tolist(), "w": th[:n].tolist(), "poly": th[n:n + 3].tolist(),
-                       "v_lo": -1.0, "v_hi": 1.0, "offset": float(th[-1]),
-                       "v_rest": float(v_rest)},
+        "hysteresis": hyst,
         "dynamics": {"b": np.asarray(b).tolist(), "a": np.asarray(a).tolist()},
         "terms": {},
         "base_info": info,

@@ -78,20 +78,26 @@ CREEP_TAUS = (0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0)
 
 
 def _creep_reg(ctx, s, setting):
+    # lowpass_tau(h) - h: the creep chain's transient; h - h_cal: the static gain the base
+    # model did not see because calibration was faster than the slow terms
     taus = [tau for tau in CREEP_TAUS if tau < 2.0 * ctx.duration]
-    return np.column_stack([_G(ctx, lowpass_tau(s.h, tau, s.dt) - s.h) for tau in taus])
+    cols = [_G(ctx, lowpass_tau(s.h, tau, s.dt) - s.h) for tau in taus]
+    cols.append(_G(ctx, s.h - ctx.h_cal_mean))
+    return np.column_stack(cols)
 
 
 def _creep_term(ctx, setting, coef):
     taus = [tau for tau in CREEP_TAUS if tau < 2.0 * ctx.duration]
-    return {"tau_s": list(taus), "gain": [float(c) for c in coef]}
+    return {"tau_s": list(taus), "gain": [float(c) for c in coef[:-1]], "static_gain": float(coef[-1]),
+            "h_ref_um": float(ctx.h_cal_mean)}
 
 
 def _creep_desc(ctx, setting, coef):
     taus = [tau for tau in CREEP_TAUS if tau < 2.0 * ctx.duration]
-    g = np.asarray(coef)
+    g = np.asarray(coef[:-1])
     main = taus[int(np.argmax(np.abs(g)))]
-    return ({"tau_s": taus, "gain": [round(float(c), 5) for c in g], "total_gain": round(float(g.sum()), 5)},
+    return ({"tau_s": taus, "gain": [round(float(c), 5) for c in g], "static_gain": round(float(coef[-1]), 5),
+             "total_gain": round(float(g.sum()), 5)},
             f"the residual follows the low-passed drive history (Kelvin-Voigt creep, total {100 * g.sum():.2f} % "
             f"of the hysteresis output, strongest time constant {main:g} s), largest in the seconds after a step")
 

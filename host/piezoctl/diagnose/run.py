@@ -46,6 +46,7 @@ class Ctx:
     max_step: float
     peak_freqs: list
     y_span: float
+    h_cal_mean: float = 0.0
 
 
 def _signals(base, recs, names):
@@ -244,7 +245,8 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
               u_lo=float(uv.min()), u_hi=float(uv.max()),
               u_mid_all=0.5 * (float(uv.max()) + float(uv.min())),
               u_half_all=max(0.5 * float(np.ptp(uv)), 1e-9), max_step=du,
-              peak_freqs=loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt), y_span=span)
+              peak_freqs=loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt), y_span=span,
+              h_cal_mean=float(np.mean(np.concatenate([refined.simulate_parts(base, r.t, r.u)["h"] for r in cal]))))
     e = np.concatenate([r[v] for r, v in zip(resid, valid)])
     fold_all = np.concatenate([f[v] for f, v in zip(fold, valid)])
     block_all = np.concatenate([b[v] for b, v in zip(block, valid)])

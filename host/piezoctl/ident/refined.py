@@ -21,12 +21,15 @@ Parameters (JSON, physical units where they have one)
 ``u_mid``, ``u_half``
     Drive normalization [V]: ``v = (u - u_mid) / u_half``.
 ``hysteresis``
-    ``r`` play thresholds [normalized drive], ``w`` their weights [um],
+    ``type``: ``"pi"`` or ``"bouc_wen"``. PI: ``r`` play thresholds [normalized drive], ``w`` their weights [um],
     ``poly`` [um] coefficients of ``v, v^2, v^3``, evaluated with ``v``
     clamped to ``[v_lo, v_hi]`` (the calibration range) and continued
     linearly outside it, ``offset`` [um], ``v_rest`` [normalized drive]: the
     plays start relaxed at the rest drive (0 V: a stage is powered up from
     0 V), so the first sample is reached along the initial loading curve.
+    Bouc-Wen: ``beta``, ``gamma`` [1/normalized drive], ``c_h`` [um] (the
+    weight of the hysteretic state h, alpha = 1), ``poly``, ``v_lo``, ``v_hi``,
+    ``offset``, ``v_rest`` as for PI.
 ``dynamics``
     ``b``, ``a``: discrete transfer function at ``fs_hz`` (``a[0] = 1``),
     static gain 1; ``[1], [1]`` for a static model.
@@ -43,8 +46,10 @@ Parameters (JSON, physical units where they have one)
       hysteretic part of H is scaled by ``1 + gain r / (r + ref)``, r the
       magnitude of the normalized drive rate [FS/s] low-passed at
       ``rate_cutoff_hz``.
-    - ``creep``: ``tau_s`` (list) and ``gain`` (list, [1]): ``w + sum g_i
-      (lowpass_tau_i(w) - w)``.
+    - ``creep``: ``tau_s`` (list), ``gain`` (list, [1]), ``static_gain`` [1]
+      and ``h_ref_um``: ``w + sum g_i (lowpass_tau_i(w) - w) + g_s (w - h_ref)``
+      (g_s: the static gain the calibration, faster than the slow terms, did
+      not see; h_ref: the mean H output during calibration).
     - ``unmodeled_resonance``: ``freq_hz``, ``damping``, ``gain`` [1]: y
       becomes ``y + gain (M(y) - y)``, M a unit-gain second-order mode.
     - ``cross_coupling``: ``c_static_um_per_v``, ``c_accel_um_per_v_s2``,
@@ -198,8 +203,57 @@ def _poly_clamped(v, poly, v_lo, v_hi) -> np.ndarray:
     return p + slope * (v - vc)
 
 
+BW_QUANTUM = 4e-3
+
+
+def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, quantum: float = BW_QUANTUM) -> np.ndarray:
+    """Hysteretic state h of a Bouc-Wen element with alpha = 1 along the drive path v.
+
+    ``dh = dv - beta |dv| h - gamma dv |h|`` (``beta > |gamma|``), starting at h = 0 at
+    ``v_rest``. Rate independent, so it is integrated in closed form on the path sampled
+    every ``quantum`` of path length and at every reversal, then interpolated in path
+    length (within a monotone stretch) back to every sample.
+    """
+    v = np.concatenate([[v_rest], np.asarray(v, float)])
+    dv = np.diff(v)
+    lam = np.concatenate([[0.0], np.cumsum(np.abs(dv))])
+    cell = np.floor(lam / quantum)
+    sgn = np.sign(dv)
+    nz = np.flatnonzero(sgn != 0)
+    rev = np.zeros(v.size, bool)
+    if nz.size > 1:
+        ch = nz[1:][sgn[nz[1:]] != sgn[nz[:-1]]]
+        rev[ch] = True  # sample before the first step of a new direction
+    keep = np.flatnonzero(np.concatenate([[True], cell[1:] != cell[:-1]]) | rev)
+    if keep[-1] != v.size - 1:
+        keep = np.append(keep, v.size - 1)
+    vk = v[keep].tolist()
+    hk = [0.0] * len(vk)
+    h = 0.0
+    exp = np.exp
+    for i in range(1, len(vk)):
+        d = vk[i] - vk[i - 1]
+        if d == 0.0:
+            hk[i] = h
+            continue
+        sd = 1.0 if d > 0 else -1.0
+        k = beta + sd * gamma if h >= 0 else beta - sd * gamma
+        heq = sd / k
+        h = heq + (h - heq) * float(exp(-k * abs(d)))
+        hk[i] = h
+    out = np.interp(lam, lam[keep], np.asarray(hk))
+    return out[1:]
+
+
 def hysteresis_parts(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
-    """(H[v] without offset, hysteretic part sum w_i (P_i(v) - v)) [um] for normalized drive v."""
+    """(H[v] without offset, hysteretic part) [um] for normalized drive v.
+
+    ``type`` ``"pi"`` (default): plays, hysteretic part ``sum w_i (P_i(v) - v)``;
+    ``"bouc_wen"``: ``c_h h(v; beta, gamma) + poly(v)``, hysteretic part ``c_h h``.
+    """
+    if hp.get("type", "pi") == "bouc_wen":
+        hh = float(hp["c_h"]) * bouc_wen_h(v, float(hp["beta"]), float(hp["gamma"]), float(hp.get("v_rest", 0.0)))
+        return hh + _poly_clamped(v, hp["poly"], hp["v_lo"], hp["v_hi"]), hh
     r = np.asarray(hp["r"], float)
     w = np.asarray(hp["w"], float)
     v_rest = float(hp.get("v_rest", 0.0))
@@ -251,7 +305,8 @@ def simulate_parts(params: dict, t, u, u2=None) -> dict:
     w = h
     if "creep" in terms:
         c = terms["creep"]
-        w = h + sum(float(g) * (lowpass_tau(h, tau, dt) - h) for tau, g in zip(c["tau_s"], c["gain"]))
+        w = h + sum(float(g) * (lowpass_tau(h, tau, dt) - h) for tau, g in zip(c["tau_s"], c["gain"])) \
+            + float(c.get("static_gain", 0.0)) * (h - float(c.get("h_ref_um", 0.0)))
     dyn = params["dynamics"]
     y = filt(dyn["b"], dyn["a"], w)
     if "unmodeled_resonance" in terms:

@@ -1,0 +1,90 @@
+"""piezoctl diagnose: contract files, both models through `simulate --model`, and a fast subset of the
+concealed-effect cases built with the C stage model (docs/diagnose.md)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from piezoctl.diagnose.cases import make_case
+from piezoctl.diagnose.effects import VOCABULARY
+from piezoctl.diagnose.run import diagnose
+from piezoctl.ident import refined
+from piezoctl.io.recording import load_recording
+
+try:
+    from piezoctl.sil.stage import find_library
+    find_library()
+    HAVE_STAGE = True
+except Exception:  # noqa: BLE001 - library not built
+    HAVE_STAGE = False
+
+pytestmark = pytest.mark.skipif(not HAVE_STAGE, reason="libpiezo_stage.so not built")
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _cli(*args):
+    return subprocess.run([str(ROOT / "tools" / "piezoctl"), *map(str, args)], capture_output=True, text=True)
+
+
+def test_slew_limit_matches_a_plain_loop():
+    rng = np.random.default_rng(1)
+    u = np.cumsum(rng.normal(0, 1, 2000)) + np.repeat(rng.uniform(-50, 50, 20), 100)
+    out = refined.slew_limit(u, 0.7)
+    ref = u.copy()
+    for i in range(1, u.size):
+        ref[i] = ref[i - 1] + np.clip(u[i] - ref[i - 1], -0.7, 0.7)
+    assert np.max(np.abs(out - ref)) < 1e-12
+
+
+def test_bouc_wen_is_rate_independent():
+    t = np.linspace(0, 1, 4001)
+    v = 0.8 * np.sin(2 * np.pi * 2 * t)
+    h1 = refined.bouc_wen_h(v, 3.0, 0.9)
+    h2 = refined.bouc_wen_h(v[::4], 3.0, 0.9)
+    assert np.max(np.abs(h1[::4] - h2)) < 5e-3 * np.ptp(h1)
+    assert np.ptp(h1) > 0.1
+
+
+@pytest.mark.parametrize("name", ["null_default", "thermal_drift", "sensor_offset"])
+def test_concealed_case(tmp_path, name):
+    case = make_case(name, tmp_path / "case", scale=0.6, seed=3)
+    out = tmp_path / "out"
+    r = _cli("diagnose", "--calibration", *case["calibration"], "--recordings", *case["recordings"],
+             "--out", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((out / "diagnosis.json").read_text())
+    assert (out / "report.html").stat().st_size > 10_000
+    eff = doc["effects"]
+    assert eff and all(x["name"] in VOCABULARY + ("none",) for x in eff)
+    for x in eff:
+        assert {"name", "significant", "evidence", "where", "params", "improvement"} <= set(x)
+        assert {"nrmse_before", "nrmse_after"} <= set(x["improvement"])
+    truth = case["truth"][0] if case["truth"] else "none"
+    assert eff[0]["name"] == truth
+    h = doc["fit"]["heldout"]
+    if truth == "none":
+        assert not any(x["significant"] for x in eff)
+        assert doc["fit"]["refined"]["nrmse"] == pytest.approx(doc["fit"]["base"]["nrmse"])
+    else:
+        assert eff[0]["significant"]
+        assert h["refined_nrmse"] <= 0.7 * h["base_nrmse"]
+    # both model files run through `simulate --model`
+    for key in ("base_model", "refined_model"):
+        p = out / doc[key]
+        sim = tmp_path / f"{key}.csv"
+        r = _cli("simulate", "--model", p, "--input", case["recordings"][0], "--out", sim)
+        assert r.returncode == 0, r.stderr
+        y = np.loadtxt(sim, delimiter=",", skiprows=1)[:, 1]
+        rec = load_recording(case["recordings"][0])
+        assert y.shape == rec.y.shape and np.all(np.isfinite(y))
+    assert doc["time_s"] < 60
+
+
+def test_bad_input_is_a_cli_error(tmp_path):
+    r = _cli("diagnose", "--calibration", tmp_path / "missing.csv", "--recordings", tmp_path / "x.csv",
+             "--out", tmp_path / "o")
+    assert r.returncode == 2 and "missing.csv" in r.stderr
