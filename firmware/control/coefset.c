@@ -308,3 +308,72 @@ int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_
         return piezo_line_q15(r_q15, cs->open_loop_gain_q24, cs->open_loop_offset_q15);
     }
 }
+
+uint16_t piezo_image_kind(const uint8_t *img, uint32_t len)
+{
+    return len >= PIEZO_TABLE_HDR_BYTES ? piezo_le16(img + PIEZO_TABLE_HDR_KIND_OFFSET) : 0u;
+}
+
+uint16_t piezo_xcset_load(piezo_xcset_t *xs, struct piezo_xc *st, const uint8_t *img, uint32_t len)
+{
+    piezo_table_info_t info;
+    const piezo_section_t *sc, *a, *b, *e, *eta, *xi;
+    struct piezo_xc_coef *k = &xs->xc;
+    uint32_t m, nch, npow, ndeg;
+    uint16_t r;
+    xs->kind = 0u;
+    if ((r = piezo_table_check(img, len, &info)) != 0u) {
+        return r;
+    }
+    if (info.kind != PIEZO_TABLE_KIND_CROSS_COUPLING) {
+        return PIEZO_TABLE_REASON_BAD_KIND;
+    }
+    if ((r = need(&info, PIEZO_SECTION_XC_SCALARS, PIEZO_SECTION_TYPE_INT32, 9u, 9u, &sc)) != 0u) {
+        return r;
+    }
+    m = (uint32_t)piezo_section_i32(sc, 0);
+    nch = (uint32_t)piezo_section_i32(sc, 1);
+    npow = (uint32_t)piezo_section_i32(sc, 2);
+    ndeg = (uint32_t)piezo_section_i32(sc, 3);
+    if (m < 1u || m > PIEZO_XC_MAX_M || nch < 1u || nch > PIEZO_XC_MAX_CH || npow < 1u ||
+        npow > PIEZO_XC_MAX_POW || ndeg < 1u || ndeg > PIEZO_XC_MAX_DEG) {
+        return PIEZO_TABLE_REASON_BAD_LENGTH;
+    }
+    if ((r = need(&info, PIEZO_SECTION_XC_A_Q24, PIEZO_SECTION_TYPE_INT32, m * m, m * m, &a)) != 0u ||
+        (r = need(&info, PIEZO_SECTION_XC_B_Q24, PIEZO_SECTION_TYPE_INT32, m, m, &b)) != 0u ||
+        (r = need(&info, PIEZO_SECTION_XC_E_Q24, PIEZO_SECTION_TYPE_INT32, m, m, &e)) != 0u ||
+        (r = need(&info, PIEZO_SECTION_XC_ETA_Q24, PIEZO_SECTION_TYPE_INT32, nch * npow * ndeg, nch * npow * ndeg,
+                  &eta)) != 0u ||
+        (r = need(&info, PIEZO_SECTION_XC_XI_Q24, PIEZO_SECTION_TYPE_INT32, nch * m * ndeg, nch * m * ndeg, &xi)) != 0u) {
+        return r;
+    }
+    if (piezo_section_i32(sc, 8) != 0 && piezo_section_i32(sc, 8) != 1) {
+        return PIEZO_TABLE_REASON_OUT_OF_RANGE;
+    }
+    copy_i32(xs->a_q24, a);
+    copy_i32(xs->b_q24, b);
+    copy_i32(xs->e_q24, e);
+    copy_i32(xs->eta_q24, eta);
+    copy_i32(xs->xi_q24, xi);
+    k->m = (uint8_t)m;
+    k->n_ch = (uint8_t)nch;
+    k->n_pow = (uint8_t)npow;
+    k->n_deg = (uint8_t)ndeg;
+    k->u_center_q15 = piezo_section_i32(sc, 4);
+    k->u_gain_q16 = piezo_section_i32(sc, 5);
+    k->x_center_q15 = piezo_section_i32(sc, 6);
+    k->x_gain_q16 = piezo_section_i32(sc, 7);
+    k->a_q24 = xs->a_q24;
+    k->b_q24 = xs->b_q24;
+    k->e_q24 = xs->e_q24;
+    k->eta_q24 = xs->eta_q24;
+    k->xi_q24 = xs->xi_q24;
+    xs->x_source = (uint8_t)piezo_section_i32(sc, 8);
+    if (piezo_xc_init(st, k) != PIEZO_OK) {
+        return PIEZO_TABLE_REASON_OUT_OF_RANGE; /* a kernel bound (sizes were checked above) */
+    }
+    xs->kind = info.kind;
+    xs->crc = info.crc;
+    xs->version = info.table_version;
+    return PIEZO_TABLE_REASON_OK;
+}

@@ -29,6 +29,7 @@
 #include "eupi_inv.h"
 #include "kp.h"
 #include "rkp.h"
+#include "xcouple.h"
 
 /* Compile-time capacity of one set (a table beyond it is refused: bad_length).
  * A target may override them (-D) to fit its RAM. */
@@ -114,5 +115,36 @@ int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_
 
 /** r g + o with one rounding, saturated: the straight-line maps above. */
 int16_t piezo_line_q15(int16_t r_q15, int32_t gain_q24, int32_t offset_q15);
+
+/*
+ * Cross-coupling table (kind cross_coupling): the coefficients of the
+ * xcouple kernel (xcouple.h) and where its position input comes from. A
+ * controller holds it in slots of its own beside the feedforward set, so a
+ * stage can run a hysteresis table and a coupling table at once. Validation
+ * on load: the image check, every xc_* section with the counts the sizes in
+ * xc_scalars imply, x_source 0 or 1, and the kernel's init (its bounds).
+ */
+typedef struct {
+    uint16_t kind;                 /* PIEZO_TABLE_KIND_CROSS_COUPLING, 0 = empty */
+    uint32_t crc;
+    uint32_t version;
+    uint8_t x_source;              /* 0: this axis' position y, 1: the other axis' y2 */
+    struct piezo_xc_coef xc;       /* points into the arrays below */
+    int32_t a_q24[PIEZO_XC_MAX_M * PIEZO_XC_MAX_M];
+    int32_t b_q24[PIEZO_XC_MAX_M];
+    int32_t e_q24[PIEZO_XC_MAX_M];
+    int32_t eta_q24[PIEZO_XC_MAX_CH * PIEZO_XC_MAX_POW * PIEZO_XC_MAX_DEG];
+    int32_t xi_q24[PIEZO_XC_MAX_CH * PIEZO_XC_MAX_M * PIEZO_XC_MAX_DEG];
+} piezo_xcset_t;
+
+/** Kind field of an image's header (0 if len cannot hold a header). */
+uint16_t piezo_image_kind(const uint8_t *img, uint32_t len);
+
+/**
+ * Fill xs from a cross_coupling image and validate it; st is the kernel
+ * instance, initialized on success. Returns PIEZO_TABLE_REASON_OK or the
+ * reason; on failure xs->kind is 0.
+ */
+uint16_t piezo_xcset_load(piezo_xcset_t *xs, struct piezo_xc *st, const uint8_t *img, uint32_t len);
 
 #endif /* PIEZO_COEFSET_H */

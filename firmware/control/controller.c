@@ -21,6 +21,9 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
     c->active = -1;
     c->pending = -1;
     c->previous = -1;
+    c->xc_active = -1;
+    c->xc_pending = -1;
+    c->xc_previous = -1;
     c->wave_cfg.kind = PIEZO_WAVE_OFF;
     if ((rc = piezo_pid_init(&c->pid, &c->cfg.pid)) != PIEZO_OK ||
         (rc = piezo_biquad_init(&c->notch, &c->cfg.notch)) != PIEZO_OK ||
@@ -30,6 +33,18 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
         return rc;
     }
     return PIEZO_OK;
+}
+
+/* A cross-coupling image into the coupling slot that is neither active nor
+ * previous. */
+static uint16_t load_xc_spare(piezo_ctl_t *c, const uint8_t *img, uint32_t len, int8_t *spare)
+{
+    int8_t i = 0;
+    while (i == c->xc_active || i == c->xc_previous) {
+        i++;
+    }
+    *spare = i;
+    return piezo_xcset_load(&c->xset[i], &c->xc[i], img, len);
 }
 
 /* Loads an image into the set that is neither active nor previous and binds
@@ -94,6 +109,9 @@ static void reset_loop_state(piezo_ctl_t *c)
     if (c->active >= 0) {
         (void)piezo_ff_bind(&c->ff[c->active], &c->set[c->active]);
     }
+    if (c->xc_active >= 0) {
+        piezo_xc_reset(&c->xc[c->xc_active]);
+    }
 }
 
 /* Three-tap input shaper on the early reference: sum_i a_i r(k - i m), one
@@ -142,7 +160,7 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
 void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 {
     const piezo_ctl_cfg_t *g = &c->cfg;
-    int16_t y, r, r_ahead, u_ff = 0, u_fb = 0, u;
+    int16_t y, y2, r, r_ahead, u_ff = 0, u_fb = 0, u;
     int8_t pend;
     uint8_t mode = c->mode;
     int run;
@@ -153,9 +171,15 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         c->active = pend;
         c->pending = -1;
     }
+    pend = c->xc_pending;
+    if (pend >= 0) {
+        c->xc_active = pend;
+        c->xc_pending = -1;
+    }
 
     /* 2-3. sensor */
     y = read_sensor(c, adc[0]);
+    y2 = piezo_sat_q15(piezo_rshift_rnd64((int64_t)(adc[1] - g->adc_zero) * g->sensor_gain_q16, 16u));
     if (c->st.faults != 0u) {
         c->st.armed = 0u; /* any fault disarms */
     }
@@ -198,6 +222,16 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 7-8. sum, clamp, slew limit (also while ramping down after a disarm), DAC */
     u = run ? piezo_sat_q15((int32_t)u_ff + u_fb) : g->u_safe_q15;
+    c->xc_q15 = 0;
+    if (c->xc_active >= 0) {
+        const piezo_xcset_t *xs = &c->xset[c->xc_active];
+        int16_t u_xc = piezo_xc_process(&c->xc[c->xc_active], c->u2_q15, xs->x_source ? y2 : y);
+        if (run && !g->xcouple_bypass &&
+            (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK || mode == PIEZO_MODE_FEEDBACK)) {
+            c->xc_q15 = u_xc;
+            u = piezo_sat_q15((int32_t)u - u_xc);
+        }
+    }
     u = piezo_limit_process(&c->limit, u);
     if (c->limit.flags != 0u && run) {
         c->st.clamps++;
@@ -214,7 +248,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     c->sig[PIEZO_SIG_ERR] = piezo_sat_q15((int32_t)r - y);
     c->sig[PIEZO_SIG_FF] = u_ff;
     c->sig[PIEZO_SIG_FB] = u_fb;
-    c->sig[PIEZO_SIG_Y2] = piezo_sat_q15(piezo_rshift_rnd64((int64_t)(adc[1] - g->adc_zero) * g->sensor_gain_q16, 16u));
+    c->sig[PIEZO_SIG_Y2] = y2;
     c->sig[PIEZO_SIG_U2] = c->u2_q15;
     piezo_rec_process(&c->rec, c->sig);
     c->overrun_run = 0u;
@@ -352,6 +386,13 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len)
         }
         if (len == 0u || len > c->staged_len) {
             r = PIEZO_TABLE_REASON_BAD_LENGTH;
+        } else if (piezo_image_kind(c->staged, len) == PIEZO_TABLE_KIND_CROSS_COUPLING) {
+            /* the coupling slot: not written to the store */
+            if ((r = load_xc_spare(c, c->staged, len, &spare)) == PIEZO_TABLE_REASON_OK) {
+                c->xc_previous = c->xc_active;
+                c->xc_pending = spare;
+                c->last_commit_xc = 1u;
+            }
         } else if ((r = load_spare(c, c->staged, len, &spare)) == PIEZO_TABLE_REASON_OK) {
             if (c->have_store && (r = piezo_store_save(&c->store, c->staged, len)) != PIEZO_TABLE_REASON_OK) {
                 c->set[spare].kind = 0u;
@@ -359,6 +400,7 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len)
                 c->staged_crc = c->set[spare].crc;
                 c->previous = c->active;
                 c->pending = spare;
+                c->last_commit_xc = 0u;
             }
         }
     }
@@ -373,6 +415,28 @@ uint16_t piezo_ctl_rollback(piezo_ctl_t *c)
 {
     uint16_t r;
     int8_t prev = c->previous;
+    if (c->unlocked && c->last_commit_xc) {
+        /* the coupling slot (RAM only): back to the previous coupling table or none */
+        if (c->xc_pending >= 0) {
+            r = PIEZO_TABLE_REASON_BUSY;
+        } else if (c->xc_active < 0) {
+            r = PIEZO_TABLE_REASON_NO_PREVIOUS;
+        } else {
+            if (c->xc_previous >= 0) {
+                piezo_xc_reset(&c->xc[c->xc_previous]);
+            }
+            c->xc_pending = c->xc_previous;
+            if (c->xc_pending < 0) {
+                c->xc_active = -1; /* no previous coupling table: compensation off */
+            }
+            c->xc_previous = -1;
+            c->last_commit_xc = 0u;
+            c->staged_len = 0u;
+            r = PIEZO_TABLE_REASON_OK;
+        }
+        c->st.table_result = r;
+        return r;
+    }
     if (!c->unlocked) {
         r = PIEZO_TABLE_REASON_LOCKED;
     } else if (c->pending >= 0) {
@@ -396,6 +460,12 @@ uint32_t piezo_ctl_active_crc(const piezo_ctl_t *c)
 {
     int8_t a = c->pending >= 0 ? c->pending : c->active;
     return a >= 0 ? c->set[a].crc : 0u;
+}
+
+uint32_t piezo_ctl_coupling_crc(const piezo_ctl_t *c)
+{
+    int8_t a = c->xc_pending >= 0 ? c->xc_pending : c->xc_active;
+    return a >= 0 ? c->xset[a].crc : 0u;
 }
 
 uint32_t piezo_ctl_active_version(const piezo_ctl_t *c)

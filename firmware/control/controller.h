@@ -23,6 +23,13 @@
  *      DIRECT: u_ff = r (the reference read as a drive)
  *   6. feedback (FF_FEEDBACK, FEEDBACK): e = r - y, u_fb = notch(PID(e))
  *   7. u = sat_q15(u_ff + u_fb); disarmed or IDLE: u = u_safe
+ *      cross-coupling compensation (a cross_coupling table loaded): the
+ *      xcouple kernel predicts, from the other axis' drive u2_q15 and a
+ *      position (this axis' y or the other's y2, as the table says), the
+ *      drive that the coupling from the other axis is worth on this axis;
+ *      in FEEDFORWARD, FF_FEEDBACK and FEEDBACK (not DIRECT, OPEN_LOOP or
+ *      with xcouple_bypass) u = sat_q15(u - u_xc). The kernel runs every
+ *      tick while a table is loaded, so its filters follow u2 in any mode
  *   8. clamp and slew-limit, then the DAC code:
  *      code = clamp(dac_zero + rshift_rnd(u * dac_gain_q16, 16), dac_min, dac_max)
  *   9. recorder, status counters
@@ -99,6 +106,7 @@ typedef struct {
     uint8_t preview_ticks;     /* feedforward look-ahead, 0..PIEZO_CTL_MAX_PREVIEW */
     uint8_t shaper_ticks;      /* tap spacing m, 0 = no shaper, 1..PIEZO_CTL_MAX_SHAPER */
     int16_t shaper_q15[3];     /* taps at 0, m, 2m; they should sum to 32768 (unity DC gain) */
+    uint8_t xcouple_bypass;    /* 1: a loaded coupling table is not applied */
 } piezo_ctl_cfg_t;
 
 #define PIEZO_CTL_MAX_PREVIEW 32u
@@ -120,7 +128,12 @@ typedef struct {
     uint8_t mode;
     uint8_t ref_source;
     int16_t setpoint_q15;
-    int16_t u2_q15;            /* other axis' drive (host-commanded, recorded) */
+    /* The other axis' drive (q15), recorded as signal u2 and the input of the
+     * cross-coupling compensation. A multi-axis target sets it before each
+     * tick from the other axis' controller (sil_loop.c: that controller's
+     * drive of the previous tick, the same for both axes); elsewhere the host
+     * may write it (register u2_q15). */
+    int16_t u2_q15;
 
     /* feedforward tables: the active set, the previous one (rollback) and a
      * free one that a commit fills; the tick swaps a committed set in */
@@ -129,6 +142,17 @@ typedef struct {
     volatile int8_t active;    /* index into set[], -1 = no table */
     volatile int8_t pending;   /* committed set waiting for the tick, -1 = none */
     int8_t previous;           /* rollback target, -1 = none */
+
+    /* cross-coupling table: slots of its own, committed, swapped at the tick
+     * boundary and rolled back like the feedforward sets; RAM only (the flash
+     * store keeps the feedforward table) */
+    piezo_xcset_t xset[3];
+    struct piezo_xc xc[3];
+    volatile int8_t xc_active;
+    volatile int8_t xc_pending;
+    int8_t xc_previous;
+    uint8_t last_commit_xc;    /* 1: the last good commit was a coupling table (rollback acts on it) */
+    int16_t xc_q15;            /* last compensation term u_xc (drive, q15) */
 
     /* staged bank: the image being uploaded */
     uint8_t staged[PIEZO_TABLE_MAX_BYTES];
@@ -188,6 +212,8 @@ int piezo_ctl_unlock(piezo_ctl_t *c, uint16_t key);
 int piezo_ctl_stage_write(piezo_ctl_t *c, uint32_t offset, const uint8_t *data, uint32_t len);
 uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len);
 uint16_t piezo_ctl_rollback(piezo_ctl_t *c);
+/** CRC of the active cross-coupling table (0 when none). */
+uint32_t piezo_ctl_coupling_crc(const piezo_ctl_t *c);
 /** CRC and version of the active table (0, 0 when none). */
 uint32_t piezo_ctl_active_crc(const piezo_ctl_t *c);
 uint32_t piezo_ctl_active_version(const piezo_ctl_t *c);

@@ -87,6 +87,7 @@ static uint32_t input_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, 
         return a >= 0 ? c->set[a].kind : 0u;
     }
     case PIEZO_IREG_STAGED_BYTES: return c->staged_len;
+    case PIEZO_IREG_COUPLING_TABLE_CRC: return piezo_ctl_coupling_crc(c);
     default: return 0u;
     }
 }
@@ -208,6 +209,7 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
     case PIEZO_HREG_PREVIEW_TICKS: return g->preview_ticks;
     case PIEZO_HREG_SHAPER_TICKS: return g->shaper_ticks;
     case PIEZO_HREG_SHAPER_Q15: return (uint16_t)g->shaper_q15[elem];
+    case PIEZO_HREG_XCOUPLE_BYPASS: return g->xcouple_bypass;
     default: return 0u;
     }
 }
@@ -261,6 +263,7 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     case PIEZO_HREG_BAD_LIMIT: return v >= 1u;
     case PIEZO_HREG_PREVIEW_TICKS: return v <= PIEZO_CTL_MAX_PREVIEW;
     case PIEZO_HREG_SHAPER_TICKS: return v <= PIEZO_CTL_MAX_SHAPER;
+    case PIEZO_HREG_XCOUPLE_BYPASS: return v <= 1u;
     case PIEZO_HREG_MAX_JUMP_Q15:
     case PIEZO_HREG_LIMIT_MAX_STEP_Q15: return s16(v) >= 0;
     default: return 1;
@@ -292,6 +295,7 @@ static int apply_config(piezo_ctl_cfg_t *g, const pending_t *p)
     case PIEZO_HREG_PREVIEW_TICKS: g->preview_ticks = (uint8_t)v; break;
     case PIEZO_HREG_SHAPER_TICKS: g->shaper_ticks = (uint8_t)v; break;
     case PIEZO_HREG_SHAPER_Q15: g->shaper_q15[p->elem] = s16(v); break;
+    case PIEZO_HREG_XCOUPLE_BYPASS: g->xcouple_bypass = (uint8_t)v; break;
     default: return 0;
     }
     return 1;

@@ -12,9 +12,9 @@ static int64_t iabs64(int64_t v)
     return v < 0 ? -v : v;
 }
 
-/* Smallest s <= PIEZO_XC_MAX_SHIFT with a state bound Z_i = 2^(24 + s) for
- * every row (xcouple.h), or -1. */
-static int state_bounds(const struct piezo_xc_coef *k, int64_t z_q24[PIEZO_XC_MAX_M])
+/* Smallest s_i <= PIEZO_XC_MAX_SHIFT with a state bound Z_i = 2^(24 + s_i)
+ * for every row (xcouple.h), or -1. */
+static int state_bounds(const struct piezo_xc_coef *k, int64_t z_q24[PIEZO_XC_MAX_M], unsigned shift[PIEZO_XC_MAX_M])
 {
     for (uint8_t i = 0; i < k->m; i++) {
         int64_t aii = k->a_q24[i * k->m + i];
@@ -27,6 +27,7 @@ static int state_bounds(const struct piezo_xc_coef *k, int64_t z_q24[PIEZO_XC_MA
             int64_t z = Q24_ONE << s;
             if ((Q24_ONE - aii) * z >= rhs && iabs64(k->e_q24[i]) < z) {
                 z_q24[i] = z;
+                shift[i] = s;
                 ok = 1;
             }
         }
@@ -40,7 +41,7 @@ static int state_bounds(const struct piezo_xc_coef *k, int64_t z_q24[PIEZO_XC_MA
 int piezo_xc_init(struct piezo_xc *s, const struct piezo_xc_coef *k)
 {
     int64_t z_q24[PIEZO_XC_MAX_M];
-    int64_t xi_sum = 0;
+    unsigned shift[PIEZO_XC_MAX_M];
     if (s == NULL || k == NULL || k->a_q24 == NULL || k->b_q24 == NULL || k->e_q24 == NULL ||
         k->eta_q24 == NULL || k->xi_q24 == NULL || k->m < 1u || k->m > PIEZO_XC_MAX_M || k->n_ch < 1u ||
         k->n_ch > PIEZO_XC_MAX_CH || k->n_pow < 1u || k->n_pow > PIEZO_XC_MAX_POW || k->n_deg < 1u ||
@@ -71,12 +72,22 @@ int piezo_xc_init(struct piezo_xc *s, const struct piezo_xc_coef *k)
         if (eta_sum > Q24_ONE) {
             return PIEZO_ERANGE;
         }
-        for (uint32_t q = 0; q < (uint32_t)k->m * k->n_deg; q++) {
-            xi_sum += iabs64(k->xi_q24[(uint32_t)c * k->m * k->n_deg + q]);
-        }
     }
-    if (xi_sum > Q24_ONE || state_bounds(k, z_q24) != 0) {
+    if (state_bounds(k, z_q24, shift) != 0) {
         return PIEZO_ERANGE;
+    }
+    /* output: (sum_b |xi_cib| + 1) Z_i <= 2^59 for each (c, i), so the
+     * accumulator of at most 8 products stays below 2^62; Z_i = 2^(24 + s_i) */
+    for (uint8_t c = 0; c < k->n_ch; c++) {
+        for (uint8_t i = 0; i < k->m; i++) {
+            int64_t sum = 1;
+            for (uint8_t b = 0; b < k->n_deg; b++) {
+                sum += iabs64(k->xi_q24[((uint32_t)c * k->m + i) * k->n_deg + b]);
+            }
+            if (sum > ((int64_t)1 << (35u - shift[i]))) {
+                return PIEZO_ERANGE;
+            }
+        }
     }
     s->k = k;
     piezo_xc_reset(s);

@@ -35,8 +35,10 @@
  *     and |E_i| < Z_i, every |zeta_i| <= Z_i <= 2^34 for all time (induction
  *     on the rows; the 2^24 covers the rounding); the row accumulator is
  *     <= 2^25 (m 2^34 + 2^24) < 2^62;
- *   sum_{c,i,b} |xi_{c,i,b}| <= 2^24, so |rho| <= 2^24 each and the output
- *     accumulator <= 2^24 2^34 = 2^58.
+ *   per output term: (sum_b |xi_{c,i,b}| + 1) <= 2^(35 - s_i), so
+ *     |rho_{c,i} zeta_{c,i}| <= 2^59 and the output accumulator (at most 8
+ *     terms) < 2^62. (Laguerre combinations that differentiate have large
+ *     alternating xi: the bound is per filter, against its own state bound.)
  * No division, no floating point; one rounding rule (piezo_rshift_rnd64).
  */
 #ifndef PIEZO_XCOUPLE_H

@@ -37,6 +37,7 @@ const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N] = {
     {0x011Eu, 2u, 0u, 1u, PIEZO_IREG_REC_FRAMES},
     {0x0120u, 1u, 0u, 1u, PIEZO_IREG_ACTIVE_TABLE_KIND},
     {0x0121u, 2u, 0u, 1u, PIEZO_IREG_STAGED_BYTES},
+    {0x0123u, 2u, 0u, 1u, PIEZO_IREG_COUPLING_TABLE_CRC},
 };
 
 const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
@@ -92,6 +93,7 @@ const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
     {0x3019u, 1u, PIEZO_REG_CONFIG, 1u, PIEZO_HREG_PREVIEW_TICKS},
     {0x301Au, 1u, PIEZO_REG_CONFIG, 1u, PIEZO_HREG_SHAPER_TICKS},
     {0x301Bu, 1u, PIEZO_REG_SIGNED | PIEZO_REG_CONFIG, 3u, PIEZO_HREG_SHAPER_Q15},
+    {0x301Eu, 1u, PIEZO_REG_CONFIG, 1u, PIEZO_HREG_XCOUPLE_BYPASS},
 };
 
 const int16_t piezo_gauss_lut_q15[PIEZO_GAUSS_LUT_N] = {

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 1u
-#define PIEZO_INTERFACE_CRC32 0x32C075D7u
+#define PIEZO_INTERFACE_CRC32 0xC8E0D360u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -66,6 +66,12 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_SECTION_EUPI_UPI_A_Q24 34u  /* int32: UPI slopes */
 #define PIEZO_SECTION_EUPI_UPI_W_Q24 35u  /* int32: UPI weights d, row-major (threshold, slope) */
 #define PIEZO_SECTION_EUPI_POLY_Q24 36u  /* int32: polynomial coefficients of u^2 .. u^(n_p + 1) */
+#define PIEZO_SECTION_XC_SCALARS 40u  /* int32: [m, n_ch, n_pow, n_deg, u_center_q15, u_gain_q16, x_center_q15, x_gain_q16, x_source]: sizes, normalization of the other axis' drive u and of the position x; x_source 0 = this axis' position, 1 = the other axis' */
+#define PIEZO_SECTION_XC_A_Q24 41u  /* int32: Laguerre state matrix A, m x m row-major, lower triangular */
+#define PIEZO_SECTION_XC_B_Q24 42u  /* int32: Laguerre input vector B, m */
+#define PIEZO_SECTION_XC_E_Q24 43u  /* int32: equilibrium gains E = (I - A)^-1 B, m: the filters' start */
+#define PIEZO_SECTION_XC_ETA_Q24 44u  /* int32: input polynomial eta[c][k][b]: coefficient of u_n^k x_n^b in channel c */
+#define PIEZO_SECTION_XC_XI_Q24 45u  /* int32: output weights xi[c][i][b]: coefficient of x_n^b on filter i of channel c, in this axis' drive (FS) per unit state */
 #define PIEZO_TABLE_REASON_OK 0u
 #define PIEZO_TABLE_REASON_BAD_MAGIC 1u
 #define PIEZO_TABLE_REASON_BAD_LAYOUT_VERSION 2u
@@ -123,6 +129,7 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_INPUT_REC_FRAMES 0x011Eu  /* uint32 */
 #define PIEZO_INPUT_ACTIVE_TABLE_KIND 0x0120u  /* uint16 */
 #define PIEZO_INPUT_STAGED_BYTES 0x0121u  /* uint32 */
+#define PIEZO_INPUT_COUPLING_TABLE_CRC 0x0123u  /* uint32 */
 #define PIEZO_HOLDING_UNLOCK 0x1000u  /* uint16 */
 #define PIEZO_HOLDING_MODE 0x1001u  /* uint16 */
 #define PIEZO_HOLDING_ARM 0x1002u  /* uint16 */
@@ -182,6 +189,7 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_HOLDING_SHAPER_TICKS 0x301Au  /* uint16 */
 #define PIEZO_HOLDING_SHAPER_Q15 0x301Bu  /* int16 x3 */
 #define PIEZO_HOLDING_SHAPER_Q15_COUNT 3u
+#define PIEZO_HOLDING_XCOUPLE_BYPASS 0x301Eu  /* uint16 */
 
 /* Register descriptors, sorted by address: words per element (1 or 2),
  * elements, and flags. */
@@ -231,6 +239,7 @@ enum piezo_input_reg_id {
     PIEZO_IREG_REC_FRAMES,
     PIEZO_IREG_ACTIVE_TABLE_KIND,
     PIEZO_IREG_STAGED_BYTES,
+    PIEZO_IREG_COUPLING_TABLE_CRC,
     PIEZO_IREG_N
 };
 extern const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N];
@@ -287,6 +296,7 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_PREVIEW_TICKS,
     PIEZO_HREG_SHAPER_TICKS,
     PIEZO_HREG_SHAPER_Q15,
+    PIEZO_HREG_XCOUPLE_BYPASS,
     PIEZO_HREG_N
 };
 extern const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N];

@@ -119,8 +119,10 @@ static void test_init_refusals(void **state)
         eta[0] += eta[0] >= 0 ? 1 : -1;
         assert_int_equal(piezo_xc_init(&s, &k), PIEZO_ERANGE);
     }
-    /* sum |xi| above 1 */
-    FRESH(); xi[0] = 1 << 24; assert_int_equal(piezo_xc_init(&s, &k), PIEZO_ERANGE);
+    /* filter 0's output weights beyond 2^(35 - s_0) (s_0 = 3 for the paper's
+     * Laguerre pole): three full-scale int32 weights, 3 (2^31 - 1) > 2^32 */
+    FRESH(); xi[0] = INT32_MAX; xi[1] = 0; xi[2] = 0; assert_int_equal(piezo_xc_init(&s, &k), PIEZO_OK);
+    xi[1] = INT32_MAX; xi[2] = INT32_MAX; assert_int_equal(piezo_xc_init(&s, &k), PIEZO_ERANGE);
 #undef FRESH
 }
 

@@ -81,7 +81,9 @@ def test_golden_cases_cover_the_edges():
     assert {"std", "max", "sat", "clamp", "single", "steps"} <= set(cases)
     k, u, x, y = cases["max"]
     assert np.abs(np.asarray(k.eta, dtype=np.int64)).sum(axis=(1, 2)).tolist() == [1 << 24] * k.n_ch
-    assert int(np.abs(np.asarray(k.xi, dtype=np.int64)).sum()) == 1 << 24
+    shifts = X._state_shifts(k)
+    xi = np.abs(np.asarray(k.xi, dtype=np.int64)).sum(axis=2)
+    assert all(int(xi[c, i]) + 1 == 1 << (35 - shifts[i]) for c in range(k.n_ch) for i in range(k.m))
     assert k.m == X.MAX_M and k.n_pow == X.MAX_POW and k.n_deg == X.MAX_DEG
     _, _, _, ys = cases["sat"]
     assert ys.max() == 32767 and ys.min() == -32768

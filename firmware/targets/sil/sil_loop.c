@@ -90,6 +90,13 @@ int piezo_sil_init(piezo_sil_t *s, const stage_params *p, uint64_t seed)
 
 void piezo_sil_tick(piezo_sil_t *s)
 {
+    if (s->n_axes > 1) {
+        /* each controller sees the other's drive of the previous tick (before
+         * either ticks: the same lag for both axes) */
+        int16_t u0 = s->ctl[0].sig[PIEZO_SIG_U], u1 = s->ctl[1].sig[PIEZO_SIG_U];
+        s->ctl[0].u2_q15 = u1;
+        s->ctl[1].u2_q15 = u0;
+    }
     for (int i = 0; i < s->n_axes; i++) {
         int32_t in[2] = {s->adc[i], s->n_axes > 1 ? s->adc[1 - i] : 0};
         piezo_ctl_tick(&s->ctl[i], in, &s->dac[i]);

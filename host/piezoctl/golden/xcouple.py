@@ -84,9 +84,13 @@ def check(k: XCoef) -> None:
     for c in range(k.n_ch):
         if int(np.abs(np.asarray(k.eta[c], dtype=np.int64)).sum()) > ONE:
             raise QOverflowError(f"xcouple: sum |eta| of channel {c} exceeds 1")
-    if int(np.abs(np.asarray(k.xi, dtype=np.int64)).sum()) > ONE:
-        raise QOverflowError("xcouple: sum |xi| exceeds 1")
-    _state_shifts(k)
+    shifts = _state_shifts(k)
+    xi = np.abs(np.asarray(k.xi, dtype=np.int64))
+    for c in range(k.n_ch):
+        for i in range(k.m):
+            if int(xi[c, i].sum()) + 1 > 1 << (35 - shifts[i]):
+                raise QOverflowError(f"xcouple: sum |xi| of channel {c}, filter {i} exceeds 2^{35 - shifts[i]} "
+                                     "(output accumulator bound)")
 
 
 def quantize(k: XCoef) -> XCoef:
@@ -243,13 +247,20 @@ def _demo(rng, m, nc, npw, nd, eta_sum=0.9, xi_sum=0.05, **kw) -> XCoef:
 
 
 def _edge_sums(k: XCoef) -> XCoef:
-    """Integers with sum |eta_c| and sum |xi| exactly 2^24 (the bounds, met)."""
+    """Integers with sum |eta_c| = 2^24 and every sum_b |xi_cib| + 1 = 2^(35 - s_i) (the bounds, met)."""
     eta = np.asarray(k.eta).copy()
     for c in range(k.n_ch):
         eta[c, 0, 0] += ONE - int(np.abs(eta[c]).sum()) if eta[c, 0, 0] >= 0 else -(ONE - int(np.abs(eta[c]).sum()))
-    xi = np.asarray(k.xi).copy()
-    d = ONE - int(np.abs(xi).sum())
-    xi[0, 0, 0] += d if xi[0, 0, 0] >= 0 else -d
+    shifts = _state_shifts(k)
+    xi = np.zeros_like(np.asarray(k.xi))
+    for c in range(k.n_ch):
+        for i in range(k.m):
+            total = (1 << (35 - shifts[i])) - 1
+            part = total // k.n_deg
+            vals = [part] * k.n_deg
+            vals[0] += total - part * k.n_deg
+            sign = 1 if (c + i) % 2 == 0 else -1
+            xi[c, i] = [sign * v * (1 if b % 2 == 0 else -1) for b, v in enumerate(vals)]
     out = dataclasses.replace(k, eta=eta, xi=xi)
     check(out)
     return out

@@ -21,7 +21,7 @@ from ..golden.rkp import RKPQ
 from .image import Section, TableImageError
 
 __all__ = ["ctl_section", "kp_dcc_sections", "rkp_sections", "eupi_inverse_sections",
-           "firmware_small_gain"]
+           "firmware_small_gain", "cross_coupling_sections"]
 
 _I16 = interface.SECTION_TYPES["int16"]
 _I32 = interface.SECTION_TYPES["int32"]
@@ -115,3 +115,20 @@ def eupi_inverse_sections(q: EUPIInvQ, a0: float) -> list[Section]:
         _sec("eupi_upi_r_q15", q.upi.r_q15), _sec("eupi_upi_a_q24", q.upi.a_q24),
         _sec("eupi_upi_w_q24", q.upi.w_q24), _sec("eupi_poly_q24", q.p_q24),
     ]
+
+
+def cross_coupling_sections(k, x_source: int = 0) -> list[Section]:
+    """Sections of a ``cross_coupling`` table from the xcouple kernel's quantized
+    coefficients (:class:`piezoctl.golden.xcouple.XCoef` of integers, checked
+    as the firmware checks them). ``x_source``: 0 = the position input is this
+    axis' position, 1 = the other axis'."""
+    from ..golden import xcouple as gxc
+    if x_source not in (0, 1):
+        raise TableImageError("out_of_range", "x_source must be 0 or 1")
+    try:
+        gxc.check(k)
+    except (ValueError, fixed.QOverflowError) as exc:
+        raise TableImageError("out_of_range", str(exc)) from None
+    scal = [k.m, k.n_ch, k.n_pow, k.n_deg, k.u_center, k.u_gain, k.x_center, k.x_gain, x_source]
+    return [_sec("xc_scalars", scal), _sec("xc_a_q24", k.a), _sec("xc_b_q24", k.b), _sec("xc_e_q24", k.e),
+            _sec("xc_eta_q24", k.eta), _sec("xc_xi_q24", k.xi)]
