@@ -97,11 +97,11 @@ static void no_violation(void)
 }
 
 /* The board, the stage behind it and the DAQ controller, at rest under the safe drive. */
-static piezo_daq_scale_t bring_up(const char *text, const fake_board_t *b, const char *cal, const fake_wire_t *w,
+static piezo_scale_t bring_up(const char *text, const fake_board_t *b, const char *cal, const fake_wire_t *w,
                                   int32_t fb_div, piezo_ctl_cfg_t *cc_out)
 {
     piezo_ctl_cfg_t cc;
-    piezo_daq_scale_t sc;
+    piezo_scale_t sc;
     if (piezo_daq_config_parse(text, "closed-loop.cfg", &dcfg, err, sizeof err) != 0) {
         fail_msg("%s", err);
     }
@@ -148,8 +148,8 @@ static double run_1716(int ci, double f)
     static const fake_wire_t w = {1, 0, 0, 3, -2.0, 2.39996337890625};
     fake_board_t b = fake_board_pci1716();
     piezo_ctl_cfg_t cc, sil_cc;
-    piezo_sil_scale_t ssc;
-    piezo_daq_scale_t sc;
+    piezo_scale_t ssc;
+    piezo_scale_t sc;
     piezo_ctl_t *c[2];
     const uint32_t period = (uint32_t)lround(10000.0 / f);
     const uint32_t n_settle = period * (f < 5.0 ? 2u : 4u), n_meas = n_settle;
@@ -202,7 +202,7 @@ static double run_1716(int ci, double f)
     for (uint32_t k = 0; k < n_settle + n_meas; k++) {
         both_tick(1, RAMP_TICKS + 1u + k);
         if (k >= n_settle) {
-            double e = piezo_daq_q15_to_um(&sc, ctl.sig[PIEZO_SIG_REF]) - stage_true_um(&stage, 0);
+            double e = piezo_scale_q15_to_um(&sc, ctl.sig[PIEZO_SIG_REF]) - stage_true_um(&stage, 0);
             se += e * e;
         }
     }
@@ -256,7 +256,7 @@ static double hold_6221(int calibrated, double setpoint_um, double *predicted_um
     static const fake_wire_t w = {1, 0, 0, 3, 10.0, 1.2};
     const double g_in = 0.004, o_in = 0.003;
     fake_board_t b = fake_board_pci6221();
-    piezo_daq_scale_t sc;
+    piezo_scale_t sc;
     double sum = 0.0, v_set;
     const uint32_t n_settle = 5000u, n_meas = 2000u;
     b.sub[0].gain_error = g_in;
@@ -272,7 +272,7 @@ static double hold_6221(int calibrated, double setpoint_um, double *predicted_um
     assert_int_equal(daq.ai[0].conv, calibrated ? PIEZO_DAQ_CONV_SOFTCAL : PIEZO_DAQ_CONV_IDEAL);
     assert_int_equal(daq.ao[0].conv, calibrated ? PIEZO_DAQ_CONV_SOFTCAL : PIEZO_DAQ_CONV_IDEAL);
     assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_FEEDBACK), PIEZO_OK);
-    ctl.setpoint_q15 = piezo_daq_um_to_q15(&sc, setpoint_um);
+    ctl.setpoint_q15 = piezo_scale_um_to_q15(&sc, setpoint_um);
     assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
     for (uint32_t k = 0; k < n_settle + n_meas; k++) {
         assert_int_equal(piezo_daq_loop_tick(&loop), 0);
@@ -288,11 +288,11 @@ static double hold_6221(int calibrated, double setpoint_um, double *predicted_um
     assert_true(ctl.st.armed);
     assert_int_equal(ctl.st.faults, 0);
     /* uncalibrated, the loop puts the input's reading v (1 + g) + o on the setpoint */
-    v_set = (piezo_daq_q15_to_um(&sc, ctl.setpoint_q15) - 10.0) / 1.2;
+    v_set = (piezo_scale_q15_to_um(&sc, ctl.setpoint_q15) - 10.0) / 1.2;
     *predicted_um = calibrated ? 0.0 : 1.2 * ((v_set - o_in) / (1.0 + g_in) - v_set);
     piezo_daq_close(&daq);
     no_violation();
-    return sum / n_meas - piezo_daq_q15_to_um(&sc, ctl.setpoint_q15);
+    return sum / n_meas - piezo_scale_q15_to_um(&sc, ctl.setpoint_q15);
 }
 
 static void test_calibration_in_the_loop(void **state)

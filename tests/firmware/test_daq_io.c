@@ -129,7 +129,7 @@ static void test_a_tick_is_two_instruction_lists_on_the_configured_channels(void
 {
     int32_t in[2], out[2] = {1000, 64000};
     piezo_ctl_cfg_t cc;
-    piezo_daq_scale_t sc;
+    piezo_scale_t sc;
     (void)state;
     parse(CFG_6221);
     open_6221(NULL, -1, 0.0, 0.0, 0.0, 0.0);
@@ -333,7 +333,7 @@ static void test_calibration_lacking_a_subdevice(void **state)
 static void test_scale_and_safe_code(void **state)
 {
     piezo_ctl_cfg_t cc;
-    piezo_daq_scale_t sc;
+    piezo_scale_t sc;
     (void)state;
     parse("device = /dev/comedi0\nflash = f\n[axis 0]\n" AO_OK AI_OK
           "amplifier.gain = 15\namplifier.offset_v = 1\nsensor.um_per_v = 1.2\nsensor.offset_um = 10\n"
@@ -344,10 +344,10 @@ static void test_scale_and_safe_code(void **state)
     assert_true(fabs(sc.drive_max_v - (1.0 + 15.0 * (-10.0 + 20.0 * 65536.0 / 65535.0))) < 1e-9);
     assert_true(fabs(sc.position_min_um - (-2.0)) < 1e-12);
     assert_true(fabs(sc.position_max_um - (10.0 + 1.2 * (-10.0 + 20.0 * 65536.0 / 65535.0))) < 1e-9);
-    assert_int_equal(cc.u_safe_q15, piezo_daq_volts_to_q15(&sc, 30.0));
+    assert_int_equal(cc.u_safe_q15, piezo_scale_volts_to_q15(&sc, 30.0));
     assert_int_equal(daq.safe_code[0], 32768 + cc.u_safe_q15);
-    assert_int_equal(cc.limit.min_q15, piezo_daq_volts_to_q15(&sc, -20.0));
-    assert_int_equal(cc.limit.max_q15, piezo_daq_volts_to_q15(&sc, 120.0));
+    assert_int_equal(cc.limit.min_q15, piezo_scale_volts_to_q15(&sc, -20.0));
+    assert_int_equal(cc.limit.max_q15, piezo_scale_volts_to_q15(&sc, 120.0));
     /* the safe drive through the board: 30 V within one output step (20 V / 65535 * 15) */
     assert_int_equal(piezo_daq_write_safe(&daq), 0);
     assert_true(fabs(15.0 * fake_comedi_output_volts(1, 0) + 1.0 - 30.0) <= 15.0 * 20.0 / 65535.0);
@@ -355,8 +355,8 @@ static void test_scale_and_safe_code(void **state)
     cfg.axis[0].amp_gain = -15.0;
     assert_int_equal(piezo_daq_ctl_config(&daq, &cfg, 0, &cc, &sc), PIEZO_OK);
     assert_true(sc.drive_min_v > sc.drive_max_v);
-    assert_int_equal(cc.limit.min_q15, piezo_daq_volts_to_q15(&sc, 120.0));
-    assert_int_equal(cc.limit.max_q15, piezo_daq_volts_to_q15(&sc, -20.0));
+    assert_int_equal(cc.limit.min_q15, piezo_scale_volts_to_q15(&sc, 120.0));
+    assert_int_equal(cc.limit.max_q15, piezo_scale_volts_to_q15(&sc, -20.0));
     assert_true(cc.limit.min_q15 < cc.limit.max_q15);
     /* a safe drive the output range cannot reach */
     cfg.axis[0].amp_gain = 15.0;
@@ -376,7 +376,7 @@ static void test_io_errors_leave_the_safe_drive(void **state)
 {
     static piezo_ctl_t ctl[2];
     piezo_ctl_cfg_t cc;
-    piezo_daq_scale_t sc;
+    piezo_scale_t sc;
     piezo_daq_loop_t loop;
     (void)state;
     parse(CFG_6221);

@@ -72,7 +72,7 @@ static void load_params(void)
 }
 
 /* The controller configuration of axis 0 with this test's feedback. */
-static piezo_ctl_cfg_t loop_cfg(piezo_sil_scale_t *sc)
+static piezo_ctl_cfg_t loop_cfg(piezo_scale_t *sc)
 {
     piezo_ctl_cfg_t cfg;
     assert_int_equal(piezo_sil_ctl_config(&params, 0, &cfg, sc), PIEZO_OK);
@@ -96,7 +96,7 @@ static int16_t sat16(double x)
 /* One run: returns the RMS errors [um] against the true and the measured displacement. */
 static void run_case(int fi, int ci, double *e_true, double *e_meas)
 {
-    piezo_sil_scale_t sc;
+    piezo_scale_t sc;
     piezo_ctl_cfg_t cfg = loop_cfg(&sc);
     piezo_ctl_t *c = &sil.ctl[0];
     const double f = freq_hz[fi];
@@ -154,7 +154,7 @@ static void run_case(int fi, int ci, double *e_true, double *e_meas)
     for (uint32_t k = 0; k < n_settle + n_meas; k++) {
         piezo_sil_tick(&sil);
         if (k >= n_settle) {
-            double r = piezo_sil_q15_to_um(&sc, c->sig[PIEZO_SIG_REF]);
+            double r = piezo_scale_q15_to_um(&sc, c->sig[PIEZO_SIG_REF]);
             double et = r - stage_true_um(&sil.stage, 0);
             double em = r - stage_adc_code_to_um(&sil.stage, 0, sil.adc[0]);
             se_t += et * et;
@@ -199,7 +199,7 @@ static void measure_all(void)
 
 static void test_scale_matches_the_host_tables(void **state)
 {
-    piezo_sil_scale_t sc;
+    piezo_scale_t sc;
     piezo_ctl_cfg_t cfg;
     (void)state;
     load_params();

@@ -62,7 +62,7 @@ static uint16_t upload(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
 /* One run; x[] gets axis 1's true displacement over the measured ticks. */
 static void run(int loop, int fi, int which, double *x, uint32_t n_meas, uint32_t n_wave_settle)
 {
-    piezo_sil_scale_t sc0, sc1;
+    piezo_scale_t sc0, sc1;
     piezo_ctl_cfg_t cfg0, cfg1;
     piezo_ctl_t *c0 = &sil.ctl[0], *c1 = &sil.ctl[1];
     const double f = freq_hz[fi];
@@ -89,14 +89,14 @@ static void run(int loop, int fi, int which, double *x, uint32_t n_meas, uint32_
 
     /* axis 1: holds 75 V of drive (feedforward) or the position it has there (feedback) */
     assert_int_equal(piezo_ctl_set_mode(c0, loop == LOOP_FB ? PIEZO_MODE_FEEDBACK : PIEZO_MODE_FEEDFORWARD), PIEZO_OK);
-    c0->setpoint_q15 = piezo_sil_volts_to_q15(&sc0, LEVEL_V);
+    c0->setpoint_q15 = piezo_scale_volts_to_q15(&sc0, LEVEL_V);
     if (loop == LOOP_FB) {
         /* the position axis 1 settles at under 75 V: from a feedforward run's level */
         c0->setpoint_q15 = (int16_t)XC_SIL_HOLD_Q15;
     }
     /* axis 2: DIRECT, its drive's offset first */
     assert_int_equal(piezo_ctl_set_mode(c1, PIEZO_MODE_DIRECT), PIEZO_OK);
-    c1->setpoint_q15 = piezo_sil_volts_to_q15(&sc1, 75.0);
+    c1->setpoint_q15 = piezo_scale_volts_to_q15(&sc1, 75.0);
     assert_int_equal(piezo_ctl_arm(c0, 1), PIEZO_OK);
     assert_int_equal(piezo_ctl_arm(c1, 1), PIEZO_OK);
     for (uint32_t k = 0; k < SETTLE_TICKS; k++) {

@@ -331,29 +331,8 @@ int piezo_daq_write_safe(piezo_daq_t *d)
     return rc;
 }
 
-static int16_t to_q15(double x, double lo, double hi)
-{
-    double q = floor((x - lo) / (hi - lo) * 65536.0 - 32768.0 + 0.5);
-    return (int16_t)(q < -32768.0 ? -32768.0 : (q > 32767.0 ? 32767.0 : q));
-}
-
-int16_t piezo_daq_volts_to_q15(const piezo_daq_scale_t *sc, double volts)
-{
-    return to_q15(volts, sc->drive_min_v, sc->drive_max_v);
-}
-
-int16_t piezo_daq_um_to_q15(const piezo_daq_scale_t *sc, double um)
-{
-    return to_q15(um, sc->position_min_um, sc->position_max_um);
-}
-
-double piezo_daq_q15_to_um(const piezo_daq_scale_t *sc, int32_t q15)
-{
-    return sc->position_min_um + ((double)q15 + 32768.0) / 65536.0 * (sc->position_max_um - sc->position_min_um);
-}
-
 int piezo_daq_ctl_config(piezo_daq_t *d, const piezo_daq_config_t *cfg, int axis, piezo_ctl_cfg_t *ctl,
-                         piezo_daq_scale_t *scale)
+                         piezo_scale_t *scale)
 {
     const piezo_daq_axis_cfg_t *a;
     int16_t lo, hi;
@@ -367,28 +346,14 @@ int piezo_daq_ctl_config(piezo_daq_t *d, const piezo_daq_config_t *cfg, int axis
     scale->position_min_um = a->sensor_offset_um + a->sensor_um_per_v * piezo_daq_code_volts(&d->ai[axis], 0.0);
     scale->position_max_um = a->sensor_offset_um + a->sensor_um_per_v * piezo_daq_code_volts(&d->ai[axis], 65536.0);
 
-    memset(ctl, 0, sizeof *ctl);
-    /* DAC: code = 32768 + q15; ADC: q15 = code - 32768; the rail codes are implausible */
-    ctl->dac_zero = 32768;
-    ctl->dac_gain_q16 = 65536;
-    ctl->dac_min = 0;
-    ctl->dac_max = PIEZO_DAQ_CODE_MAX;
-    ctl->adc_zero = 32768;
-    ctl->sensor_gain_q16 = 65536;
-    ctl->adc_min_ok = 1;
-    ctl->adc_max_ok = PIEZO_DAQ_CODE_MAX - 1;
-    ctl->max_jump_q15 = 16384; /* half the range in 100 us: no stage, even ringing */
-    ctl->bad_limit = 3;
-    ctl->overrun_limit = 100;
-    ctl->pid.out_min_q15 = -32768;
-    ctl->pid.out_max_q15 = 32767;
-    ctl->notch.b0_q24 = 1 << 24;
-    ctl->u_safe_q15 = piezo_daq_volts_to_q15(scale, a->safe_v);
-    lo = a->has_drive_min ? piezo_daq_volts_to_q15(scale, a->drive_min_v) : -32768;
-    hi = a->has_drive_max ? piezo_daq_volts_to_q15(scale, a->drive_max_v) : 32767;
+    /* 16-bit codes over the comedi range: DAC code = 32768 + q15, q15 = ADC code - 32768 */
+    (void)piezo_converter_cfg(ctl, 16, 16);
+    ctl->u_safe_q15 = piezo_scale_volts_to_q15(scale, a->safe_v);
+    lo = a->has_drive_min ? piezo_scale_volts_to_q15(scale, a->drive_min_v) : -32768;
+    hi = a->has_drive_max ? piezo_scale_volts_to_q15(scale, a->drive_max_v) : 32767;
     if (scale->drive_max_v < scale->drive_min_v) { /* inverting amplifier: volts fall as q15 rises */
-        int16_t t = a->has_drive_max ? piezo_daq_volts_to_q15(scale, a->drive_max_v) : -32768;
-        hi = a->has_drive_min ? piezo_daq_volts_to_q15(scale, a->drive_min_v) : 32767;
+        int16_t t = a->has_drive_max ? piezo_scale_volts_to_q15(scale, a->drive_max_v) : -32768;
+        hi = a->has_drive_min ? piezo_scale_volts_to_q15(scale, a->drive_min_v) : 32767;
         lo = t;
     }
     if (lo > hi || ctl->u_safe_q15 < lo || ctl->u_safe_q15 > hi) {

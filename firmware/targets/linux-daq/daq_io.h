@@ -39,6 +39,7 @@
 #include <comedilib.h>
 
 #include "controller.h"
+#include "converters.h"
 #include "daq_config.h"
 
 #define PIEZO_DAQ_CODE_MAX 65535 /* the controller's code range: 0..65535 over the comedi range */
@@ -56,12 +57,6 @@ typedef struct {
     comedi_polynomial_t poly;   /* the converter, unless conv is IDEAL */
     int conv;                   /* enum piezo_daq_conv */
 } piezo_daq_chan_t;
-
-/* Physical value of q15 -32768 (code 0) and +32768 (code 65536). */
-typedef struct {
-    double drive_min_v, drive_max_v;          /* amplifier output [V] */
-    double position_min_um, position_max_um;
-} piezo_daq_scale_t;
 
 typedef struct {
     comedi_t *dev;
@@ -108,12 +103,8 @@ double piezo_daq_code_volts(const piezo_daq_chan_t *ch, double code);
  *  off until configured), its physical scale, and safe_code[axis]. The drive
  *  clamp is drive.min_v..drive.max_v when given. Returns a piezo_err code. */
 int piezo_daq_ctl_config(piezo_daq_t *d, const piezo_daq_config_t *cfg, int axis, piezo_ctl_cfg_t *ctl,
-                         piezo_daq_scale_t *scale);
+                         piezo_scale_t *scale);
 
-/** q15 of a drive voltage / of a position on a scale, clamped. */
-int16_t piezo_daq_volts_to_q15(const piezo_daq_scale_t *sc, double volts);
-int16_t piezo_daq_um_to_q15(const piezo_daq_scale_t *sc, double um);
-double piezo_daq_q15_to_um(const piezo_daq_scale_t *sc, int32_t q15);
 
 /* The closed loop of the target: the board and one controller per axis. */
 typedef struct {

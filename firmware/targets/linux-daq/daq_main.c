@@ -70,7 +70,7 @@ int main(int argc, char **argv)
     piezo_tcp_server_t tcp[PIEZO_DAQ_MAX_AXES];
     piezo_flash_file_t flash[PIEZO_DAQ_MAX_AXES];
     piezo_storage_t store[PIEZO_DAQ_MAX_AXES];
-    piezo_daq_scale_t scale[PIEZO_DAQ_MAX_AXES];
+    piezo_scale_t scale[PIEZO_DAQ_MAX_AXES];
     piezo_daq_loop_t loop;
     piezo_rt_result_t rt;
     int n_open = 0, status = 0;

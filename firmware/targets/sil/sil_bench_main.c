@@ -31,7 +31,7 @@ static piezo_sil_t sil; /* large: not on the stack */
 static int setup_axis(piezo_sil_t *s, const stage_params *p, int axis, int dcc, int tuned)
 {
     piezo_ctl_cfg_t cfg;
-    piezo_sil_scale_t sc;
+    piezo_scale_t sc;
     piezo_ctl_t *c = &s->ctl[axis];
     const uint8_t *img = dcc ? sil_dcc_img : sil_eupi_img;
     uint32_t len = dcc ? SIL_DCC_IMG_LEN : SIL_EUPI_IMG_LEN;

@@ -5,28 +5,7 @@
 
 #include "piezo_err.h"
 
-static int16_t to_q15(double x, double lo, double hi)
-{
-    double q = floor((x - lo) / (hi - lo) * 65536.0 - 32768.0 + 0.5);
-    return (int16_t)(q < -32768.0 ? -32768.0 : (q > 32767.0 ? 32767.0 : q));
-}
-
-int16_t piezo_sil_volts_to_q15(const piezo_sil_scale_t *sc, double volts)
-{
-    return to_q15(volts, sc->drive_min_v, sc->drive_max_v);
-}
-
-int16_t piezo_sil_um_to_q15(const piezo_sil_scale_t *sc, double um)
-{
-    return to_q15(um, sc->position_min_um, sc->position_max_um);
-}
-
-double piezo_sil_q15_to_um(const piezo_sil_scale_t *sc, int32_t q15)
-{
-    return sc->position_min_um + ((double)q15 + 32768.0) / 65536.0 * (sc->position_max_um - sc->position_min_um);
-}
-
-int piezo_sil_ctl_config(const stage_params *p, int axis, piezo_ctl_cfg_t *cfg, piezo_sil_scale_t *scale)
+int piezo_sil_ctl_config(const stage_params *p, int axis, piezo_ctl_cfg_t *cfg, piezo_scale_t *scale)
 {
     const stage_axis_params *a;
     int db, ab;
@@ -36,33 +15,14 @@ int piezo_sil_ctl_config(const stage_params *p, int axis, piezo_ctl_cfg_t *cfg, 
     a = &p->axis[axis];
     db = a->dac.bits;
     ab = a->adc.bits;
-    if (db < 1 || db > 16 || ab < 1 || ab > 16) {
-        return PIEZO_ERANGE; /* q15 carries at most 16 bits */
+    if (piezo_converter_cfg(cfg, db, ab) != PIEZO_OK) {
+        return PIEZO_ERANGE;
     }
-    memset(cfg, 0, sizeof *cfg);
-    /* DAC: code = 2^(b-1) + q15 * 2^b / 2^16 */
-    cfg->dac_zero = 1 << (db - 1);
-    cfg->dac_gain_q16 = 1 << db;
-    cfg->dac_min = 0;
-    cfg->dac_max = (1 << db) - 1;
-    /* ADC: q15 = (code - 2^(b-1)) * 2^(16-b); the rail codes are implausible */
-    cfg->adc_zero = 1 << (ab - 1);
-    cfg->sensor_gain_q16 = (int32_t)(1L << (32 - ab));
-    cfg->adc_min_ok = 1;
-    cfg->adc_max_ok = (1 << ab) - 2;
-    cfg->max_jump_q15 = 16384; /* half the range in 100 us: no stage, even ringing */
-    cfg->bad_limit = 3;
-    cfg->overrun_limit = 100;
-    cfg->limit.min_q15 = -32768;
-    cfg->limit.max_q15 = 32767;
-    cfg->pid.out_min_q15 = -32768;
-    cfg->pid.out_max_q15 = 32767;
-    cfg->notch.b0_q24 = 1 << 24;
     scale->drive_min_v = a->amp.gain * a->dac.v_min + a->amp.offset_v;
     scale->drive_max_v = a->amp.gain * a->dac.v_max + a->amp.offset_v;
     scale->position_min_um = a->adc.y_min_um;
     scale->position_max_um = a->adc.y_max_um;
-    cfg->u_safe_q15 = piezo_sil_volts_to_q15(scale, 0.0);
+    cfg->u_safe_q15 = piezo_scale_volts_to_q15(scale, 0.0);
     cfg->limit.min_q15 = cfg->u_safe_q15 < 0 ? cfg->u_safe_q15 : -32768;
     return PIEZO_OK;
 }

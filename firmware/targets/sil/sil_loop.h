@@ -11,7 +11,7 @@
  * controller's drive of the previous tick (what that axis' DAC holds). The converters map the full q15 range
  * onto their codes (q15 = code - 2^(bits-1), scaled to the bit width), and the
  * physical meaning of q15 full scale follows from the stage's DAC, amplifier
- * and ADC parameters (piezo_sil_scale_t).
+ * and ADC parameters (piezo_scale_t).
  */
 #ifndef PIEZO_SIL_LOOP_H
 #define PIEZO_SIL_LOOP_H
@@ -19,19 +19,14 @@
 #include <stdint.h>
 
 #include "controller.h"
+#include "converters.h"
 #include "stage_model.h"
-
-/* Physical value of q15 -32768 (min) and +32768 (max). */
-typedef struct {
-    double drive_min_v, drive_max_v;       /* amplifier output [V] */
-    double position_min_um, position_max_um;
-} piezo_sil_scale_t;
 
 typedef struct {
     stage_t stage;
     int n_axes;
     piezo_ctl_t ctl[STAGE_MAX_AXES];
-    piezo_sil_scale_t scale[STAGE_MAX_AXES];
+    piezo_scale_t scale[STAGE_MAX_AXES];
     int32_t adc[STAGE_MAX_AXES];
     int32_t dac[STAGE_MAX_AXES];
     uint64_t ticks;
@@ -40,7 +35,7 @@ typedef struct {
 /** Controller configuration and scale for one axis of a stage: converter
  *  scaling from the bit widths, plausibility at the ADC rails, u_safe = 0 V,
  *  no slew limit (the amplifier has its own), PID off until configured. */
-int piezo_sil_ctl_config(const stage_params *p, int axis, piezo_ctl_cfg_t *cfg, piezo_sil_scale_t *scale);
+int piezo_sil_ctl_config(const stage_params *p, int axis, piezo_ctl_cfg_t *cfg, piezo_scale_t *scale);
 
 /** Stage at rest (seeded noise) and one controller per axis, disarmed, no table. */
 int piezo_sil_init(piezo_sil_t *s, const stage_params *p, uint64_t seed);
@@ -48,9 +43,5 @@ int piezo_sil_init(piezo_sil_t *s, const stage_params *p, uint64_t seed);
 /** One 10 kHz tick of every controller and the stage. */
 void piezo_sil_tick(piezo_sil_t *s);
 
-/** q15 of a drive voltage / of a position, clamped to the q15 range. */
-int16_t piezo_sil_volts_to_q15(const piezo_sil_scale_t *sc, double volts);
-int16_t piezo_sil_um_to_q15(const piezo_sil_scale_t *sc, double um);
-double piezo_sil_q15_to_um(const piezo_sil_scale_t *sc, int32_t q15);
 
 #endif /* PIEZO_SIL_LOOP_H */

@@ -154,7 +154,7 @@ int main(int argc, char **argv)
         return 2;
     }
     for (int i = 0; i < g_sil.n_axes; i++) {
-        const piezo_sil_scale_t *sc = &g_sil.scale[i];
+        const piezo_scale_t *sc = &g_sil.scale[i];
         piezo_regmap_init(&map[i], &g_sil.ctl[i]);
         map[i].axis = (uint16_t)i;
         map[i].n_axes = (uint16_t)g_sil.n_axes;

@@ -70,7 +70,7 @@ EUPI_OPTIONS = dict(eupi_n_cpi=12, eupi_n_upi=4, eupi_n_tilts=2, eupi_poly=3, eu
 
 @dataclass(frozen=True)
 class Scale:
-    """Physical value of q15 -32768 and +32768 (``piezo_sil_scale_t``)."""
+    """Physical value of q15 -32768 and +32768 (``piezo_scale_t``)."""
 
     drive_min_v: float
     drive_max_v: float
