@@ -7,8 +7,8 @@
  *   sil-stage --modbus-tcp HOST:PORT [--modbus-rtu-pty LINK] [--stage PARAMS.json]
  *             [--flash FILE] [--seed N] [--rtu-baud BAUD]
  *
- * PORT 0 picks a free port. Axis i (two-axis stages) is served on TCP port
- * PORT + i and on RTU unit id i + 1. Tables persist in FILE (a flash
+ * PORT 0 picks a free port for axis 0. Axis i (two-axis stages) is served on
+ * TCP port PORT + i (the picked port + i) and on RTU unit id i + 1. Tables persist in FILE (a flash
  * emulation; default $TMPDIR/piezoctl-sil-<port>.flash). One line on stdout
  * says when it is ready and where; on exit it prints the tick statistics, as
  * a sentence and as a `sil-stage: stats key=value ...` line.
@@ -164,7 +164,9 @@ int main(int argc, char **argv)
         map[i].position_min_nm = (int32_t)(sc->position_min_um * 1000.0);
         map[i].position_max_nm = (int32_t)(sc->position_max_um * 1000.0);
         regs[i] = piezo_regmap_regs(&map[i]);
-        if (piezo_tcp_server_open(&tcp[i], host, port == 0 ? 0 : (uint16_t)(port + i), (uint8_t)(i + 1), &regs[i]) != 0) {
+        /* PORT 0: axis 1 on a free port, axis i on that port + i (as for a given PORT) */
+        long p_i = port == 0 ? (i == 0 ? 0 : (long)piezo_tcp_server_port(&tcp[0]) + i) : port + i;
+        if (piezo_tcp_server_open(&tcp[i], host, (uint16_t)p_i, (uint8_t)(i + 1), &regs[i]) != 0) {
             fprintf(stderr, "sil-stage: cannot listen on %s:%ld: %s\n", host, port + i, strerror(errno));
             return 1;
         }

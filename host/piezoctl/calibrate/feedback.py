@@ -32,9 +32,13 @@ def group_delay_ticks(frf, tick_hz: float, f_max: float) -> int:
     return int(np.clip(np.round(tau * tick_hz), 0, 32))
 
 
-def resonance_hz(frf) -> float:
-    """Frequency of the largest magnitude above 10x the lowest measured frequency [Hz]."""
-    sel = frf.f_hz > 10 * frf.f_hz[0]
+def resonance_hz(frf, f_floor: float = 20.0) -> float:
+    """Frequency of the largest magnitude above ``f_floor`` and twice the lowest measured frequency [Hz].
+
+    (Not "10x the lowest": where the coherence drops the chirp's low end, the
+    lowest kept frequency can be 40 Hz and the 140 Hz mode of a two-axis stage
+    would be missed.)"""
+    sel = frf.f_hz > max(f_floor, 2 * frf.f_hz[0])
     i = int(np.argmax(np.where(sel, frf.mag, 0.0)))
     return float(frf.f_hz[i])
 
@@ -93,7 +97,11 @@ def design_feedback(frf, line_gain: float, tick_hz: float, *, fc_max: float = 12
     ts = 1.0 / tick_hz
     ki = 2 * np.pi * fc * ts * line_gain
     m, taps = zvd_shaper(f_res, zeta, tick_hz)
-    delay = group_delay_ticks(frf, tick_hz, f_res / 3.0)
+    # the delay from the phase below a third of the resonance; with fewer than 8
+    # coherent points there (a low mode, e.g. 140 Hz, above a chirp whose low end
+    # lost coherence) the slope is noise: no preview rather than a wrong one
+    enough = np.count_nonzero(frf.f_hz < f_res / 3.0) >= 8
+    delay = group_delay_ticks(frf, tick_hz, f_res / 3.0) if enough else 0
     return {"resonance_hz": f_res, "damping": zeta, "crossover_hz": fc, "kp": 0.2 * line_gain, "ki": ki,
             "notch": notch(f_res, tick_hz), "delay_ticks": delay, "shaper_ticks": m, "shaper_q15": taps,
             "preview_ticks": int(min(32, delay + m))}

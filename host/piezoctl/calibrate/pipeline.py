@@ -54,6 +54,22 @@ def _rms(x) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
+def _park(ctl, bottom_q15: int, seconds: float = 0.2, steps: int = 40) -> None:
+    """Disarm after ramping the reference to ``bottom_q15`` (a drive in DIRECT
+    mode, a position otherwise): dropping a raised drive to u_safe at once
+    rings a low first mode (140 Hz on the two-axis stage) past the sensor's
+    range, which latches the sensor fault."""
+    st = ctl.status()
+    if st["armed"]:
+        q0 = st["reference_q15"]
+        ctl.write("setpoint_q15", q0)
+        ctl.write("ref_source", 0)
+        for k in range(1, steps + 1):
+            ctl.write("setpoint_q15", int(round(q0 + (bottom_q15 - q0) * k / steps)))
+            time.sleep(seconds / steps)
+    ctl.arm(False)
+
+
 def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 1.0) -> dict:
     """Calibrate the controller ``ctl`` and write ``out``/{model.json, table.bin, summary.json, report.html}.
 
@@ -91,7 +107,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         raise CliError(f"the controller faulted during the excitation: {', '.join(st['faults_names'])}")
     save_recording(data_dir / "chirp.csv", {"t": ch["t"], "u": ch["u"], "y": ch["y"]},
                    meta={"source": "piezoctl calibrate"})
-    ctl.arm(False)
+    _park(ctl, -32768)
     y_lo, y_hi = float(np.min(forc[0]["y"])), float(np.max(forc[0]["y"]))
     _log(2, f"excitation: {len(forc)} nested sweeps at {f_sweep:g} Hz (stroke {y_hi - y_lo:.2f} um), "
             f"chirp 5..2000 Hz: {sum(len(r['t']) for r in forc) + len(ch['t'])} samples recorded")
@@ -156,7 +172,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
     tracking = {}
     compensated = "ff_feedback"
     for mode in ("open_loop", compensated):
-        ctl.arm(False)
+        _park(ctl, ctl.q15_position(y_lo))
         if mode == "open_loop":
             ctl.configure_shaper()
             ctl.configure_feedback()
@@ -171,7 +187,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         for f in FREQS:
             runs[(mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=2 if f < 10 else 5)
         runs[(mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
-    ctl.arm(False)
+    _park(ctl, ctl.q15_position(y_lo))
     for key in list(FREQS) + ["multitone"]:
         unc = _rms(runs[("open_loop", key)]["ref"] - runs[("open_loop", key)]["y"])
         com = _rms(runs[(compensated, key)]["ref"] - runs[(compensated, key)]["y"])

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..ident import get_kind
 
-__all__ = ["write_report", "figure_html"]
+__all__ = ["write_report", "figure_html", "append_coupling_html"]
 
 
 def figure_html(fig) -> str:
@@ -88,5 +88,26 @@ def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse}"
             "td,th{border:1px solid #aaa;padding:4px 8px;text-align:right}</style></head><body>"
             + "\n".join(body) + "</body></html>")
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(page)
+
+
+def append_coupling_html(path, coupling: dict) -> None:
+    """Add the cross-axis compensation section (two-axis stages) to a written report."""
+    rows = []
+    for axis, c in sorted(coupling.items()):
+        for f, v in c["by_frequency"].items():
+            rows.append(f"<tr><td>{html.escape(axis)}</td><td>{c['from_axis']}</td><td>{html.escape(f)} Hz sine</td>"
+                        f"<td>{v['rmse_uncompensated_um'] * 1e3:.2f}</td><td>{v['rmse_compensated_um'] * 1e3:.2f}</td>"
+                        f"<td>{v['reduction']:.1f}x</td></tr>")
+    tables = ", ".join(f"axis {a}: {html.escape(c['table_crc_hex'])}" for a, c in sorted(coupling.items()))
+    section = ("<h2>Cross-axis coupling</h2><p>Error of an axis holding mid stroke while the other axis "
+               "tracks a sine over 60 % of its stroke, with the cross-coupling compensation bypassed and "
+               f"applied (coupling tables {tables}).</p><table><tr><th>axis</th><th>from axis</th>"
+               "<th>other axis</th><th>RMS error uncompensated [nm]</th><th>compensated [nm]</th>"
+               "<th>reduction</th></tr>" + "".join(rows) + "</table>")
+    with open(path, encoding="utf-8") as fh:
+        page = fh.read()
+    page = page.replace("</body></html>", section + "</body></html>")
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(page)

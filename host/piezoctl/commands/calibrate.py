@@ -5,7 +5,11 @@ by the firmware), identification with held-out model choice and dynamics,
 checks, table build and flash, acceptance test (triangles at 1, 10, 50 Hz and
 a multitone, uncompensated and compensated; rollback if worse), report.
 Writes DIR/model.json, DIR/table.bin, DIR/summary.json, DIR/report.html and
-DIR/data/ (the recordings). ``docs/calibrate.md`` describes it.
+DIR/data/ (the recordings). ``docs/calibrate.md`` describes it. On a two-axis
+controller (identity n_axes == 2; axis 2 at TCP port PORT + 1, or unit id 2)
+axis 2 is calibrated the same way into DIR/axis2/, then the cross-axis
+coupling both ways (``piezoctl.calibrate.coupling``): coupling tables flashed,
+``coupling`` added to summary.json and report.html.
 """
 
 from __future__ import annotations
@@ -29,14 +33,24 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _calibrate(port: str, out: pathlib.Path, kinds) -> dict:
+    """Axis 1; on a two-axis controller also axis 2 (DIR/axis2) and the cross-axis coupling."""
+    ctl = connect(port)
+    summary = calibrate(ctl, out, kinds=kinds)
+    if ctl.identity.n_axes == 2:
+        from ..calibrate.coupling import calibrate_two_axis
+        summary = calibrate_two_axis(ctl, port, out, summary, kinds=kinds)
+    return summary
+
+
 def run(args) -> int:
     out = pathlib.Path(args.out)
     kinds = tuple(k.strip() for k in args.models.split(",") if k.strip())
     if args.target == "sil":
         with SilTarget(stage=args.stage) as sil:
-            summary = calibrate(connect(sil.port), out, kinds=kinds)
+            summary = _calibrate(sil.port, out, kinds)
     else:
-        summary = calibrate(connect(args.target), out, kinds=kinds)
+        summary = _calibrate(args.target, out, kinds)
     print(f"calibrated: {summary['model']} -> {summary['table_kind']} table {summary['table_crc_hex']}; "
           f"report {out / 'report.html'}")
     return 0

@@ -1,0 +1,271 @@
+"""Two-axis stages: calibrate the second axis, then the cross-axis coupling.
+
+After each axis' own hysteresis calibration (:func:`piezoctl.calibrate.pipeline.calibrate`,
+axis 2 into ``DIR/axis2/``), for each receiving axis i and the other axis j:
+
+1. identification: axis i held in DIRECT mode at 3 drive levels (its
+   positions); at each, after 1 s of settling, axis j (DIRECT) plays a chirp
+   1 -> 60 Hz over 3 s, +-0.8 of its half drive range around mid drive (wider than
+   the evaluation's drive: the polynomial must not extrapolate), and axis i's
+   recorder keeps y and u2 (the other axis' drive as axis i's controller sees
+   it); y minus its straight-line trend (axis i's creep) is the coupling;
+2. the coupling map u2 -> y at position x (axis i's mean position) is fitted
+   with the hammerstein kind at the firmware kernel's settings
+   (:data:`piezoctl.tables.coupling.KERNEL_SETTINGS`), the pairs aligned as
+   the controller acts on them (input of tick k, output seen from tick k + 2);
+3. the table (output: the coupling divided by axis i's static gain, the slope
+   of its calibrated straight line) is uploaded, read back, committed and
+   confirmed through ``coupling_table_crc``;
+4. evaluation: both axes in their compensated mode (their tables, feedback,
+   shaper), axis i holding mid stroke while axis j tracks a sine over 60 % of
+   its stroke at 1 and 10 Hz; axis i's RMS error with the compensation
+   bypassed (``xcouple_bypass`` = 1) and applied.
+
+``summary.json`` (axis 1's) gains ``coupling``: per axis (``"1"``, ``"2"``:
+the receiving axis) ``rmse_uncompensated_um``, ``rmse_compensated_um`` and
+``reduction`` at 10 Hz, ``by_frequency`` for both frequencies, the table CRC
+and the fit; and ``axes``: where axis 2's own calibration is.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import struct
+import sys
+import time
+import zlib
+
+import numpy as np
+
+from ..errors import CliError
+from ..ident import hammerstein as ham
+from ..tables.coupling import KERNEL_SETTINGS, coupling_table
+from ..transport import open_port
+
+__all__ = ["other_axis_port", "identify_coupling", "flash_coupling", "evaluate_coupling", "calibrate_two_axis"]
+
+LEAD = 2                       # ticks: a drive change at tick k shows from the sample of tick k + 2
+LEVELS = (0.3, 0.5, 0.7)       # axis i's drive levels (fractions of the range)
+CHIRP_S = 3.0
+SETTLE_S = 1.0
+EVAL_FREQS = (1.0, 10.0)
+
+
+def _log(text: str) -> None:
+    print(f"[coupling] {text}", file=sys.stderr, flush=True)
+
+
+def other_axis_port(port: str, axis: int = 2) -> tuple[str, int]:
+    """(port, unit id) of axis ``axis`` (1-based) of the controller at ``port``.
+
+    TCP: axis i is served on port PORT + i - 1 (unit id i); RTU and USB: the
+    same line, unit id i.
+    """
+    if port.startswith("tcp:"):
+        head, _, p = port.rpartition(":")
+        return f"{head}:{int(p) + axis - 1}", axis
+    return port, axis
+
+
+def connect_axis(port: str, axis: int = 2):
+    from ..device import Controller
+    p, unit = other_axis_port(port, axis)
+    return Controller(open_port(p, unit=unit, timeout=1.0))
+
+
+def _hold_direct(ctl, q15: int) -> None:
+    """DIRECT mode holding drive ``q15``, reached by a ramp (a drive step rings a
+    low first mode past the sensor's range: the sensor fault)."""
+    from .pipeline import _park
+    st = ctl.status()
+    if not (st["armed"] and st["mode"] == 5):
+        _park(ctl, -32768)
+        ctl.command("stop_wave")
+        ctl.set_mode("direct")
+        ctl.write("setpoint_q15", -32768)
+        ctl.write("ref_source", 0)
+        ctl.arm(True)
+        q0 = -32768
+    else:
+        q0 = st["reference_q15"]
+        ctl.write("setpoint_q15", q0)
+        ctl.write("ref_source", 0)
+    for k in range(1, 41):
+        ctl.write("setpoint_q15", int(round(q0 + (q15 - q0) * k / 40)))
+        time.sleep(0.3 / 40)
+
+
+def identify_coupling(ci, cj) -> dict:
+    """Records of the coupling into axis i (controller ``ci``) from axis j (``cj``).
+
+    Returns ``{"u": [...], "x": [...], "y": [...]}`` (aligned, physical units).
+    """
+    tick = ci.identity.tick_hz
+    frames = int(CHIRP_S * tick) + int(0.2 * tick)
+    us, xs, ys = [], [], []
+    for lv in LEVELS:
+        _hold_direct(ci, int(round((2 * lv - 1) * 32767)))
+        _hold_direct(cj, 0)
+        time.sleep(SETTLE_S)
+        cj.configure_wave("chirp", offset_q15=0, amplitude_q15=int(0.8 * 32767), f_hz=1.0, f_end_hz=60.0,
+                          duration_s=CHIRP_S)
+        ci.configure_recorder(["y", "u2"], trigger="immediate")
+        ci.command("arm_recorder")
+        cj.command("start_wave")
+        deadline = time.monotonic() + 3 * CHIRP_S + 10
+        while ci.status()["rec_frames"] < frames // 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        data = ci.read_recording(2)[:frames]
+        cj.command("stop_wave")
+        if data.shape[0] < frames:
+            raise CliError("coupling identification: the recorder did not fill in time")
+        y = ci.to_physical("y", data[:, 0])
+        u2 = cj.scale.drive_from_fs(data[:, 1] / 32768.0)   # the other axis' drive, its own scale
+        t = np.arange(y.size) / tick
+        trend = np.polyval(np.polyfit(t, y, 1), t)
+        us.append(u2[:u2.size - LEAD])
+        ys.append((y - trend)[LEAD:])
+        xs.append(np.full(u2.size - LEAD, float(np.mean(y))))
+    from .pipeline import _park
+    for c in (ci, cj):
+        _park(c, -32768)
+    return {"u": us, "x": xs, "y": ys}
+
+
+def flash_coupling(ctl, img: bytes, timeout_s: float = 2.0) -> int:
+    """Upload, verify, commit a coupling table; wait until it runs. Returns its CRC."""
+    crc = struct.unpack_from("<I", img, len(img) - 4)[0]
+    ctl.upload_table(img)
+    back = ctl.read_staged(len(img))
+    if back != img or zlib.crc32(back[:-4]) & 0xFFFFFFFF != crc:
+        raise CliError("coupling table: the read-back differs from the upload")
+    reason = ctl.commit_table()
+    if reason != "ok":
+        raise CliError(f"coupling table refused by the controller: {reason}")
+    deadline = time.monotonic() + timeout_s
+    while ctl.status()["coupling_table_crc"] != crc:
+        if time.monotonic() > deadline:
+            raise CliError("coupling table committed but not running")
+        time.sleep(0.02)
+    return crc
+
+
+def _configure_compensated(ctl, comp: dict) -> None:
+    from .pipeline import _park
+    _park(ctl, -32768 if ctl.status()["mode"] == 5 else ctl.q15_position(comp["stroke"][0]))
+    ctl.command("stop_wave")
+    ctl.configure_shaper(comp["shaper_ticks"], comp["shaper_q15"], comp["preview_ticks"])
+    ctl.configure_feedback(kp=comp["kp"], ki=comp["ki_per_tick"], notch=_notch(comp, ctl.identity.tick_hz))
+    ctl.set_mode(comp["mode"])
+
+
+def _notch(comp: dict, tick_hz: float):
+    from .feedback import notch
+    return notch(comp["notch_hz"], tick_hz)
+
+
+def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict) -> dict:
+    """Axis i's RMS error [um] holding mid stroke while axis j tracks sines, bypassed and compensated."""
+    from .pipeline import _park
+    out = {}
+    tick = ci.identity.tick_hz
+    for f in EVAL_FREQS:
+        res = {}
+        for bypass in (1, 0):
+            _configure_compensated(ci, comp_i)
+            ci.configure("xcouple_bypass", bypass)
+            _configure_compensated(cj, comp_j)
+            mid_i = 0.5 * (comp_i["stroke"][0] + comp_i["stroke"][1])
+            ci.set_setpoint_um(mid_i)
+            ci.arm(True)
+            lo, hi = comp_j["stroke"]
+            cj.configure_wave("sine", offset_q15=cj.q15_position(0.5 * (lo + hi)),
+                              amplitude_q15=int(round(0.3 * (hi - lo) / cj.scale.p_half * 32768)), f_hz=f)
+            cj.arm(True)
+            cj.command("start_wave")
+            time.sleep(max(1.0, 2.0 / f))              # settle
+            periods = 2 if f < 5 else 10
+            frames = int(round(periods / f * tick))
+            cols = ci.capture(["err"], frames, trigger="immediate")
+            res[bypass] = float(np.sqrt(np.mean(cols["err"] ** 2)))
+            cj.command("stop_wave")
+            for c, comp in ((ci, comp_i), (cj, comp_j)):
+                _park(c, c.q15_position(comp["stroke"][0]))
+        ci.configure("xcouple_bypass", 0)
+        out[f"{f:g}"] = {"rmse_uncompensated_um": res[1], "rmse_compensated_um": res[0],
+                         "reduction": res[1] / res[0] if res[0] > 0 else float("inf")}
+    return out
+
+
+def _comp_of(summary: dict, out: pathlib.Path) -> dict:
+    """The axis' compensated configuration and the stroke it was calibrated over [um]."""
+    from ..io.recording import load_recording
+    c = dict(summary["compensation"])
+    y = load_recording(out / summary["files"]["data"] / "sweep_0.csv").y
+    c["stroke"] = (float(np.min(y)), float(np.max(y)))
+    return c
+
+
+def calibrate_two_axis(c1, port: str, out: pathlib.Path, summary1: dict, *, kinds=("eupi", "kp")) -> dict:
+    """Axis 2's own calibration into ``out/axis2``, then the coupling both ways; returns axis 1's summary with ``coupling``."""
+    from .pipeline import calibrate
+    from .report import append_coupling_html
+    t0 = time.monotonic()
+    c2 = connect_axis(port, 2)
+    if c2.identity.axis != 1:
+        raise CliError(f"{port}: axis 2 answers as axis {c2.identity.axis + 1}")
+    _log("axis 2: its own calibration")
+    summary2 = calibrate(c2, out / "axis2", kinds=kinds)
+    ctls = {1: c1, 2: c2}
+    sums = {1: summary1, 2: summary2}
+    dirs = {1: out, 2: out / "axis2"}
+    for a, c in ctls.items():
+        # a fault latched while this axis sat disarmed during the other's calibration
+        # (the other's resonance rings it through the coupling): reported, cleared; a
+        # persistent one latches again and stops the arm below
+        st = c.status()
+        if st["faults"]:
+            _log(f"axis {a}: faults latched while idle: {', '.join(st['faults_names'])}; cleared")
+            c.command("clear_faults")
+    coupling = {}
+    for i, j in ((1, 2), (2, 1)):
+        ci, cj = ctls[i], ctls[j]
+        data = identify_coupling(ci, cj)
+        settings = dict(KERNEL_SETTINGS)
+        params = ham.fit_arrays(data["u"], data["x"], data["y"], **settings)
+        resid = [float(np.sqrt(np.mean((y - ham.predict(params, u, x)) ** 2)) / np.ptp(y))
+                 for u, x, y in zip(data["u"], data["x"], data["y"])]
+        line = _line_gain(dirs[i], ci)
+        drive_per_um = line / ci.scale.p_half
+        tab = coupling_table(params, cj.scale, ci.scale, drive_per_um, x_source=0,
+                             table_version=int(time.time()), fit_nrmse=float(np.mean(resid)),
+                             build_time=int(time.time()))
+        (out / f"coupling_table_axis{i}.bin").write_bytes(tab.image)
+        crc = flash_coupling(ci, tab.image)
+        ev = evaluate_coupling(ci, cj, _comp_of(sums[i], dirs[i]), _comp_of(sums[j], dirs[j]))
+        head = ev["10"]
+        coupling[str(i)] = {"from_axis": j, "rmse_uncompensated_um": head["rmse_uncompensated_um"],
+                            "rmse_compensated_um": head["rmse_compensated_um"], "reduction": head["reduction"],
+                            "by_frequency": ev, "table_crc_hex": f"{crc:#010x}",
+                            "table": f"coupling_table_axis{i}.bin", "fit_nrmse": resid,
+                            "drive_per_um": drive_per_um, "line_gain": line}
+        _log(f"axis {i} from axis {j}: table {crc:#010x}; " + ", ".join(
+            f"{k} Hz {v['rmse_uncompensated_um'] * 1e3:.1f} -> {v['rmse_compensated_um'] * 1e3:.1f} nm"
+            for k, v in ev.items()))
+    summary1 = dict(summary1)
+    summary1["coupling"] = coupling
+    summary1["axes"] = {"2": {"summary": "axis2/summary.json", "model": summary2["model"],
+                              "table_crc_hex": summary2["table_crc_hex"], "tracking": summary2["tracking"]}}
+    summary1["coupling_duration_s"] = time.monotonic() - t0
+    (out / "summary.json").write_text(json.dumps(summary1, indent=2, sort_keys=True))
+    append_coupling_html(out / "report.html", coupling)
+    return summary1
+
+
+def _line_gain(axis_dir: pathlib.Path, ctl) -> float:
+    """Axis i's uncompensated straight line [drive FS per position FS]: 1 / its static gain,
+    from the model its calibration flashed (what the feedback design uses too)."""
+    from ..io.modelfile import load_model
+    from ..tables.from_model import compile_model
+    return float(compile_model(load_model(axis_dir / "model.json"), ctl.scale).line[0])
