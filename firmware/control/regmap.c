@@ -120,6 +120,9 @@ static int16_t rec_sample(const piezo_ctl_t *c, uint32_t index)
 {
     int16_t frame[PIEZO_REC_MAX_CHANNELS];
     uint32_t nch = c->rec.cfg.n_channels, k = 0u;
+    if (index >= PIEZO_CTL_REC_SAMPLES) {
+        return 0; /* past any recording (as piezo_rec_read would say); bounds the loop below */
+    }
     while (index >= nch) { /* no division: readout is not in the tick, but the core links none */
         index -= nch;
         k++;
