@@ -53,6 +53,11 @@ def main(root: str) -> None:
         "raw_requests": raw(bytes([3, 0x10, 0, 0, 7])) + raw(bytes([4, 1, 0, 0, 40]))
         + raw(bytes([6, 0x10, 0, 0x50, 0xA5])) + raw(bytes([16, 0x20, 0x80, 0, 1, 2, 0, 3]))
         + raw(bytes([23, 0x20, 2, 0, 4, 0x20, 0, 0, 2, 4, 0, 0, 0, 8])),
+        # the recorder window far past any recording (rec_read_index 0xFFFFFF00): once a
+        # loop of ~2^32 steps per register in rec_sample, now answered at once
+        "rec_index_far": raw(bytes([16, 0x17, 0x00, 0, 2, 4, 0xFF, 0xFF, 0xFF, 0x00]))
+        + raw(bytes([3, 0x17, 0x02, 0, 125]))
+        + raw(bytes([23, 0x17, 0x02, 0, 125, 0x17, 0x00, 0, 2, 4, 0xFF, 0xFF, 0xFF, 0xF0])),
     }
     for name, data in seeds.items():
         with open(os.path.join(root, name), "wb") as fh:
