@@ -88,3 +88,34 @@ def test_bad_input_is_a_cli_error(tmp_path):
     r = _cli("diagnose", "--calibration", tmp_path / "missing.csv", "--recordings", tmp_path / "x.csv",
              "--out", tmp_path / "o")
     assert r.returncode == 2 and "missing.csv" in r.stderr
+
+
+def test_active_block_test_finds_a_localized_improvement_and_not_noise():
+    from piezoctl.diagnose.significance import active_block_test
+    rng = np.random.default_rng(4)
+    nb, m = 40, 500
+    blocks = np.repeat(np.arange(nb), m)
+    noise = rng.normal(0, 1.0, nb * m)
+    # an effect in 8 of 40 blocks, 3x the noise; the term predicts it (correction) and removes it
+    eff = np.zeros(nb * m)
+    act = np.isin(blocks, np.arange(0, nb, 5))
+    eff[act] = 3.0 * np.sin(np.arange(np.sum(act)) * 0.05)
+    t, p, n = active_block_test(noise + eff, noise, eff, blocks)
+    assert n == 8 and p < 1e-4
+    # a term that predicts the same correction but the data do not contain the effect: no evidence
+    t, p, n = active_block_test(noise, noise - eff, eff, blocks)
+    assert p > 0.5
+
+
+def test_outside_mask_guards_after_the_excursion():
+    from piezoctl.diagnose.run import OUT_GUARD_S, _outside_mask
+    from piezoctl.diagnose.effects import Signals
+    dt = 1e-4
+    u = np.full(20000, 50.0)
+    u[5000:6000] = 120.0
+    z = np.zeros(u.size)
+    s = Signals(name="r", t=np.arange(u.size) * dt, u=u, y=z, u2=None, x2=None, temp=None, dt=dt, v=z, h=z, hyst=z,
+                yb=z, ydyn=z)
+    m = _outside_mask(s, 10.0, 100.0)
+    g = int(round(OUT_GUARD_S / dt))
+    assert not m[:5000].any() and m[5000:6000 + g - 1].all() and not m[6000 + g + 1:].any()

@@ -26,7 +26,7 @@ from ..ident.common import IdentError
 from ..ident.refined import bouc_wen_h, filt
 from ..models.play import play_outputs
 
-__all__ = ["fit_base", "block_masks", "MAX_ROWS"]
+__all__ = ["fit_base", "fit_dynamics", "block_masks", "MAX_ROWS"]
 
 MAX_ROWS = 200_000
 ORDERS = (0, 2, 4)
@@ -249,3 +249,28 @@ def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: fl
         "base_info": info,
     }
     return params
+
+
+def fit_dynamics(xs, ys, k0s, max_rows: int = 60_000) -> tuple[np.ndarray, np.ndarray]:
+    """Dynamics G (unit static gain) from H outputs ``xs`` [um] to outputs ``ys`` [um] (offset removed).
+
+    ARX of order 0, 2 or 4 by the base model's rule (a higher order kept when it lowers
+    the simulation error on these data by 5 %); no output-error refinement (this is
+    called once per setting of a drive-side term, so it must be cheap).
+
+    Returns
+    -------
+    (b, a) : tuple of ndarray
+        Discrete transfer function at the recordings' rate.
+    """
+    models, scores = {}, {}
+    for order in ORDERS:
+        m = _arx([x[k0:] for x, k0 in zip(xs, k0s)], [y[k0:] for y, k0 in zip(ys, k0s)], order, max_rows)
+        models[order] = m
+        scores[order] = _sim_rmse(m, xs, ys, k0s) if m is not None else float("inf")
+    best = 0
+    for order in ORDERS[1:]:
+        if models[order] is not None and scores[order] < 0.95 * scores[best]:
+            best = order
+    b, a = models[best]
+    return np.asarray(b, float), np.asarray(a, float)

@@ -147,8 +147,8 @@ U2_MOVING = [{"kind": "sine", "f": 25.0, "T": 15.0, "range": (30.0, 120.0)},
 # overrides for the calibration session / per reveal recording (the session differs).
 CASES: dict[str, dict] = {
     "creep": {"truth": ["creep"],
-              "stage": {"creep": {"enabled": True, "terms": [{"tau_s": 0.1, "gain": 0.02}, {"tau_s": 1.0, "gain": 0.02},
-                                                            {"tau_s": 8.0, "gain": 0.03}]}},
+              "stage": {"creep": {"enabled": True, "terms": [{"tau_s": 0.5, "gain": 0.02}, {"tau_s": 2.0, "gain": 0.02},
+                                                            {"tau_s": 10.0, "gain": 0.03}]}},
               "cal": [{"kind": "static", "f": 5.0, "T": 10.0}, CAL_STD[1]]},
     "thermal_drift": {"truth": ["thermal_drift"],
                       "stage": {"thermal": {"enabled": True, "drift_um_per_k": 0.5, "delta_k": 2.0,

@@ -24,7 +24,7 @@ Parameters (JSON, physical units where they have one)
     ``type``: ``"pi"`` or ``"bouc_wen"``. PI: ``r`` play thresholds [normalized drive], ``w`` their weights [um],
     ``poly`` [um] coefficients of ``v, v^2, v^3``, evaluated with ``v``
     clamped to ``[v_lo, v_hi]`` (the calibration range) and continued
-    linearly outside it, ``offset`` [um], ``v_rest`` [normalized drive]: the
+    linearly outside it with the cubic's mean slope over that range, ``offset`` [um], ``v_rest`` [normalized drive]: the
     plays start relaxed at the rest drive (0 V: a stage is powered up from
     0 V), so the first sample is reached along the initial loading curve.
     Bouc-Wen: ``beta``, ``gamma`` [1/normalized drive], ``c_h`` [um] (the
@@ -196,10 +196,16 @@ def apply_drive_terms(terms: dict, u, dt: float) -> np.ndarray:
 
 
 def _poly_clamped(v, poly, v_lo, v_hi) -> np.ndarray:
+    """Cubic of v inside ``[v_lo, v_hi]`` (the calibrated range), continued outside it as a straight
+    line with the cubic's *mean* slope over the range (its secant): a cubic fitted on a narrow range
+    has an unreliable slope at its ends, the mean gain is what the calibration determined."""
     c1, c2, c3 = (list(poly) + [0.0, 0.0, 0.0])[:3]
     vc = np.clip(v, v_lo, v_hi)
     p = c1 * vc + c2 * vc ** 2 + c3 * vc ** 3
-    slope = c1 + 2 * c2 * vc + 3 * c3 * vc ** 2
+    if v_hi > v_lo:
+        slope = (c1 * (v_hi - v_lo) + c2 * (v_hi ** 2 - v_lo ** 2) + c3 * (v_hi ** 3 - v_lo ** 3)) / (v_hi - v_lo)
+    else:
+        slope = c1
     return p + slope * (v - vc)
 
 
