@@ -119,18 +119,18 @@ static uint8_t read_input(void *ctx, uint16_t addr, uint16_t count, uint16_t *ou
 static int16_t rec_sample(const piezo_ctl_t *c, uint32_t index)
 {
     int16_t frame[PIEZO_REC_MAX_CHANNELS];
-    uint32_t nch = c->rec.cfg.n_channels, k = 0u;
+    uint32_t nch = c->rec.cfg.n_channels, k;
     if (index >= PIEZO_CTL_REC_SAMPLES) {
-        return 0; /* past any recording (as piezo_rec_read would say); bounds the loop below */
+        return 0; /* past any recording (as piezo_rec_read would say) */
     }
-    while (index >= nch) { /* no division: readout is not in the tick, but the core links none */
-        index -= nch;
-        k++;
-    }
+    /* readout runs between ticks, never in them: a division here is fine
+     * (hardware UDIV on the Cortex-M4); the per-register walk it replaces
+     * made a full readout quadratic */
+    k = index / nch;
     if (piezo_rec_read(&c->rec, k, frame) != PIEZO_OK) {
         return 0;
     }
-    return frame[index];
+    return frame[index - k * nch];
 }
 
 /* Current value of holding element `elem` (32-bit values whole). */

@@ -196,10 +196,13 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                           "reduction": unc / com if com > 0 else float("inf")}
     worse = [k for k, v in tracking.items() if v["rmse_compensated_um"] > v["rmse_uncompensated_um"]]
     rolled_back = False
+    rollback_result = None
     if worse:
-        reason = ctl.rollback_table()
-        rolled_back = True
-        _log(6, f"compensation made {', '.join(worse)} worse: rolled back ({reason})")
+        rollback_result = ctl.rollback_table()
+        rolled_back = rollback_result == "ok"
+        _log(6, f"compensation made {', '.join(worse)} worse: "
+                + ("rolled back to the previous table" if rolled_back else
+                   f"rollback refused ({rollback_result}): the new table stays active"))
     _log(6, "acceptance: " + ", ".join(f"{k} Hz {v['rmse_uncompensated_um']:.3f} -> {v['rmse_compensated_um']:.3f} um "
                                        f"({v['reduction']:.1f}x)" if k != "multitone" else
                                        f"multitone {v['rmse_uncompensated_um']:.3f} -> {v['rmse_compensated_um']:.3f} um"
@@ -215,6 +218,8 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         "table_crc": crc,
         "table_crc_hex": f"{crc:#010x}",
         "rolled_back": rolled_back,
+        "worse_than_uncompensated": worse,
+        "rollback_result": rollback_result,
         "tracking": tracking,
         "checks": {"forward_inverse_max_error_fraction": identity_err, "quantization_max_lsb": quant_lsb,
                    **{k: v for k, v in comp.info.items() if isinstance(v, (int, float))}},

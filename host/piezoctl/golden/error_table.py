@@ -13,8 +13,9 @@ import numpy as np
 
 __all__ = ["KERNELS", "error_stats", "rows", "markdown"]
 
-# golden modules that provide error_report() -> list of (case, y_float, y_fixed_q15)
-KERNELS = ["kp", "rkp", "dcc", "play", "eupi", "eupi_inv"]
+# golden modules that provide error_report() -> list of (case, y_float, y_fixed_q15),
+# or a dict with max_lsb and snr_db (xcouple)
+KERNELS = ["kp", "rkp", "dcc", "play", "eupi", "eupi_inv", "xcouple"]
 
 
 def error_stats(y_float: np.ndarray, y_fixed_q15: np.ndarray) -> tuple[float, float]:
@@ -43,7 +44,11 @@ def rows() -> list[tuple[str, str, float, float]]:
             mod = importlib.import_module(f"piezoctl.golden.{k}")
         except ModuleNotFoundError:
             continue
-        for case, yf, yq in mod.error_report():
+        rep = mod.error_report()
+        if isinstance(rep, dict):
+            out.append((k, "realistic coupling predictor", rep["max_lsb"], rep["snr_db"]))
+            continue
+        for case, yf, yq in rep:
             out.append((k, case, *error_stats(yf, yq)))
     return out
 
