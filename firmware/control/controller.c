@@ -411,6 +411,18 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len)
     return r;
 }
 
+uint16_t piezo_ctl_load_image(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
+{
+    if (img == NULL || piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY) != PIEZO_OK) {
+        return PIEZO_TABLE_REASON_LOCKED;
+    }
+    c->staged_len = 0u;
+    if (piezo_ctl_stage_write(c, 0u, img, len) != PIEZO_OK) {
+        return c->st.table_result;
+    }
+    return piezo_ctl_commit(c, len);
+}
+
 uint16_t piezo_ctl_rollback(piezo_ctl_t *c)
 {
     uint16_t r;

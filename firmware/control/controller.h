@@ -211,6 +211,9 @@ void piezo_ctl_stop_wave(piezo_ctl_t *c);
 int piezo_ctl_unlock(piezo_ctl_t *c, uint16_t key);
 int piezo_ctl_stage_write(piezo_ctl_t *c, uint32_t offset, const uint8_t *data, uint32_t len);
 uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len);
+/** Unlock, stage a whole image and commit it, as an upload would: for a
+ *  target that loads a table of its own (or a test). Returns the reason. */
+uint16_t piezo_ctl_load_image(piezo_ctl_t *c, const uint8_t *img, uint32_t len);
 uint16_t piezo_ctl_rollback(piezo_ctl_t *c);
 /** CRC of the active cross-coupling table (0 when none). */
 uint32_t piezo_ctl_coupling_crc(const piezo_ctl_t *c);

@@ -315,6 +315,20 @@ static void test_shaper_spreads_a_step_over_its_taps(void **state)
     assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_EINVAL);
 }
 
+static void test_load_image_commits_or_names_the_refusal(void **state)
+{
+    (void)state;
+    setup_armed(PIEZO_MODE_FEEDFORWARD);
+    assert_int_equal(piezo_ctl_load_image(&ctl, ctl_dcc_img, CTL_DCC_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    (void)tick(0, 0);
+    uint32_t crc = piezo_ctl_active_crc(&ctl);
+    assert_int_equal(piezo_ctl_load_image(&ctl, ctl_bad[0].img, ctl_bad[0].len), ctl_bad[0].reason);
+    assert_int_equal(piezo_ctl_load_image(&ctl, NULL, 10), PIEZO_TABLE_REASON_LOCKED);
+    assert_int_equal(piezo_ctl_load_image(&ctl, ctl_dcc_img, PIEZO_TABLE_MAX_BYTES + 1u), PIEZO_TABLE_REASON_BAD_LENGTH);
+    (void)tick(0, 0);
+    assert_true(piezo_ctl_active_crc(&ctl) == crc);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -330,6 +344,7 @@ int main(void)
         cmocka_unit_test(test_recorder_captures_the_wave_run),
         cmocka_unit_test(test_preview_feeds_the_reference_early),
         cmocka_unit_test(test_shaper_spreads_a_step_over_its_taps),
+        cmocka_unit_test(test_load_image_commits_or_names_the_refusal),
     };
     return cmocka_run_group_tests_name("controller", tests, NULL, NULL);
 }

@@ -78,16 +78,6 @@ static void set_fb(piezo_ctl_cfg_t *c, int32_t gain_div)
     c->notch_on = 1u;
 }
 
-static uint16_t upload(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
-{
-    assert_int_equal(piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
-    for (uint32_t off = 0; off < len; off += 246u) {
-        uint32_t n = len - off < 246u ? len - off : 246u;
-        assert_int_equal(piezo_ctl_stage_write(c, off, img + off, n), PIEZO_OK);
-    }
-    return piezo_ctl_commit(c, 0);
-}
-
 static void no_violation(void)
 {
     const char *v = fake_comedi_violation();
@@ -170,7 +160,7 @@ static double run_1716(int ci, double f)
     c[0] = &ctl;
     c[1] = &sil.ctl[0];
     for (int i = 0; i < 2; i++) {
-        assert_int_equal(upload(c[i], ci == CFG_EUPI_FB ? sil_eupi_img : sil_dcc_img,
+        assert_int_equal(piezo_ctl_load_image(c[i], ci == CFG_EUPI_FB ? sil_eupi_img : sil_dcc_img,
                                 ci == CFG_EUPI_FB ? SIL_EUPI_IMG_LEN : SIL_DCC_IMG_LEN),
                          PIEZO_TABLE_REASON_OK);
         assert_int_equal(piezo_ctl_set_mode(c[i], mode), PIEZO_OK);

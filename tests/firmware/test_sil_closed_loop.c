@@ -53,16 +53,6 @@ static stage_params params;
 static double rms_true[N_FREQ][CFG_N], rms_meas[N_FREQ][CFG_N];
 static int measured;
 
-static uint16_t upload(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
-{
-    assert_int_equal(piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
-    for (uint32_t off = 0; off < len; off += 246u) { /* register-window chunks */
-        uint32_t n = len - off < 246u ? len - off : 246u;
-        assert_int_equal(piezo_ctl_stage_write(c, off, img + off, n), PIEZO_OK);
-    }
-    return piezo_ctl_commit(c, 0);
-}
-
 static void load_params(void)
 {
     char err[256];
@@ -116,10 +106,10 @@ static void run_case(int fi, int ci, double *e_true, double *e_meas)
     assert_int_equal(piezo_sil_init(&sil, &params, 1000u + (uint64_t)(fi * CFG_N + ci)), PIEZO_OK);
     assert_int_equal(piezo_ctl_init(c, &cfg), PIEZO_OK);
     if (ci == CFG_EUPI || ci == CFG_EUPI_FB) {
-        assert_int_equal(upload(c, sil_eupi_img, SIL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OK);
+        assert_int_equal(piezo_ctl_load_image(c, sil_eupi_img, SIL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OK);
     } else {
         /* the DCC table also carries the straight-line gain OPEN_LOOP uses */
-        assert_int_equal(upload(c, sil_dcc_img, SIL_DCC_IMG_LEN), PIEZO_TABLE_REASON_OK);
+        assert_int_equal(piezo_ctl_load_image(c, sil_dcc_img, SIL_DCC_IMG_LEN), PIEZO_TABLE_REASON_OK);
     }
     switch (ci) {
     case CFG_NONE: mode = PIEZO_MODE_OPEN_LOOP; break;

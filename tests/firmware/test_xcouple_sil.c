@@ -49,16 +49,6 @@ static stage_params params;
 static double rms[LOOP_N][N_FREQ][2], ptp_coupling[LOOP_N][N_FREQ];
 static int measured;
 
-static uint16_t upload(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
-{
-    assert_int_equal(piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
-    for (uint32_t off = 0; off < len; off += 246u) {
-        uint32_t n = len - off < 246u ? len - off : 246u;
-        assert_int_equal(piezo_ctl_stage_write(c, off, img + off, n), PIEZO_OK);
-    }
-    return piezo_ctl_commit(c, 0);
-}
-
 /* One run; x[] gets axis 1's true displacement over the measured ticks. */
 static void run(int loop, int fi, int which, double *x, uint32_t n_meas, uint32_t n_wave_settle)
 {
@@ -82,7 +72,7 @@ static void run(int loop, int fi, int which, double *x, uint32_t n_meas, uint32_
     }
     cfg0.xcouple_bypass = (uint8_t)(which != RUN_ON);
     assert_int_equal(piezo_ctl_init(c0, &cfg0), PIEZO_OK);
-    assert_int_equal(upload(c0, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(piezo_ctl_load_image(c0, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil); /* the committed coupling table becomes active here */
     assert_true(c0->xc_active >= 0 && c0->active < 0);
     assert_int_equal(piezo_ctl_coupling_crc(c0), piezo_le32(xc_sil_table + XC_SIL_TABLE_LEN - 4u));
@@ -212,18 +202,18 @@ static void test_coupling_slot_commit_and_rollback(void **state)
     assert_int_equal(piezo_sil_init(&sil, &params, 1u), PIEZO_OK);
     c = &sil.ctl[0];
     assert_int_equal(piezo_ctl_coupling_crc(c), 0u);
-    assert_int_equal(upload(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(piezo_ctl_load_image(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
     assert_true(c->xc_active >= 0 && c->active < 0 && c->previous < 0);
     assert_int_equal(piezo_ctl_active_crc(c), 0u); /* the feedforward slot: still empty */
     /* a corrupted coupling image is refused; the running one stays */
     memcpy(bad, xc_sil_table, sizeof bad);
     bad[XC_SIL_TABLE_LEN / 2u] ^= 0x40u;
-    assert_int_equal(upload(c, bad, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_BAD_CRC);
+    assert_int_equal(piezo_ctl_load_image(c, bad, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_BAD_CRC);
     piezo_sil_tick(&sil);
     assert_int_equal(piezo_ctl_coupling_crc(c), piezo_le32(xc_sil_table + XC_SIL_TABLE_LEN - 4u));
     /* the same table again: the first becomes the coupling rollback target */
-    assert_int_equal(upload(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(piezo_ctl_load_image(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
     assert_true(c->xc_previous >= 0 && c->xc_previous != c->xc_active);
     assert_int_equal(piezo_ctl_rollback(c), PIEZO_TABLE_REASON_OK);
@@ -234,7 +224,7 @@ static void test_coupling_slot_commit_and_rollback(void **state)
     assert_true(c->xc_active >= 0);
     /* a commit then a rollback with no previous coupling table: compensation off */
     assert_int_equal(piezo_sil_init(&sil, &params, 1u), PIEZO_OK);
-    assert_int_equal(upload(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(piezo_ctl_load_image(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
     assert_int_equal(piezo_ctl_rollback(c), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);

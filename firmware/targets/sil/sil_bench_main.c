@@ -50,11 +50,10 @@ static int setup_axis(piezo_sil_t *s, const stage_params *p, int axis, int dcc, 
     cfg.notch.a1_q24 = SIL_NOTCH_A1_Q24;
     cfg.notch.a2_q24 = SIL_NOTCH_A2_Q24;
     cfg.notch_on = 1u;
-    if (piezo_ctl_init(c, &cfg) != PIEZO_OK || piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY) != PIEZO_OK ||
-        piezo_ctl_stage_write(c, 0, img, len) != PIEZO_OK) {
+    if (piezo_ctl_init(c, &cfg) != PIEZO_OK) {
         return -1;
     }
-    if ((r = piezo_ctl_commit(c, 0)) != PIEZO_TABLE_REASON_OK) {
+    if ((r = piezo_ctl_load_image(c, img, len)) != PIEZO_TABLE_REASON_OK) {
         fprintf(stderr, "sil_bench: table refused (reason %u)\n", r);
         return -1;
     }

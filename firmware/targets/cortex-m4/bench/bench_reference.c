@@ -116,14 +116,6 @@ static void reference_part_tick(void)
     }
 }
 
-static int commit(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
-{
-    if (piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY) != 0 || piezo_ctl_stage_write(c, 0u, img, len) != 0) {
-        return -1;
-    }
-    return piezo_ctl_commit(c, len) == PIEZO_TABLE_REASON_OK ? 0 : -1;
-}
-
 static int setup(void)
 {
     piezo_ctl_t *c = &piezo_axis;
@@ -137,7 +129,8 @@ static int setup(void)
     cfg.notch_on = 1u;
     cfg.limit = (piezo_limit_coef_t){.min_q15 = -32000, .max_q15 = 32000, .max_step_q15 = 4000};
     cfg.u_safe_q15 = -32000;
-    if (piezo_ctl_init(c, &cfg) != 0 || commit(c, bench_dcc_img, BENCH_DCC_IMG_LEN) != 0) {
+    if (piezo_ctl_init(c, &cfg) != 0 ||
+        piezo_ctl_load_image(c, bench_dcc_img, BENCH_DCC_IMG_LEN) != PIEZO_TABLE_REASON_OK) {
         return -1;
     }
     c->wave_cfg = (piezo_wave_cfg_t){.kind = PIEZO_WAVE_SINE, .amplitude_q15 = 29491, /* 0.9 FS */
