@@ -19,6 +19,7 @@ from . import locate as loc
 from . import significance as sg
 from .base import fit_base
 from .effects import EFFECTS, VOCABULARY, Signals
+from .discriminate import calibration_band_hz, discriminate_group, highpassed
 
 __all__ = ["diagnose", "DEFAULTS"]
 
@@ -51,6 +52,7 @@ class Ctx:
     cal_h: list = dataclasses.field(default_factory=list)     # base H output on them [um]
     cal_k0: list = dataclasses.field(default_factory=list)    # settled start index per calibration recording
     refit_cache: dict = dataclasses.field(default_factory=dict)
+    design_cache: dict = dataclasses.field(default_factory=dict)
     cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
     cal_u_hi: float = 0.0
 
@@ -113,74 +115,69 @@ def _fit_predict(Xs, e, train, test, rows):
     return th, X[test] @ th, sse_tr
 
 
-def _evaluate(ctx, eff, accepted, e, fold_all, block_all, rows, cache, p_max):
-    """Cross-validated evaluation of effect ``eff`` on top of the accepted designs."""
+def _designs(ctx, eff):
     settings = eff.settings(ctx)
-    designs = []
+    out = []
     for st in settings:
         key = (eff.name, repr(st))
-        if key not in cache:
-            cache[key] = _Design(ctx, eff, st)
-        designs.append(cache[key])
-    pred_before = np.zeros(e.size)
-    pred_after = np.zeros(e.size)
+        if key not in ctx.design_cache:
+            ctx.design_cache[key] = _Design(ctx, eff, st)
+        out.append(ctx.design_cache[key])
+    return settings, out
+
+
+def _residual(ctx):
+    return np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
+
+
+def _evaluate(ctxs, eff, es, fold_all, block_all, rows, p_max):
+    """Cross-validated evaluation of effect ``eff`` on top of the current model.
+
+    ``ctxs[f]``, ``es[f]``: the model (terms accepted so far, fitted on fold f only) and its residual; the
+    candidate is fitted on fold f of that residual and predicts fold 1 - f.
+    """
+    e_before = np.zeros(fold_all.size)
+    pred_after = np.zeros(fold_all.size)
     chosen = []
     fold_ratios = []
+    k = 1
     for f in (0, 1):
+        ctx, e = ctxs[f], es[f]
+        settings, designs = _designs(ctx, eff)
+        k = designs[0].k + (1 if len(settings) > 1 else 0)
         train, test = fold_all == f, fold_all == 1 - f
-        acc_X = [a["design"][f].X for a in accepted]
-        if acc_X:
-            _, pb, _ = _fit_predict(acc_X, e, train, test, rows)
-            pred_before[test] = pb
+        e_before[test] = e[test]
         best = None
         for st, d in zip(settings, designs):
-            th, pa, sse = _fit_predict(acc_X + [d.X], e, train, test, rows)
+            th, pa, sse = _fit_predict([d.X], e, train, test, rows)
             if best is None or sse < best[2]:
                 best = (st, d, sse, pa, th)
         pred_after[test] = best[3]
         chosen.append(best)
-        rb = float(np.sqrt(np.mean((e[test] - pred_before[test]) ** 2)))
+        rb = float(np.sqrt(np.mean(e[test] ** 2)))
         ra = float(np.sqrt(np.mean((e[test] - best[3]) ** 2)))
         fold_ratios.append(ra / rb if rb > 0 else 1.0)
+    span = ctxs[0].y_span
     used = fold_all >= 0
-    rb_res = (e - pred_before)[used]
-    ra_res = (e - pred_after)[used]
-    nb = float(np.sqrt(np.mean(rb_res ** 2)) / ctx.y_span)
-    na = float(np.sqrt(np.mean(ra_res ** 2)) / ctx.y_span)
-    t, p, n_act = sg.active_block_test(rb_res, ra_res, (pred_after - pred_before)[used], block_all[used])
+    rb_res = e_before[used]
+    ra_res = (e_before - pred_after)[used]
+    nb = float(np.sqrt(np.mean(rb_res ** 2)) / span)
+    na = float(np.sqrt(np.mean(ra_res ** 2)) / span)
+    t, p, n_act = sg.active_block_test(rb_res, ra_res, pred_after[used], block_all[used])
     neff = sg.effective_n(rb_res)
-    k = designs[0].k + (1 if len(settings) > 1 else 0)
     dbic = sg.bic_delta(float(np.sum(rb_res ** 2)), float(np.sum(ra_res ** 2)), neff, k)
     ratio = na / nb if nb > 0 else 1.0
     significant = bool(max(fold_ratios) <= sg.RATIO_MAX and p < p_max and dbic < 0)
     return {"effect": eff, "ratio": ratio, "fold_ratios": fold_ratios, "nrmse_before": nb, "nrmse_after": na,
             "t": t, "p": p, "n_active": n_act, "p_max": p_max, "dbic": dbic, "n_eff": neff, "significant": significant,
-            "design": [c[1] for c in chosen], "setting": [c[0] for c in chosen], "coef": [c[4] for c in chosen]}
-
-
-def _terms_from(ctx, accepted, e, train, rows):
-    """Fit all accepted effects jointly on ``train``; return (terms, per-effect coef, contributions)."""
-    terms, coefs, contribs = {}, [], []
-    if not accepted:
-        return terms, coefs, contribs
-    Xs = [a["design_all"].X for a in accepted]
-    th, _, _ = _fit_predict(Xs, e, train, np.zeros(e.size, bool), rows)
-    i = 0
-    for a in accepted:
-        k = a["design_all"].k
-        c = th[i: i + k]
-        i += k
-        terms[a["effect"].name] = a["effect"].term(ctx, a["setting_all"], c)
-        coefs.append(c)
-        contribs.append([np.asarray(a["effect"].regressors(ctx, s, a["setting_all"]), float) @ c
-                         for s in ctx.signals])
-    return terms, coefs, contribs
+            "design": [c[1] for c in chosen], "setting": [c[0] for c in chosen], "coef": [c[4] for c in chosen],
+            "veto": None}
 
 
 def _model_params(base, terms):
-    """Refined model parameters: the base with ``terms``; a drive-dynamics term brings its refitted G."""
+    """``base`` (which may already have terms) with ``terms`` added; a drive-dynamics term brings its refitted G."""
     ref = dict(base)
-    ref["terms"] = {}
+    ref["terms"] = dict(base.get("terms", {}) or {})
     for k, v in terms.items():
         v = dict(v)
         dyn = v.pop("_dynamics", None)
@@ -188,6 +185,38 @@ def _model_params(base, terms):
             ref["dynamics"] = dyn
         ref["terms"][k] = v
     return ref
+
+
+def _rebase(ctx, params, recs):
+    """The context re-derived from ``params`` by exact simulation: every later candidate's signals (H output,
+    hysteretic part, dynamics, output) come from the refined model, not from the base."""
+    off = float(params["hysteresis"].get("offset", 0.0))
+    po = params.get("terms", {}).get("sensor_offset")
+    sigs = []
+    for s, r in zip(ctx.signals, recs):
+        p = refined.simulate_parts(params, r.t, r.u, r.u2)
+        y = p["y"]
+        if po is not None:
+            y = y + po["per_recording"].get(s.name, po["offset_um"]) - po["offset_um"]
+        sigs.append(dataclasses.replace(s, v=p["v"], h=p["h"], hyst=p["hyst"], yb=y, ydyn=p["y_dyn"] + off))
+    cal_h = [refined.simulate_parts(params, r.t, r.u, r.u2)["h"] for r in ctx.cal]
+    return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={},
+                               h_cal_mean=float(np.mean(np.concatenate(cal_h))))
+
+
+def _exact_fold(ctx, params, d, f, fold_all, ft_all, recs):
+    """Exact check of candidate ``d`` in fold f: its term (setting and coefficients fitted on fold f) added to the
+    fold-f model, the recordings simulated, the error scored on fold 1 - f against the model without it."""
+    eff = d["effect"]
+    new = _model_params(params, {eff.name: eff.term(ctx, d["setting"][f], d["coef"][f])})
+    ys = _simulate_refined(new, recs, ctx.names)
+    e_new = np.concatenate([(s.y - y)[v] for s, y, v in zip(ctx.signals, ys, ctx.valid)])
+    e_old = _residual(ctx)
+    test = fold_all == 1 - f
+    tall = ft_all == 1 - f   # every settled sample of the test fold, outside the calibrated range too
+    return {"params": new, "sse_before": float(np.sum(e_old[test] ** 2)), "sse_after": float(np.sum(e_new[test] ** 2)),
+            "n": int(np.sum(test)), "sse_before_all": float(np.sum(e_old[tall] ** 2)),
+            "sse_after_all": float(np.sum(e_new[tall] ** 2)), "ys": ys}
 
 
 def _simulate_refined(params, recs, names):
@@ -297,55 +326,106 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         f"{np.sqrt(np.mean(e ** 2)) / span:.4f}")
 
     rows = DEFAULTS["max_rows"]
-    cache = {}
     accepted = []
     rounds = []
     candidates = [EFFECTS[n] for n in VOCABULARY if EFFECTS[n].applicable(ctx)]
+    # the current model: on all data (ctx_all, the refined model) and per fold (fctx[f]: the accepted terms
+    # fitted on fold f only, the model whose held-out error on fold 1 - f is scored); after each accepted term
+    # all three are re-derived by exact simulation of the refined model
+    ctx_all, fctx = ctx, [ctx, ctx]
+    ft_all = np.concatenate([f[v] for f, v in zip(fold_time, valid)])
+    fc_hp = min(3.0 * calibration_band_hz(cal, ctx.cal_k0), 0.1 / dt)
     for _ in range(max_terms):
         groups = {a["effect"].group for a in accepted if a["effect"].group}
         todo = [eff for eff in candidates if eff.name not in {a["effect"].name for a in accepted}
                 and not (eff.group and eff.group in groups)]
+        if not todo:
+            break
         p_max = sg.ALPHA / max(len(todo), 1)
-        evals = [_evaluate(ctx, eff, accepted, e, fold_all, block_all, rows, cache, p_max) for eff in todo]
+        es = [_residual(fctx[0])]
+        es.append(es[0] if fctx[1] is fctx[0] else _residual(fctx[1]))
+        evals = [_evaluate(fctx, eff, es, fold_all, block_all, rows, p_max) for eff in todo]
         evals.sort(key=lambda d: d["ratio"])
+        # drive-side dynamics candidates that all pass: told apart by their exact residual above the
+        # calibration's band (discriminate.py)
+        dd = [d for d in evals if d["significant"] and d["effect"].group == "drive_dynamics"]
+        if len(dd) > 1 and fc_hp > 0:
+            hp = []
+            for d in dd:
+                d["exact"] = [_exact_fold(fctx[f], fctx[f].base, d, f, fold_all, ft_all, recs) for f in (0, 1)]
+                h = np.zeros(fold_all.size)
+                for f in (0, 1):
+                    sel = fold_all == 1 - f
+                    h[sel] = highpassed(fctx[f], d["exact"][f]["ys"], fc_hp)[sel]
+                hp.append(h)
+            order, text = discriminate_group(dd, hp, fold_all, block_all, fc_hp)
+            log("    " + text)
+            pos = [i for i, d in enumerate(evals) if any(d is x for x in dd)]
+            for i, k in zip(pos, order):
+                evals[i] = dd[k]
+            for d in dd:
+                d["discrimination"] = text
         rounds.append(evals)
-        sig_ev = [d for d in evals if d["significant"]]
+        best = None
+        for d in evals:
+            if not d["significant"] or d["veto"]:
+                continue
+            ex = d.get("exact") or [_exact_fold(fctx[f], fctx[f].base, d, f, fold_all, ft_all, recs) for f in (0, 1)]
+            d["exact_fold_ratios"] = [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0
+                                      else 1.0 for x in ex]
+            n_ex = sum(x["n"] for x in ex)
+            d["exact_before"] = float(np.sqrt(sum(x["sse_before"] for x in ex) / max(n_ex, 1)) / span)
+            d["exact_after"] = float(np.sqrt(sum(x["sse_after"] for x in ex) / max(n_ex, 1)) / span)
+            log(f"    exact {d['effect'].name}: {d['exact_fold_ratios']} {d['exact_before']:.4f} -> {d['exact_after']:.4f}")
+            if max(d["exact_fold_ratios"]) < 1.0 and all(x["sse_after_all"] < x["sse_before_all"] for x in ex):
+                d["exact"] = ex
+                best = d
+                break
+            d["veto"] = ("the exact simulation of the refined model with this term does not lower the held-out "
+                         f"error in each fold (ratios {d['exact_fold_ratios'][0]:.2f}, {d['exact_fold_ratios'][1]:.2f}; "
+                         "all settled samples: " + ", ".join(f"{np.sqrt(x['sse_after_all'] / x['sse_before_all']):.2f}"
+                                                             if x["sse_before_all"] > 0 else "1" for x in ex) + ")")
         log("  " + ", ".join(f"{d['effect'].name} {d['ratio']:.3f} ({d['fold_ratios'][0]:.2f}/"
                              f"{d['fold_ratios'][1]:.2f} p {d['p']:.0e} n{d['n_active']})"
-                             f"{'*' if d['significant'] else ''}" for d in evals[:6]))
-        if not sig_ev:
+                             f"{'*' if d['significant'] and not d['veto'] else ''}{'V' if d['veto'] else ''}"
+                             for d in evals[:6]))
+        if best is None:
             break
-        best = sig_ev[0]
-        # the setting on all data
+        # setting and coefficients on all selection samples, applied to the all-data model
         allmask = fold_all >= 0
+        e_all = _residual(ctx_all)
         bs = None
-        for st in best["effect"].settings(ctx):
-            d = cache[(best["effect"].name, repr(st))]
-            _, _, sse = _fit_predict([a["design_all"].X for a in accepted] + [d.X], e, allmask,
-                                     np.zeros(e.size, bool), rows)
+        settings, designs = _designs(ctx_all, best["effect"])
+        for st, dsg in zip(settings, designs):
+            th, _, sse = _fit_predict([dsg.X], e_all, allmask, np.zeros(e_all.size, bool), rows)
             if bs is None or sse < bs[2]:
-                bs = (st, d, sse)
-        best["setting_all"], best["design_all"] = bs[0], bs[1]
+                bs = (st, dsg, sse, th)
+        eff = best["effect"]
+        best["setting_all"], best["coef_all"] = bs[0], bs[3]
+        best["describe"] = eff.describe(ctx_all, bs[0], bs[3])
+        best["contrib"] = [np.asarray(eff.regressors(ctx_all, s, bs[0]), float) @ bs[3] for s in ctx_all.signals]
+        params_all = _model_params(ctx_all.base, {eff.name: eff.term(ctx_all, bs[0], bs[3])})
+        ctx_all = _rebase(ctx_all, params_all, recs)
+        fctx = [_rebase(fctx[f], best["exact"][f]["params"], recs) for f in (0, 1)]
         accepted.append(best)
     log(f"selection done ({time.perf_counter() - t_start:.1f} s): "
         f"{[a['effect'].name for a in accepted] or ['none']}")
 
-    # refined model: all accepted terms fitted jointly on all settled data, applied exactly
-    terms, coefs, contribs = _terms_from(ctx, accepted, e, fold_all >= 0, rows)
-    ref = _model_params(base, terms)
+    # refined model: the accepted terms, each fitted on all settled data on top of the previous ones
+    ref = ctx_all.base
+    terms = dict(ref.get("terms", {}))
     prov_r = make_provenance(list(calibration) + list(recordings), {"settle_s": settle_s},
                              rows=[len(r) for r in cal + recs], metrics={"terms": list(terms)})
     save_model(out / "refined_model.json", "refined", ref, prov_r)
     ys = [r.y for r in recs]
     yb_all = [s.yb for s in sigs]
     yr_all = _simulate_refined(ref, recs, names) if terms else yb_all
-    # exact held-out of the refined model: terms fitted on one fold, simulated, scored on the other
+    # exact held-out of the refined model: the terms fitted on one fold (in the order accepted), the refined
+    # model simulated and scored on the other fold
     held_pred = [np.array(y, copy=True) for y in yb_all]
     if terms:
         for f in (0, 1):
-            trf = fold_all == f
-            tf_terms, _, _ = _terms_from(ctx, accepted, e, trf, rows)
-            pf = _simulate_refined(_model_params(base, tf_terms), recs, names)
+            pf = _simulate_refined(fctx[f].base, recs, names)
             for i, (p, fm) in enumerate(zip(pf, fold_time)):
                 sel = fm == 1 - f
                 held_pred[i][sel] = p[sel]
@@ -362,15 +442,19 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
                        "method": "terms fitted on alternate time blocks, refined model simulated, scored on the "
                                  "other blocks (2-fold)"}}
     effects = []
-    for a, c, contrib in zip(accepted, coefs, contribs):
-        params, phrase = a["effect"].describe(ctx, a["setting_all"], c)
-        where = loc.where_of([_cut(s, v) for s, v in zip(sigs, valid)], [x[v] for x, v in zip(contrib, valid)], dt)
+    for a in accepted:
+        params, phrase = a["describe"]
+        where = loc.where_of([_cut(s, v) for s, v in zip(sigs, valid)], [x[v] for x, v in zip(a["contrib"], valid)], dt)
         effects.append({
             "name": a["effect"].name, "significant": True,
-            "evidence": (f"{phrase[0].upper() + phrase[1:]}; adding it lowers the held-out NRMSE from "
-                         f"{a['nrmse_before']:.4f} to {a['nrmse_after']:.4f} (active-block t-test p = {a['p']:.1e}, threshold {a['p_max']:.1e})."),
+            "evidence": (f"{phrase[0].upper() + phrase[1:]}; adding it to the model lowers the exact held-out NRMSE "
+                         f"from {a['exact_before']:.4f} to {a['exact_after']:.4f} (active-block t-test on the "
+                         f"linearized term p = {a['p']:.1e}, threshold {a['p_max']:.1e})."
+                         + (f" {a['discrimination']}" if a.get("discrimination") else "")),
             "where": where, "params": params,
-            "improvement": {"nrmse_before": a["nrmse_before"], "nrmse_after": a["nrmse_after"],
+            "improvement": {"nrmse_before": a["exact_before"], "nrmse_after": a["exact_after"],
+                            "exact_fold_ratios": a["exact_fold_ratios"],
+                            "linearized": {"nrmse_before": a["nrmse_before"], "nrmse_after": a["nrmse_after"]},
                             "fold_ratios": a["fold_ratios"], "p_value": a["p"], "delta_bic": a["dbic"]},
             "signature": a["effect"].signature})
     last = rounds[-1] if rounds else []
@@ -390,11 +474,15 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         if d["effect"].name in named:
             continue
         effects.append({"name": d["effect"].name, "significant": False,
-                        "evidence": (f"Not significant: held-out NRMSE {d['nrmse_before']:.4f} -> "
+                        "evidence": (("Not accepted: " + d["veto"] + "; " if d["veto"] else "Not significant: ")
+                                     + f"linearized held-out NRMSE {d['nrmse_before']:.4f} -> "
                                      f"{d['nrmse_after']:.4f} (fold ratios {d['fold_ratios'][0]:.2f}, "
                                      f"{d['fold_ratios'][1]:.2f}; p = {d['p']:.1e}; dBIC {d['dbic']:.0f})."),
                         "where": {}, "params": {},
-                        "improvement": {"nrmse_before": d["nrmse_before"], "nrmse_after": d["nrmse_after"],
+                        # not added: the model (and its error) is unchanged; the candidate's own figures follow
+                        "improvement": {"nrmse_before": d["nrmse_before"], "nrmse_after": d["nrmse_before"],
+                                        "candidate": {"nrmse_after": d["nrmse_after"],
+                                                      "exact_fold_ratios": d.get("exact_fold_ratios")},
                                         "fold_ratios": d["fold_ratios"], "p_value": d["p"], "delta_bic": d["dbic"]},
                         "signature": d["effect"].signature})
     doc = {"format": "piezoctl-diagnosis", "version": 1,
