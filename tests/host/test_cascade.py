@@ -113,3 +113,24 @@ def test_identify_cli_cascade(tmp_path):
     d = json.loads(out.read_text())
     assert d["kind"] == "cascade" and len(d["params"]["den"]) == 3
     assert all(re < 0 for re, _ in d["params"]["poles"])
+
+
+def test_weights_step_refits_the_hysteresis_through_the_dynamics():
+    """Variable projection, step a: with G fixed, wrong EUPI weights are refitted
+    by linear least squares on the G-filtered operator outputs."""
+    wn, z = 2 * np.pi * 120, 0.3
+    den = [1, 2 * z * wn, wn ** 2]
+    recs = make_recordings([wn ** 2], den, 2000.0, 250.0, seconds=1.0)
+    opts = dict(cascade_order=2, cascade_num_order=0, cascade_fmin=2.0, cascade_fmax=220.0,
+                u_range=[0, 100], cascade_method="wcls", cascade_refine=0)
+    p = C.fit(recs, Options(opts))
+    spoiled = json.loads(json.dumps(p, default=lambda o: np.asarray(o).tolist()))
+    spoiled["hysteresis"]["b"] = [1.5 * v for v in spoiled["hysteresis"]["b"]]
+    spoiled["hysteresis"]["a0"] *= 0.8
+    step = C.refine_weights(spoiled, recs)
+    before, after = step["refine_weights_cost"]
+    assert after < 0.2 * before
+    sse = sum(float(np.sum((C.simulate({**spoiled, **step}, r.t, r.u) - r.y) ** 2)) for r in recs)
+    assert sse == pytest.approx(after, rel=1e-6)
+    assert step["hysteresis"]["a0"] > 0 and min(step["hysteresis"]["b"]) >= 0
+    assert step["hysteresis"]["invertible"]

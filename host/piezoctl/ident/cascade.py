@@ -19,13 +19,17 @@ Identification (the paper's procedure)
    dynamic files are pooled (sorted by frequency; equal frequencies averaged).
 4. Fit G of order ``--cascade-order`` by ``--cascade-method`` (``pso-wcls``
    default, or ``wcls``) (:mod:`piezoctl.ident.tf`).
-5. Joint refinement (``--cascade-refine`` function evaluations, 0 = off):
-   ``scipy.optimize.least_squares`` over the transfer function's coefficients
-   (scaled by the FRF's top frequency) and an affine correction
-   ``c1 H[u] + c0`` of the hysteresis output, on the time-domain data of all
-   recordings. The refined model is kept only if it is stable and lowers the
-   residual. (The EUPI operator weights themselves are only refined through
-   ``c1, c0``.)
+5. Joint refinement (``--cascade-refine`` function evaluations, 0 = off),
+   on the time-domain data of all recordings, by variable projection in
+   ``--cascade-refine-rounds`` rounds (default 2): (a) with G fixed, the
+   output is linear in the EUPI weights (G is linear: G[sum_k w_k x_k] =
+   sum_k w_k G[x_k]), so the weights a0, b, d, p and the offset are refitted
+   by bounded least squares (a0 > 0, b, d >= 0) on the operator outputs
+   filtered through G; (b) with H fixed, ``scipy.optimize.least_squares``
+   refines G's coefficients (scaled by the FRF's top frequency) together with
+   an affine correction ``c1 H[u] + c0``. The small-gain k_ex of the refitted
+   EUPI is chosen again. A round is kept only if G stays stable and the
+   residual goes down.
 
 ``simulate`` runs H, then G discretized with a first-order hold at the
 recording's sample period (:func:`piezoctl.ident.tf.simulate_tf`), starting at
@@ -53,7 +57,7 @@ __all__ = ["KIND", "DESCRIPTION", "add_options", "fit", "simulate", "split_recor
            "spectral_centroid"]
 
 DEFAULTS = {"order": 2, "num_order": None, "method": "pso-wcls", "static_hz": 2.0, "static": None,
-            "fmin": None, "fmax": None, "refine": 50, "seed": 0}
+            "fmin": None, "fmax": None, "refine": 50, "refine_rounds": 2, "seed": 0}
 
 
 def add_options(parser) -> None:
@@ -70,6 +74,8 @@ def add_options(parser) -> None:
     parser.add_argument("--cascade-fmax", type=float, default=None, help="highest FRF frequency [Hz]")
     parser.add_argument("--cascade-refine", type=int, default=50,
                         help="function evaluations of the joint time-domain refinement (0: off)")
+    parser.add_argument("--cascade-refine-rounds", type=int, default=2,
+                        help="rounds of weights-then-dynamics refinement (default 2)")
     parser.add_argument("--cascade-seed", type=int, default=0, help="PSO seed")
 
 
@@ -162,7 +168,18 @@ def fit(recordings, options) -> dict:
               "frf": {"f_hz": frf.f_hz, "mag": frf.mag, "phase_deg": frf.phase_deg}}
     n_eval = int(_opt(options, "refine"))
     if n_eval > 0:
-        params.update(refine(params, recordings, n_eval, w0=float(frf.w.max())))
+        first = None
+        xs = [_operator_columns(hp, r.u) for r in recordings]  # weight-free: computed once
+        for _ in range(max(1, int(_opt(options, "refine_rounds")))):
+            step = refine_weights(params, recordings, xs)
+            params.update(step)
+            ws = [_hysteresis_output(params["hysteresis"], x) for x in xs]
+            step2 = refine(params, recordings, n_eval, w0=float(frf.w.max()), ws=ws)
+            params.update(step2)
+            first = first if first is not None else step.get("refine_weights_cost", step2["refine_cost"])[0]
+            if step2["refine_cost"][1] >= step2["refine_cost"][0] and "refine_weights_cost" not in step:
+                break
+        params["refine_cost"] = [first, params["refine_cost"][1]]
     params["num"] = [float(v) for v in params["num"]]
     params["den"] = [float(v) for v in params["den"]]
     params["poles"] = [[float(p.real), float(p.imag)] for p in tf.poles_of(params["den"])]
@@ -170,7 +187,7 @@ def fit(recordings, options) -> dict:
     return params
 
 
-def refine(params: dict, recordings, max_nfev: int, w0: float) -> dict:
+def refine(params: dict, recordings, max_nfev: int, w0: float, ws=None) -> dict:
     """Joint time-domain refinement of G's coefficients and the affine hysteresis correction.
 
     Parameters
@@ -183,6 +200,8 @@ def refine(params: dict, recordings, max_nfev: int, w0: float) -> dict:
         Function evaluations of ``least_squares``.
     w0 : float
         Frequency scale [rad/s]: coefficients are optimized as ``b_k / w0^(n-k)``.
+    ws : list of ndarray, optional
+        The hysteresis output H[u] [um] of each recording, if already known.
 
     Returns
     -------
@@ -192,7 +211,8 @@ def refine(params: dict, recordings, max_nfev: int, w0: float) -> dict:
     """
     num, den = np.asarray(params["num"], float), np.asarray(params["den"], float)
     n, nb = den.size - 1, num.size - 1
-    ws = [eupi_kind.simulate(params["hysteresis"], r.t, r.u) for r in recordings]
+    if ws is None:
+        ws = [eupi_kind.simulate(params["hysteresis"], r.t, r.u) for r in recordings]
     sc_b = w0 ** (n - np.arange(nb, -1, -1.0))
     sc_a = w0 ** (n - np.arange(n - 1, -1, -1.0))
 
@@ -213,6 +233,96 @@ def refine(params: dict, recordings, max_nfev: int, w0: float) -> dict:
     if cost1 < cost0 and tf.is_stable(a):
         return {"num": b, "den": a, "c1": float(c1), "c0": float(c0), "refine_cost": [cost0, cost1]}
     return {"refine_cost": [cost0, cost0]}
+
+
+def _operator_columns(hp: dict, u) -> np.ndarray:
+    """The EUPI kind's regressor columns for drive u [V]: v, CPI plays, UPI plays, v^2..v^Np."""
+    from ..models.play import play_outputs
+    from .common import normalize
+    v = normalize(np.asarray(u, float), hp["u_min"], hp["u_max"])
+    cols = [v[:, None]]
+    r_cpi = np.asarray(hp["r_cpi"], float)
+    if r_cpi.size:
+        cols.append(play_outputs(v, r_cpi))
+    r_upi, a_upi = np.asarray(hp["r_upi"], float), np.asarray(hp["a_upi"], float)
+    if r_upi.size and a_upi.size:
+        cols.append(play_outputs(v, np.repeat(r_upi, a_upi.size), np.tile(a_upi, r_upi.size)))
+    npoly = len(hp["p"]) + 1
+    if npoly >= 2:
+        cols.append(v[:, None] ** np.arange(2, npoly + 1)[None, :])
+    return np.hstack(cols)
+
+
+def _hysteresis_output(hp: dict, x: np.ndarray) -> np.ndarray:
+    """H[u] [um] from the operator columns of u: y_mid + y_half (X theta + p0)."""
+    d = np.asarray(hp["d"], float).ravel()
+    theta = np.concatenate([[hp["a0"]], np.asarray(hp["b"], float), d, np.asarray(hp["p"], float)])
+    return float(hp["y_mid"]) + float(hp["y_half"]) * (x @ theta + float(hp["p0"]))
+
+
+def refine_weights(params: dict, recordings, xs=None) -> dict:
+    """Refit the EUPI weights with the dynamics G fixed (variable projection, step a).
+
+    ``y = G[c1 (y_mid + y_half (X theta + p0)) + c0]`` is linear in ``theta``
+    and the offset: the columns of X are filtered through G and the weights
+    solved by bounded least squares (a0 >= A0_MIN, b, d >= 0, p free). The
+    affine correction is folded into the refitted weights (c1 = 1, c0 = 0).
+
+    ``xs``: the operator columns of each recording (:func:`_operator_columns`),
+    if already computed.
+
+    Returns
+    -------
+    dict
+        ``hysteresis`` (refitted, k_ex chosen again), ``c1``, ``c0`` and
+        ``refine_weights_cost`` ([before, after] [um^2]); empty if it did not help.
+    """
+    from ..models import eupi as eupiref
+    hp = dict(params["hysteresis"])
+    num, den = params["num"], params["den"]
+    if xs is None:
+        xs = [_operator_columns(hp, r.u) for r in recordings]
+    c1, c0 = float(params.get("c1", 1.0)), float(params.get("c0", 0.0))
+    num_den = (num, den)
+
+    def cost(h, a1, a0_):
+        return float(sum(np.sum((tf.simulate_tf(*num_den, r.t, a1 * _hysteresis_output(h, x) + a0_) - r.y) ** 2)
+                         for r, x in zip(recordings, xs)))
+
+    gx, ys = [], []
+    for r, X in zip(recordings, xs):
+        cols = [tf.simulate_tf(num, den, r.t, X[:, k]) for k in range(X.shape[1])]
+        cols.append(tf.simulate_tf(num, den, r.t, np.ones_like(r.t)))
+        gx.append(np.column_stack(cols))
+        ys.append(r.y)
+    A, y = np.vstack(gx), np.concatenate(ys)
+    n_cpi, n_u = len(hp["r_cpi"]), len(hp["r_upi"]) * len(hp["a_upi"])
+    lo = np.concatenate([[eupi_kind.A0_MIN], np.zeros(n_cpi + n_u), np.full(A.shape[1] - 1 - n_cpi - n_u, -np.inf)])
+    hi = np.full(A.shape[1], np.inf)
+    cost0 = cost(hp, c1, c0)
+    # output units: y = (X theta' ) with theta' = y_half theta; the last column is the constant
+    sol = optimize.lsq_linear(A, y, bounds=(lo, hi), method="bvls")
+    th = sol.x
+    yh = float(hp["y_half"])
+    new = dict(hp)
+    new["a0"] = float(max(th[0] / yh, eupi_kind.A0_MIN))
+    new["b"] = np.maximum(th[1:1 + n_cpi] / yh, 0.0)
+    d = np.maximum(th[1 + n_cpi:1 + n_cpi + n_u] / yh, 0.0)
+    new["d"] = d.reshape(len(hp["r_upi"]), len(hp["a_upi"])) if n_u else np.zeros((0, 0))
+    new["p"] = th[1 + n_cpi + n_u:-1] / yh
+    new["p0"] = float((th[-1] - float(hp["y_mid"])) / yh)
+    base = eupi_kind.to_params({**new, "k_ex": 0.0})
+    new["margin_at_kex0"] = eupiref.small_gain_margin(base, -1.0, 1.0)
+    try:
+        kex = eupiref.choose_kex(base, -1.0, 1.0, margin=0.05)
+        new["k_ex"], new["invertible"] = kex, True
+        new["small_gain_margin"] = eupiref.small_gain_margin(eupiref.apply_kex(base, kex), -1.0, 1.0)
+    except ValueError:
+        new["k_ex"], new["invertible"], new["small_gain_margin"] = 0.0, False, new["margin_at_kex0"]
+    cost1 = cost(new, 1.0, 0.0)
+    if cost1 < cost0:
+        return {"hysteresis": new, "c1": 1.0, "c0": 0.0, "refine_weights_cost": [cost0, cost1]}
+    return {}
 
 
 def simulate(params: dict, t, u, u2=None) -> np.ndarray:

@@ -571,9 +571,15 @@ def simulate_tf(num, den, t, u, method: str = "foh") -> np.ndarray:
     nx = ad.shape[0]
     if nx == 0:
         return dd[0, 0] * u
-    try:  # equilibrium of the discrete system for the constant input u[0]
-        x = np.linalg.solve(np.eye(nx) - ad, bd[:, 0] * u[0])
-    except np.linalg.LinAlgError:
-        x = np.zeros(nx)
-    _, y, _ = signal.dlsim((ad, bd, cd, dd, dt), u, t=None, x0=x)
+    # the same difference equation as the state space, run by lfilter (C speed;
+    # dlsim loops in Python), started at the equilibrium for the constant u[0]
+    b, a = signal.ss2tf(ad, bd, cd, dd)
+    b = np.atleast_1d(np.asarray(b, dtype=float)[0])
+    try:
+        zi = signal.lfilter_zi(b, a) * u[0]
+    except (np.linalg.LinAlgError, ValueError):
+        zi = np.zeros(max(len(a), len(b)) - 1)
+    if not np.all(np.isfinite(zi)):
+        zi = np.zeros_like(zi)
+    y, _ = signal.lfilter(b, a, u, zi=zi)
     return np.asarray(y).ravel()
