@@ -81,6 +81,10 @@ def options_for(kind: str, extra: list) -> Options:
     """The identify options of ``kind`` with their defaults, as the CLI would give them."""
     from ..commands import identify as ident_cmd
     ap = build_parser()
+    if kind == "cascade":
+        # the real recordings are single runs (sweeps, or one drive each), not
+        # the paper's quasi-static + inverse-processed chirp pairs
+        extra = [*extra, "--cascade-fallback"]
     args = ap.parse_args(["identify", "--model", kind, "--data", "x.csv", "--out", "x.json", *extra])
     dests = list(ident_cmd.COMMAND_OPTION_DESTS) + ident_cmd._KIND_DESTS.get(kind, [])
     opts = Options({d: getattr(args, d) for d in dests if hasattr(args, d)})

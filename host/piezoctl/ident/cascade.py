@@ -8,7 +8,10 @@ Identification (the paper's procedure)
    quasi-static if the power-weighted mean frequency (spectral centroid) of its
    detrended drive u is below ``--cascade-static-hz`` (default 2 Hz), dynamic
    otherwise. ``--cascade-static`` lists the quasi-static files by index instead
-   (0-based, in ``--data`` order).
+   (0-based, in ``--data`` order). With only one kind of recording the fit is
+   refused, unless ``--cascade-fallback``: then every recording serves both
+   steps (the hysteresis from all data, the dynamics from the response of all
+   data to the hysteresis output) and the joint refinement separates them.
 2. Fit the EUPI hysteresis H on the quasi-static recordings (the ``eupi`` kind
    with its default options).
 3. For each dynamic recording (in the paper: the stage driven by the EUPI
@@ -57,7 +60,7 @@ __all__ = ["KIND", "DESCRIPTION", "add_options", "fit", "simulate", "split_recor
            "spectral_centroid"]
 
 DEFAULTS = {"order": 2, "num_order": None, "method": "pso-wcls", "static_hz": 2.0, "static": None,
-            "fmin": None, "fmax": None, "refine": 50, "refine_rounds": 2, "seed": 0}
+            "fmin": None, "fmax": None, "refine": 50, "refine_rounds": 2, "seed": 0, "fallback": False}
 
 
 def add_options(parser) -> None:
@@ -76,6 +79,9 @@ def add_options(parser) -> None:
                         help="function evaluations of the joint time-domain refinement (0: off)")
     parser.add_argument("--cascade-refine-rounds", type=int, default=2,
                         help="rounds of weights-then-dynamics refinement (default 2)")
+    parser.add_argument("--cascade-fallback", action="store_true",
+                        help="when the data has only quasi-static or only dynamic recordings, use every "
+                             "recording for both steps (the joint refinement then does the separating)")
     parser.add_argument("--cascade-seed", type=int, default=0, help="PSO seed")
 
 
@@ -108,8 +114,12 @@ def split_recordings(recordings, options=None) -> tuple[list[int], list[int]]:
         static = [i for i, r in enumerate(recordings) if spectral_centroid(r.t, r.u) < lim]
     dynamic = [i for i in range(len(recordings)) if i not in static]
     if not static or not dynamic:
-        raise IdentError(f"cascade needs quasi-static and dynamic recordings (got {len(static)} "
-                         f"quasi-static, {len(dynamic)} dynamic; see --cascade-static-hz / --cascade-static)")
+        if not _opt(options, "fallback"):
+            raise IdentError(f"cascade needs quasi-static and dynamic recordings (got {len(static)} "
+                             f"quasi-static, {len(dynamic)} dynamic; see --cascade-static-hz / --cascade-static, "
+                             f"or --cascade-fallback)")
+        # one kind of recording only: every recording serves both steps
+        static = dynamic = list(range(len(recordings)))
     return static, dynamic
 
 
