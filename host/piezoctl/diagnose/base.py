@@ -84,6 +84,44 @@ def _arx(x_list, y_list, order, rows):
     return b, a
 
 
+G_OUT_MAX = 3.0   # largest |G| allowed above twice the calibration's band (where it has no evidence)
+
+
+def band_cps(xs, k0s) -> float:
+    """Normalized frequency [cycles/sample] below which 99 % of the energy of the inputs' increments lies."""
+    f_all, p_all = [], []
+    for x, k0 in zip(xs, k0s):
+        dx = np.diff(np.asarray(x, float)[k0:])
+        if dx.size < 16:
+            continue
+        p_all.append(np.abs(np.fft.rfft(dx)) ** 2)
+        f_all.append(np.fft.rfftfreq(dx.size, 1.0))
+    if not f_all:
+        return 0.5
+    f, p = np.concatenate(f_all), np.concatenate(p_all)
+    o = np.argsort(f)
+    c = np.cumsum(p[o])
+    return float(f[o][min(np.searchsorted(c, 0.99 * c[-1]), f.size - 1)])
+
+
+def plausible(m, band) -> bool:
+    """A dynamics model the calibration supports: |G| at most ``G_OUT_MAX`` above twice the calibration's
+    band ``band`` [cycles/sample]. A slow calibration cannot identify fast dynamics, and an ARX fitted on it
+    can put large gains at high frequency (a 20 Hz calibration gave |G| = 27 at Nyquist), which a step then
+    excites."""
+    if m is None:
+        return False
+    b, a = m
+    if len(a) == 1 and len(b) == 1:
+        return True
+    f0 = min(2.0 * band, 0.5)
+    if f0 >= 0.5:
+        return True
+    w = np.linspace(2 * np.pi * f0, np.pi, 256)
+    _, hw = sig.freqz(b, a, worN=w)
+    return bool(np.max(np.abs(hw)) <= G_OUT_MAX)
+
+
 def _bw_features(v, beta, gamma, v_rest) -> np.ndarray:
     h = bouc_wen_h(v, beta, gamma, v_rest)
     return np.column_stack([h, v, v ** 2, v ** 3])
@@ -225,8 +263,9 @@ def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: fl
             models[order] = m
             scores[order] = _sim_rmse(m, xs, yo, k0s) if m is not None else float("inf")
         best = 0
+        band = band_cps(xs, k0s)
         for order in ORDERS[1:]:
-            if models[order] is not None and scores[order] < 0.95 * scores[best]:
+            if plausible(models[order], band) and scores[order] < 0.95 * scores[best]:
                 best = order
         b, a = models[best]
         info = {"dynamics_order": best, "cv_sim_rmse_um": {str(k): v for k, v in scores.items()}}
@@ -269,8 +308,9 @@ def fit_dynamics(xs, ys, k0s, max_rows: int = 60_000) -> tuple[np.ndarray, np.nd
         models[order] = m
         scores[order] = _sim_rmse(m, xs, ys, k0s) if m is not None else float("inf")
     best = 0
+    band = band_cps(xs, k0s)
     for order in ORDERS[1:]:
-        if models[order] is not None and scores[order] < 0.95 * scores[best]:
+        if plausible(models[order], band) and scores[order] < 0.95 * scores[best]:
             best = order
     b, a = models[best]
     return np.asarray(b, float), np.asarray(a, float)
