@@ -495,7 +495,7 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
                                  f"{sg.RATIO_MAX} of the model without it in each fold; a one-sided t-test on the "
                                  "per-block log ratios log(MSE before / MSE after) over the blocks where the term's "
                                  "held-out predicted correction has at least "
-                                 f"{sg.ACTIVE_FRAC:g} of its largest block RMS (chosen without the test fold's "
+                                 f"{sg.ACTIVE_FRAC:g} of its {sg.ACTIVE_PCT:g}th-percentile block RMS (chosen without the test fold's "
                                  f"measurements) gives p < {sg.ALPHA:g} / (number of candidates in the round) "
                                  "(Bonferroni: family-wise error 1 % per round); and the BIC with the "
                                  "autocorrelation-corrected sample size decreases. Samples with the drive outside "

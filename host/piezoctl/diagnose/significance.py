@@ -10,8 +10,8 @@ A term is *significant* when all hold:
 1. the cross-validated held-out NRMSE falls to at most ``RATIO_MAX`` (0.9) of the
    model without the term, in each fold separately;
 2. on the *active* blocks (where the term's held-out predicted correction, computed
-   without the test fold's measurements, has at least ``ACTIVE_FRAC`` of its largest
-   block RMS) a one-sided t-test on the per-block log ratios
+   without the test fold's measurements, has at least ``ACTIVE_FRAC`` of its
+   ``ACTIVE_PCT``-th percentile block RMS) a one-sided t-test on the per-block log ratios
    ``log(MSE_before / MSE_after)`` gives p < ``ALPHA`` / m, m the number of candidates
    in the selection round (Bonferroni: family-wise error ``ALPHA`` = 1 % per round);
    blocks are the units, so the residual's autocorrelation within a block does not
@@ -26,10 +26,12 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-__all__ = ["RATIO_MAX", "ALPHA", "ACTIVE_FRAC", "active_block_test", "effective_n", "bic_delta"]
+__all__ = ["RATIO_MAX", "ALPHA", "ACTIVE_FRAC", "ACTIVE_PCT", "active_block_test", "effective_n", "bic_delta"]
 
 RATIO_MAX = 0.9
 ALPHA = 0.01          # family-wise error per selection round (Bonferroni over the candidates)
+ACTIVE_PCT = 80.0     # reference block RMS of the correction: this percentile over the blocks (not the largest: a
+                      # few blocks with spikes, e.g. steps of the other axis, must not silence the rest)
 ACTIVE_FRAC = 0.1     # a block is "active" when the term's predicted correction there has at least this
                       # fraction of its largest block RMS
 
@@ -63,7 +65,8 @@ def active_block_test(before: np.ndarray, after: np.ndarray, correction: np.ndar
 
     The *active* blocks are those where the term's predicted correction (fitted on the
     other fold, evaluated from the test fold's inputs only, never its measurements) has
-    an RMS of at least ``ACTIVE_FRAC`` of its largest block RMS. On them, the per-block
+    an RMS of at least ``ACTIVE_FRAC`` of its ``ACTIVE_PCT``-th percentile block RMS (and at least
+    ``ACTIVE_FRAC``^2 of the largest, for terms that act in fewer than a fifth of the blocks). On them, the per-block
     log ratio ``z_b = log(MSE_before_b / MSE_after_b)`` is scale free, so a few blocks
     with large errors (steps, corners) do not swamp the others; a one-sided t-test
     (``n_active - 1`` degrees of freedom) tests mean z > 0. Blocks are the units, so the
@@ -90,7 +93,7 @@ def active_block_test(before: np.ndarray, after: np.ndarray, correction: np.ndar
     mc = np.sqrt(np.bincount(inv, correction ** 2) / cnt)
     if mc.max() <= 0:
         return 0.0, 1.0, 0
-    act = mc >= ACTIVE_FRAC * mc.max()
+    act = mc >= ACTIVE_FRAC * max(float(np.percentile(mc, ACTIVE_PCT)), ACTIVE_FRAC * float(mc.max()))
     tiny = 1e-30
     z = np.log((mb[act] + tiny) / (ma[act] + tiny))
     if z.size < 4:
