@@ -49,7 +49,7 @@ def test_bouc_wen_is_rate_independent():
     assert np.ptp(h1) > 0.1
 
 
-@pytest.mark.parametrize("name", ["null_default", "thermal_drift"])
+@pytest.mark.parametrize("name", ["null_default", "thermal_drift", "delay"])
 def test_concealed_case(tmp_path, name):
     case = make_case(name, tmp_path / "case", scale=0.6, seed=3)
     out = tmp_path / "out"
@@ -72,6 +72,11 @@ def test_concealed_case(tmp_path, name):
     else:
         assert eff[0]["significant"]
         assert h["refined_nrmse"] <= 0.7 * h["base_nrmse"]
+    # an improvement is reported only where the exact refined model's held-out error went down
+    for x in eff:
+        assert x["improvement"]["nrmse_after"] <= x["improvement"]["nrmse_before"]
+        if x["significant"]:
+            assert max(x["improvement"]["exact_fold_ratios"]) < 1.0
     # both model files run through `simulate --model`
     for key in ("base_model", "refined_model"):
         p = out / doc[key]
@@ -119,3 +124,33 @@ def test_outside_mask_guards_after_the_excursion():
     m = _outside_mask(s, 10.0, 100.0)
     g = int(round(OUT_GUARD_S / dt))
     assert not m[:5000].any() and m[5000:6000 + g - 1].all() and not m[6000 + g + 1:].any()
+
+
+def test_discriminate_group_prefers_the_clearly_smaller_residual_and_states_ambiguity():
+    from piezoctl.diagnose.discriminate import discriminate_group
+    rng = np.random.default_rng(5)
+    nb, m = 24, 400
+    blocks = np.repeat(np.arange(nb), m)
+    fold = blocks % 2
+    cands = [{"effect": type("E", (), {"name": n})()} for n in ("amplifier_bandwidth", "delay")]
+    small = rng.normal(0, 1.0, nb * m)
+    large = rng.normal(0, 2.0, nb * m)
+    order, text = discriminate_group(cands, [large, small], fold, blocks, 100.0)
+    assert order == [1, 0] and text.startswith("Discrimination") and "delay" in text
+    same = [rng.normal(0, 1.0, nb * m), rng.normal(0, 1.0, nb * m)]
+    order, text = discriminate_group(cands, same, fold, blocks, 100.0)
+    assert order == [0, 1] and text.startswith("Ambiguous")
+
+
+def test_dynamics_plausibility_rejects_gain_beyond_the_calibration_band():
+    from scipy import signal as sps
+    from piezoctl.diagnose.base import plausible
+    # a 600 Hz mode at 10 kHz inside a band reaching 1 kHz: accepted
+    b, a, _ = sps.cont2discrete(([(2 * np.pi * 600) ** 2], [1, 2 * 0.03 * 2 * np.pi * 600, (2 * np.pi * 600) ** 2]),
+                                1e-4, method="zoh")
+    assert plausible((np.ravel(b), np.ravel(a)), 0.1)
+    # the same mode when the calibration reached only 20 Hz (0.002 cycles/sample): |G| = 16 at 600 Hz, rejected
+    assert not plausible((np.ravel(b), np.ravel(a)), 0.002)
+    # the ARX a 20 Hz calibration produced (|G| = 27 at Nyquist): rejected; a static G always accepted
+    assert not plausible((np.array([-10.1278, 21.4652, -11.336]), np.array([1.0, -0.7907, -0.208])), 0.002)
+    assert plausible((np.array([1.0]), np.array([1.0])), 0.002)

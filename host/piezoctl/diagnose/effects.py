@@ -84,41 +84,67 @@ def _creep_taus(ctx):
     return [tau for tau in CREEP_TAUS if tau < 2.0 * ctx.duration]
 
 
+def _hfeatures(ctx, u):
+    """The base hysteresis' feature columns (play outputs or the Bouc-Wen state, v, v^2, v^3, 1) for drive u [V]:
+    everything the base fit could have put into H."""
+    from ..models.play import play_outputs
+    from ..ident.refined import bouc_wen_h
+    hp = ctx.base["hysteresis"]
+    v = (np.asarray(u, float) - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
+    vr = float(hp.get("v_rest", 0.0))
+    if hp.get("type", "pi") == "bouc_wen":
+        H = bouc_wen_h(v, float(hp["beta"]), float(hp["gamma"]), vr)[:, None]
+    else:
+        r = np.asarray(hp["r"], float)
+        H = play_outputs(v, r, y0=np.full(r.size, vr))
+    vc = np.clip(v, float(hp.get("v_lo", -1.0)), float(hp.get("v_hi", 1.0)))
+    return np.column_stack([H, vc, vc ** 2, vc ** 3, np.ones(v.size)])
+
+
 def _creep_proj(ctx):
-    """Per time constant, (alpha, beta): the part alpha h + beta of lowpass_tau(h) that the base model,
-    fitted on the calibration, has already absorbed (least squares on the calibration's H output)."""
+    """Per time constant, the coefficients P of the part F P of lowpass_tau(h) that the base model, fitted on
+    the calibration, has already absorbed: F are the base hysteresis' own features (plays or Bouc-Wen state, the
+    drive polynomial, a constant), least squares on the calibration. A fast calibration turns a slow creep term
+    into a mean level and a wider loop; both are in F P, so only what the calibration could not show is left."""
     if "creep_proj" not in ctx.refit_cache:
         out = []
+        F = np.vstack([_hfeatures(ctx, r.u)[k0:] for r, k0 in zip(ctx.cal, ctx.cal_k0)])
+        sc = np.sqrt(np.mean(F ** 2, axis=0))
+        sc[sc == 0] = 1.0
         for tau in _creep_taus(ctx):
             lp = np.concatenate([lowpass_tau(h, tau, r.dt)[k0:] for r, h, k0 in zip(ctx.cal, ctx.cal_h, ctx.cal_k0)])
-            hh = np.concatenate([h[k0:] for h, k0 in zip(ctx.cal_h, ctx.cal_k0)])
-            X = np.column_stack([hh, np.ones(hh.size)])
-            th, *_ = np.linalg.lstsq(X, lp, rcond=None)
-            out.append((float(th[0]), float(th[1])))
+            th, *_ = np.linalg.lstsq(F / sc, lp, rcond=1e-9)
+            out.append(th / sc)
         ctx.refit_cache["creep_proj"] = out
     return ctx.refit_cache["creep_proj"]
 
 
 def _creep_reg(ctx, s, setting):
     # per time constant: the chain's response lowpass_tau(h) minus what the calibration already showed
-    # (alpha h + beta: a fast calibration sees only the mean of a slow term, a slow one its full gain);
+    # (F P: a fast calibration sees only the mean of a slow term and a wider loop, a slow one its full gain);
     # a transient after steps and dwells, not a static function of the level
-    return np.column_stack([_G(ctx, lowpass_tau(s.h, tau, s.dt) - al * s.h - be)
-                            for tau, (al, be) in zip(_creep_taus(ctx), _creep_proj(ctx))])
+    F = _hfeatures(ctx, s.u)
+    return np.column_stack([_G(ctx, lowpass_tau(s.h, tau, s.dt) - F @ P)
+                            for tau, P in zip(_creep_taus(ctx), _creep_proj(ctx))])
 
 
 def _creep_term(ctx, setting, coef):
+    """w = h + sum g_i (lp_i(h) - F P_i): the refined kind's chain (gains g_i on lp_i(h) - h, static gain
+    sum g_i) with the base hysteresis' weights changed by Q = -sum g_i P_i (what the calibration had absorbed)."""
+    import copy
     taus = _creep_taus(ctx)
-    pr = _creep_proj(ctx)
-    # w = h + sum g (lp - al h - be) = h + sum g (lp - h) + sum g (1 - al) (h - be / (1 - al)) ...
-    # written as the refined kind's chain: gain g_i on (lp - h), static gain sum g_i (1 - al_i), h_ref
     g = np.asarray(coef, float)
-    al = np.array([p[0] for p in pr])
-    be = np.array([p[1] for p in pr])
-    gs = float(np.sum(g * (1.0 - al)))
-    cst = float(np.sum(g * be))
-    h_ref = cst / gs if abs(gs) > 1e-12 else 0.0
-    return {"tau_s": list(taus), "gain": [float(c) for c in g], "static_gain": gs, "h_ref_um": h_ref}
+    Q = -sum(gi * P for gi, P in zip(g, _creep_proj(ctx)))
+    hp = copy.deepcopy(ctx.base["hysteresis"])
+    n = Q.size - 4
+    if hp.get("type", "pi") == "bouc_wen":
+        hp["c_h"] = float(hp["c_h"]) + float(Q[0])
+    else:
+        hp["w"] = [float(w) + float(q) for w, q in zip(hp["w"], Q[:n])]
+    hp["poly"] = [float(c) + float(q) for c, q in zip(hp["poly"], Q[n:n + 3])]
+    hp["offset"] = float(hp.get("offset", 0.0)) + float(Q[-1])
+    return {"tau_s": list(taus), "gain": [float(c) for c in g], "static_gain": float(np.sum(g)), "h_ref_um": 0.0,
+            "_hysteresis": hp}
 
 
 def _creep_desc(ctx, setting, coef):
@@ -219,23 +245,26 @@ DAMPINGS = (0.005, 0.01, 0.02, 0.05)
 
 
 def _res_settings(ctx):
-    return [(f, z) for f in ctx.peak_freqs for z in DAMPINGS]
+    # around each residual peak (Welch bins are 2.4 Hz; a damped ring's peak is not exactly its mode frequency)
+    return [(f * q, z) for f in ctx.peak_freqs for q in (0.97, 0.98, 0.99, 1.0, 1.01, 1.02, 1.03) for z in DAMPINGS]
 
 
 def _res_reg(ctx, s, setting):
     f, z = setting
     bm, am = mode_filter(f, z, s.dt)
-    return (filt(bm, am, s.ydyn) - s.ydyn)[:, None]
+    # the mode with and without the ZOH's one-sample delay: the ring's timing within a sample is not known
+    return np.column_stack([filt(bm, am, s.ydyn) - s.ydyn, filt(bm[1:], am, s.ydyn) - s.ydyn])
 
 
 def _res_term(ctx, setting, coef):
-    return {"freq_hz": float(setting[0]), "damping": float(setting[1]), "gain": float(coef[0])}
+    return {"freq_hz": float(setting[0]), "damping": float(setting[1]), "gain": float(coef[0]),
+            "gain_lead": float(coef[1])}
 
 
 def _res_desc(ctx, setting, coef):
-    return ({"freq_hz": round(setting[0], 1), "damping": setting[1], "gain": round(float(coef[0]), 4)},
+    return ({"freq_hz": round(setting[0], 1), "damping": setting[1], "gain": round(float(coef[0] + coef[1]), 4)},
             f"the residual rings at {setting[0]:.0f} Hz (damping {setting[1]:g}) after fast edges and triangle "
-            f"corners, above the calibration's band: a mode with {100 * coef[0]:.1f} % of the static gain")
+            f"corners, above the calibration's band: a mode with {100 * (coef[0] + coef[1]):.1f} % of the static gain")
 
 
 def _res_app(ctx):

@@ -183,6 +183,9 @@ def _model_params(base, terms):
         dyn = v.pop("_dynamics", None)
         if dyn is not None:
             ref["dynamics"] = dyn
+        hyst = v.pop("_hysteresis", None)
+        if hyst is not None:
+            ref["hysteresis"] = hyst
         ref["terms"][k] = v
     return ref
 
@@ -448,7 +451,7 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         effects.append({
             "name": a["effect"].name, "significant": True,
             "evidence": (f"{phrase[0].upper() + phrase[1:]}; adding it to the model lowers the exact held-out NRMSE "
-                         f"from {a['exact_before']:.4f} to {a['exact_after']:.4f} (active-block t-test on the "
+                         f"from {a['exact_before']:.4f} to {a['exact_after']:.4f} (active-block t and signed-rank tests on the "
                          f"linearized term p = {a['p']:.1e}, threshold {a['p_max']:.1e})."
                          + (f" {a['discrimination']}" if a.get("discrimination") else "")),
             "where": where, "params": params,
@@ -492,7 +495,7 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
            "fit": fit,
            "test": {"statement": "a term is significant when, fitted on alternate ~1 s time blocks and scored on "
                                  "the others (2-fold), it lowers the held-out NRMSE to at most "
-                                 f"{sg.RATIO_MAX} of the model without it in each fold; a one-sided t-test on the "
+                                 f"{sg.RATIO_MAX} of the model without it in each fold; a one-sided t-test and a Wilcoxon signed-rank test (p = 2 x the smaller) on the "
                                  "per-block log ratios log(MSE before / MSE after) over the blocks where the term's "
                                  "held-out predicted correction has at least "
                                  f"{sg.ACTIVE_FRAC:g} of its {sg.ACTIVE_PCT:g}th-percentile block RMS (chosen without the test fold's "

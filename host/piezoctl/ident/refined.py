@@ -50,8 +50,11 @@ Parameters (JSON, physical units where they have one)
       and ``h_ref_um``: ``w + sum g_i (lowpass_tau_i(w) - w) + g_s (w - h_ref)``
       (g_s: the static gain the calibration, faster than the slow terms, did
       not see; h_ref: the mean H output during calibration).
-    - ``unmodeled_resonance``: ``freq_hz``, ``damping``, ``gain`` [1]: y
-      becomes ``y + gain (M(y) - y)``, M a unit-gain second-order mode.
+    - ``unmodeled_resonance``: ``freq_hz``, ``damping``, ``gain`` [1] and
+      optional ``gain_lead`` [1]: y becomes ``y + gain (M(y) - y) +
+      gain_lead (z M(y) - y)``, M a unit-gain second-order mode (ZOH), z M
+      the same mode without the ZOH's one-sample delay (their mix places
+      the ring between two samples).
     - ``cross_coupling``: ``c_static_um_per_v``, ``c_accel_um_per_v_s2``,
       ``c_pos_per_um_v`` and ``y_center_um``: ``x = G u2`` (this axis'
       dynamics as a proxy for the other's), ``y += c_s x + c_a x'' +
@@ -318,7 +321,10 @@ def simulate_parts(params: dict, t, u, u2=None) -> dict:
     if "unmodeled_resonance" in terms:
         m = terms["unmodeled_resonance"]
         bm, am = mode_filter(m["freq_hz"], m["damping"], dt)
-        y = y + float(m["gain"]) * (filt(bm, am, y) - y)
+        yi = y
+        y = y + float(m["gain"]) * (filt(bm, am, yi) - yi)
+        if float(m.get("gain_lead", 0.0)) != 0.0:  # the mode without the ZOH's one-sample delay
+            y = y + float(m["gain_lead"]) * (filt(bm[1:], am, yi) - yi)
     y_dyn = y
     y = y + float(hp.get("offset", 0.0))
     if "cross_coupling" in terms and u2 is not None:
