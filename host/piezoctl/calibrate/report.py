@@ -17,6 +17,7 @@ __all__ = ["write_report", "figure_html", "append_coupling_html"]
 def figure_html(fig) -> str:
     """A matplotlib figure as an inline <img>."""
     buf = io.BytesIO()
+    fig.tight_layout()  # subplot titles otherwise overlap the axes above
     fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
     import matplotlib.pyplot as plt
     plt.close(fig)
