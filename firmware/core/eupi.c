@@ -65,23 +65,35 @@ int piezo_eupi_init(struct piezo_eupi *m, const struct piezo_eupi_coef *coef,
     if (rc != PIEZO_OK) {
         return rc;
     }
-    const size_t n_cpi = coef->cpi.n_r;
-    if (state_len < n_cpi) {
-        return PIEZO_ERANGE;
-    }
-    struct piezo_play cpi;
-    struct piezo_play upi;
-    rc = piezo_play_init(&cpi, &coef->cpi, state_q15, n_cpi, NULL, 0u);
-    if (rc == PIEZO_OK) {
-        rc = piezo_play_init(&upi, &coef->upi, state_q15 + n_cpi, state_len - n_cpi,
-                             work_q39, work_q39 == NULL ? 0u : work_len);
-    }
+    rc = piezo_eupi_bind_banks(&m->cpi, &coef->cpi, &m->upi, &coef->upi, state_q15, state_len,
+                               work_q39, work_len);
     if (rc != PIEZO_OK) {
         return rc;
     }
     m->coef = coef;
-    m->cpi = cpi;
-    m->upi = upi;
+    return PIEZO_OK;
+}
+
+int piezo_eupi_bind_banks(struct piezo_play *cpi, const struct piezo_play_coef *cpi_coef,
+                          struct piezo_play *upi, const struct piezo_play_coef *upi_coef,
+                          int32_t *state_q15, size_t state_len, int64_t *work_q39, size_t work_len)
+{
+    const size_t n_cpi = cpi_coef->n_r;
+    struct piezo_play c, u;
+    int rc;
+    if (n_cpi > PIEZO_PLAY_MAX_OPS || state_len < n_cpi) {
+        return PIEZO_ERANGE;
+    }
+    rc = piezo_play_init(&c, cpi_coef, state_q15, n_cpi, NULL, 0u);
+    if (rc == PIEZO_OK) {
+        rc = piezo_play_init(&u, upi_coef, state_q15 + n_cpi, state_len - n_cpi, work_q39,
+                             work_q39 == NULL ? 0u : work_len);
+    }
+    if (rc != PIEZO_OK) {
+        return rc;
+    }
+    *cpi = c;
+    *upi = u;
     return PIEZO_OK;
 }
 

@@ -98,6 +98,13 @@ int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
 int piezo_eupi_check_upi_poly(const struct piezo_play_coef *upi,
                               const int32_t *p_q24, uint16_t n_p);
 
+/* Binds a classical bank (its n_r operators at the start of state_q15) and a
+ * UPI bank (the rest of state_q15, work_q39) on the caller's arrays; neither
+ * instance is written unless both bind. Returns the play.h codes. */
+int piezo_eupi_bind_banks(struct piezo_play *cpi, const struct piezo_play_coef *cpi_coef,
+                          struct piezo_play *upi, const struct piezo_play_coef *upi_coef,
+                          int32_t *state_q15, size_t state_len, int64_t *work_q39, size_t work_len);
+
 /* Checks that a bank's thresholds are q15 signals (< 1) and weights >= 0. */
 int piezo_eupi_check_bank_q15(const struct piezo_play_coef *bank);
 

@@ -31,23 +31,12 @@ int piezo_eupi_inv_init(struct piezo_eupi_inv *c, const struct piezo_eupi_inv_co
     if (g2_max > PIEZO_EUPI_INV_G2_MAX_Q24) {
         return PIEZO_EINVAL;
     }
-    const size_t n_cpi = coef->cpi_inv.n_r;
-    if (n_cpi > PIEZO_PLAY_MAX_OPS || state_len < n_cpi) {
-        return PIEZO_ERANGE;
-    }
-    struct piezo_play cpi_inv;
-    struct piezo_play upi;
-    rc = piezo_play_init(&cpi_inv, &coef->cpi_inv, state_q15, n_cpi, NULL, 0u);
-    if (rc == PIEZO_OK) {
-        rc = piezo_play_init(&upi, &coef->upi, state_q15 + n_cpi, state_len - n_cpi,
-                             work_q39, work_q39 == NULL ? 0u : work_len);
-    }
+    rc = piezo_eupi_bind_banks(&c->cpi_inv, &coef->cpi_inv, &c->upi, &coef->upi, state_q15, state_len,
+                               work_q39, work_len);
     if (rc != PIEZO_OK) {
         return rc;
     }
     c->coef = coef;
-    c->cpi_inv = cpi_inv;
-    c->upi = upi;
     piezo_eupi_inv_reset(c);
     return PIEZO_OK;
 }
