@@ -49,6 +49,19 @@ def test_bouc_wen_is_rate_independent():
     assert np.ptp(h1) > 0.1
 
 
+def test_bouc_wen_large_step_crosses_zero_exactly():
+    # one 1.6-wide step (h crosses zero inside it) must equal the same path taken in 4000 small steps
+    v_small = np.concatenate([np.full(10, 0.8), np.linspace(0.8, -0.8, 4001)[1:]])
+    v_big = np.concatenate([np.full(10, 0.8), [-0.8]])
+    for beta, gamma in ((3.0, 0.9), (8.0, 2.0), (2.0, -1.2)):
+        pre = np.linspace(-0.8, 0.8, 2001)
+        h_small = refined.bouc_wen_h(np.concatenate([pre, v_small]), beta, gamma, -0.8)
+        h_big = refined.bouc_wen_h(np.concatenate([pre, v_big]), beta, gamma, -0.8)
+        assert h_small[2000 + 9] > 0.1 / beta      # h > 0 before the step
+        assert h_big[-1] < 0
+        assert abs(h_big[-1] - h_small[-1]) < 1e-9
+
+
 @pytest.mark.parametrize("name", ["null_default", "thermal_drift", "delay"])
 def test_concealed_case(tmp_path, name):
     case = make_case(name, tmp_path / "case", scale=0.6, seed=3)

@@ -240,15 +240,27 @@ def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, quantum: float
     hk = [0.0] * len(vk)
     h = 0.0
     exp = np.exp
+    log = np.log
     for i in range(1, len(vk)):
         d = vk[i] - vk[i - 1]
         if d == 0.0:
             hk[i] = h
             continue
         sd = 1.0 if d > 0 else -1.0
-        k = beta + sd * gamma if h >= 0 else beta - sd * gamma
+        ln = abs(d)
+        # k depends on sign(h) (sign(dv) at h = 0): a segment that takes h across zero is integrated in two
+        # pieces, or one large drive step (a single segment) would use the wrong rate after the crossing
+        sh = sd if h == 0.0 else (1.0 if h > 0 else -1.0)
+        k = beta + sd * sh * gamma
         heq = sd / k
-        h = heq + (h - heq) * float(exp(-k * abs(d)))
+        if sh != sd:
+            l0 = float(log(1.0 - h / heq)) / k
+            if l0 < ln:
+                ln -= l0
+                k = beta + gamma
+                heq = sd / k
+                h = 0.0
+        h = heq + (h - heq) * float(exp(-k * ln))
         hk[i] = h
     out = np.interp(lam, lam[keep], np.asarray(hk))
     return out[1:]
