@@ -127,11 +127,31 @@ def _bw_features(v, beta, gamma, v_rest) -> np.ndarray:
     return np.column_stack([h, v, v ** 2, v ** 3])
 
 
+TREND_ORDER = 3   # per calibration recording, Legendre polynomials 1..TREND_ORDER of time enter the H fits
+
+
+def _trends(ns, k0s) -> list:
+    """Per recording, block columns of slow trends (Legendre P1..P3 of the settled time span; zero in the other
+    recordings' blocks). They absorb slow drift in the calibration - a creep transient after power-up, a thermal
+    settling - which would otherwise bend the hysteresis fit (a rising drift during a calibration loop of
+    shrinking amplitude looks like amplitude-dependent shape); they are not part of the model."""
+    out = []
+    m = TREND_ORDER
+    for i, (n, k0) in enumerate(zip(ns, k0s)):
+        T = np.zeros((n, m * len(ns)))
+        x = np.linspace(-1.0, 1.0, max(n - k0, 2))
+        x = np.concatenate([np.full(k0, -1.0), x])[:n]
+        T[:, i * m:(i + 1) * m] = np.polynomial.legendre.legvander(x, m)[:, 1:]
+        out.append(T)
+    return out
+
+
 def _cv_h(Fs, ys, k0s, rows) -> float:
     """RMS error [um] of the static H fit, 2-fold over interleaved blocks (8 per recording)."""
     err, n = 0.0, 0
+    Ts = _trends([y.size for y in ys], k0s)
     for f in (0, 1):
-        tr = [np.column_stack([F, np.ones(F.shape[0])]) for F in Fs]
+        tr = [np.column_stack([F, T, np.ones(F.shape[0])]) for F, T in zip(Fs, Ts)]
         m = [(block_masks(y.size, 8) % 2 == f) & (np.arange(y.size) >= k0) for y, k0 in zip(ys, k0s)]
         X = np.vstack([x[mm] for x, mm in zip(tr, m)])
         yy = np.concatenate([y[mm] for y, mm in zip(ys, m)])
@@ -179,12 +199,36 @@ def _oe_refine(m, xs, ys, k0s, max_nfev: int = 30):
 
 
 def _fit_h(Fs, ys, rows, k0s):
-    X = np.vstack([np.column_stack([F[k0:], np.ones(F.shape[0] - k0)]) for F, k0 in zip(Fs, k0s)])
+    """H's coefficients (features of Fs, then the offset), fitted with the slow trend columns (not returned)."""
+    Ts = _trends([y.size for y in ys], k0s)
+    X = np.vstack([np.column_stack([F[k0:], T[k0:], np.ones(F.shape[0] - k0)]) for F, T, k0 in zip(Fs, Ts, k0s)])
     y = np.concatenate([y[k0:] for y, k0 in zip(ys, k0s)])
     if X.shape[0] > rows:
         s = int(np.ceil(X.shape[0] / rows))
         X, y = X[::s], y[::s]
-    return _lstsq(X, y, RIDGE)
+    th = _lstsq(X, y, RIDGE)
+    nf = Fs[0].shape[1]
+    return np.concatenate([th[:nf], th[-1:]])
+
+
+def _refine_bw(best, vs, polys, sos, ylp, k0s, rows, v_rest):
+    """(score, None, (beta, gamma)) refined from the grid point by Nelder-Mead on (log beta, gamma / beta).
+
+    The grid is coarse (a factor 1.6 in beta); a shape error that is small inside a narrow calibration grows
+    when the model is run over a wider range, and is then mistaken for missing physics."""
+    def score(z):
+        beta, gr = float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95))
+        hs = [sig.sosfiltfilt(sos, bouc_wen_h(v, beta, gr * beta, v_rest)) for v in vs]
+        return _cv_h([np.column_stack([h, p]) for h, p in zip(hs, polys)], ylp, k0s, rows)
+    beta0, gamma0 = best[2]
+    z0 = np.array([np.log(beta0), gamma0 / beta0])
+    sol = optimize.minimize(score, z0, method="Nelder-Mead",
+                            options={"maxfev": 40, "xatol": 0.01, "fatol": 1e-4 * best[0],
+                                     "initial_simplex": [z0, z0 + [0.25, 0.0], z0 + [0.0, 0.15]]})
+    if sol.fun < best[0]:
+        beta = float(np.exp(sol.x[0]))
+        return (float(sol.fun), None, (beta, float(np.clip(sol.x[1], -0.95, 0.95)) * beta))
+    return best
 
 
 def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: float = 0.0,
@@ -242,6 +286,7 @@ def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: fl
             sc = _cv_h([np.column_stack([h, p]) for h, p in zip(hs, polys)], ylp, k0s, max_rows)
             if best_bw is None or sc < best_bw[0]:
                 best_bw = (sc, None, (beta, gr * beta))
+    best_bw = _refine_bw(best_bw, vs, polys, sos, ylp, k0s, max_rows, v_rest)
     best_bw = (best_bw[0], [_bw_features(v, *best_bw[2], v_rest) for v in vs], best_bw[2])
     cls["bouc_wen"] = best_bw
     htype = "bouc_wen" if cls["bouc_wen"][0] < cls["pi"][0] else "pi"
@@ -272,7 +317,11 @@ def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: fl
         Gs = [filt(b, a, F) for F in Fs]
         th = _fit_h(Gs, ys, max_rows, k0s)
     n = n_plays if htype == "pi" else 1
-    hyst = {"type": htype, "poly": th[n:n + 3].tolist(), "v_lo": -1.0, "v_hi": 1.0, "offset": float(th[-1]),
+    # the cubic is trusted over the drive range the fit saw (settled samples; the conditioning sweep before
+    # settle_s reaches further but does not enter the fit) and continued as a line beyond it
+    v_lo = min(float(np.min(v[k0:])) for v, k0 in zip(vs, k0s))
+    v_hi = max(float(np.max(v[k0:])) for v, k0 in zip(vs, k0s))
+    hyst = {"type": htype, "poly": th[n:n + 3].tolist(), "v_lo": v_lo, "v_hi": v_hi, "offset": float(th[-1]),
             "v_rest": float(v_rest)}
     if htype == "pi":
         hyst.update(r=r.tolist(), w=th[:n].tolist())

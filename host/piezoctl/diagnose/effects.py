@@ -70,6 +70,10 @@ class Effect:
     describe: Callable
     applicable: Callable = lambda ctx: True
     group: str = ""      # effects of one group refit the same part of the base; at most one is accepted
+    # number of leading regressor columns that are a nuisance (refit of the base's own structure; with them the
+    # last column, a constant): the term is tested against the model with the nuisance alone refitted on the
+    # same fold (a nested test)
+    nuisance: Callable = lambda ctx: 0
 
 
 def _G(ctx, x):
@@ -101,40 +105,32 @@ def _hfeatures(ctx, u):
     return np.column_stack([H, vc, vc ** 2, vc ** 3, np.ones(v.size)])
 
 
-def _creep_proj(ctx):
-    """Per time constant, the coefficients P of the part F P of lowpass_tau(h) that the base model, fitted on
-    the calibration, has already absorbed: F are the base hysteresis' own features (plays or Bouc-Wen state, the
-    drive polynomial, a constant), least squares on the calibration. A fast calibration turns a slow creep term
-    into a mean level and a wider loop; both are in F P, so only what the calibration could not show is left."""
-    if "creep_proj" not in ctx.refit_cache:
-        out = []
-        F = np.vstack([_hfeatures(ctx, r.u)[k0:] for r, k0 in zip(ctx.cal, ctx.cal_k0)])
-        sc = np.sqrt(np.mean(F ** 2, axis=0))
-        sc[sc == 0] = 1.0
-        for tau in _creep_taus(ctx):
-            lp = np.concatenate([lowpass_tau(h, tau, r.dt)[k0:] for r, h, k0 in zip(ctx.cal, ctx.cal_h, ctx.cal_k0)])
-            th, *_ = np.linalg.lstsq(F / sc, lp, rcond=1e-9)
-            out.append(th / sc)
-        ctx.refit_cache["creep_proj"] = out
-    return ctx.refit_cache["creep_proj"]
-
-
 def _creep_reg(ctx, s, setting):
-    # per time constant: the chain's response lowpass_tau(h) minus what the calibration already showed
-    # (F P: a fast calibration sees only the mean of a slow term and a wider loop, a slow one its full gain);
-    # a transient after steps and dwells, not a static function of the level
+    # leading columns: the base hysteresis' own features through G (the nuisance: the hysteresis refitted with the
+    # chain, since a fast calibration turned part of a slow creep into a mean level and a wider loop); then per
+    # time constant the chain's deviation lowpass_tau(h) - h through G: a transient after steps and dwells
     F = _hfeatures(ctx, s.u)
-    return np.column_stack([_G(ctx, lowpass_tau(s.h, tau, s.dt) - F @ P)
-                            for tau, P in zip(_creep_taus(ctx), _creep_proj(ctx))])
+    cols = [_G(ctx, F[:, j]) for j in range(F.shape[1] - 1)]
+    cols += [_G(ctx, lowpass_tau(s.h, tau, s.dt) - s.h) for tau in _creep_taus(ctx)]
+    return np.column_stack(cols + [np.ones(s.t.size)])
+
+
+def _creep_nuisance(ctx):
+    return _hfeatures(ctx, np.zeros(2)).shape[1] - 1
+
+
+def _creep_split(ctx, coef):
+    n = _creep_nuisance(ctx)
+    c = np.asarray(coef, float)
+    return np.concatenate([c[:n], c[-1:]]), c[n:-1]
 
 
 def _creep_term(ctx, setting, coef):
-    """w = h + sum g_i (lp_i(h) - F P_i): the refined kind's chain (gains g_i on lp_i(h) - h, static gain
-    sum g_i) with the base hysteresis' weights changed by Q = -sum g_i P_i (what the calibration had absorbed)."""
+    """w = h + sum g_i (lp_i(h) - h): the refined kind's chain, with the base hysteresis' weights changed by the
+    jointly fitted nuisance coefficients Q (plays or Bouc-Wen weight, drive cubic, offset)."""
     import copy
     taus = _creep_taus(ctx)
-    g = np.asarray(coef, float)
-    Q = -sum(gi * P for gi, P in zip(g, _creep_proj(ctx)))
+    Q, g = _creep_split(ctx, coef)
     hp = copy.deepcopy(ctx.base["hysteresis"])
     n = Q.size - 4
     if hp.get("type", "pi") == "bouc_wen":
@@ -143,13 +139,13 @@ def _creep_term(ctx, setting, coef):
         hp["w"] = [float(w) + float(q) for w, q in zip(hp["w"], Q[:n])]
     hp["poly"] = [float(c) + float(q) for c, q in zip(hp["poly"], Q[n:n + 3])]
     hp["offset"] = float(hp.get("offset", 0.0)) + float(Q[-1])
-    return {"tau_s": list(taus), "gain": [float(c) for c in g], "static_gain": float(np.sum(g)), "h_ref_um": 0.0,
+    return {"tau_s": list(taus), "gain": [float(c) for c in g], "static_gain": 0.0, "h_ref_um": 0.0,
             "_hysteresis": hp}
 
 
 def _creep_desc(ctx, setting, coef):
     taus = _creep_taus(ctx)
-    g = np.asarray(coef)
+    g = _creep_split(ctx, coef)[1]
     main = taus[int(np.argmax(np.abs(g)))]
     return ({"tau_s": taus, "gain": [round(float(c), 5) for c in g], "total_gain": round(float(g.sum()), 5)},
             f"the residual follows the low-passed drive history (Kelvin-Voigt creep, total {100 * g.sum():.2f} % "
@@ -365,18 +361,31 @@ def _sl_app(ctx):
 
 
 # --- saturation --------------------------------------------------------------------------
+SAT_COARSE = tuple(0.025 * i for i in range(15))   # threshold below the largest drive, fraction of the span
+
+
 def _sat_settings(ctx):
     lo, hi = ctx.u_lo, ctx.u_hi
     span = hi - lo
-    out = [(None, hi - q * span) for q in (0.02, 0.05, 0.1, 0.15, 0.2, 0.3)]
-    out += [(lo + q * span, None) for q in (0.02, 0.05, 0.1, 0.15, 0.2, 0.3)]
+    out = [(None, hi - q * span) for q in SAT_COARSE[1:]]
+    out += [(lo + q * span, None) for q in SAT_COARSE[1:]]
     return out
 
 
-def _sat_reg(ctx, s, setting):
+def _sat_h(ctx, s, setting):
+    """H output [um] with the drive clipped at ``setting`` (lo, hi) [V]: the hysteresis sees the clipped drive
+    (it reverses at the limit, not where the command does)."""
     lo, hi = setting
     uc = np.clip(s.u, -np.inf if lo is None else lo, np.inf if hi is None else hi)
-    return _G(ctx, uc - s.u)[:, None]
+    if np.array_equal(uc, s.u):
+        return s.h
+    v = (uc - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
+    return hysteresis_parts(ctx.base["hysteresis"], v)[0]
+
+
+def _sat_reg(ctx, s, setting):
+    # exact for the base model: the output with the clipped drive minus the output without (coefficient ~1)
+    return _G(ctx, _sat_h(ctx, s, setting) - s.h)[:, None]
 
 
 def _sat_term(ctx, setting, coef):
@@ -431,7 +440,7 @@ def _one(ctx):
 
 EFFECTS = {
     "creep": Effect("creep", "residual correlated with the low-passed drive history; large after steps and dwells",
-                    _one, _creep_reg, _creep_term, _creep_desc),
+                    _one, _creep_reg, _creep_term, _creep_desc, nuisance=_creep_nuisance),
     "thermal_drift": Effect("thermal_drift", "slow trend with time (or temperature), independent of the drive",
                             lambda ctx: list(THERMAL_TAUS), _th_reg, _th_term, _th_desc),
     "sensor_offset": Effect("sensor_offset", "a constant per recording (session)", _one, _off_reg, _off_term,
