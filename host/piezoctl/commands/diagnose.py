@@ -26,6 +26,7 @@ def add_parser(sub) -> None:
                    help="seconds at the start of every recording left out of fits and scores (default 0.5)")
     p.add_argument("--max-terms", type=int, default=4, metavar="N", help="at most N added terms (default 4)")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
+    p.add_argument("--png", action="store_true", help="also write the report's figures as DIR/plots/*.png")
     p.add_argument("--quiet", action="store_true", help="print only the result")
     p.set_defaults(func=run)
 
@@ -37,7 +38,7 @@ def run(args) -> int:
     if args.max_terms < 0:
         raise CliError(f"--max-terms {args.max_terms}: must be >= 0")
     doc = diagnose(args.calibration, args.recordings, args.out, settle_s=args.settle_s, max_terms=args.max_terms,
-                   report=not args.no_report, log=(lambda *a, **k: None) if args.quiet else print)
+                   report=not args.no_report, png=args.png, log=(lambda *a, **k: None) if args.quiet else print)
     fit = doc["fit"]
     print(f"named: {', '.join(doc['named'])}")
     print(f"NRMSE base {fit['base']['nrmse']:.4f} -> refined {fit['refined']['nrmse']:.4f} "

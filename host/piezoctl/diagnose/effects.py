@@ -74,6 +74,9 @@ class Effect:
     # last column, a constant): the term is tested against the model with the nuisance alone refitted on the
     # same fold (a nested test)
     nuisance: Callable = lambda ctx: 0
+    # lower bounds of the coefficients (None: unconstrained), e.g. creep gains >= 0 (a Kelvin-Voigt element only
+    # adds compliance; free signs turn the chain into an arbitrary slow filter)
+    lower: Callable = lambda ctx: None
 
 
 def _G(ctx, x):
@@ -81,7 +84,8 @@ def _G(ctx, x):
 
 
 # --- creep -----------------------------------------------------------------------------
-CREEP_TAUS = (0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0)
+# creep time constants [s]: from 0.1 s up (a faster "creep" is a lag of the dynamics, not creep)
+CREEP_TAUS = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0)
 
 
 def _creep_taus(ctx):
@@ -123,6 +127,11 @@ def _creep_split(ctx, coef):
     n = _creep_nuisance(ctx)
     c = np.asarray(coef, float)
     return np.concatenate([c[:n], c[-1:]]), c[n:-1]
+
+
+def _creep_lower(ctx):
+    n = _creep_nuisance(ctx)
+    return np.concatenate([np.full(n, -np.inf), np.zeros(len(_creep_taus(ctx))), [-np.inf]])
 
 
 def _creep_term(ctx, setting, coef):
@@ -440,7 +449,8 @@ def _one(ctx):
 
 EFFECTS = {
     "creep": Effect("creep", "residual correlated with the low-passed drive history; large after steps and dwells",
-                    _one, _creep_reg, _creep_term, _creep_desc, nuisance=_creep_nuisance),
+                    _one, _creep_reg, _creep_term, _creep_desc, nuisance=_creep_nuisance,
+                    lower=_creep_lower),
     "thermal_drift": Effect("thermal_drift", "slow trend with time (or temperature), independent of the drive",
                             lambda ctx: list(THERMAL_TAUS), _th_reg, _th_term, _th_desc),
     "sensor_offset": Effect("sensor_offset", "a constant per recording (session)", _one, _off_reg, _off_term,
@@ -449,7 +459,8 @@ EFFECTS = {
                              "with its frequency", _one, _cc_reg, _cc_term, _cc_desc, _cc_app),
     "rate_dependent_hysteresis": Effect("rate_dependent_hysteresis", "residual grows with |du/dt| times the "
                                         "hysteretic part (loop width grows with rate)",
-                                        lambda ctx: list(RATE_REFS), _rd_reg, _rd_term, _rd_desc),
+                                        lambda ctx: list(RATE_REFS), _rd_reg, _rd_term, _rd_desc,
+                                        lower=lambda ctx: [0.0]),   # loops widen with rate, never narrow
     "unmodeled_resonance": Effect("unmodeled_resonance", "residual energy in a narrow band above the calibration "
                                   "band, ringing after corners", _res_settings, _res_reg, _res_term, _res_desc,
                                   _res_app),

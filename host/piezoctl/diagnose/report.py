@@ -10,6 +10,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import os
 
 import numpy as np
 
@@ -120,9 +121,15 @@ def figures(doc, sigs, valid, yr_all) -> dict:
     return figs
 
 
-def write_report(path, doc, sigs, valid, yr_all, held_pred=None) -> None:
-    """Write report.html for a diagnosis document and its signals."""
+def write_report(path, doc, sigs, valid, yr_all, held_pred=None, png_dir=None) -> None:
+    """Write report.html for a diagnosis document and its signals; with ``png_dir``, each figure also as
+    ``png_dir/<name>.png`` (residual_time, residual_frequency, residual_amplitude_rate, overlay)."""
     figs = figures(doc, sigs, valid, yr_all)
+    if png_dir is not None:
+        os.makedirs(png_dir, exist_ok=True)
+        for k, b64 in figs.items():
+            with open(os.path.join(png_dir, f"{k}.png"), "wb") as fh:
+                fh.write(base64.b64decode(b64))
     fit = doc["fit"]
     parts = ["<!DOCTYPE html><html><head><meta charset='utf-8'><title>piezoctl diagnose</title>",
              "<style>body{font-family:sans-serif;max-width:60em;margin:1em auto}td,th{padding:2px 8px;"

@@ -104,13 +104,23 @@ def _lstsq(X, y):
     return th / sc
 
 
-def _fit_predict(Xs, e, train, test, rows):
-    """Least squares of e on [Xs] over train rows (strided); prediction on test rows."""
+def _lstsq_bounded(X, y, lb):
+    """Least squares with lower bounds ``lb`` (-inf: free) on unit-RMS columns."""
+    from scipy.optimize import lsq_linear
+    sc = np.sqrt(np.mean(X ** 2, axis=0))
+    sc[sc == 0] = 1.0
+    sol = lsq_linear(X / sc, y, bounds=(np.asarray(lb, float) * sc, np.inf), method="bvls", lsq_solver="exact")
+    return sol.x / sc
+
+
+def _fit_predict(Xs, e, train, test, rows, lb=None):
+    """Least squares of e on [Xs] over train rows (strided), coefficients >= ``lb`` when given; prediction on
+    test rows."""
     X = np.hstack(Xs) if len(Xs) > 1 else Xs[0]
     idx = np.flatnonzero(train)
     if idx.size > rows:
         idx = idx[:: int(np.ceil(idx.size / rows))]
-    th = _lstsq(X[idx], e[idx])
+    th = _lstsq(X[idx], e[idx]) if lb is None else _lstsq_bounded(X[idx], e[idx], lb)
     sse_tr = float(np.sum((e[idx] - X[idx] @ th) ** 2)) * (np.sum(train) / max(idx.size, 1))
     return th, X[test] @ th, sse_tr
 
@@ -154,7 +164,7 @@ def _evaluate(ctxs, eff, es, fold_all, block_all, rows, p_max):
             e_before[test] = e[test] - pn
         best = None
         for st, d in zip(settings, designs):
-            th, pa, sse = _fit_predict([d.X], e, train, test, rows)
+            th, pa, sse = _fit_predict([d.X], e, train, test, rows, eff.lower(ctx))
             if best is None or sse < best[2]:
                 best = (st, d, sse, pa, th)
         pred_after[test] = best[3] - (e[test] - e_before[test])
@@ -244,7 +254,7 @@ def _nrmse_pooled(ys, yhats, masks, span):
 
 
 def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], max_terms=DEFAULTS["max_terms"],
-             block_s=DEFAULTS["block_s"], report=True, log=print) -> dict:
+             block_s=DEFAULTS["block_s"], report=True, log=print, png=False) -> dict:
     """Run the whole diagnosis and write ``diagnosis.json``, the model files and ``report.html``.
 
     Parameters
@@ -261,6 +271,8 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         Length [s] of the cross-validation blocks (at least 6 per recording).
     report : bool
         Write report.html.
+    png : bool
+        Also write the report's figures as ``out_dir/plots/*.png``.
 
     Returns
     -------
@@ -405,7 +417,8 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         bs = None
         settings, designs = _designs(ctx_all, best["effect"])
         for st, dsg in zip(settings, designs):
-            th, _, sse = _fit_predict([dsg.X], e_all, allmask, np.zeros(e_all.size, bool), rows)
+            th, _, sse = _fit_predict([dsg.X], e_all, allmask, np.zeros(e_all.size, bool), rows,
+                                      best["effect"].lower(ctx_all))
             if bs is None or sse < bs[2]:
                 bs = (st, dsg, sse, th)
         eff = best["effect"]
@@ -523,7 +536,7 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         json.dump(_jsonable(doc), fh, indent=1, allow_nan=False)
     if report:
         from .report import write_report
-        write_report(out / "report.html", doc, sigs, valid, yr_all, held_pred)
+        write_report(out / "report.html", doc, sigs, valid, yr_all, held_pred, png_dir=out / "plots" if png else None)
         doc["time_s"] = round(time.perf_counter() - t_start, 2)
         with open(out / "diagnosis.json", "w") as fh:
             json.dump(_jsonable(doc), fh, indent=1, allow_nan=False)
