@@ -20,6 +20,7 @@ from ..errors import CliError
 __all__ = [
     "Options", "IdentError", "nrmse", "rmse", "drive_range", "normalize", "fit_stride",
     "solve_linear", "LinearFit", "Gram", "add_common_options", "COMMON_OPTION_DESTS", "recording_rows",
+    "offset_params",
 ]
 
 
@@ -287,6 +288,29 @@ def solve_linear(features: Sequence[np.ndarray], targets: Sequence[np.ndarray], 
     """
     gram = Gram(features, targets, offset=offset, max_rows=max_rows, block=block)
     return gram.solve(lower=lower, upper=upper, ridge=ridge, penalty=penalty)
+
+
+def offset_params(res: LinearFit, options) -> dict:
+    """Output-offset entries of a model's parameters from its linear fit.
+
+    Parameters
+    ----------
+    res : LinearFit
+        The fit, its offsets in the model's output unit [um].
+    options : mapping
+        The fit's options; ``offset`` is the common ``--offset``.
+
+    Returns
+    -------
+    dict
+        ``offset`` [um], the offset the model keeps (:attr:`LinearFit.offset`),
+        and with ``--offset per-file`` also ``offsets_per_file`` [um], one per
+        data file in their order (what :func:`simulate_offsets` reads back).
+    """
+    out = {"offset": res.offset}
+    if options.get("offset") == "per-file":
+        out["offsets_per_file"] = res.offsets
+    return out
 
 
 def simulate_offsets(params: dict, n_files: int) -> list[float]:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..models import kp as kpref
-from .common import IdentError, check_positive_int, drive_range, normalize, solve_linear
+from .common import IdentError, check_positive_int, drive_range, normalize, offset_params, solve_linear
 
 KIND = "kp"
 DESCRIPTION = "Krasnosel'skii-Pokrovskii density on an L-level grid (non-negative least squares)"
@@ -91,10 +91,8 @@ def fit(recordings, options) -> dict:
         "L": grid.L, "nmin": grid.nmin, "nmax": grid.nmax, "s": grid.s, "N": grid.N,
         "w": res.coef[:grid.N],
         "linear": float(res.coef[grid.N]) if linear else 0.0,
-        "offset": res.offset,
+        **offset_params(res, options),
     }
-    if options.get("offset") == "per-file":
-        params["offsets_per_file"] = res.offsets
     return params
 
 

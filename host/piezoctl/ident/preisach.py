@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..models.play import play_outputs
-from .common import IdentError, check_positive_int, drive_range, normalize, solve_linear
+from .common import IdentError, check_positive_int, drive_range, normalize, offset_params, solve_linear
 
 KIND = "preisach"
 DESCRIPTION = "modified Preisach baseline: cubic + linear + n play operators (least squares)"
@@ -69,10 +69,8 @@ def fit(recordings, options) -> dict:
         "u_min": u_min, "u_max": u_max, "n": n,
         "r": r, "r_volts": r * 0.5 * (u_max - u_min),
         "p1": float(res.coef[0]), "p2": float(res.coef[1]), "alpha": res.coef[2:],
-        "offset": res.offset,
+        **offset_params(res, options),
     }
-    if options.get("offset") == "per-file":
-        params["offsets_per_file"] = res.offsets
     return params
 
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..models import kp as kpref
-from .common import IdentError, check_positive_int, drive_range, normalize, solve_linear
+from .common import IdentError, check_positive_int, drive_range, normalize, offset_params, solve_linear
 from .kp import grid_of
 
 KIND = "rkp"
@@ -173,10 +173,8 @@ def fit(recordings, options) -> dict:
         "rate_cutoff_hz": fc,
         "theta": res.coef[:NM].reshape(grid.N, M),
         "theta_lin": res.coef[NM:NM + M] if linear else np.zeros(M),
-        "offset": res.offset,
+        **offset_params(res, options),
     }
-    if options.get("offset") == "per-file":
-        params["offsets_per_file"] = res.offsets
     return params
 
 
