@@ -49,7 +49,7 @@ from ..io.recording import Recording
 from ..models.play import play_outputs
 
 __all__ = ["FS", "POSITIONS", "generate", "axis2_displacement", "coupled", "run", "main",
-           "PAPER"]
+           "PAPER", "fit_both", "last_period_errors", "error_row"]
 
 FS = 5000.0                                   # sample rate of the chirp records [Hz]
 N_SINE = 6000                                 # samples per sine record (two periods)
@@ -165,6 +165,85 @@ def _preisach_recs(recs):
     return [Recording(t=r.t, u=r.u2, y=r.y) for r in recs]
 
 
+def fit_both(recs, opts) -> tuple[dict, dict, float, float]:
+    """Fit the distributed Hammerstein model and the modified Preisach baseline (n = 10).
+
+    Parameters
+    ----------
+    recs : list of Recording
+        Coupling records: ``t`` [s], ``u`` [V] (unused), ``y`` [um], ``u2`` [V],
+        ``x2`` [um]. The Preisach baseline sees ``u2`` as its drive.
+    opts : Options
+        Hammerstein options (``hammerstein_*``).
+
+    Returns
+    -------
+    hp, pp : dict
+        Hammerstein and Preisach parameters.
+    t_ham, t_pre : float
+        Their fit times [s].
+    """
+    t0 = time.perf_counter()
+    hp = ham.fit(recs, opts)
+    t_ham = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    pp = preisach.fit(_preisach_recs(recs), Options(preisach_n=10, offset="shared",
+                                                     max_fit_rows=200_000, u_range=None))
+    t_pre = time.perf_counter() - t0
+    return hp, pp, t_ham, t_pre
+
+
+def last_period_errors(hp: dict, pp: dict, r: Recording, f: float):
+    """Both models' errors on a record over its last period, relative to y's span there.
+
+    Parameters
+    ----------
+    hp, pp : dict
+        Hammerstein and Preisach parameters (:func:`fit_both`).
+    r : Recording
+        Record of a sine at ``f`` (columns as in :func:`fit_both`).
+    f : float
+        Its frequency [Hz].
+
+    Returns
+    -------
+    last : ndarray of bool
+        The samples of the last period (``t >= t[-1] - 1/f``).
+    e_ham, e_pre : ndarray
+        ``|y - y_model| / (max y - min y)`` over those samples [1].
+    """
+    last = r.t >= r.t[-1] - 1.0 / f
+    span = np.ptp(r.y[last])
+    yh = ham.simulate(hp, r.t, r.u, r.u2, x2=r.x2)
+    yp = preisach.simulate(pp, r.t, r.u2)
+    return last, np.abs(r.y - yh)[last] / span, np.abs(r.y - yp)[last] / span
+
+
+def error_row(eh: list, ep: list, cp: list) -> dict:
+    """One table cell group from the per-record errors and couplings.
+
+    Parameters
+    ----------
+    eh, ep : list of ndarray
+        Hammerstein and Preisach relative errors per record [1]
+        (:func:`last_period_errors`).
+    cp : list of float
+        Coupling per record [% of the other axis' displacement].
+
+    Returns
+    -------
+    dict
+        ``coupling`` (mean) [%]; ``ham_avg``, ``ham_worst``, ``pre_avg``,
+        ``pre_worst`` (mean and maximum over all samples) [%]; ``reduction``
+        of the mean error by Hammerstein against Preisach [%].
+    """
+    eh, ep = np.concatenate(eh), np.concatenate(ep)
+    return {"coupling": float(np.mean(cp)), "ham_avg": 100 * float(eh.mean()),
+            "ham_worst": 100 * float(eh.max()), "pre_avg": 100 * float(ep.mean()),
+            "pre_worst": 100 * float(ep.max()),
+            "reduction": 100 * (1 - float(eh.mean()) / float(ep.mean()))}
+
+
 def run(settings: dict | None = None, seed: int = 0, verbose: bool = True,
         freqs=FREQS) -> dict:
     """Per frequency: fit both models on the training sines, evaluate on fresh records.
@@ -182,31 +261,20 @@ def run(settings: dict | None = None, seed: int = 0, verbose: bool = True,
     hp = None
     for f in freqs:
         recs = generate_sines(f, POSITIONS, seed * 1000 + 1)
-        t0 = time.perf_counter()
-        hp = ham.fit(recs, opts)
-        t_h += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        pp = preisach.fit(_preisach_recs(recs), Options(preisach_n=10, offset="shared",
-                                                         max_fit_rows=200_000, u_range=None))
-        t_p += time.perf_counter() - t0
+        hp, pp, dt_h, dt_p = fit_both(recs, opts)
+        t_h += dt_h
+        t_p += dt_p
         row = {"f": f}
         for label, pos in (("train", POSITIONS), ("between", BETWEEN)):
             eh, ep, cp = [], [], []
             for r in generate_sines(f, pos, seed * 1000 + 2 + (label == "between")):
-                t, u2, y = r.t, r.u2, r.y
-                y0, d2 = coupled(t, u2, r.x2[0])
-                last = t >= t[-1] - 1.0 / f
-                span = np.ptp(y[last])
-                yh = ham.simulate(hp, t, r.u, u2, x2=r.x2)
-                yp = preisach.simulate(pp, t, u2)
-                eh.append(np.abs(y - yh)[last] / span)
-                ep.append(np.abs(y - yp)[last] / span)
+                last, e_h, e_p = last_period_errors(hp, pp, r, f)
+                eh.append(e_h)
+                ep.append(e_p)
+                # coupling of the noise-free displacement
+                y0, d2 = coupled(r.t, r.u2, r.x2[0])
                 cp.append(100 * np.ptp(y0[last]) / np.ptp(d2[last]))
-            eh, ep = np.concatenate(eh), np.concatenate(ep)
-            row[label] = {"coupling": float(np.mean(cp)), "ham_avg": 100 * float(eh.mean()),
-                          "ham_worst": 100 * float(eh.max()), "pre_avg": 100 * float(ep.mean()),
-                          "pre_worst": 100 * float(ep.max()),
-                          "reduction": 100 * (1 - float(eh.mean()) / float(ep.mean()))}
+            row[label] = error_row(eh, ep, cp)
         rows.append(row)
     out = {"rows": rows, "fit_s": {"hammerstein": t_h, "preisach": t_p}, "params": hp}
     if verbose:

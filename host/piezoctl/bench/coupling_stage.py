@@ -34,15 +34,14 @@ The coupled displacement
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
 
 from ..ident import hammerstein as ham
-from ..ident import preisach
 from ..ident.common import Options
 from ..io.recording import Recording
 from ..sil.stage import default_stage_path, simulate_stage, stage_info
+from .coupling import error_row, fit_both, last_period_errors, markdown
 
 __all__ = ["STAGE", "FREQS", "LEVELS_V", "BETWEEN_V", "record", "amplitude", "generate", "run", "main"]
 
@@ -108,17 +107,12 @@ def generate(f: float, levels, amp: float, seed: int = 1, stage=STAGE) -> list[R
     return recs
 
 
-def _preisach_recs(recs):
-    return [Recording(t=r.t, u=r.u2, y=r.y) for r in recs]
-
-
 def run(settings: dict | None = None, seed: int = 0, verbose: bool = True, freqs=FREQS,
         stage=STAGE) -> dict:
     """Per frequency: fit both models on the 9 training positions, evaluate there and between.
 
     Returns the same structure as :func:`piezoctl.bench.coupling.run`, plus ``amp_v`` per row.
     """
-    from .coupling import markdown
     if stage_info(stage)[0] != 2:
         raise ValueError(f"{stage}: the coupling benchmark needs a two-axis stage")
     opts = Options({f"hammerstein_{k}": v for k, v in (settings or {}).items()})
@@ -128,30 +122,19 @@ def run(settings: dict | None = None, seed: int = 0, verbose: bool = True, freqs
     for f in freqs:
         amp = amplitude(f, stage)
         recs = generate(f, LEVELS_V, amp, seed * 1000 + 1, stage)
-        t0 = time.perf_counter()
-        hp = ham.fit(recs, opts)
-        t_h += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        pp = preisach.fit(_preisach_recs(recs), Options(preisach_n=10, offset="shared",
-                                                         max_fit_rows=200_000, u_range=None))
-        t_p += time.perf_counter() - t0
+        hp, pp, dt_h, dt_p = fit_both(recs, opts)
+        t_h += dt_h
+        t_p += dt_p
         row = {"f": f, "amp_v": amp}
         for label, levels in (("train", LEVELS_V), ("between", BETWEEN_V)):
             evals = recs if label == "train" else generate(f, levels, amp, seed * 1000 + 2, stage)
             eh, ep, cp = [], [], []
             for r in evals:
-                last = r.t >= r.t[-1] - 1.0 / f
-                span = np.ptp(r.y[last])
-                yh = ham.simulate(hp, r.t, r.u, r.u2, x2=r.x2)
-                yp = preisach.simulate(pp, r.t, r.u2)
-                eh.append(np.abs(r.y - yh)[last] / span)
-                ep.append(np.abs(r.y - yp)[last] / span)
-                cp.append(100 * span / r.meta["y2_ptp"])
-            eh, ep = np.concatenate(eh), np.concatenate(ep)
-            row[label] = {"coupling": float(np.mean(cp)), "ham_avg": 100 * float(eh.mean()),
-                          "ham_worst": 100 * float(eh.max()), "pre_avg": 100 * float(ep.mean()),
-                          "pre_worst": 100 * float(ep.max()),
-                          "reduction": 100 * (1 - float(eh.mean()) / float(ep.mean()))}
+                last, e_h, e_p = last_period_errors(hp, pp, r, f)
+                eh.append(e_h)
+                ep.append(e_p)
+                cp.append(100 * np.ptp(r.y[last]) / r.meta["y2_ptp"])
+            row[label] = error_row(eh, ep, cp)
         rows.append(row)
     out = {"rows": rows, "fit_s": {"hammerstein": t_h, "preisach": t_p}, "params": hp}
     if verbose:
