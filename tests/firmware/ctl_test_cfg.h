@@ -1,4 +1,5 @@
-/* The controller configuration of the controller and register-map tests:
+/* The controller configuration of the controller and register-map tests
+ * (and of tests/fuzz/fuzz_regmap.c):
  * ADC and DAC codes equal q15 values; nothing clamps or slews; the safe
  * drive is the bottom of the range (the DCC reset state). */
 #ifndef CTL_TEST_CFG_H

@@ -38,6 +38,7 @@
 #include <string.h>
 
 #include "controller.h"
+#include "ctl_test_cfg.h"
 #include "modbus_pdu.h"
 #include "piezo_interface.h"
 #include "regmap.h"
@@ -308,21 +309,8 @@ static void chunk(uint32_t offset, const uint8_t *bytes, unsigned n, uint8_t *rs
 
 static void setup(void)
 {
-    piezo_ctl_cfg_t c;
-    memset(&c, 0, sizeof c);
-    c.sensor_gain_q16 = 65536;
-    c.adc_min_ok = -32768;
-    c.adc_max_ok = 32767;
-    c.bad_limit = 3;
-    c.dac_gain_q16 = 65536;
-    c.dac_min = -32768;
-    c.dac_max = 32767;
-    c.u_safe_q15 = -32768;
-    c.limit.min_q15 = -32768;
-    c.limit.max_q15 = 32767;
-    c.pid.out_min_q15 = -32768;
-    c.pid.out_max_q15 = 32767;
-    c.notch.b0_q24 = 1 << 24;
+    piezo_ctl_cfg_t c = unit_cfg();
+    c.overrun_limit = 0; /* never (unit_cfg: 5): the register reads back 0 here, as it always has */
     if (piezo_ctl_init(&ctl, &c) != 0) {
         fail();
     }
