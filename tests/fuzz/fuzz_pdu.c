@@ -12,58 +12,25 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fuzz_regs_check.h"
 #include "modbus_pdu.h"
 #include "test_modbus_regs.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 static tregs_t bank;
-static piezo_mb_regs_t inner;
-static int writes_done;
-
-static void check_span(uint16_t addr, uint16_t count)
-{
-    if (count < 1u || count > PIEZO_MB_MAX_READ || (uint32_t)addr + count > 0x10000u) {
-        abort();
-    }
-}
-
-static uint8_t w_read_input(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
-{
-    check_span(addr, count);
-    return inner.read_input(ctx, addr, count, out);
-}
-
-static uint8_t w_read_holding(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
-{
-    check_span(addr, count);
-    return inner.read_holding(ctx, addr, count, out);
-}
-
-static uint8_t w_write_holding(void *ctx, uint16_t addr, uint16_t count, const uint16_t *v)
-{
-    check_span(addr, count);
-    if (count > PIEZO_MB_MAX_WRITE) {
-        abort();
-    }
-    uint8_t r = inner.write_holding(ctx, addr, count, v);
-    if (r == 0u) {
-        writes_done++;
-    }
-    return r;
-}
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     static int ready;
     if (!ready) {
-        inner = tregs_init(&bank);
+        fuzz_inner = tregs_init(&bank);
         ready = 1;
     }
-    piezo_mb_regs_t regs = {&bank, w_read_input, w_read_holding, w_write_holding};
+    piezo_mb_regs_t regs = {&bank, fuzz_read_input, fuzz_read_holding, fuzz_write_holding};
     static uint16_t before[sizeof bank.hold / sizeof bank.hold[0]];
     memcpy(before, bank.hold, sizeof before);
-    writes_done = 0;
+    fuzz_writes_ok = 0;
     uint8_t rsp[PIEZO_MB_PDU_MAX];
     size_t n = piezo_mb_pdu_process(&regs, data, size, rsp, sizeof rsp);
     if (size == 0u) {
@@ -80,7 +47,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         if (n != 2u || rsp[1] < 1u || rsp[1] > 4u) {
             abort();
         }
-        int fc23_read_failed = fc == PIEZO_MB_FC_READ_WRITE_MULTIPLE && writes_done == 1;
+        int fc23_read_failed = fc == PIEZO_MB_FC_READ_WRITE_MULTIPLE && fuzz_writes_ok == 1;
         if (!fc23_read_failed && memcmp(before, bank.hold, sizeof before) != 0) {
             abort();  /* a refused request changed registers */
         }

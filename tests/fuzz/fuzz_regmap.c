@@ -39,6 +39,7 @@
 
 #include "controller.h"
 #include "ctl_test_cfg.h"
+#include "fuzz_regs_check.h"
 #include "modbus_pdu.h"
 #include "piezo_interface.h"
 #include "regmap.h"
@@ -56,8 +57,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 static piezo_ctl_t ctl, ctl_before;
 static piezo_regmap_t map;
-static piezo_mb_regs_t inner;
-static int write_ok;                 /* the request's write_holding call succeeded */
 static uint32_t good[MAX_GOOD];      /* CRCs of tables committed successfully */
 static unsigned n_good;
 static uint16_t hold_before[MAX_HOLD], hold_after[MAX_HOLD];
@@ -108,40 +107,8 @@ static int is_good(uint32_t crc)
     return 0;
 }
 
-/* ---- callbacks with the server's own contract checked */
-static void check_span(uint16_t addr, uint16_t count)
-{
-    if (count < 1u || count > PIEZO_MB_MAX_READ || (uint32_t)addr + count > 0x10000u) {
-        fail();
-    }
-}
-
-static uint8_t w_read_input(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
-{
-    check_span(addr, count);
-    return inner.read_input(ctx, addr, count, out);
-}
-
-static uint8_t w_read_holding(void *ctx, uint16_t addr, uint16_t count, uint16_t *out)
-{
-    check_span(addr, count);
-    return inner.read_holding(ctx, addr, count, out);
-}
-
-static uint8_t w_write_holding(void *ctx, uint16_t addr, uint16_t count, const uint16_t *v)
-{
-    check_span(addr, count);
-    if (count > PIEZO_MB_MAX_WRITE) {
-        fail();
-    }
-    uint8_t r = inner.write_holding(ctx, addr, count, v);
-    if (r == 0u) {
-        write_ok = 1;
-    }
-    return r;
-}
-
-static const piezo_mb_regs_t regs = {&map, w_read_input, w_read_holding, w_write_holding};
+/* the register map's callbacks with the server's own contract checked (fuzz_regs_check.h) */
+static const piezo_mb_regs_t regs = {&map, fuzz_read_input, fuzz_read_holding, fuzz_write_holding};
 
 /* Every holding register's value, read through map m (descriptor order). */
 static unsigned snapshot_holding(piezo_regmap_t *m, uint16_t *out)
@@ -214,7 +181,7 @@ static size_t request(const uint8_t *req, size_t len, uint8_t *rsp)
                   piezo_table_check(ctl.staged, img_len, &info) == PIEZO_TABLE_REASON_OK;
     }
 
-    write_ok = 0;
+    fuzz_writes_ok = 0;
     size_t n = piezo_mb_pdu_process(&regs, req, len, rsp, PIEZO_MB_PDU_MAX);
 
     /* the answer's shape */
@@ -243,7 +210,7 @@ static size_t request(const uint8_t *req, size_t len, uint8_t *rsp)
     }
 
     /* a refused request changes nothing (FC 23: unless its write was done) */
-    if (exc && !(fc == PIEZO_MB_FC_READ_WRITE_MULTIPLE && write_ok)) {
+    if (exc && !(fc == PIEZO_MB_FC_READ_WRITE_MULTIPLE && fuzz_writes_ok != 0)) {
         /* Holding registers are a function of the controller and the map, so
          * an unchanged state (the cheap test) means unchanged registers; when
          * the state differs, the registers are compared to tell which broke. */
@@ -318,7 +285,7 @@ static void setup(void)
     map.drive_min_mv = 0;
     map.drive_max_mv = 150000;
     map.position_max_nm = 100000;
-    inner = piezo_regmap_regs(&map);
+    fuzz_inner = piezo_regmap_regs(&map);
     n_good = 0u;
 }
 
