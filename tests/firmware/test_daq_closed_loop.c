@@ -67,15 +67,10 @@ static void load_params(void)
  * gain_div times the SIL's per q15). */
 static void set_fb(piezo_ctl_cfg_t *c, int32_t gain_div)
 {
-    c->pid.kp_q24 = SIL_FB_KP_Q24 / gain_div;
-    c->pid.ki_q24 = SIL_FB_KI_Q24 / gain_div;
-    c->pid.kd_q24 = SIL_FB_KD_Q24 / gain_div;
-    c->notch.b0_q24 = SIL_NOTCH_B0_Q24;
-    c->notch.b1_q24 = SIL_NOTCH_B1_Q24;
-    c->notch.b2_q24 = SIL_NOTCH_B2_Q24;
-    c->notch.a1_q24 = SIL_NOTCH_A1_Q24;
-    c->notch.a2_q24 = SIL_NOTCH_A2_Q24;
-    c->notch_on = 1u;
+    const piezo_biquad_coef_t notch = {SIL_NOTCH_B0_Q24, SIL_NOTCH_B1_Q24, SIL_NOTCH_B2_Q24,
+                                       SIL_NOTCH_A1_Q24, SIL_NOTCH_A2_Q24};
+    piezo_sil_set_feedback(c, SIL_FB_KP_Q24 / gain_div, SIL_FB_KI_Q24 / gain_div, SIL_FB_KD_Q24 / gain_div,
+                           &notch);
 }
 
 static void no_violation(void)

@@ -65,16 +65,10 @@ static void load_params(void)
 static piezo_ctl_cfg_t loop_cfg(piezo_scale_t *sc)
 {
     piezo_ctl_cfg_t cfg;
+    const piezo_biquad_coef_t notch = {SIL_NOTCH_B0_Q24, SIL_NOTCH_B1_Q24, SIL_NOTCH_B2_Q24,
+                                       SIL_NOTCH_A1_Q24, SIL_NOTCH_A2_Q24};
     assert_int_equal(piezo_sil_ctl_config(&params, 0, &cfg, sc), PIEZO_OK);
-    cfg.pid.kp_q24 = SIL_FB_KP_Q24;
-    cfg.pid.ki_q24 = SIL_FB_KI_Q24;
-    cfg.pid.kd_q24 = SIL_FB_KD_Q24;
-    cfg.notch.b0_q24 = SIL_NOTCH_B0_Q24;
-    cfg.notch.b1_q24 = SIL_NOTCH_B1_Q24;
-    cfg.notch.b2_q24 = SIL_NOTCH_B2_Q24;
-    cfg.notch.a1_q24 = SIL_NOTCH_A1_Q24;
-    cfg.notch.a2_q24 = SIL_NOTCH_A2_Q24;
-    cfg.notch_on = 1u;
+    piezo_sil_set_feedback(&cfg, SIL_FB_KP_Q24, SIL_FB_KI_Q24, SIL_FB_KD_Q24, &notch);
     return cfg;
 }
 

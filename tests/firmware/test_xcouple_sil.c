@@ -61,14 +61,10 @@ static void run(int loop, int fi, int which, double *x, uint32_t n_meas, uint32_
     assert_int_equal(piezo_sil_ctl_config(&params, 0, &cfg0, &sc0), PIEZO_OK);
     assert_int_equal(piezo_sil_ctl_config(&params, 1, &cfg1, &sc1), PIEZO_OK);
     if (loop == LOOP_FB) {
-        cfg0.pid.kp_q24 = XC_SIL_KP_Q24;
-        cfg0.pid.ki_q24 = XC_SIL_KI_Q24;
-        cfg0.notch.b0_q24 = XC_SIL_N_B0_Q24;
-        cfg0.notch.b1_q24 = XC_SIL_N_B1_Q24;
-        cfg0.notch.b2_q24 = XC_SIL_N_B2_Q24;
-        cfg0.notch.a1_q24 = XC_SIL_N_A1_Q24;
-        cfg0.notch.a2_q24 = XC_SIL_N_A2_Q24;
-        cfg0.notch_on = 1u;
+        const piezo_biquad_coef_t notch = {XC_SIL_N_B0_Q24, XC_SIL_N_B1_Q24, XC_SIL_N_B2_Q24,
+                                           XC_SIL_N_A1_Q24, XC_SIL_N_A2_Q24};
+        /* a PI: kd stays 0, as piezo_sil_ctl_config left it */
+        piezo_sil_set_feedback(&cfg0, XC_SIL_KP_Q24, XC_SIL_KI_Q24, 0, &notch);
     }
     cfg0.xcouple_bypass = (uint8_t)(which != RUN_ON);
     assert_int_equal(piezo_ctl_init(c0, &cfg0), PIEZO_OK);

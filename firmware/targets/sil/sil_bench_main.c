@@ -37,19 +37,14 @@ static int setup_axis(piezo_sil_t *s, const stage_params *p, int axis, int dcc, 
     uint32_t len = dcc ? SIL_DCC_IMG_LEN : SIL_EUPI_IMG_LEN;
     piezo_rec_cfg_t rc;
     uint16_t r;
+    const piezo_biquad_coef_t notch = {SIL_NOTCH_B0_Q24, SIL_NOTCH_B1_Q24, SIL_NOTCH_B2_Q24,
+                                       SIL_NOTCH_A1_Q24, SIL_NOTCH_A2_Q24};
 
     if (piezo_sil_ctl_config(p, axis, &cfg, &sc) != PIEZO_OK) {
         return -1;
     }
-    cfg.pid.kp_q24 = tuned ? SIL_FB_KP_Q24 : 0;
-    cfg.pid.ki_q24 = tuned ? SIL_FB_KI_Q24 : SIL_FB_KI_Q24 / 32;
-    cfg.pid.kd_q24 = SIL_FB_KD_Q24;
-    cfg.notch.b0_q24 = SIL_NOTCH_B0_Q24;
-    cfg.notch.b1_q24 = SIL_NOTCH_B1_Q24;
-    cfg.notch.b2_q24 = SIL_NOTCH_B2_Q24;
-    cfg.notch.a1_q24 = SIL_NOTCH_A1_Q24;
-    cfg.notch.a2_q24 = SIL_NOTCH_A2_Q24;
-    cfg.notch_on = 1u;
+    piezo_sil_set_feedback(&cfg, tuned ? SIL_FB_KP_Q24 : 0, tuned ? SIL_FB_KI_Q24 : SIL_FB_KI_Q24 / 32,
+                           SIL_FB_KD_Q24, &notch);
     if (piezo_ctl_init(c, &cfg) != PIEZO_OK) {
         return -1;
     }

@@ -27,6 +27,16 @@ int piezo_sil_ctl_config(const stage_params *p, int axis, piezo_ctl_cfg_t *cfg, 
     return PIEZO_OK;
 }
 
+void piezo_sil_set_feedback(piezo_ctl_cfg_t *cfg, int32_t kp_q24, int32_t ki_q24, int32_t kd_q24,
+                            const piezo_biquad_coef_t *notch)
+{
+    cfg->pid.kp_q24 = kp_q24;
+    cfg->pid.ki_q24 = ki_q24;
+    cfg->pid.kd_q24 = kd_q24;
+    cfg->notch = *notch;
+    cfg->notch_on = 1u;
+}
+
 int piezo_sil_init(piezo_sil_t *s, const stage_params *p, uint64_t seed)
 {
     int rc;

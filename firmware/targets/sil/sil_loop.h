@@ -37,6 +37,13 @@ typedef struct {
  *  no slew limit (the amplifier has its own), PID off until configured. */
 int piezo_sil_ctl_config(const stage_params *p, int axis, piezo_ctl_cfg_t *cfg, piezo_scale_t *scale);
 
+/** Feedback tuned on the host for a SIL stage (the golden headers' PI gains
+ *  and notch, piezoctl.golden.sil_tables and xcouple_sil) into cfg: the PID
+ *  gains (q24, pid.h) and the notch biquad, switched on. The PID's output
+ *  limits and the rest of cfg stay as they are. */
+void piezo_sil_set_feedback(piezo_ctl_cfg_t *cfg, int32_t kp_q24, int32_t ki_q24, int32_t kd_q24,
+                            const piezo_biquad_coef_t *notch);
+
 /** Stage at rest (seeded noise) and one controller per axis, disarmed, no table. */
 int piezo_sil_init(piezo_sil_t *s, const stage_params *p, uint64_t seed);
 
