@@ -59,3 +59,13 @@ function(piezo_golden_header kernel outvar)
   endif()
   set(${outvar} ${out} PARENT_SCOPE)
 endfunction()
+
+# piezo_add_cli_test(NAME TARGET executable [ARGS arg...] EXPECT regex)
+# Runs a host executable of this build with ARGS: its stdout and stderr, then
+# a line "status=N" (its exit status), must match EXPECT.
+function(piezo_add_cli_test name)
+  cmake_parse_arguments(C "" "TARGET;EXPECT" "ARGS" ${ARGN})
+  add_test(NAME ${name}
+    COMMAND sh -c "\"$0\" \"$@\" 2>&1; echo \"status=$?\"" $<TARGET_FILE:${C_TARGET}> ${C_ARGS})
+  set_tests_properties(${name} PROPERTIES PASS_REGULAR_EXPRESSION "${C_EXPECT}")
+endfunction()

@@ -68,5 +68,21 @@ if(TARGET piezo_daq_io AND TARGET piezo_stage AND TARGET PkgConfig::COMEDILIB)
               $<TARGET_FILE:daq_controller> ${cfg_dir}/bad_key.cfg)
     set_tests_properties(daq_controller_bad_config PROPERTIES PASS_REGULAR_EXPRESSION
       "^daq-controller: [^\n]*/bad_key.cfg:4: unknown key 'ao.chanel'\nstatus=2\n$")
+
+    # The command line (firmware/targets/common/cmdline.c): help, the errors
+    # and their exit status, before the configuration is read.
+    set(daq_usage "usage: daq-controller --config FILE --modbus-tcp HOST:PORT\n")
+    piezo_add_cli_test(daq_controller_cli_help TARGET daq_controller ARGS -h
+      EXPECT "^${daq_usage}status=0\n$")
+    piezo_add_cli_test(daq_controller_cli_no_value TARGET daq_controller ARGS --config
+      EXPECT "^daq-controller: --config needs a value\n${daq_usage}status=2\n$")
+    piezo_add_cli_test(daq_controller_cli_unknown TARGET daq_controller
+      ARGS --config ${cfg_dir}/missing_device.cfg --tcp 127.0.0.1:0
+      EXPECT "^daq-controller: unknown option --tcp\n${daq_usage}status=2\n$")
+    piezo_add_cli_test(daq_controller_cli_required TARGET daq_controller ARGS --modbus-tcp 127.0.0.1:0
+      EXPECT "^daq-controller: --config FILE and --modbus-tcp HOST:PORT are required\n${daq_usage}status=2\n$")
+    piezo_add_cli_test(daq_controller_cli_host_port TARGET daq_controller
+      ARGS --config ${cfg_dir}/missing_device.cfg --modbus-tcp 5020
+      EXPECT "^daq-controller: --modbus-tcp wants HOST:PORT, got 5020\nstatus=2\n$")
   endif()
 endif()

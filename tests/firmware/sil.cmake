@@ -23,3 +23,21 @@ if(TARGET piezo_sil AND TARGET piezo_stage_shared)
     STAGE_FILE="${CMAKE_CURRENT_LIST_DIR}/../../firmware/targets/sil/stages/default.json")
   set_tests_properties(test_sil_closed_loop PROPERTIES LABELS sil TIMEOUT 300)
 endif()
+
+# sil-stage's command line (firmware/targets/common/cmdline.c): help, the
+# errors and their exit status, before anything is opened.
+if(TARGET sil_stage)
+  set(sil_usage "usage: sil-stage --modbus-tcp HOST:PORT [^\n]*\n[^\n]*--rtu-baud BAUD[^\n]*\n")
+  piezo_add_cli_test(sil_stage_cli_help TARGET sil_stage ARGS --help
+    EXPECT "^${sil_usage}status=0\n$")
+  piezo_add_cli_test(sil_stage_cli_no_value TARGET sil_stage ARGS --seed 3 --modbus-tcp
+    EXPECT "^sil-stage: --modbus-tcp needs a value\n${sil_usage}status=2\n$")
+  piezo_add_cli_test(sil_stage_cli_unknown TARGET sil_stage ARGS --modbus-tcp 127.0.0.1:0 --port 5020
+    EXPECT "^sil-stage: unknown option --port\n${sil_usage}status=2\n$")
+  piezo_add_cli_test(sil_stage_cli_required TARGET sil_stage ARGS --stage --help
+    EXPECT "^sil-stage: --modbus-tcp HOST:PORT is required\n${sil_usage}status=2\n$")
+  piezo_add_cli_test(sil_stage_cli_host_port TARGET sil_stage ARGS --modbus-tcp localhost
+    EXPECT "^sil-stage: --modbus-tcp wants HOST:PORT, got localhost\nstatus=2\n$")
+  piezo_add_cli_test(sil_stage_cli_bad_port TARGET sil_stage ARGS --modbus-tcp 127.0.0.1:65536
+    EXPECT "^sil-stage: bad port in 127.0.0.1:65536\nstatus=2\n$")
+endif()

@@ -30,6 +30,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "cmdline.h"
 #include "daq_config.h"
 #include "daq_io.h"
 #include "flash_file.h"
@@ -73,43 +74,19 @@ int main(int argc, char **argv)
     piezo_scale_t scale[PIEZO_DAQ_MAX_AXES];
     piezo_daq_loop_t loop;
     piezo_rt_result_t rt;
-    int n_open = 0, status = 0;
+    int n_open = 0, status = 0, cli;
+    const piezo_cli_opt_t opts[] = {{"--config", &cfg_path}, {"--modbus-tcp", &tcp_spec}};
 
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
-            usage(stdout);
-            return 0;
-        }
-        if (v == NULL) {
-            fprintf(stderr, "daq-controller: %s needs a value\n", a);
-            usage(stderr);
-            return 2;
-        }
-        if (strcmp(a, "--config") == 0) {
-            cfg_path = v;
-        } else if (strcmp(a, "--modbus-tcp") == 0) {
-            tcp_spec = v;
-        } else {
-            fprintf(stderr, "daq-controller: unknown option %s\n", a);
-            usage(stderr);
-            return 2;
-        }
-        i++;
+    cli = piezo_cli_parse(argc, argv, "daq-controller", opts, sizeof opts / sizeof opts[0], usage);
+    if (cli != PIEZO_CLI_RUN) {
+        return cli; /* 0 after --help, 2 for a bad command line */
     }
     if (cfg_path == NULL || tcp_spec == NULL) {
         fprintf(stderr, "daq-controller: --config FILE and --modbus-tcp HOST:PORT are required\n");
         usage(stderr);
         return 2;
     }
-    switch (piezo_parse_host_port(tcp_spec, host, sizeof host, &port)) {
-    case 0: break;
-    case -1:
-        fprintf(stderr, "daq-controller: --modbus-tcp wants HOST:PORT, got %s\n", tcp_spec);
-        return 2;
-    default:
-        fprintf(stderr, "daq-controller: bad port in %s\n", tcp_spec);
+    if (piezo_cli_modbus_tcp("daq-controller", tcp_spec, host, sizeof host, &port) != 0) {
         return 2;
     }
     if (piezo_daq_config_load(cfg_path, &cfg, errbuf, sizeof errbuf) != 0) {

@@ -32,6 +32,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "cmdline.h"
 #include "flash_file.h"
 #include "modbus_rtu.h"
 #include "pacer.h"
@@ -83,6 +84,11 @@ static int open_pty(const char *link, int *slave_keep)
 int main(int argc, char **argv)
 {
     const char *tcp_spec = NULL, *pty_link = NULL, *stage_path = NULL, *flash_path = NULL;
+    const char *seed_arg = NULL, *baud_arg = NULL;
+    const piezo_cli_opt_t opts[] = {
+        {"--modbus-tcp", &tcp_spec}, {"--modbus-rtu-pty", &pty_link}, {"--stage", &stage_path},
+        {"--flash", &flash_path},    {"--seed", &seed_arg},           {"--rtu-baud", &baud_arg},
+    };
     uint64_t seed = 1;
     uint32_t baud = 115200;
     char host[64] = "127.0.0.1", errbuf[256], flash_default[512];
@@ -94,51 +100,24 @@ int main(int argc, char **argv)
     piezo_rtu_t rtu[STAGE_MAX_AXES];
     piezo_flash_file_t flash[STAGE_MAX_AXES];
     piezo_storage_t store[STAGE_MAX_AXES];
-    int pty = -1, pty_slave = -1;
+    int pty = -1, pty_slave = -1, cli;
 
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
-            usage(stdout);
-            return 0;
-        }
-        if (v == NULL) {
-            fprintf(stderr, "sil-stage: %s needs a value\n", a);
-            usage(stderr);
-            return 2;
-        }
-        if (strcmp(a, "--modbus-tcp") == 0) {
-            tcp_spec = v;
-        } else if (strcmp(a, "--modbus-rtu-pty") == 0) {
-            pty_link = v;
-        } else if (strcmp(a, "--stage") == 0) {
-            stage_path = v;
-        } else if (strcmp(a, "--flash") == 0) {
-            flash_path = v;
-        } else if (strcmp(a, "--seed") == 0) {
-            seed = strtoull(v, NULL, 10);
-        } else if (strcmp(a, "--rtu-baud") == 0) {
-            baud = (uint32_t)strtoul(v, NULL, 10);
-        } else {
-            fprintf(stderr, "sil-stage: unknown option %s\n", a);
-            usage(stderr);
-            return 2;
-        }
-        i++;
+    cli = piezo_cli_parse(argc, argv, "sil-stage", opts, sizeof opts / sizeof opts[0], usage);
+    if (cli != PIEZO_CLI_RUN) {
+        return cli; /* 0 after --help, 2 for a bad command line */
+    }
+    if (seed_arg != NULL) {
+        seed = strtoull(seed_arg, NULL, 10);
+    }
+    if (baud_arg != NULL) {
+        baud = (uint32_t)strtoul(baud_arg, NULL, 10);
     }
     if (tcp_spec == NULL) {
         fprintf(stderr, "sil-stage: --modbus-tcp HOST:PORT is required\n");
         usage(stderr);
         return 2;
     }
-    switch (piezo_parse_host_port(tcp_spec, host, sizeof host, &port)) {
-    case 0: break;
-    case -1:
-        fprintf(stderr, "sil-stage: --modbus-tcp wants HOST:PORT, got %s\n", tcp_spec);
-        return 2;
-    default:
-        fprintf(stderr, "sil-stage: bad port in %s\n", tcp_spec);
+    if (piezo_cli_modbus_tcp("sil-stage", tcp_spec, host, sizeof host, &port) != 0) {
         return 2;
     }
     if (stage_path != NULL) {

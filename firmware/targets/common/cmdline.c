@@ -1,0 +1,48 @@
+#include "cmdline.h"
+
+#include <string.h>
+
+#include "pacer.h"
+
+int piezo_cli_parse(int argc, char **argv, const char *prog, const piezo_cli_opt_t *opts, size_t n,
+                    void (*usage)(FILE *f))
+{
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
+        size_t k = 0;
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            usage(stdout);
+            return 0;
+        }
+        if (v == NULL) {
+            fprintf(stderr, "%s: %s needs a value\n", prog, a);
+            usage(stderr);
+            return 2;
+        }
+        while (k < n && strcmp(a, opts[k].name) != 0) {
+            k++;
+        }
+        if (k == n) {
+            fprintf(stderr, "%s: unknown option %s\n", prog, a);
+            usage(stderr);
+            return 2;
+        }
+        *opts[k].value = v;
+        i++;
+    }
+    return PIEZO_CLI_RUN;
+}
+
+int piezo_cli_modbus_tcp(const char *prog, const char *spec, char *host, unsigned long host_len, long *port)
+{
+    switch (piezo_parse_host_port(spec, host, host_len, port)) {
+    case 0: return 0;
+    case -1:
+        fprintf(stderr, "%s: --modbus-tcp wants HOST:PORT, got %s\n", prog, spec);
+        return 2;
+    default:
+        fprintf(stderr, "%s: bad port in %s\n", prog, spec);
+        return 2;
+    }
+}
