@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from piezoctl.diagnose.cases import make_case
+from piezoctl.diagnose.cases import FAST_CASES, make_case
 from piezoctl.diagnose.effects import VOCABULARY
 from piezoctl.diagnose.run import diagnose
 from piezoctl.ident import refined
@@ -62,7 +62,7 @@ def test_bouc_wen_large_step_crosses_zero_exactly():
         assert abs(h_big[-1] - h_small[-1]) < 1e-9
 
 
-@pytest.mark.parametrize("name", ["null_default", "thermal_drift", "delay"])
+@pytest.mark.parametrize("name", FAST_CASES)
 def test_concealed_case(tmp_path, name):
     case = make_case(name, tmp_path / "case", scale=0.6, seed=3)
     out = tmp_path / "out"

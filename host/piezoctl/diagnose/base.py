@@ -297,22 +297,7 @@ def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: fl
     for it in range(2):
         xs = [F @ th[:-1] for F in Fs]
         yo = [y - th[-1] for y in ys]
-        # order by simulation error on all calibration data: each step up in order must
-        # lower it by 5 % (interleaved time blocks cannot cross-validate a chirp's band)
-        scores = {}
-        models = {}
-        for order in ORDERS:
-            m = _arx([x[k0:] for x, k0 in zip(xs, k0s)], [y[k0:] for y, k0 in zip(yo, k0s)], order, max_rows)
-            if m is not None and order > 0 and it == 1:
-                m = _oe_refine(m, xs, yo, k0s)
-            models[order] = m
-            scores[order] = _sim_rmse(m, xs, yo, k0s) if m is not None else float("inf")
-        best = 0
-        band = band_cps(xs, k0s)
-        for order in ORDERS[1:]:
-            if plausible(models[order], band) and scores[order] < 0.95 * scores[best]:
-                best = order
-        b, a = models[best]
+        (b, a), best, scores = _select_dynamics(xs, yo, k0s, max_rows, refine=it == 1)
         info = {"dynamics_order": best, "cv_sim_rmse_um": {str(k): v for k, v in scores.items()}}
         Gs = [filt(b, a, F) for F in Fs]
         th = _fit_h(Gs, ys, max_rows, k0s)
@@ -351,9 +336,20 @@ def fit_dynamics(xs, ys, k0s, max_rows: int = 60_000) -> tuple[np.ndarray, np.nd
     (b, a) : tuple of ndarray
         Discrete transfer function at the recordings' rate.
     """
+    (b, a), _, _ = _select_dynamics(xs, ys, k0s, max_rows, refine=False)
+    return np.asarray(b, float), np.asarray(a, float)
+
+
+def _select_dynamics(xs, ys, k0s, max_rows, refine):
+    """ARX of each order in ORDERS (output-error refined when ``refine``); returns ((b, a), order, scores).
+
+    Order by simulation error on all calibration data: each step up in order must lower it by 5 % and be
+    plausible (interleaved time blocks cannot cross-validate a chirp's band)."""
     models, scores = {}, {}
     for order in ORDERS:
         m = _arx([x[k0:] for x, k0 in zip(xs, k0s)], [y[k0:] for y, k0 in zip(ys, k0s)], order, max_rows)
+        if m is not None and order > 0 and refine:
+            m = _oe_refine(m, xs, ys, k0s)
         models[order] = m
         scores[order] = _sim_rmse(m, xs, ys, k0s) if m is not None else float("inf")
     best = 0
@@ -361,5 +357,4 @@ def fit_dynamics(xs, ys, k0s, max_rows: int = 60_000) -> tuple[np.ndarray, np.nd
     for order in ORDERS[1:]:
         if plausible(models[order], band) and scores[order] < 0.95 * scores[best]:
             best = order
-    b, a = models[best]
-    return np.asarray(b, float), np.asarray(a, float)
+    return models[best], best, scores

@@ -206,7 +206,9 @@ CASES: dict[str, dict] = {
     "null_two_axis": {"truth": [], "axes": 2, "stage": {}, "cal": CAL_STD, "u2_cal": 75.0, "u2_rec": U2_MOVING},
 }
 
-FAST_CASES = ("creep", "cross_coupling", "unmodeled_resonance", "null_default")
+# the subset tools/test runs (tests/host/test_diagnose.py, shorter signals and another seed than the benchmark):
+# a null, a drift, a drive-side dynamics term, creep (nested test) and saturation (beyond the calibrated range)
+FAST_CASES = ("null_default", "thermal_drift", "delay", "creep", "saturation")
 
 
 def _scaled(specs, scale):

@@ -70,10 +70,15 @@ class Effect:
     describe: Callable
     applicable: Callable = lambda ctx: True
     group: str = ""      # effects of one group refit the same part of the base; at most one is accepted
-    # number of leading regressor columns that are a nuisance (refit of the base's own structure; with them the
-    # last column, a constant): the term is tested against the model with the nuisance alone refitted on the
-    # same fold (a nested test)
+    # number of leading regressor columns that are a nuisance (refit of the base's own structure): the term is
+    # tested against the model with the nuisance alone refitted on the same fold (a nested test)
     nuisance: Callable = lambda ctx: 0
+    # the last regressor column is a constant (the model's offset refitted with the term), also a nuisance: a
+    # term that shifts the mean output must not leave a constant behind for "sensor_offset" to claim
+    intercept: bool = False
+    # finer settings around the best one so far (the grid's neighbours' midpoints), tried on the same training
+    # data; empty when the grid is fine enough
+    refine: Callable = lambda ctx, setting: []
     # lower bounds of the coefficients (None: unconstrained), e.g. creep gains >= 0 (a Kelvin-Voigt element only
     # adds compliance; free signs turn the chain into an arbitrary slow filter)
     lower: Callable = lambda ctx: None
@@ -294,13 +299,12 @@ def _shift(x, d):
 
 
 def _drive_h(ctx, name, setting, u, h_base, dt):
-    """H output [um] with the drive term in front (delay and bandwidth act on H's output:
-    exact for a delay, first order in the term for a band limit; slew re-runs H)."""
+    """H output [um] with the drive term in front: a delay shifts H's output (exact: H is rate independent); a
+    band limit or a slew limit changes the drive's path, so H is run again on the filtered drive (a low-pass of
+    H's output would round the loop's corners differently from a low-passed drive through the hysteresis)."""
     if name == "delay":
         return _shift(h_base, setting)
-    if name == "amplifier_bandwidth":
-        return lowpass(h_base, setting, dt)
-    ue = slew_limit(u, setting * dt)
+    ue = lowpass(u, setting, dt) if name == "amplifier_bandwidth" else slew_limit(u, setting * dt)
     if np.array_equal(ue, u):
         return h_base
     v = (ue - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
@@ -447,20 +451,80 @@ def _one(ctx):
     return [None]
 
 
+def _geo_refine(grid_of, steps=2):
+    """Refinement for a geometric grid of scalars: the two geometric midpoints around ``setting`` (a quarter of
+    the grid ratio on the second call, and so on: the ratio is read from the distance to the nearest tried)."""
+    def refine(ctx, x):
+        g = np.asarray(grid_of(ctx), float)
+        if x is None or g.size < 2:
+            return []
+        r = float(np.exp(np.mean(np.diff(np.log(g))))) if np.all(g > 0) else 0.0
+        if r <= 1.0:
+            return []
+        key = ("_refine", id(grid_of), repr(x))
+        level = ctx.refit_cache.get(key, 0) + 1
+        if level > steps:
+            return []
+        f = r ** (0.5 ** level)
+        out = [float(x) / f, float(x) * f]
+        for o in out:
+            ctx.refit_cache[("_refine", id(grid_of), repr(o))] = level
+        return out
+    return refine
+
+
+def _sat_refine(ctx, setting):
+    lo, hi = setting
+    span = ctx.u_hi - ctx.u_lo
+    step = 0.025 * span
+    key = ("_refine_sat", repr(setting))
+    level = ctx.refit_cache.get(key, 0) + 1
+    if level > 2:
+        return []
+    d = step * 0.5 ** level
+    out = [(lo, hi - d), (lo, hi + d)] if hi is not None else [(lo - d, hi), (lo + d, hi)]
+    for o in out:
+        ctx.refit_cache[("_refine_sat", repr(o))] = level
+    return out
+
+
+def _with_intercept(eff: Effect) -> Effect:
+    """``eff`` with a constant column appended, fitted with it and added to the model's offset."""
+    import copy
+
+    def reg(ctx, s, st):
+        X = np.asarray(eff.regressors(ctx, s, st), float)
+        return np.column_stack([X, np.ones(X.shape[0])])
+
+    def term(ctx, st, coef):
+        out = dict(eff.term(ctx, st, coef[:-1]))
+        hp = copy.deepcopy(out.get("_hysteresis", ctx.base["hysteresis"]))
+        hp["offset"] = float(hp.get("offset", 0.0)) + float(coef[-1])
+        out["_hysteresis"] = hp
+        return out
+
+    def lower(ctx):
+        lb = eff.lower(ctx)
+        return None if lb is None else list(lb) + [-np.inf]
+
+    return dataclasses.replace(eff, regressors=reg, term=term, describe=lambda ctx, st, c: eff.describe(ctx, st, c[:-1]),
+                               lower=lower, intercept=True)
+
+
 EFFECTS = {
     "creep": Effect("creep", "residual correlated with the low-passed drive history; large after steps and dwells",
                     _one, _creep_reg, _creep_term, _creep_desc, nuisance=_creep_nuisance,
-                    lower=_creep_lower),
+                    lower=_creep_lower, intercept=True),
     "thermal_drift": Effect("thermal_drift", "slow trend with time (or temperature), independent of the drive",
                             lambda ctx: list(THERMAL_TAUS), _th_reg, _th_term, _th_desc),
     "sensor_offset": Effect("sensor_offset", "a constant per recording (session)", _one, _off_reg, _off_term,
                             _off_desc),
     "cross_coupling": Effect("cross_coupling", "residual explained by the other axis' drive/motion, growing "
                              "with its frequency", _one, _cc_reg, _cc_term, _cc_desc, _cc_app),
-    "rate_dependent_hysteresis": Effect("rate_dependent_hysteresis", "residual grows with |du/dt| times the "
+    "rate_dependent_hysteresis": _with_intercept(Effect("rate_dependent_hysteresis", "residual grows with |du/dt| times the "
                                         "hysteretic part (loop width grows with rate)",
                                         lambda ctx: list(RATE_REFS), _rd_reg, _rd_term, _rd_desc,
-                                        lower=lambda ctx: [0.0]),   # loops widen with rate, never narrow
+                                        lower=lambda ctx: [0.0])),   # loops widen with rate, never narrow
     "unmodeled_resonance": Effect("unmodeled_resonance", "residual energy in a narrow band above the calibration "
                                   "band, ringing after corners", _res_settings, _res_reg, _res_term, _res_desc,
                                   _res_app),
@@ -470,15 +534,15 @@ EFFECTS = {
     "amplifier_slew_limit": Effect("amplifier_slew_limit", "residual only where |du/dt| exceeds a limit; "
                                    "edges become ramps", _sl_settings, _dd_reg("amplifier_slew_limit"),
                                    _dd_term("amplifier_slew_limit", "v_per_s", lambda ctx, x: float(x)),
-                                   _sl_desc, _sl_app, group="drive_dynamics"),
+                                   _sl_desc, _sl_app, group="drive_dynamics", refine=_geo_refine(_sl_settings)),
     "amplifier_bandwidth": Effect("amplifier_bandwidth", "high-frequency attenuation and phase lag of a "
                                   "first-order pole (edges rounded)", _bw_settings, _dd_reg("amplifier_bandwidth"),
                                   _dd_term("amplifier_bandwidth", "hz", lambda ctx, x: float(x)), _bw_desc,
-                                  group="drive_dynamics"),
-    "sensor_nonlinearity": Effect("sensor_nonlinearity", "static function of the measured displacement",
-                                  _one, _sn_reg, _sn_term, _sn_desc),
+                                  group="drive_dynamics", refine=_geo_refine(_bw_settings)),
+    "sensor_nonlinearity": _with_intercept(Effect("sensor_nonlinearity", "static function of the measured displacement",
+                                  _one, _sn_reg, _sn_term, _sn_desc)),
     "saturation": Effect("saturation", "residual only beyond a drive threshold, growing with the excess",
-                         _sat_settings, _sat_reg, _sat_term, _sat_desc),
-    "asymmetric_hysteresis": Effect("asymmetric_hysteresis", "even function of the drive (loop not "
-                                    "point-symmetric)", _one, _ah_reg, _ah_term, _ah_desc),
+                         _sat_settings, _sat_reg, _sat_term, _sat_desc, refine=_sat_refine),
+    "asymmetric_hysteresis": _with_intercept(Effect("asymmetric_hysteresis", "even function of the drive (loop not "
+                                    "point-symmetric)", _one, _ah_reg, _ah_term, _ah_desc)),
 }

@@ -125,15 +125,38 @@ def _fit_predict(Xs, e, train, test, rows, lb=None):
     return th, X[test] @ th, sse_tr
 
 
+def _design(ctx, eff, st):
+    key = (eff.name, repr(st))
+    if key not in ctx.design_cache:
+        ctx.design_cache[key] = _Design(ctx, eff, st)
+    return ctx.design_cache[key]
+
+
 def _designs(ctx, eff):
     settings = eff.settings(ctx)
-    out = []
-    for st in settings:
-        key = (eff.name, repr(st))
-        if key not in ctx.design_cache:
-            ctx.design_cache[key] = _Design(ctx, eff, st)
-        out.append(ctx.design_cache[key])
-    return settings, out
+    return settings, [_design(ctx, eff, st) for st in settings]
+
+
+def _best_setting(ctx, eff, e, train, test, rows):
+    """(setting, design, sse on train, prediction on test, coefficients) with the least training error over the
+    effect's grid, then over its finer settings around the best one (``Effect.refine``, twice)."""
+    settings, designs = _designs(ctx, eff)
+    lb = eff.lower(ctx)
+    best = None
+    tried = set()
+    for _ in range(3):
+        for st, d in zip(settings, designs):
+            if repr(st) in tried:
+                continue
+            tried.add(repr(st))
+            th, pa, sse = _fit_predict([d.X], e, train, test, rows, lb)
+            if best is None or sse < best[2]:
+                best = (st, d, sse, pa, th)
+        settings = eff.refine(ctx, best[0])
+        if not settings:
+            break
+        designs = [_design(ctx, eff, st) for st in settings]
+    return best
 
 
 def _residual(ctx):
@@ -155,18 +178,14 @@ def _evaluate(ctxs, eff, es, fold_all, block_all, rows, p_max):
         ctx, e = ctxs[f], es[f]
         settings, designs = _designs(ctx, eff)
         nn = eff.nuisance(ctx)
-        k = designs[0].k - nn + (1 if len(settings) > 1 else 0)
+        k = designs[0].k - nn - (1 if eff.intercept else 0) + (1 if len(settings) > 1 else 0)
         train, test = fold_all == f, fold_all == 1 - f
         e_before[test] = e[test]
-        if nn:  # nested: "before" is the model with the nuisance columns alone refitted on this fold
-            Xn = designs[0].X[:, list(range(nn)) + [designs[0].k - 1]]
+        if nn or eff.intercept:  # nested: "before" is the model with the nuisance columns alone refitted here
+            Xn = designs[0].X[:, list(range(nn)) + ([designs[0].k - 1] if eff.intercept else [])]
             _, pn, _ = _fit_predict([Xn], e, train, test, rows)
             e_before[test] = e[test] - pn
-        best = None
-        for st, d in zip(settings, designs):
-            th, pa, sse = _fit_predict([d.X], e, train, test, rows, eff.lower(ctx))
-            if best is None or sse < best[2]:
-                best = (st, d, sse, pa, th)
+        best = _best_setting(ctx, eff, e, train, test, rows)
         pred_after[test] = best[3] - (e[test] - e_before[test])
         chosen.append(best)
         rb = float(np.sqrt(np.mean(e_before[test] ** 2)))
@@ -414,19 +433,14 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         # setting and coefficients on all selection samples, applied to the all-data model
         allmask = fold_all >= 0
         e_all = _residual(ctx_all)
-        bs = None
-        settings, designs = _designs(ctx_all, best["effect"])
-        for st, dsg in zip(settings, designs):
-            th, _, sse = _fit_predict([dsg.X], e_all, allmask, np.zeros(e_all.size, bool), rows,
-                                      best["effect"].lower(ctx_all))
-            if bs is None or sse < bs[2]:
-                bs = (st, dsg, sse, th)
+        st, dsg, sse, _, th = _best_setting(ctx_all, best["effect"], e_all, allmask, np.zeros(e_all.size, bool), rows)
+        bs = (st, dsg, sse, th)
         eff = best["effect"]
         best["setting_all"], best["coef_all"] = bs[0], bs[3]
         best["describe"] = eff.describe(ctx_all, bs[0], bs[3])
         c_term = np.array(bs[3], float)
-        if eff.nuisance(ctx_all):  # where the term acts: its own columns, not the refitted base structure
-            c_term[:eff.nuisance(ctx_all)] = 0.0
+        c_term[:eff.nuisance(ctx_all)] = 0.0  # where the term acts: its own columns, not the refitted base
+        if eff.intercept:
             c_term[-1] = 0.0
         best["contrib"] = [np.asarray(eff.regressors(ctx_all, s, bs[0]), float) @ c_term for s in ctx_all.signals]
         params_all = _model_params(ctx_all.base, {eff.name: eff.term(ctx_all, bs[0], bs[3])})

@@ -7,7 +7,7 @@ other; every sample is predicted exactly once by a fit that did not see it.
 
 A term is *significant* when all hold:
 
-1. the cross-validated held-out NRMSE falls to at most ``RATIO_MAX`` (0.9) of the
+1. the cross-validated held-out NRMSE falls to at most ``RATIO_MAX`` (0.8) of the
    model without the term, in each fold separately;
 2. on the *active* blocks (where the term's held-out predicted correction, computed
    without the test fold's measurements, has at least ``ACTIVE_FRAC`` of its
@@ -28,7 +28,7 @@ from scipy import stats
 
 __all__ = ["RATIO_MAX", "ALPHA", "ACTIVE_FRAC", "ACTIVE_PCT", "active_block_test", "effective_n", "bic_delta"]
 
-RATIO_MAX = 0.9
+RATIO_MAX = 0.8
 ALPHA = 0.01          # family-wise error per selection round (Bonferroni over the candidates)
 ACTIVE_PCT = 80.0     # reference block RMS of the correction: this percentile over the blocks (not the largest: a
                       # few blocks with spikes, e.g. steps of the other axis, must not silence the rest)
