@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <sched.h>
+#include <signal.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -116,6 +117,16 @@ piezo_rt_result_t piezo_rt_setup(int prio, int lock_memory)
     }
     (void)prctl(PR_SET_TIMERSLACK, 1UL); /* default slack is 50 us */
     return r;
+}
+
+void piezo_stop_signals(void (*on_stop)(int sig))
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_stop;
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
 }
 
 int piezo_parse_host_port(const char *spec, char *host, unsigned long host_len, long *port)

@@ -85,6 +85,12 @@ typedef struct {
  *  CAP_SYS_NICE, RLIMIT_MEMLOCK) are reported in the result. */
 piezo_rt_result_t piezo_rt_setup(int prio, int lock_memory);
 
+/** SIGINT and SIGTERM call on_stop (a handler that sets the loop's stop
+ *  flag: piezo_pacer_sleep() returns EINTR and the loop looks at it);
+ *  SIGPIPE is ignored (a client that went away is an error on its socket,
+ *  not the end of the process). */
+void piezo_stop_signals(void (*on_stop)(int sig));
+
 /** "HOST:PORT" (PORT 0..65535) into host (NUL-terminated) and *port.
  *  Returns 0; -1 when there is no colon or the host does not fit host_len;
  *  -2 when PORT is not a number in 0..65535. */

@@ -161,14 +161,7 @@ int main(int argc, char **argv)
         piezo_daq_close(&g_daq);
         return status;
     }
-    {
-        struct sigaction sa;
-        memset(&sa, 0, sizeof sa);
-        sa.sa_handler = on_signal;
-        sigaction(SIGINT, &sa, NULL);
-        sigaction(SIGTERM, &sa, NULL);
-        signal(SIGPIPE, SIG_IGN);
-    }
+    piezo_stop_signals(on_signal);
     rt = piezo_rt_setup(cfg.priority, 1);
     if (cfg.priority > 0 && !rt.fifo) {
         fprintf(stderr, "daq-controller: warning: SCHED_FIFO refused (%s): running at normal priority\n",

@@ -178,14 +178,7 @@ int main(int argc, char **argv)
         fprintf(stderr, "sil-stage: cannot make the pseudo-terminal %s: %s\n", pty_link, strerror(errno));
         return 1;
     }
-    {
-        struct sigaction sa;
-        memset(&sa, 0, sizeof sa);
-        sa.sa_handler = on_signal;
-        sigaction(SIGINT, &sa, NULL);
-        sigaction(SIGTERM, &sa, NULL);
-        signal(SIGPIPE, SIG_IGN);
-    }
+    piezo_stop_signals(on_signal);
     (void)piezo_rt_setup(50, 0); /* SCHED_FIFO where permitted, timer slack 1 ns */
     printf("sil-stage: ready tcp=%s:%u axes=%d rtu=%s\n", host, (unsigned)piezo_tcp_server_port(&tcp[0]),
            g_sil.n_axes, pty_link ? pty_link : "-");
