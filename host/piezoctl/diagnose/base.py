@@ -33,7 +33,7 @@ ORDERS = (0, 2, 4)
 LP_FIRST_HZ = 20.0
 RIDGE = 1e-6
 R_MAX = 0.8
-BW_BETAS = tuple(float(x) for x in np.geomspace(0.5, 40.0, 10))
+BW_BETAS = tuple(float(x) for x in np.geomspace(0.5, 40.0, 7))   # a factor 2.1; Nelder-Mead refines
 BW_GAMMA_RATIOS = (-0.6, -0.3, 0.0, 0.3, 0.6)
 
 
@@ -324,23 +324,26 @@ def fit_base(recordings, n_plays: int = 10, max_rows: int = MAX_ROWS, u_rest: fl
     return params
 
 
-def fit_dynamics(xs, ys, k0s, max_rows: int = 60_000) -> tuple[np.ndarray, np.ndarray]:
+def fit_dynamics(xs, ys, k0s, max_rows: int = 60_000, band: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Dynamics G (unit static gain) from H outputs ``xs`` [um] to outputs ``ys`` [um] (offset removed).
 
     ARX of order 0, 2 or 4 by the base model's rule (a higher order kept when it lowers
     the simulation error on these data by 5 %); no output-error refinement (this is
     called once per setting of a drive-side term, so it must be cheap).
 
+    band : float, optional
+        The calibration's band [cycles/sample] for the plausibility rule (default: from ``xs``).
+
     Returns
     -------
     (b, a) : tuple of ndarray
         Discrete transfer function at the recordings' rate.
     """
-    (b, a), _, _ = _select_dynamics(xs, ys, k0s, max_rows, refine=False)
+    (b, a), _, _ = _select_dynamics(xs, ys, k0s, max_rows, refine=False, band=band)
     return np.asarray(b, float), np.asarray(a, float)
 
 
-def _select_dynamics(xs, ys, k0s, max_rows, refine):
+def _select_dynamics(xs, ys, k0s, max_rows, refine, band=None):
     """ARX of each order in ORDERS (output-error refined when ``refine``); returns ((b, a), order, scores).
 
     Order by simulation error on all calibration data: each step up in order must lower it by 5 % and be
@@ -353,7 +356,7 @@ def _select_dynamics(xs, ys, k0s, max_rows, refine):
         models[order] = m
         scores[order] = _sim_rmse(m, xs, ys, k0s) if m is not None else float("inf")
     best = 0
-    band = band_cps(xs, k0s)
+    band = band_cps(xs, k0s) if band is None else band
     for order in ORDERS[1:]:
         if plausible(models[order], band) and scores[order] < 0.95 * scores[best]:
             best = order

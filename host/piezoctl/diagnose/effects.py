@@ -316,10 +316,13 @@ def refit_dynamics(ctx, name, setting):
     key = (name, float(setting))
     if key in ctx.refit_cache:
         return ctx.refit_cache[key]
-    from .base import fit_dynamics
+    from .base import band_cps, fit_dynamics
+    if "band" not in ctx.refit_cache:  # the calibration's band hardly depends on the drive term's setting
+        ctx.refit_cache["band"] = band_cps(ctx.cal_h, ctx.cal_k0)
     xs = [_drive_h(ctx, name, setting, r.u, h, r.dt) for r, h in zip(ctx.cal, ctx.cal_h)]
     off = float(ctx.base["hysteresis"].get("offset", 0.0))
-    ba = fit_dynamics(xs, [np.asarray(r.y, float) - off for r in ctx.cal], ctx.cal_k0)
+    ba = fit_dynamics(xs, [np.asarray(r.y, float) - off for r in ctx.cal], ctx.cal_k0, max_rows=40_000,
+                      band=ctx.refit_cache["band"])
     ctx.refit_cache[key] = ba
     return ba
 

@@ -72,6 +72,8 @@ its first input sample.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import signal
 
@@ -204,7 +206,7 @@ def _poly_clamped(v, poly, v_lo, v_hi) -> np.ndarray:
     has an unreliable slope at its ends, the mean gain is what the calibration determined."""
     c1, c2, c3 = (list(poly) + [0.0, 0.0, 0.0])[:3]
     vc = np.clip(v, v_lo, v_hi)
-    p = c1 * vc + c2 * vc ** 2 + c3 * vc ** 3
+    p = ((c3 * vc + c2) * vc + c1) * vc
     if v_hi > v_lo:
         slope = (c1 * (v_hi - v_lo) + c2 * (v_hi ** 2 - v_lo ** 2) + c3 * (v_hi ** 3 - v_lo ** 3)) / (v_hi - v_lo)
     else:
@@ -212,58 +214,60 @@ def _poly_clamped(v, poly, v_lo, v_hi) -> np.ndarray:
     return p + slope * (v - vc)
 
 
-BW_QUANTUM = 4e-3
-
-
-def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, quantum: float = BW_QUANTUM) -> np.ndarray:
+def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray:
     """Hysteretic state h of a Bouc-Wen element with alpha = 1 along the drive path v.
 
     ``dh = dv - beta |dv| h - gamma dv |h|`` (``beta > |gamma|``), starting at h = 0 at
-    ``v_rest``. Rate independent, so it is integrated in closed form on the path sampled
-    every ``quantum`` of path length and at every reversal, then interpolated in path
-    length (within a monotone stretch) back to every sample.
+    ``v_rest``. Rate independent: within a monotone run of the drive (direction s) h is a
+    closed-form function of the path length L travelled in the run,
+    ``h = heq + (h0 - heq) exp(-k L)``, ``k = beta + s sign(h) gamma``, ``heq = s / k``;
+    when h starts against the direction it reaches zero after
+    ``l0 = log(1 - h0 / heq) / k`` and continues with ``k = beta + gamma``. Evaluated
+    exactly at every sample, one run at a time (a drive step of any size is exact).
     """
     v = np.concatenate([[v_rest], np.asarray(v, float)])
     dv = np.diff(v)
-    lam = np.concatenate([[0.0], np.cumsum(np.abs(dv))])
-    cell = np.floor(lam / quantum)
-    sgn = np.sign(dv)
-    nz = np.flatnonzero(sgn != 0)
-    rev = np.zeros(v.size, bool)
-    if nz.size > 1:
-        ch = nz[1:][sgn[nz[1:]] != sgn[nz[:-1]]]
-        rev[ch] = True  # sample before the first step of a new direction
-    keep = np.flatnonzero(np.concatenate([[True], cell[1:] != cell[:-1]]) | rev)
-    if keep[-1] != v.size - 1:
-        keep = np.append(keep, v.size - 1)
-    vk = v[keep].tolist()
-    hk = [0.0] * len(vk)
-    h = 0.0
-    exp = np.exp
-    log = np.log
-    for i in range(1, len(vk)):
-        d = vk[i] - vk[i - 1]
-        if d == 0.0:
-            hk[i] = h
+    out = np.zeros(dv.size)
+    nz = np.flatnonzero(dv != 0.0)
+    if nz.size == 0:
+        return out
+    sgn = np.sign(dv[nz])
+    # run starts: first nonzero step and every change of direction; zero steps belong to the run before them
+    starts = nz[np.concatenate([[0], np.flatnonzero(sgn[1:] != sgn[:-1]) + 1])]
+    ends = np.append(starts[1:], dv.size)
+    path = np.cumsum(np.abs(dv))
+    h0 = 0.0
+    hs = []
+    kp, km = beta + gamma, beta - gamma
+    sds = np.sign(dv[starts]).tolist()
+    p0s = np.concatenate([[0.0], path])[starts].tolist()
+    for a, b, sd, p0 in zip(starts.tolist(), ends.tolist(), sds, p0s):
+        if b - a <= 12:  # short runs (a chirp's high end): scalar arithmetic is cheaper than array calls
+            for L in (path[a:b] - p0).tolist():
+                if h0 == 0.0 or (h0 > 0) == (sd > 0):
+                    h = sd / kp + (h0 - sd / kp) * math.exp(-kp * L)
+                else:
+                    heq = sd / km
+                    l0 = math.log(1.0 - h0 / heq) / km
+                    h = (heq + (h0 - heq) * math.exp(-km * L)) if L < l0 else sd / kp * (1.0 - math.exp(-kp * (L - l0)))
+                hs.append(h)
+            out[a:b] = hs
+            h0 = hs[-1]
+            hs.clear()
             continue
-        sd = 1.0 if d > 0 else -1.0
-        ln = abs(d)
-        # k depends on sign(h) (sign(dv) at h = 0): a segment that takes h across zero is integrated in two
-        # pieces, or one large drive step (a single segment) would use the wrong rate after the crossing
-        sh = sd if h == 0.0 else (1.0 if h > 0 else -1.0)
-        k = beta + sd * sh * gamma
-        heq = sd / k
-        if sh != sd:
-            l0 = float(log(1.0 - h / heq)) / k
-            if l0 < ln:
-                ln -= l0
-                k = beta + gamma
-                heq = sd / k
-                h = 0.0
-        h = heq + (h - heq) * float(exp(-k * ln))
-        hk[i] = h
-    out = np.interp(lam, lam[keep], np.asarray(hk))
-    return out[1:]
+        L = path[a:b] - p0
+        if h0 == 0.0 or (h0 > 0) == (sd > 0):
+            heq = sd / kp
+            seg = heq + (h0 - heq) * np.exp(-kp * L)
+        else:
+            heq = sd / km
+            l0 = float(np.log(1.0 - h0 / heq)) / km
+            heq2 = sd / kp
+            seg = np.where(L < l0, heq + (h0 - heq) * np.exp(-km * np.minimum(L, l0)),
+                           heq2 * (1.0 - np.exp(-kp * np.maximum(L - l0, 0.0))))
+        out[a:b] = seg
+        h0 = float(seg[-1])
+    return out
 
 
 def hysteresis_parts(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
