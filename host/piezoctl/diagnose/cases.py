@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CASES", "FAST_CASES", "make_case", "signal", "stage_dict"]
+__all__ = ["CASES", "MULTI_CASES", "FAST_CASES", "make_case", "signal", "stage_dict"]
 
 FS = 10_000.0
 
@@ -210,6 +210,22 @@ CASES: dict[str, dict] = {
     "null_two_axis": {"truth": [], "axes": 2, "stage": {}, "cal": CAL_STD, "u2_cal": 75.0, "u2_rec": U2_MOVING},
 }
 
+# two effects at once ("several effects may be present; list them all"): run with
+# tools/bench-diagnose --cases multi (not in the default run, which is one effect per case)
+MULTI_CASES: dict[str, dict] = {
+    "delay+sensor_offset": {"truth": ["delay", "sensor_offset"],
+                            "stage": {"delay": {"enabled": True, "samples": 10}, "mechanics__enabled": False},
+                            "cal": CAL_SLOW, "rec_stages": CASES["sensor_offset"]["rec_stages"]},
+    "creep+thermal_drift": {"truth": ["creep", "thermal_drift"],
+                            "stage": {"creep": CASES["creep"]["stage"]["creep"],
+                                      "thermal": CASES["thermal_drift"]["stage"]["thermal"]},
+                            "cal_stage": {"thermal__enabled": False}, "cal": CASES["creep"]["cal"], "temp": True},
+    "unmodeled_resonance+cross_coupling": {"truth": ["unmodeled_resonance", "cross_coupling"], "axes": 2,
+                                           "coupling": CASES["cross_coupling"]["coupling"],
+                                           "stage": CASES["unmodeled_resonance"]["stage"], "cal": CAL_SLOW,
+                                           "u2_cal": 75.0, "u2_rec": U2_MOVING, "rec": CASES["unmodeled_resonance"]["rec"]},
+}
+
 # the subset tools/test runs (tests/host/test_diagnose.py, shorter signals and another seed than the benchmark):
 # a null, a drift, a drive-side dynamics term, creep (nested test) and saturation (beyond the calibrated range)
 FAST_CASES = ("null_default", "thermal_drift", "delay", "creep", "saturation")
@@ -230,7 +246,7 @@ def make_case(name: str, out_dir, scale: float = 1.0, seed: int = 0) -> dict:
     Parameters
     ----------
     name : str
-        A key of :data:`CASES`.
+        A key of :data:`CASES` or :data:`MULTI_CASES`.
     out_dir : path-like
         Directory (created); receives ``stage*.json``, ``cal*.csv``, ``rec*.csv``.
     scale : float
@@ -245,7 +261,7 @@ def make_case(name: str, out_dir, scale: float = 1.0, seed: int = 0) -> dict:
     """
     from ..io.recording import save_recording
     from ..sil.stage import simulate_stage
-    case = CASES[name]
+    case = CASES[name] if name in CASES else MULTI_CASES[name]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     axes = case.get("axes", 1)

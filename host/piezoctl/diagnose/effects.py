@@ -209,25 +209,47 @@ def _cc_app(ctx):
     return any(s.u2 is not None and np.ptp(s.u2) > 1e-6 for s in ctx.signals)
 
 
+def _cc_settings(ctx):
+    # None: the other axis follows G; (f, zeta): it moves through a mode at a residual peak, so the acceleration
+    # it couples in rings (a step of u2 through a stiff axis is a burst at the mode, not a two-sample spike)
+    return [None] + [(f, z) for f in ctx.peak_freqs for z in DAMPINGS]
+
+
 def _cc_reg(ctx, s, setting):
     n = s.t.size
+    k = 3 if setting is None else 4
     if s.u2 is None:
-        return np.zeros((n, 3))
-    x = _G(ctx, s.u2) - ctx.u2_ref
-    acc = np.gradient(np.gradient(x + ctx.u2_ref, s.dt), s.dt)
-    return np.column_stack([x, acc, x * (s.yb - ctx.y_center)])
+        return np.zeros((n, k))
+    xg = _G(ctx, s.u2)
+    x = xg - ctx.u2_ref
+    cols = [x, None, x * (s.yb - ctx.y_center)]
+    if setting is not None:
+        # with and without the ZOH's one-sample delay (as the resonance term): at 1.5 kHz and 10 kHz one sample is
+        # 54 degrees of the ring
+        bm, am = mode_filter(setting[0], setting[1], s.dt)
+        cols.append(np.gradient(np.gradient(filt(bm[1:], am, xg), s.dt), s.dt))
+        xg = filt(bm, am, xg)
+    cols[1] = np.gradient(np.gradient(xg, s.dt), s.dt)
+    return np.column_stack(cols)
 
 
 def _cc_term(ctx, setting, coef):
-    return {"c_static_um_per_v": float(coef[0]), "c_accel_um_per_v_s2": float(coef[1]),
-            "c_pos_per_um_v": float(coef[2]), "y_center_um": float(ctx.y_center), "u2_ref_v": float(ctx.u2_ref)}
+    out = {"c_static_um_per_v": float(coef[0]), "c_accel_um_per_v_s2": float(coef[1]),
+           "c_pos_per_um_v": float(coef[2]), "y_center_um": float(ctx.y_center), "u2_ref_v": float(ctx.u2_ref)}
+    if setting is not None:
+        out.update(mode_hz=float(setting[0]), mode_damping=float(setting[1]), c_accel_lead_um_per_v_s2=float(coef[3]))
+    return out
 
 
 def _cc_desc(ctx, setting, coef):
-    return ({"static_um_per_v": float(coef[0]), "accel_um_per_v_s2": float(coef[1]),
-             "position_dependence_per_um_v": float(coef[2])},
-            f"the residual follows the other axis' motion (u2): {1000 * coef[0]:+.2f} nm per volt of u2 plus a "
-            f"term in its acceleration, i.e. coupling that grows with frequency")
+    par = {"static_um_per_v": float(coef[0]), "accel_um_per_v_s2": float(coef[1]),
+           "position_dependence_per_um_v": float(coef[2])}
+    ring = ""
+    if setting is not None:
+        par.update(other_axis_mode_hz=round(setting[0], 1), other_axis_mode_damping=setting[1])
+        ring = f", ringing at {setting[0]:.0f} Hz after the other axis' steps (it moves through that mode)"
+    return (par, f"the residual follows the other axis' motion (u2): {1000 * coef[0]:+.2f} nm per volt of u2 plus a "
+                 f"term in its acceleration, i.e. coupling that grows with frequency{ring}")
 
 
 # --- rate-dependent hysteresis -----------------------------------------------------------
@@ -329,11 +351,12 @@ def refit_dynamics(ctx, name, setting):
 
 def _dd_reg(name):
     def reg(ctx, s, setting):
+        # the change of the dynamics' output (refitted G on the term's H output minus the current G on the current
+        # H output): terms added after the dynamics (per-recording offsets, drift, coupling) cancel, where the
+        # difference to the model's output would carry them into the regressor
         b, a = refit_dynamics(ctx, name, setting)
-        hb = s.h
-        x = _drive_h(ctx, name, setting, s.u, hb, s.dt)
-        off = float(ctx.base["hysteresis"].get("offset", 0.0))
-        return (filt(b, a, x) + off - s.yb)[:, None]
+        x = _drive_h(ctx, name, setting, s.u, s.h, s.dt)
+        return (filt(b, a, x) - _G(ctx, s.h))[:, None]
     return reg
 
 
@@ -523,7 +546,7 @@ EFFECTS = {
     "sensor_offset": Effect("sensor_offset", "a constant per recording (session)", _one, _off_reg, _off_term,
                             _off_desc),
     "cross_coupling": Effect("cross_coupling", "residual explained by the other axis' drive/motion, growing "
-                             "with its frequency", _one, _cc_reg, _cc_term, _cc_desc, _cc_app),
+                             "with its frequency", _cc_settings, _cc_reg, _cc_term, _cc_desc, _cc_app),
     "rate_dependent_hysteresis": _with_intercept(Effect("rate_dependent_hysteresis", "residual grows with |du/dt| times the "
                                         "hysteretic part (loop width grows with rate)",
                                         lambda ctx: list(RATE_REFS), _rd_reg, _rd_term, _rd_desc,

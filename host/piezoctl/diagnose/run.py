@@ -178,7 +178,7 @@ def _evaluate(ctxs, eff, es, fold_all, block_all, rows, p_max):
         ctx, e = ctxs[f], es[f]
         settings, designs = _designs(ctx, eff)
         nn = eff.nuisance(ctx)
-        k = designs[0].k - nn - (1 if eff.intercept else 0) + (1 if len(settings) > 1 else 0)
+        k = max(d.k for d in designs) - nn - (1 if eff.intercept else 0) + (1 if len(settings) > 1 else 0)
         train, test = fold_all == f, fold_all == 1 - f
         e_before[test] = e[test]
         if nn or eff.intercept:  # nested: "before" is the model with the nuisance columns alone refitted here

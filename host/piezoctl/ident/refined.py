@@ -59,6 +59,9 @@ Parameters (JSON, physical units where they have one)
       ``c_pos_per_um_v`` and ``y_center_um``: ``x = G u2`` (this axis'
       dynamics as a proxy for the other's), ``y += c_s x + c_a x'' +
       c_p x (y - y_center)``.
+      Optional ``mode_hz``, ``mode_damping``, ``c_accel_lead_um_per_v_s2``: the
+      acceleration is taken after a mode filter (the other axis moves through a
+      resonance), with and without the ZOH's one-sample delay.
     - ``thermal_drift``: ``amplitude_um``, ``tau_s``, ``slope_um_per_s``:
       ``A (1 - exp(-(t - t0)/tau)) + slope (t - t0)``.
     - ``sensor_offset``: ``offset_um`` (used by ``simulate``) and
@@ -381,7 +384,14 @@ def simulate_parts(params: dict, t, u, u2=None) -> dict:
     if "cross_coupling" in terms and u2 is not None:
         c = terms["cross_coupling"]
         x = filt(dyn["b"], dyn["a"], np.asarray(u2, float))
-        acc = np.gradient(np.gradient(x, dt), dt)
+        xa = x
+        acc_lead = 0.0
+        if c.get("mode_hz"):  # the other axis moves through a mode: its acceleration rings
+            bm, am = mode_filter(float(c["mode_hz"]), float(c["mode_damping"]), dt)
+            xa = filt(bm, am, x)
+            acc_lead = np.gradient(np.gradient(filt(bm[1:], am, x), dt), dt)  # the mode without the ZOH delay
+        acc = np.gradient(np.gradient(xa, dt), dt)
+        y = y + float(c.get("c_accel_lead_um_per_v_s2", 0.0)) * acc_lead
         y = y + float(c["c_static_um_per_v"]) * (x - float(c.get("u2_ref_v", 0.0))) \
             + float(c["c_accel_um_per_v_s2"]) * acc \
             + float(c["c_pos_per_um_v"]) * (x - float(c.get("u2_ref_v", 0.0))) * (y - float(c["y_center_um"]))
