@@ -76,9 +76,9 @@ class Effect:
     # the last regressor column is a constant (the model's offset refitted with the term), also a nuisance: a
     # term that shifts the mean output must not leave a constant behind for "sensor_offset" to claim
     intercept: bool = False
-    # finer settings around the best one so far (the grid's neighbours' midpoints), tried on the same training
-    # data; empty when the grid is fine enough
-    refine: Callable = lambda ctx, setting: []
+    # finer settings around the best one so far at refinement level 1, 2 (the grid's neighbours' midpoints, then
+    # halfway again), tried on the same training data; empty when the grid is fine enough
+    refine: Callable = lambda ctx, setting, level: []
     # lower bounds of the coefficients (None: unconstrained), e.g. creep gains >= 0 (a Kelvin-Voigt element only
     # adds compliance; free signs turn the chain into an arbitrary slow filter)
     lower: Callable = lambda ctx: None
@@ -477,41 +477,25 @@ def _one(ctx):
     return [None]
 
 
-def _geo_refine(grid_of, steps=2):
-    """Refinement for a geometric grid of scalars: the two geometric midpoints around ``setting`` (a quarter of
-    the grid ratio on the second call, and so on: the ratio is read from the distance to the nearest tried)."""
-    def refine(ctx, x):
+def _geo_refine(grid_of):
+    """Refinement for a geometric grid of scalars: the two points a factor r^(1/2^level) either side of
+    ``setting``, r the grid's mean ratio (level 1: the geometric midpoints to its neighbours)."""
+    def refine(ctx, x, level):
         g = np.asarray(grid_of(ctx), float)
-        if x is None or g.size < 2:
+        if x is None or g.size < 2 or not np.all(g > 0):
             return []
-        r = float(np.exp(np.mean(np.diff(np.log(g))))) if np.all(g > 0) else 0.0
+        r = float(np.exp(np.mean(np.diff(np.log(g)))))
         if r <= 1.0:
             return []
-        key = ("_refine", id(grid_of), repr(x))
-        level = ctx.refit_cache.get(key, 0) + 1
-        if level > steps:
-            return []
         f = r ** (0.5 ** level)
-        out = [float(x) / f, float(x) * f]
-        for o in out:
-            ctx.refit_cache[("_refine", id(grid_of), repr(o))] = level
-        return out
+        return [float(x) / f, float(x) * f]
     return refine
 
 
-def _sat_refine(ctx, setting):
+def _sat_refine(ctx, setting, level):
     lo, hi = setting
-    span = ctx.u_hi - ctx.u_lo
-    step = 0.025 * span
-    key = ("_refine_sat", repr(setting))
-    level = ctx.refit_cache.get(key, 0) + 1
-    if level > 2:
-        return []
-    d = step * 0.5 ** level
-    out = [(lo, hi - d), (lo, hi + d)] if hi is not None else [(lo - d, hi), (lo + d, hi)]
-    for o in out:
-        ctx.refit_cache[("_refine_sat", repr(o))] = level
-    return out
+    d = 0.025 * (ctx.u_hi - ctx.u_lo) * 0.5 ** level   # the grid step halved per level
+    return [(lo, hi - d), (lo, hi + d)] if hi is not None else [(lo - d, hi), (lo + d, hi)]
 
 
 def _with_intercept(eff: Effect) -> Effect:

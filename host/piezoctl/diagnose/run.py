@@ -143,16 +143,18 @@ def _best_setting(ctx, eff, e, train, test, rows):
     settings, designs = _designs(ctx, eff)
     lb = eff.lower(ctx)
     best = None
-    tried = set()
+    level = {}   # refinement level at which each tried setting was proposed (grid: 0)
+    new_level = 0
     for _ in range(3):
         for st, d in zip(settings, designs):
-            if repr(st) in tried:
+            if repr(st) in level:
                 continue
-            tried.add(repr(st))
+            level[repr(st)] = new_level
             th, pa, sse = _fit_predict([d.X], e, train, test, rows, lb)
             if best is None or sse < best[2]:
                 best = (st, d, sse, pa, th)
-        settings = eff.refine(ctx, best[0])
+        new_level = level[repr(best[0])] + 1
+        settings = eff.refine(ctx, best[0], new_level) if new_level <= 2 else []
         if not settings:
             break
         designs = [_design(ctx, eff, st) for st in settings]
