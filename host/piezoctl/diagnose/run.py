@@ -47,7 +47,6 @@ class Ctx:
     max_step: float
     peak_freqs: list
     y_span: float
-    h_cal_mean: float = 0.0
     cal: list = dataclasses.field(default_factory=list)       # calibration recordings
     cal_h: list = dataclasses.field(default_factory=list)     # base H output on them [um]
     cal_k0: list = dataclasses.field(default_factory=list)    # settled start index per calibration recording
@@ -239,8 +238,7 @@ def _rebase(ctx, params, recs):
             y = y + po["per_recording"].get(s.name, po["offset_um"]) - po["offset_um"]
         sigs.append(dataclasses.replace(s, v=p["v"], h=p["h"], hyst=p["hyst"], yb=y, ydyn=p["y_dyn"] + off))
     cal_h = [refined.simulate_parts(params, r.t, r.u, r.u2)["h"] for r in ctx.cal]
-    return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={},
-                               h_cal_mean=float(np.mean(np.concatenate(cal_h))))
+    return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={})
 
 
 def _exact_fold(ctx, params, d, f, fold_all, recs):
@@ -326,6 +324,7 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
     u2c = [r.u2 for r in cal if r.u2 is not None]
     du = max(float(np.max(np.abs(np.diff(s.u)))) for s in sigs)
     cal_h = [refined.simulate_parts(base, r.t, r.u)["h"] for r in cal]
+    cal_k0 = [min(int(round(settle_s / r.dt)), len(r) // 2) for r in cal]   # settled start per calibration file
     ctx = Ctx(base=base, signals=sigs, valid=valid, fold=fold, block=block, names=names, n_rec=len(sigs), dt=dt,
               duration=max(s.t[-1] - s.t[0] for s in sigs),
               u2_ref=float(np.mean(np.concatenate(u2c))) if u2c else 0.0,
@@ -334,10 +333,9 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
               u_mid_all=0.5 * (float(uv.max()) + float(uv.min())),
               u_half_all=max(0.5 * float(np.ptp(uv)), 1e-9), max_step=du,
               peak_freqs=loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt), y_span=span,
-              cal=cal, cal_h=cal_h,
-              cal_u_lo=min(float(np.min(r.u[min(int(round(settle_s / r.dt)), len(r) // 2):])) for r in cal),
-              cal_u_hi=max(float(np.max(r.u[min(int(round(settle_s / r.dt)), len(r) // 2):])) for r in cal), cal_k0=[min(int(round(settle_s / r.dt)), len(r) // 2) for r in cal],
-              h_cal_mean=float(np.mean(np.concatenate(cal_h))))
+              cal=cal, cal_h=cal_h, cal_k0=cal_k0,
+              cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
+              cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)))
     # samples where the drive is (or within OUT_GUARD_S was) outside the calibrated range: the base model
     # extrapolates there (hysteresis class and weights identified inside, the cubic continued as a line).
     # They stay in the selection - saturation or a sensor's curvature may show only there - and are reported
