@@ -24,7 +24,7 @@ import numpy as np
 from ..ident.refined import (filt, lowpass, lowpass_tau, mode_filter, slew_limit, drive_rate, RATE_CUTOFF_HZ,
                              hysteresis_parts)
 
-__all__ = ["VOCABULARY", "Effect", "EFFECTS", "Signals"]
+__all__ = ["VOCABULARY", "Effect", "EFFECTS", "Signals", "nuisance_columns"]
 
 VOCABULARY = ("creep", "thermal_drift", "sensor_offset", "cross_coupling", "rate_dependent_hysteresis",
               "unmodeled_resonance", "delay", "amplifier_slew_limit", "amplifier_bandwidth",
@@ -327,6 +327,12 @@ def _drive_h(ctx, name, setting, u, h_base, dt):
     if name == "delay":
         return _shift(h_base, setting)
     ue = lowpass(u, setting, dt) if name == "amplifier_bandwidth" else slew_limit(u, setting * dt)
+    return _h_of_drive(ctx, ue, u, h_base)
+
+
+def _h_of_drive(ctx, ue, u, h_base):
+    """H output [um] of the current model's hysteresis for a changed drive ``ue`` [V]; ``h_base`` (its output
+    for the unchanged drive ``u``) when the change does nothing."""
     if np.array_equal(ue, u):
         return h_base
     v = (ue - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
@@ -416,10 +422,7 @@ def _sat_h(ctx, s, setting):
     (it reverses at the limit, not where the command does)."""
     lo, hi = setting
     uc = np.clip(s.u, -np.inf if lo is None else lo, np.inf if hi is None else hi)
-    if np.array_equal(uc, s.u):
-        return s.h
-    v = (uc - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
-    return hysteresis_parts(ctx.base["hysteresis"], v)[0]
+    return _h_of_drive(ctx, uc, s.u, s.h)
 
 
 def _sat_reg(ctx, s, setting):
@@ -496,6 +499,12 @@ def _sat_refine(ctx, setting, level):
     lo, hi = setting
     d = 0.025 * (ctx.u_hi - ctx.u_lo) * 0.5 ** level   # the grid step halved per level
     return [(lo, hi - d), (lo, hi + d)] if hi is not None else [(lo - d, hi), (lo + d, hi)]
+
+
+def nuisance_columns(eff: Effect, ctx, k: int) -> list:
+    """Indices of the nuisance columns among an effect's ``k`` regressor columns: the first
+    ``eff.nuisance(ctx)``, and the last when ``eff.intercept``."""
+    return list(range(eff.nuisance(ctx))) + ([k - 1] if eff.intercept else [])
 
 
 def _with_intercept(eff: Effect) -> Effect:

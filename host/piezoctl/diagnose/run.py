@@ -18,7 +18,7 @@ from ..io.recording import load_recording
 from . import locate as loc
 from . import significance as sg
 from .base import fit_base
-from .effects import EFFECTS, VOCABULARY, Signals
+from .effects import EFFECTS, VOCABULARY, Signals, nuisance_columns
 from .discriminate import calibration_band_hz, discriminate_group, highpassed
 
 __all__ = ["diagnose", "DEFAULTS"]
@@ -178,12 +178,12 @@ def _evaluate(ctxs, eff, es, fold_all, block_all, rows, p_max):
     for f in (0, 1):
         ctx, e = ctxs[f], es[f]
         settings, designs = _designs(ctx, eff)
-        nn = eff.nuisance(ctx)
-        k = max(d.k for d in designs) - nn - (1 if eff.intercept else 0) + (1 if len(settings) > 1 else 0)
+        nuis = nuisance_columns(eff, ctx, designs[0].k)
+        k = max(d.k for d in designs) - len(nuis) + (1 if len(settings) > 1 else 0)
         train, test = fold_all == f, fold_all == 1 - f
         e_before[test] = e[test]
-        if nn or eff.intercept:  # nested: "before" is the model with the nuisance columns alone refitted here
-            Xn = designs[0].X[:, list(range(nn)) + ([designs[0].k - 1] if eff.intercept else [])]
+        if nuis:  # nested: "before" is the model with the nuisance columns alone refitted here
+            Xn = designs[0].X[:, nuis]
             _, pn, _ = _fit_predict([Xn], e, train, test, rows)
             e_before[test] = e[test] - pn
         best = _best_setting(ctx, eff, e, train, test, rows)
@@ -433,9 +433,7 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         best["setting_all"], best["coef_all"] = bs[0], bs[3]
         best["describe"] = eff.describe(ctx_all, bs[0], bs[3])
         c_term = np.array(bs[3], float)
-        c_term[:eff.nuisance(ctx_all)] = 0.0  # where the term acts: its own columns, not the refitted base
-        if eff.intercept:
-            c_term[-1] = 0.0
+        c_term[nuisance_columns(eff, ctx_all, c_term.size)] = 0.0  # where the term acts: its own columns only
         best["contrib"] = [np.asarray(eff.regressors(ctx_all, s, bs[0]), float) @ c_term for s in ctx_all.signals]
         params_all = _model_params(ctx_all.base, {eff.name: eff.term(ctx_all, bs[0], bs[3])})
         ctx_all = _rebase(ctx_all, params_all, recs)
