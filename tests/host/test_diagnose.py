@@ -157,7 +157,7 @@ def test_discriminate_group_prefers_the_clearly_smaller_residual_and_states_ambi
 
 def test_dynamics_plausibility_rejects_gain_beyond_the_calibration_band():
     from scipy import signal as sps
-    from piezoctl.diagnose.base import plausible
+    from piezoctl.ident.base import plausible
     # a 600 Hz mode at 10 kHz inside a band reaching 1 kHz: accepted
     b, a, _ = sps.cont2discrete(([(2 * np.pi * 600) ** 2], [1, 2 * 0.03 * 2 * np.pi * 600, (2 * np.pi * 600) ** 2]),
                                 1e-4, method="zoh")

@@ -21,8 +21,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..ident.refined import (filt, lowpass, lowpass_tau, mode_filter, slew_limit, drive_rate, RATE_CUTOFF_HZ,
-                             hysteresis_parts)
+from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
+from ..models.hysteresis import hysteresis_channels, hysteresis_parts, scale_channels
 
 __all__ = ["VOCABULARY", "Effect", "EFFECTS", "Signals", "nuisance_columns"]
 
@@ -82,6 +82,10 @@ class Effect:
     # lower bounds of the coefficients (None: unconstrained), e.g. creep gains >= 0 (a Kelvin-Voigt element only
     # adds compliance; free signs turn the chain into an arbitrary slow filter)
     lower: Callable = lambda ctx: None
+    # tested nested against free gains on the current model's hysteresis channels through its dynamics, refitted
+    # on the same fold (run.hysteresis_nuisance): what a refit of the base could absorb is not credited to the
+    # term. Creep carries a richer nuisance of its own (every feature of the hysteresis).
+    nested: bool = True
 
 
 def _G(ctx, x):
@@ -98,20 +102,10 @@ def _creep_taus(ctx):
 
 
 def _hfeatures(ctx, u):
-    """The base hysteresis' feature columns (play outputs or the Bouc-Wen state, v, v^2, v^3, 1) for drive u [V]:
-    everything the base fit could have put into H."""
-    from ..models.play import play_outputs
-    from ..ident.refined import bouc_wen_h
-    hp = ctx.base["hysteresis"]
+    """The current hysteresis' channels for drive u [V] plus a constant (see
+    :func:`piezoctl.models.hysteresis.hysteresis_channels`): free gains on them refit the base's own flexibility."""
     v = (np.asarray(u, float) - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
-    vr = float(hp.get("v_rest", 0.0))
-    if hp.get("type", "pi") == "bouc_wen":
-        H = bouc_wen_h(v, float(hp["beta"]), float(hp["gamma"]), vr)[:, None]
-    else:
-        r = np.asarray(hp["r"], float)
-        H = play_outputs(v, r, y0=np.full(r.size, vr))
-    vc = np.clip(v, float(hp.get("v_lo", -1.0)), float(hp.get("v_hi", 1.0)))
-    return np.column_stack([H, vc, vc ** 2, vc ** 3, np.ones(v.size)])
+    return np.column_stack([hysteresis_channels(ctx.base["hysteresis"], v), np.ones(v.size)])
 
 
 def _creep_reg(ctx, s, setting):
@@ -142,16 +136,9 @@ def _creep_lower(ctx):
 def _creep_term(ctx, setting, coef):
     """w = h + sum g_i (lp_i(h) - h): the refined kind's chain, with the base hysteresis' weights changed by the
     jointly fitted nuisance coefficients Q (plays or Bouc-Wen weight, drive cubic, offset)."""
-    import copy
     taus = _creep_taus(ctx)
     Q, g = _creep_split(ctx, coef)
-    hp = copy.deepcopy(ctx.base["hysteresis"])
-    n = Q.size - 4
-    if hp.get("type", "pi") == "bouc_wen":
-        hp["c_h"] = float(hp["c_h"]) + float(Q[0])
-    else:
-        hp["w"] = [float(w) + float(q) for w, q in zip(hp["w"], Q[:n])]
-    hp["poly"] = [float(c) + float(q) for c, q in zip(hp["poly"], Q[n:n + 3])]
+    hp = scale_channels(ctx.base["hysteresis"], Q[:-1])
     hp["offset"] = float(hp.get("offset", 0.0)) + float(Q[-1])
     return {"tau_s": list(taus), "gain": [float(c) for c in g], "static_gain": 0.0, "h_ref_um": 0.0,
             "_hysteresis": hp}
@@ -344,7 +331,7 @@ def refit_dynamics(ctx, name, setting):
     key = (name, float(setting))
     if key in ctx.refit_cache:
         return ctx.refit_cache[key]
-    from .base import band_cps, fit_dynamics
+    from ..ident.base import band_cps, fit_dynamics
     if "band" not in ctx.refit_cache:  # the calibration's band hardly depends on the drive term's setting
         ctx.refit_cache["band"] = band_cps(ctx.cal_h, ctx.cal_k0)
     xs = [_drive_h(ctx, name, setting, r.u, h, r.dt) for r, h in zip(ctx.cal, ctx.cal_h)]
@@ -533,7 +520,7 @@ def _with_intercept(eff: Effect) -> Effect:
 EFFECTS = {
     "creep": Effect("creep", "residual correlated with the low-passed drive history; large after steps and dwells",
                     _one, _creep_reg, _creep_term, _creep_desc, nuisance=_creep_nuisance,
-                    lower=_creep_lower, intercept=True),
+                    lower=_creep_lower, intercept=True, nested=False),
     "thermal_drift": Effect("thermal_drift", "slow trend with time (or temperature), independent of the drive",
                             lambda ctx: list(THERMAL_TAUS), _th_reg, _th_term, _th_desc),
     "sensor_offset": Effect("sensor_offset", "a constant per recording (session)", _one, _off_reg, _off_term,

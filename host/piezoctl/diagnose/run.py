@@ -17,7 +17,9 @@ from ..io.modelfile import make_provenance, save_model
 from ..io.recording import load_recording
 from . import locate as loc
 from . import significance as sg
-from .base import fit_base
+from ..dsp import filt
+from ..ident.base import fit_base
+from ..models.hysteresis import hysteresis_channels
 from .effects import EFFECTS, VOCABULARY, Signals, nuisance_columns
 from .discriminate import calibration_band_hz, discriminate_group, highpassed
 
@@ -52,6 +54,7 @@ class Ctx:
     cal_k0: list = dataclasses.field(default_factory=list)    # settled start index per calibration recording
     refit_cache: dict = dataclasses.field(default_factory=dict)
     design_cache: dict = dataclasses.field(default_factory=dict)
+    nuisance: np.ndarray | None = None   # hysteresis_nuisance() of this model, computed on first use
     cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
     cal_u_hi: float = 0.0
 
@@ -97,9 +100,12 @@ class _Design:
 
 
 def _lstsq(X, y):
+    """Least squares on unit-RMS columns through the normal equations (the design is tall and narrow: a
+    k x k solve instead of an SVD of the rows); rank deficiency is handled by the small solve's cutoff."""
     sc = np.sqrt(np.mean(X ** 2, axis=0))
     sc[sc == 0] = 1.0
-    th, *_ = np.linalg.lstsq(X / sc, y, rcond=1e-9)
+    Xs = X / sc
+    th, *_ = np.linalg.lstsq(Xs.T @ Xs, Xs.T @ y, rcond=1e-12)
     return th / sc
 
 
@@ -112,16 +118,28 @@ def _lstsq_bounded(X, y, lb):
     return sol.x / sc
 
 
-def _fit_predict(Xs, e, train, test, rows, lb=None):
-    """Least squares of e on [Xs] over train rows (strided), coefficients >= ``lb`` when given; prediction on
-    test rows."""
-    X = np.hstack(Xs) if len(Xs) > 1 else Xs[0]
+def _train_rows(train, rows):
     idx = np.flatnonzero(train)
     if idx.size > rows:
         idx = idx[:: int(np.ceil(idx.size / rows))]
-    th = _lstsq(X[idx], e[idx]) if lb is None else _lstsq_bounded(X[idx], e[idx], lb)
-    sse_tr = float(np.sum((e[idx] - X[idx] @ th) ** 2)) * (np.sum(train) / max(idx.size, 1))
-    return th, X[test] @ th, sse_tr
+    return idx
+
+
+def _fit_predict(Xs, e, train, test, rows, lb=None, nuis=None):
+    """Least squares of e on [Xs] over train rows (strided), coefficients >= ``lb`` when given; prediction on
+    test rows. ``nuis``: the nested test's nuisance as (train rows, test rows) of its columns, prepended (its
+    coefficients first, unbounded), sliced once per fold by the caller."""
+    X = np.hstack(Xs) if len(Xs) > 1 else Xs[0]
+    idx = _train_rows(train, rows)
+    Xtr = X[idx] if nuis is None else np.hstack([nuis[0], X[idx]])
+    if lb is not None and nuis is not None:
+        lb = np.concatenate([np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
+    th = _lstsq(Xtr, e[idx]) if lb is None else _lstsq_bounded(Xtr, e[idx], lb)
+    sse_tr = float(np.sum((e[idx] - Xtr @ th) ** 2)) * (np.sum(train) / max(idx.size, 1))
+    if nuis is None:
+        return th, X[test] @ th, sse_tr
+    m = nuis[1].shape[1]
+    return th, nuis[1] @ th[:m] + X[test] @ th[m:], sse_tr
 
 
 def _design(ctx, eff, st):
@@ -136,9 +154,10 @@ def _designs(ctx, eff):
     return settings, [_design(ctx, eff, st) for st in settings]
 
 
-def _best_setting(ctx, eff, e, train, test, rows):
+def _best_setting(ctx, eff, e, train, test, rows, nuis=None):
     """(setting, design, sse on train, prediction on test, coefficients) with the least training error over the
-    effect's grid, then over its finer settings around the best one (``Effect.refine``, twice)."""
+    effect's grid, then over its finer settings around the best one (``Effect.refine``, twice). With ``nuis``
+    (see :func:`_fit_predict`) the nuisance is fitted jointly and its coefficients are dropped from the result."""
     settings, designs = _designs(ctx, eff)
     lb = eff.lower(ctx)
     best = None
@@ -149,7 +168,9 @@ def _best_setting(ctx, eff, e, train, test, rows):
             if repr(st) in level:
                 continue
             level[repr(st)] = new_level
-            th, pa, sse = _fit_predict([d.X], e, train, test, rows, lb)
+            th, pa, sse = _fit_predict([d.X], e, train, test, rows, lb, nuis)
+            if nuis is not None:
+                th = th[nuis[0].shape[1]:]
             if best is None or sse < best[2]:
                 best = (st, d, sse, pa, th)
         new_level = level[repr(best[0])] + 1
@@ -158,6 +179,19 @@ def _best_setting(ctx, eff, e, train, test, rows):
             break
         designs = [_design(ctx, eff, st) for st in settings]
     return best
+
+
+def hysteresis_nuisance(ctx):
+    """The nested tests' nuisance (n_settled, m + 1): the current model's hysteresis channels through its
+    dynamics (free gains on them refit the base's own flexibility on the new data: loop width per play
+    threshold, the reversible curve's gain) and a constant, stacked over the settled samples; cached on the
+    context."""
+    if ctx.nuisance is None:
+        hp = ctx.base["hysteresis"]
+        b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+        ctx.nuisance = np.vstack([np.column_stack([filt(b, a, hysteresis_channels(hp, s.v)), np.ones(s.v.size)])[v]
+                                  for s, v in zip(ctx.signals, ctx.valid)])
+    return ctx.nuisance
 
 
 def _residual(ctx):
@@ -182,11 +216,15 @@ def _evaluate(ctxs, eff, es, fold_all, block_all, rows, p_max):
         k = max(d.k for d in designs) - len(nuis) + (1 if len(settings) > 1 else 0)
         train, test = fold_all == f, fold_all == 1 - f
         e_before[test] = e[test]
-        if nuis:  # nested: "before" is the model with the nuisance columns alone refitted here
-            Xn = designs[0].X[:, nuis]
-            _, pn, _ = _fit_predict([Xn], e, train, test, rows)
+        N = None
+        if eff.nested:   # nested against a refit of the current model's own hysteresis on this fold
+            Nall = hysteresis_nuisance(ctx)
+            N = (Nall[_train_rows(train, rows)], Nall[test])
+        if nuis or N is not None:  # nested: "before" is the model with the nuisance columns alone refitted here
+            Xn = [designs[0].X[:, nuis]] if nuis else [np.zeros((e.size, 0))]
+            _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
             e_before[test] = e[test] - pn
-        best = _best_setting(ctx, eff, e, train, test, rows)
+        best = _best_setting(ctx, eff, e, train, test, rows, N)
         pred_after[test] = best[3] - (e[test] - e_before[test])
         chosen.append(best)
         rb = float(np.sqrt(np.mean(e_before[test] ** 2)))
@@ -238,7 +276,8 @@ def _rebase(ctx, params, recs):
             y = y + po["per_recording"].get(s.name, po["offset_um"]) - po["offset_um"]
         sigs.append(dataclasses.replace(s, v=p["v"], h=p["h"], hyst=p["hyst"], yb=y, ydyn=p["y_dyn"] + off))
     cal_h = [refined.simulate_parts(params, r.t, r.u, r.u2)["h"] for r in ctx.cal]
-    return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={})
+    return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={},
+                               nuisance=None)
 
 
 def _exact_fold(ctx, params, d, f, fold_all, recs):
@@ -427,7 +466,10 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         # setting and coefficients on all selection samples, applied to the all-data model
         allmask = fold_all >= 0
         e_all = _residual(ctx_all)
-        st, dsg, sse, _, th = _best_setting(ctx_all, best["effect"], e_all, allmask, np.zeros(e_all.size, bool), rows)
+        Nall = hysteresis_nuisance(ctx_all) if best["effect"].nested else None
+        st, dsg, sse, _, th = _best_setting(ctx_all, best["effect"], e_all, allmask, np.zeros(e_all.size, bool), rows,
+                                            None if Nall is None else (Nall[_train_rows(allmask, rows)],
+                                                                       Nall[:0]))
         bs = (st, dsg, sse, th)
         eff = best["effect"]
         best["setting_all"], best["coef_all"] = bs[0], bs[3]

@@ -1,0 +1,328 @@
+"""Rate-independent hysteresis operators of the ``refined`` model kind (float64).
+
+Three operator types, selected by ``hp["type"]`` of a ``refined`` model's
+``hysteresis`` block (docs/model-file.md); all act on the normalized drive
+``v = (u - u_mid) / u_half`` and return micrometres:
+
+``plane`` (the diagnosis base since round 5)
+    A discretized Preisach plane written through play operators. The relay
+    with switching thresholds ``s - r`` and ``s + r`` is up exactly when the
+    play of threshold ``r`` (started in the same state) has an output above
+    ``s``, so a Preisach model whose density is piecewise constant in ``s``
+    and discrete in ``r`` is ``H(v) = sum_j F_j(P_rj(v))``, each ``F_j`` a
+    piecewise-linear function (knots ``knots[j]``, values ``values[j]``) of
+    one play's output. ``r_0 = 0`` is the reversible (anhysteretic) part.
+    No parametric family: any rate-independent hysteresis with wiping-out
+    and congruent minor loops is reached as the grid refines. Outside its
+    knots each ``F_j`` continues as a straight line (the calibration said
+    nothing beyond its range).
+``pi``
+    Classical Prandtl-Ishlinskii plays with a clamped cubic (model files of
+    rounds 1-4).
+``bouc_wen``
+    A Bouc-Wen element with a clamped cubic (model files of rounds 1-4).
+
+Operator states depend only on the drive and the shape parameters, so they
+are kept in a small LRU cache keyed on both: the diagnosis reruns one
+operator on one drive many times with different weights.
+"""
+
+from __future__ import annotations
+
+import collections
+import hashlib
+import math
+
+import numpy as np
+
+from .play import play_outputs
+
+__all__ = ["bouc_wen_h", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
+           "poly_clamped", "hysteresis_features", "add_to_features", "hysteresis_channels",
+           "scale_channels"]
+
+_STATE_CACHE: "collections.OrderedDict" = collections.OrderedDict()
+_STATE_CACHE_MAX_SAMPLES = 20_000_000   # about 160 MB of float64
+
+
+def _cached_state(kind: str, params: tuple, v: np.ndarray, compute) -> np.ndarray:
+    """The hysteresis state for drive ``v`` from a small LRU cache keyed on the parameters and the drive's bytes.
+
+    The diagnosis runs the same operator on the same drive many times (per fold and round, for every setting of
+    a drive-side term, on the calibration for each refit of the dynamics); the state depends only on the drive
+    and the operator's shape parameters, not on the weights that change between those runs. Returns a read-only
+    array (callers must not modify it)."""
+    v = np.ascontiguousarray(v, dtype=float)
+    key = (kind, params, v.size, hashlib.blake2b(v.view(np.uint8), digest_size=16).digest())
+    hit = _STATE_CACHE.get(key)
+    if hit is not None:
+        _STATE_CACHE.move_to_end(key)
+        return hit
+    out = compute(v)
+    out.setflags(write=False)
+    _STATE_CACHE[key] = out
+    total = sum(a.size for a in _STATE_CACHE.values())
+    while total > _STATE_CACHE_MAX_SAMPLES and len(_STATE_CACHE) > 1:
+        total -= _STATE_CACHE.popitem(last=False)[1].size
+    return out
+
+
+def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray:
+    """Hysteretic state of a Bouc-Wen element (see :func:`_bouc_wen_h`), cached: read-only result."""
+    return _cached_state("bw", (float(beta), float(gamma), float(v_rest)), v,
+                         lambda x: _bouc_wen_h(x, float(beta), float(gamma), float(v_rest)))
+
+
+def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray:
+    """Hysteretic state h of a Bouc-Wen element with alpha = 1 along the drive path v.
+
+    ``dh = dv - beta |dv| h - gamma dv |h|`` (``beta > |gamma|``), starting at h = 0 at
+    ``v_rest``. Rate independent: within a monotone run of the drive (direction s) h is a
+    closed-form function of the path length L travelled in the run,
+    ``h = heq + (h0 - heq) exp(-k L)``, ``k = beta + s sign(h) gamma``, ``heq = s / k``;
+    when h starts against the direction it reaches zero after
+    ``l0 = log(1 - h0 / heq) / k`` and continues with ``k = beta + gamma``. Evaluated
+    exactly at every sample, one run at a time (a drive step of any size is exact).
+    """
+    v = np.concatenate([[v_rest], np.asarray(v, float)])
+    dv = np.diff(v)
+    out = np.zeros(dv.size)
+    nz = np.flatnonzero(dv != 0.0)
+    if nz.size == 0:
+        return out
+    sgn = np.sign(dv[nz])
+    # run starts: first nonzero step and every change of direction; zero steps belong to the run before them
+    starts = nz[np.concatenate([[0], np.flatnonzero(sgn[1:] != sgn[:-1]) + 1])]
+    ends = np.append(starts[1:], dv.size)
+    path = np.cumsum(np.abs(dv))
+    h0 = 0.0
+    hs = []
+    kp, km = beta + gamma, beta - gamma
+    sds = np.sign(dv[starts]).tolist()
+    p0s = np.concatenate([[0.0], path])[starts].tolist()
+    for a, b, sd, p0 in zip(starts.tolist(), ends.tolist(), sds, p0s):
+        if b - a <= 12:  # short runs (a chirp's high end): scalar arithmetic is cheaper than array calls
+            for L in (path[a:b] - p0).tolist():
+                if h0 == 0.0 or (h0 > 0) == (sd > 0):
+                    h = sd / kp + (h0 - sd / kp) * math.exp(-kp * L)
+                else:
+                    heq = sd / km
+                    l0 = math.log(1.0 - h0 / heq) / km
+                    h = (heq + (h0 - heq) * math.exp(-km * L)) if L < l0 else sd / kp * (1.0 - math.exp(-kp * (L - l0)))
+                hs.append(h)
+            out[a:b] = hs
+            h0 = hs[-1]
+            hs.clear()
+            continue
+        L = path[a:b] - p0
+        if h0 == 0.0 or (h0 > 0) == (sd > 0):
+            heq = sd / kp
+            seg = heq + (h0 - heq) * np.exp(-kp * L)
+        else:
+            heq = sd / km
+            l0 = float(np.log(1.0 - h0 / heq)) / km
+            heq2 = sd / kp
+            seg = np.where(L < l0, heq + (h0 - heq) * np.exp(-km * np.minimum(L, l0)),
+                           heq2 * (1.0 - np.exp(-kp * np.maximum(L - l0, 0.0))))
+        out[a:b] = seg
+        h0 = float(seg[-1])
+    return out
+
+
+def play_states(v, r, v_rest: float = 0.0) -> np.ndarray:
+    """Outputs (T, n) of classical plays of thresholds ``r`` [normalized drive] started relaxed at ``v_rest``,
+    cached: read-only result."""
+    r = np.asarray(r, float)
+    v = np.asarray(v, float)
+    if v.size == 0:
+        return np.zeros((0, r.size))
+    return _cached_state("play", (tuple(r.tolist()), float(v_rest)), v,
+                         lambda x: play_outputs(x, r, y0=np.full(r.size, float(v_rest))))
+
+
+def _segments(x, knots):
+    """Segment index i (0..K-2) and fraction f of each x between knots i and i+1; f < 0 or > 1 beyond the ends
+    (linear continuation of the end segments)."""
+    k = np.asarray(knots, float)
+    h = (k[-1] - k[0]) / (k.size - 1)
+    if h > 0 and np.allclose(np.diff(k), h, rtol=1e-9, atol=0.0):   # evenly spaced (the base's knots): no search
+        q = (np.asarray(x, float) - k[0]) / h
+        i = np.clip(np.floor(q), 0, k.size - 2).astype(np.intp)
+        return i, q - i
+    i = np.clip(np.searchsorted(k, x, side="right") - 1, 0, k.size - 2)
+    f = (x - k[i]) / (k[i + 1] - k[i])
+    return i, f
+
+
+def hat_basis(x, knots) -> np.ndarray:
+    """Piecewise-linear (hat) basis (n, K) of x on increasing ``knots``, continued linearly beyond the end knots.
+
+    Column k is the piecewise-linear function that is 1 at knot k and 0 at the others; the columns sum to 1
+    everywhere (also beyond the ends)."""
+    x = np.asarray(x, float)
+    K = len(knots)
+    i, f = _segments(x, knots)
+    out = np.zeros((x.size, K))
+    rows = np.arange(x.size)
+    out[rows, i] = 1.0 - f
+    out[rows, i + 1] += f
+    return out
+
+
+def interp_linear_ext(x, knots, values) -> np.ndarray:
+    """The piecewise-linear function through (knots, values), continued linearly beyond the end knots."""
+    x = np.asarray(x, float)
+    vals = np.asarray(values, float)
+    i, f = _segments(x, knots)
+    return vals[i] * (1.0 - f) + vals[i + 1] * f
+
+
+def plane_parts(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
+    """(H[v] without offset, hysteretic part) [um] of a ``plane`` operator; the hysteretic part is
+    ``sum_{j>=1} F_j(P_rj(v)) - F_j(v)``: the branch-dependent deviation from the operator's central curve."""
+    v = np.asarray(v, float)
+    r = np.asarray(hp["r"], float)
+    P = play_states(v, r, float(hp.get("v_rest", 0.0)))
+    h = np.zeros(v.size)
+    hyst = np.zeros(v.size)
+    for j, (kn, vals) in enumerate(zip(hp["knots"], hp["values"])):
+        fj = interp_linear_ext(P[:, j], kn, vals)
+        h += fj
+        if r[j] > 0:
+            hyst += fj - interp_linear_ext(v, kn, vals)
+    bw = hp.get("bw")
+    if bw:
+        hb = float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)))
+        h, hyst = h + hb, hyst + hb
+    return h, hyst
+
+
+def poly_clamped(v, poly, v_lo, v_hi) -> np.ndarray:
+    """Cubic of v inside ``[v_lo, v_hi]`` (the calibrated range), continued outside it as a straight
+    line with the cubic's *mean* slope over the range (its secant): a cubic fitted on a narrow range
+    has an unreliable slope at its ends, the mean gain is what the calibration determined."""
+    c1, c2, c3 = (list(poly) + [0.0, 0.0, 0.0])[:3]
+    vc = np.clip(v, v_lo, v_hi)
+    p = ((c3 * vc + c2) * vc + c1) * vc
+    if v_hi > v_lo:
+        slope = (c1 * (v_hi - v_lo) + c2 * (v_hi ** 2 - v_lo ** 2) + c3 * (v_hi ** 3 - v_lo ** 3)) / (v_hi - v_lo)
+    else:
+        slope = c1
+    return p + slope * (v - vc)
+
+
+def hysteresis_parts(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
+    """(H[v] without offset, hysteretic part) [um] for normalized drive v.
+
+    ``type`` ``"plane"``: see :func:`plane_parts`; ``"pi"`` (default): plays, hysteretic part
+    ``sum w_i (P_i(v) - v)``; ``"bouc_wen"``: ``c_h h(v; beta, gamma) + poly(v)``, hysteretic part ``c_h h``.
+    """
+    v = np.asarray(v, float)
+    kind = hp.get("type", "pi")
+    if kind == "plane":
+        return plane_parts(hp, v)
+    if kind == "bouc_wen":
+        hh = float(hp["c_h"]) * bouc_wen_h(v, float(hp["beta"]), float(hp["gamma"]), float(hp.get("v_rest", 0.0)))
+        return hh + poly_clamped(v, hp["poly"], hp["v_lo"], hp["v_hi"]), hh
+    r = np.asarray(hp["r"], float)
+    w = np.asarray(hp["w"], float)
+    P = play_states(v, r, float(hp.get("v_rest", 0.0)))
+    hyst = P @ w - float(w.sum()) * v
+    out = float(w.sum()) * v + hyst + poly_clamped(v, hp["poly"], hp["v_lo"], hp["v_hi"])
+    return out, hyst
+
+
+def hysteresis_features(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
+    """(F, theta): columns F (n, k) of the operator's linear part for normalized drive v and the coefficients
+    theta that reproduce H (without offset) as ``F @ theta``. A refit of theta on new data is a refit of the
+    operator's own flexibility (the diagnosis' nested tests use it as their nuisance).
+
+    ``plane``: each play's hat basis (first hat left out, its value is 0); ``pi``: plays, v, v^2, v^3 (clamped);
+    ``bouc_wen``: the state h, v, v^2, v^3 (clamped)."""
+    v = np.asarray(v, float)
+    kind = hp.get("type", "pi")
+    if kind == "plane":
+        P = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
+        F = np.hstack([hat_basis(P[:, j], kn)[:, 1:] for j, kn in enumerate(hp["knots"])])
+        th = np.concatenate([np.asarray(vals[1:], float) - float(vals[0]) for vals in hp["values"]])
+        bw = hp.get("bw")
+        if bw:
+            hb = bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)))
+            F, th = np.column_stack([F, hb]), np.append(th, float(bw["c_h"]))
+        return F, th
+    vc = np.clip(v, float(hp.get("v_lo", -1.0)), float(hp.get("v_hi", 1.0)))
+    if kind == "bouc_wen":
+        H = bouc_wen_h(v, float(hp["beta"]), float(hp["gamma"]), float(hp.get("v_rest", 0.0)))[:, None]
+        th = [float(hp["c_h"])]
+    else:
+        H = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
+        th = list(map(float, hp["w"]))
+    return np.column_stack([H, vc, vc ** 2, vc ** 3]), np.array(th + list(hp["poly"])[:3], float)
+
+
+def add_to_features(hp: dict, dtheta) -> dict:
+    """A copy of ``hp`` whose linear part (see :func:`hysteresis_features`) has ``dtheta`` added."""
+    import copy
+    out = copy.deepcopy(hp)
+    d = np.asarray(dtheta, float)
+    kind = hp.get("type", "pi")
+    if kind == "plane":
+        c = 0
+        for j, vals in enumerate(out["values"]):
+            k = len(vals) - 1
+            out["values"][j] = [float(vals[0])] + [float(x) + float(y) for x, y in zip(vals[1:], d[c:c + k])]
+            c += k
+        if out.get("bw"):
+            out["bw"]["c_h"] = float(out["bw"]["c_h"]) + float(d[c])
+        return out
+    n = d.size - 3
+    if kind == "bouc_wen":
+        out["c_h"] = float(out["c_h"]) + float(d[0])
+    else:
+        out["w"] = [float(w) + float(q) for w, q in zip(out["w"], d[:n])]
+    out["poly"] = [float(c) + float(q) for c, q in zip(out["poly"], d[n:n + 3])]
+    return out
+
+
+def hysteresis_channels(hp: dict, v) -> np.ndarray:
+    """The operator's output split into channels (n, m) that sum to H (without offset) [um]: per play of a
+    ``plane`` its ``F_j(P_rj(v))`` (and the Bouc-Wen column's contribution); for ``pi`` and ``bouc_wen`` the
+    hysteretic part and the rest. Free gains on these channels are a low-dimensional refit of the operator's
+    own flexibility: loop width per threshold, the reversible curve's gain."""
+    v = np.asarray(v, float)
+    if hp.get("type", "pi") != "plane":
+        h, hyst = hysteresis_parts(hp, v)
+        return np.column_stack([hyst, h - hyst])
+    P = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
+    cols = [interp_linear_ext(P[:, j], kn, vals) for j, (kn, vals) in enumerate(zip(hp["knots"], hp["values"]))]
+    bw = hp.get("bw")
+    if bw:
+        cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]),
+                                                  float(hp.get("v_rest", 0.0))))
+    return np.column_stack(cols)
+
+
+def scale_channels(hp: dict, gains) -> dict:
+    """A copy of ``hp`` whose channels (see :func:`hysteresis_channels`) are multiplied by ``1 + gains``."""
+    import copy
+    out = copy.deepcopy(hp)
+    g = 1.0 + np.asarray(gains, float)
+    if hp.get("type", "pi") != "plane":
+        # channels: the hysteretic part, the rest (plays' reversible slope and the cubic)
+        if hp.get("type") == "bouc_wen":
+            out["c_h"] = float(out["c_h"]) * float(g[0])
+        else:
+            w = np.asarray(out["w"], float)
+            # PI: hysteretic part sum w (P - v), rest sum(w) v + cubic: both scale with w only through the split
+            out["w"] = (w * float(g[0])).tolist()
+            out["poly"] = [float(c) * float(g[1]) + (float(g[1]) - float(g[0])) * (float(w.sum()) if i == 0 else 0.0)
+                           for i, c in enumerate(out["poly"])]
+            return out
+        out["poly"] = [float(c) * float(g[1]) for c in out["poly"]]
+        return out
+    n = len(out["values"])
+    for j in range(n):
+        out["values"][j] = [float(x) * float(g[j]) for x in out["values"][j]]
+    if out.get("bw"):
+        out["bw"]["c_h"] = float(out["bw"]["c_h"]) * float(g[n])
+    return out
