@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from piezoctl.diagnose.cases import FAST_CASES, make_case
-from piezoctl.diagnose.effects import VOCABULARY
+from piezoctl.ident.terms import VOCABULARY
 from piezoctl.diagnose.run import diagnose
 from piezoctl.ident import refined
 from piezoctl.io.recording import load_recording
@@ -127,7 +127,7 @@ def test_active_block_test_finds_a_localized_improvement_and_not_noise():
 
 def test_outside_mask_guards_after_the_excursion():
     from piezoctl.diagnose.run import OUT_GUARD_S, _outside_mask
-    from piezoctl.diagnose.effects import Signals
+    from piezoctl.diagnose.select import Signals
     dt = 1e-4
     u = np.full(20000, 50.0)
     u[5000:6000] = 120.0
@@ -145,7 +145,7 @@ def test_discriminate_group_prefers_the_clearly_smaller_residual_and_states_ambi
     nb, m = 24, 400
     blocks = np.repeat(np.arange(nb), m)
     fold = blocks % 2
-    cands = [{"effect": type("E", (), {"name": n})()} for n in ("amplifier_bandwidth", "delay")]
+    cands = [type("C", (), {"name": n})() for n in ("amplifier_bandwidth", "delay")]
     small = rng.normal(0, 1.0, nb * m)
     large = rng.normal(0, 2.0, nb * m)
     order, text = discriminate_group(cands, [large, small], fold, blocks, 100.0)

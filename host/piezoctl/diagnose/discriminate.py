@@ -77,7 +77,7 @@ def discriminate_group(cands, hp, fold_all, block_all, fc):
         else:
             ps.append(float(stats.t.sf(np.mean(z) / (sd / np.sqrt(z.size)), z.size - 1)))
     pmax = max(ps) if ps else 1.0
-    names = [c["effect"].name for c in cands]
+    names = [c.name for c in cands]
     rms = ", ".join(f"{n} {np.sqrt(t / len(ids)):.2e}" for n, t in zip(names, tot))
     if pmax < ALPHA_DISC:
         text = (f"Discrimination: above {fc:.0f} Hz (beyond the calibration's band) the exact held-out residual is "

@@ -82,20 +82,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
+from ..dsp import drive_rate, filt, lowpass, mode_filter, slew_limit
 from ..models.hysteresis import bouc_wen_h, hysteresis_parts
 from .common import IdentError
+from .terms import TERM_ORDER, TERMS, G, SimState
 
 KIND = "refined"
 DESCRIPTION = "hysteresis + linear dynamics with named physical terms (written by piezoctl diagnose)"
 
-__all__ = ["KIND", "DESCRIPTION", "add_options", "fit", "simulate", "simulate_parts", "slew_limit",
-           "lowpass", "mode_filter", "drive_rate", "apply_drive_terms", "filt", "TERM_ORDER"]
-
-
-TERM_ORDER = ("delay", "amplifier_bandwidth", "amplifier_slew_limit", "saturation",
-              "asymmetric_hysteresis", "rate_dependent_hysteresis", "creep", "unmodeled_resonance",
-              "cross_coupling", "thermal_drift", "sensor_offset", "sensor_nonlinearity")
+__all__ = ["KIND", "DESCRIPTION", "add_options", "fit", "simulate", "simulate_parts", "TERM_ORDER",
+           # re-exported for model users: the filters (piezoctl.dsp) and the Bouc-Wen state
+           "slew_limit", "lowpass", "mode_filter", "drive_rate", "filt", "bouc_wen_h"]
 
 
 def add_options(parser) -> None:
@@ -114,26 +111,6 @@ def fit(recordings, options) -> dict:
     return params
 
 
-def apply_drive_terms(terms: dict, u, dt: float) -> np.ndarray:
-    """The drive after delay, amplifier bandwidth, slew limit and saturation [V]."""
-    u = np.asarray(u, dtype=float)
-    if "delay" in terms:
-        d = float(terms["delay"]["samples"])
-        if d > 0:
-            idx = np.arange(u.size) - d
-            u = np.interp(idx, np.arange(u.size), u, left=u[0])
-    if "amplifier_bandwidth" in terms:
-        u = lowpass(u, terms["amplifier_bandwidth"]["hz"], dt)
-    if "amplifier_slew_limit" in terms:
-        u = slew_limit(u, float(terms["amplifier_slew_limit"]["v_per_s"]) * dt)
-    if "saturation" in terms:
-        s = terms["saturation"]
-        lo = -np.inf if s.get("lo_v") is None else float(s["lo_v"])
-        hi = np.inf if s.get("hi_v") is None else float(s["hi_v"])
-        u = np.clip(u, lo, hi)
-    return u
-
-
 def _check_rate(params, t) -> float:
     t = np.asarray(t, float)
     dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0 / float(params["fs_hz"])
@@ -146,6 +123,9 @@ def _check_rate(params, t) -> float:
 
 def simulate_parts(params: dict, t, u, u2=None) -> dict:
     """Run the model and return its intermediate signals.
+
+    The terms are applied stage by stage in :data:`piezoctl.ident.terms.TERM_ORDER`, each by its own
+    :class:`~piezoctl.ident.terms.Term` class (the same code whose linearization the diagnosis tested).
 
     Returns
     -------
@@ -160,61 +140,29 @@ def simulate_parts(params: dict, t, u, u2=None) -> dict:
     if unknown:
         raise IdentError(f"refined: unknown terms {sorted(unknown)}; known: {', '.join(TERM_ORDER)}")
     t = np.asarray(t, float)
-    dt = _check_rate(params, t)
-    ue = apply_drive_terms(terms, u, dt)
-    v = (ue - float(params["u_mid"])) / float(params["u_half"])
+    st = SimState(params=params, t=t, dt=_check_rate(params, t), u=np.asarray(u, float),
+                  u2=None if u2 is None else np.asarray(u2, float))
+    order = [n for n in TERM_ORDER if n in terms]
+
+    def stage(name):
+        for n in order:
+            if TERMS[n].stage == name:
+                TERMS[n].apply(terms[n], st)
+
+    st.ue = st.u
+    stage("drive")
+    st.v = (st.ue - float(params["u_mid"])) / float(params["u_half"])
     hp = params["hysteresis"]
-    h, hyst = hysteresis_parts(hp, v)
-    if "asymmetric_hysteresis" in terms:
-        a = terms["asymmetric_hysteresis"]
-        s = (ue - float(a["mid_v"])) / float(a["half_v"])
-        h = h + float(a["c2_um"]) * s ** 2 + float(a["c3_um"]) * s ** 3
-    if "rate_dependent_hysteresis" in terms:
-        rd = terms["rate_dependent_hysteresis"]
-        r = drive_rate(v, dt, float(rd.get("rate_cutoff_hz", RATE_CUTOFF_HZ)))
-        h = h + float(rd["gain"]) * r / (r + float(rd["ref_fs_per_s"])) * hyst
-    w = h
-    if "creep" in terms:
-        c = terms["creep"]
-        w = h + sum(float(g) * (lowpass_tau(h, tau, dt) - h) for tau, g in zip(c["tau_s"], c["gain"])) \
-            + float(c.get("static_gain", 0.0)) * (h - float(c.get("h_ref_um", 0.0)))
-    dyn = params["dynamics"]
-    y = filt(dyn["b"], dyn["a"], w)
-    if "unmodeled_resonance" in terms:
-        m = terms["unmodeled_resonance"]
-        bm, am = mode_filter(m["freq_hz"], m["damping"], dt)
-        yi = y
-        y = y + float(m["gain"]) * (filt(bm, am, yi) - yi)
-        if float(m.get("gain_lead", 0.0)) != 0.0:  # the mode without the ZOH's one-sample delay
-            y = y + float(m["gain_lead"]) * (filt(bm[1:], am, yi) - yi)
-    y_dyn = y
-    y = y + float(hp.get("offset", 0.0))
-    if "cross_coupling" in terms and u2 is not None:
-        c = terms["cross_coupling"]
-        x = filt(dyn["b"], dyn["a"], np.asarray(u2, float))
-        xa = x
-        acc_lead = 0.0
-        if c.get("mode_hz"):  # the other axis moves through a mode: its acceleration rings
-            bm, am = mode_filter(float(c["mode_hz"]), float(c["mode_damping"]), dt)
-            xa = filt(bm, am, x)
-            acc_lead = np.gradient(np.gradient(filt(bm[1:], am, x), dt), dt)  # the mode without the ZOH delay
-        acc = np.gradient(np.gradient(xa, dt), dt)
-        y = y + float(c.get("c_accel_lead_um_per_v_s2", 0.0)) * acc_lead
-        y = y + float(c["c_static_um_per_v"]) * (x - float(c.get("u2_ref_v", 0.0))) \
-            + float(c["c_accel_um_per_v_s2"]) * acc \
-            + float(c["c_pos_per_um_v"]) * (x - float(c.get("u2_ref_v", 0.0))) * (y - float(c["y_center_um"]))
-    if "thermal_drift" in terms:
-        th = terms["thermal_drift"]
-        tt = t - t[0]
-        y = y + float(th["amplitude_um"]) * (1.0 - np.exp(-tt / float(th["tau_s"]))) \
-            + float(th.get("slope_um_per_s", 0.0)) * tt
-    if "sensor_offset" in terms:
-        y = y + float(terms["sensor_offset"]["offset_um"])
-    if "sensor_nonlinearity" in terms:
-        sn = terms["sensor_nonlinearity"]
-        q = (y - float(sn["mid_um"])) / float(sn["half_um"])
-        y = y + float(sn["c2_um"]) * q ** 2 + float(sn["c3_um"]) * q ** 3
-    return {"u_eff": ue, "v": v, "h": h, "hyst": hyst, "w": w, "y_dyn": y_dyn, "y": y}
+    st.h, st.hyst = hysteresis_parts(hp, st.v)
+    stage("hysteresis")
+    st.w = st.h
+    stage("creep")
+    st.y = G(params, st.w)
+    stage("dynamics")
+    y_dyn = st.y
+    st.y = st.y + float(hp.get("offset", 0.0))
+    stage("output")
+    return {"u_eff": st.ue, "v": st.v, "h": st.h, "hyst": st.hyst, "w": st.w, "y_dyn": y_dyn, "y": st.y}
 
 
 def simulate(params: dict, t, u, u2=None) -> np.ndarray:

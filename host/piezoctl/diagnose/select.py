@@ -1,0 +1,450 @@
+"""Forward selection of vocabulary terms with a cross-validated, nested significance test.
+
+The recordings (after settling) are cut into ~1 s blocks; even blocks are fold A, odd
+blocks fold B. Each candidate term (its grid setting and coefficients) is fitted on one
+fold of the current model's residual and predicts the other, *nested*: jointly with free
+gains on the current model's hysteresis channels (what a refit of the base could absorb
+on the new data), against the model with those gains alone refitted on the same fold.
+The significance rules are in ``significance.py``; every accepted term must also lower
+the held-out error of the exact refined model in each fold. After each accepted term
+every signal is re-derived from the refined model by exact simulation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..dsp import filt
+from ..ident import refined
+from ..ident.terms import Term
+from ..models.hysteresis import hysteresis_channels
+from . import significance as sg
+from .discriminate import discriminate_group, highpassed
+
+__all__ = ["Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
+           "simulate_refined", "hysteresis_nuisance", "best_setting", "train_rows"]
+
+
+@dataclasses.dataclass
+class Signals:
+    """One recording with the current model's signals (all arrays of the recording's length)."""
+
+    name: str
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    u2: np.ndarray | None
+    x2: np.ndarray | None
+    temp: np.ndarray | None
+    dt: float
+    v: np.ndarray          # normalized drive after the model's drive terms
+    h: np.ndarray          # H output [um]
+    hyst: np.ndarray       # hysteretic part of H [um]
+    yb: np.ndarray         # model output [um]
+    ydyn: np.ndarray       # output before the offset and the output-stage terms [um]
+    index: int = 0
+
+
+@dataclasses.dataclass
+class Ctx:
+    """The current model and everything the terms' regressors read (see ``piezoctl.ident.terms``)."""
+
+    base: dict               # the current model's parameters (kind refined)
+    signals: list            # Signals per recording
+    valid: list              # bool masks (settled samples)
+    fold: list               # 0/1 per sample (-1: not used)
+    block: list              # global block id per sample
+    names: list
+    n_rec: int
+    dt: float
+    duration: float
+    u2_ref: float
+    y_center: float
+    y_half: float
+    u_lo: float
+    u_hi: float
+    u_mid_all: float
+    u_half_all: float
+    max_step: float
+    peak_freqs: list
+    y_span: float
+    cal: list = dataclasses.field(default_factory=list)       # calibration recordings
+    cal_h: list = dataclasses.field(default_factory=list)     # current H output on them [um]
+    cal_k0: list = dataclasses.field(default_factory=list)    # settled start index per calibration recording
+    refit_cache: dict = dataclasses.field(default_factory=dict)
+    design_cache: dict = dataclasses.field(default_factory=dict)
+    nuisance: np.ndarray | None = None   # hysteresis_nuisance() of this model, computed on first use
+    cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
+    cal_u_hi: float = 0.0
+
+
+@dataclasses.dataclass
+class Candidate:
+    """One term's evaluation in one selection round (per-fold lists: index f is the fit on fold f)."""
+
+    term: Term
+    ratio: float                     # linearized held-out NRMSE after / before (pooled)
+    fold_ratios: list
+    nrmse_before: float
+    nrmse_after: float
+    t: float
+    p: float
+    n_active: int
+    p_max: float
+    dbic: float
+    n_eff: float
+    significant: bool
+    setting: list
+    coef: list
+    veto: str | None = None
+    exact: list | None = None                 # per fold: params, sse_before, sse_after, n, ys
+    exact_fold_ratios: list | None = None
+    exact_before: float | None = None
+    exact_after: float | None = None
+    discrimination: str | None = None
+    setting_all: object = None                # fitted on all settled samples (the refined model's term)
+    coef_all: np.ndarray | None = None
+    described: tuple | None = None            # (params with units, phrase)
+    contrib: list | None = None               # per recording: the term's own contribution [um]
+
+    @property
+    def name(self) -> str:
+        return self.term.name
+
+
+def make_signals(params, recs, names) -> list:
+    out = []
+    off = float(params["hysteresis"].get("offset", 0.0))
+    for i, (r, n) in enumerate(zip(recs, names)):
+        p = refined.simulate_parts(params, r.t, r.u, r.u2)
+        out.append(Signals(name=n, t=r.t, u=r.u, y=r.y, u2=r.u2, x2=r.x2, temp=r.temp, dt=r.dt, v=p["v"],
+                           h=p["h"], hyst=p["hyst"], yb=p["y"], ydyn=p["y_dyn"] + off, index=i))
+    return out
+
+
+def make_masks(sigs, settle_s, block_s):
+    """(valid, fold, block) per recording: settled samples, fold 0/1 of alternate blocks, global block ids."""
+    valid, fold, block = [], [], []
+    nb = 0
+    for s in sigs:
+        n = s.t.size
+        k0 = min(int(round(settle_s / s.dt)), n // 2)
+        v = np.zeros(n, bool)
+        v[k0:] = True
+        m = n - k0
+        nblk = int(np.clip(round(m * s.dt / block_s), 6, 40))
+        b = np.full(n, -1)
+        b[k0:] = np.minimum((np.arange(m) * nblk) // m, nblk - 1)
+        f = np.where(b >= 0, b % 2, -1)
+        block.append(np.where(b >= 0, b + nb, -1))
+        nb += nblk
+        valid.append(v)
+        fold.append(f)
+    return valid, fold, block
+
+
+class _Design:
+    """Stacked regressors of one term setting over all recordings (settled samples)."""
+
+    def __init__(self, ctx, term, setting):
+        self.setting = setting
+        self.X = np.vstack([np.asarray(term.regressors(ctx, s, setting), float)[v]
+                            for s, v in zip(ctx.signals, ctx.valid)])
+        self.k = self.X.shape[1]
+
+
+def _lstsq(X, y):
+    """Least squares on unit-RMS columns through the normal equations (the design is tall and narrow: a
+    k x k solve instead of an SVD of the rows); rank deficiency is handled by the small solve's cutoff."""
+    sc = np.sqrt(np.mean(X ** 2, axis=0))
+    sc[sc == 0] = 1.0
+    Xs = X / sc
+    th, *_ = np.linalg.lstsq(Xs.T @ Xs, Xs.T @ y, rcond=1e-12)
+    return th / sc
+
+
+def _lstsq_bounded(X, y, lb):
+    """Least squares with lower bounds ``lb`` (-inf: free) on unit-RMS columns."""
+    from scipy.optimize import lsq_linear
+    sc = np.sqrt(np.mean(X ** 2, axis=0))
+    sc[sc == 0] = 1.0
+    sol = lsq_linear(X / sc, y, bounds=(np.asarray(lb, float) * sc, np.inf), method="bvls", lsq_solver="exact")
+    return sol.x / sc
+
+
+def train_rows(train, rows):
+    idx = np.flatnonzero(train)
+    if idx.size > rows:
+        idx = idx[:: int(np.ceil(idx.size / rows))]
+    return idx
+
+
+def _fit_predict(X, e, train, test, rows, lb=None, nuis=None):
+    """Least squares of e on X over train rows (strided), coefficients >= ``lb`` when given; prediction on
+    test rows. ``nuis``: the nested test's nuisance as (train rows, test rows) of its columns, prepended (its
+    coefficients first, unbounded), sliced once per fold by the caller."""
+    idx = train_rows(train, rows)
+    Xtr = X[idx] if nuis is None else np.hstack([nuis[0], X[idx]])
+    if lb is not None and nuis is not None:
+        lb = np.concatenate([np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
+    th = _lstsq(Xtr, e[idx]) if lb is None else _lstsq_bounded(Xtr, e[idx], lb)
+    sse_tr = float(np.sum((e[idx] - Xtr @ th) ** 2)) * (np.sum(train) / max(idx.size, 1))
+    if nuis is None:
+        return th, X[test] @ th, sse_tr
+    m = nuis[1].shape[1]
+    return th, nuis[1] @ th[:m] + X[test] @ th[m:], sse_tr
+
+
+def _design(ctx, term, st):
+    key = (term.name, repr(st))
+    if key not in ctx.design_cache:
+        ctx.design_cache[key] = _Design(ctx, term, st)
+    return ctx.design_cache[key]
+
+
+def best_setting(ctx, term, e, train, test, rows, nuis=None):
+    """(setting, design, sse on train, prediction on test, coefficients) with the least training error over the
+    term's grid, then over its finer settings around the best one (``Term.refine``, twice). With ``nuis``
+    (see :func:`_fit_predict`) the nuisance is fitted jointly and its coefficients are dropped from the result."""
+    settings = term.settings(ctx)
+    lb = term.lower(ctx)
+    best = None
+    level = {}   # refinement level at which each tried setting was proposed (grid: 0)
+    new_level = 0
+    for _ in range(3):
+        for st in settings:
+            if repr(st) in level:
+                continue
+            level[repr(st)] = new_level
+            d = _design(ctx, term, st)
+            th, pa, sse = _fit_predict(d.X, e, train, test, rows, lb, nuis)
+            if nuis is not None:
+                th = th[nuis[0].shape[1]:]
+            if best is None or sse < best[2]:
+                best = (st, d, sse, pa, th)
+        new_level = level[repr(best[0])] + 1
+        settings = term.refine(ctx, best[0], new_level) if new_level <= 2 else []
+        if not settings:
+            break
+    return best
+
+
+def hysteresis_nuisance(ctx):
+    """The nested tests' nuisance (n_settled, m + 1): the current model's hysteresis channels through its
+    dynamics (free gains on them refit the base's own flexibility on the new data: loop width per play
+    threshold, the reversible curve's gain) and a constant, stacked over the settled samples; cached on the
+    context."""
+    if ctx.nuisance is None:
+        hp = ctx.base["hysteresis"]
+        b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+        ctx.nuisance = np.vstack([np.column_stack([filt(b, a, hysteresis_channels(hp, s.v)), np.ones(s.v.size)])[v]
+                                  for s, v in zip(ctx.signals, ctx.valid)])
+    return ctx.nuisance
+
+
+def residual(ctx):
+    return np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
+
+
+def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
+    """Cross-validated evaluation of ``term`` on top of the current model.
+
+    ``ctxs[f]``, ``es[f]``: the model (terms accepted so far, fitted on fold f only) and its residual; the
+    candidate is fitted on fold f of that residual and predicts fold 1 - f.
+    """
+    e_before = np.zeros(fold_all.size)
+    pred_after = np.zeros(fold_all.size)
+    chosen, fold_ratios = [], []
+    k = 1
+    for f in (0, 1):
+        ctx, e = ctxs[f], es[f]
+        settings = term.settings(ctx)
+        d0 = _design(ctx, term, settings[0])
+        own = term.nuisance_columns(ctx, d0.k)
+        k = max(_design(ctx, term, st).k for st in settings) - len(own) + (1 if len(settings) > 1 else 0)
+        train, test = fold_all == f, fold_all == 1 - f
+        e_before[test] = e[test]
+        N = None
+        if term.nested:   # nested against a refit of the current model's own hysteresis on this fold
+            Nall = hysteresis_nuisance(ctx)
+            N = (Nall[train_rows(train, rows)], Nall[test])
+        if own or N is not None:  # "before" is the model with the nuisance columns alone refitted here
+            Xn = d0.X[:, own] if own else np.zeros((e.size, 0))
+            _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
+            e_before[test] = e[test] - pn
+        best = best_setting(ctx, term, e, train, test, rows, N)
+        pred_after[test] = best[3] - (e[test] - e_before[test])
+        chosen.append(best)
+        rb = float(np.sqrt(np.mean(e_before[test] ** 2)))
+        ra = float(np.sqrt(np.mean((e[test] - best[3]) ** 2)))
+        fold_ratios.append(ra / rb if rb > 0 else 1.0)
+    span = ctxs[0].y_span
+    used = fold_all >= 0
+    rb_res = e_before[used]
+    ra_res = (e_before - pred_after)[used]
+    nb = float(np.sqrt(np.mean(rb_res ** 2)) / span)
+    na = float(np.sqrt(np.mean(ra_res ** 2)) / span)
+    t, p, n_act = sg.active_block_test(rb_res, ra_res, pred_after[used], block_all[used])
+    neff = sg.effective_n(rb_res)
+    dbic = sg.bic_delta(float(np.sum(rb_res ** 2)), float(np.sum(ra_res ** 2)), neff, k)
+    significant = bool(max(fold_ratios) <= sg.RATIO_MAX and p < p_max and dbic < 0)
+    return Candidate(term=term, ratio=na / nb if nb > 0 else 1.0, fold_ratios=fold_ratios, nrmse_before=nb,
+                     nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
+                     significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen])
+
+
+def model_with(base, terms):
+    """``base`` (which may already have terms) with ``terms`` added; a drive-dynamics term brings its refitted G,
+    a nested term its refitted hysteresis."""
+    ref = dict(base)
+    ref["terms"] = dict(base.get("terms", {}) or {})
+    for k, v in terms.items():
+        v = dict(v)
+        dyn = v.pop("_dynamics", None)
+        if dyn is not None:
+            ref["dynamics"] = dyn
+        hyst = v.pop("_hysteresis", None)
+        if hyst is not None:
+            ref["hysteresis"] = hyst
+        ref["terms"][k] = v
+    return ref
+
+
+def simulate_refined(params, recs, names):
+    """Model output per recording, with the per-recording sensor offsets where the recording is known."""
+    out = []
+    off = params["terms"].get("sensor_offset")
+    for r, n in zip(recs, names):
+        y = refined.simulate(params, r.t, r.u, r.u2)
+        if off is not None:
+            y = y + off["per_recording"].get(n, off["offset_um"]) - off["offset_um"]
+        out.append(y)
+    return out
+
+
+def rebase(ctx, params, recs):
+    """The context re-derived from ``params`` by exact simulation: every later candidate's signals (H output,
+    hysteretic part, dynamics, output) come from the refined model, not from the base."""
+    off = float(params["hysteresis"].get("offset", 0.0))
+    po = params.get("terms", {}).get("sensor_offset")
+    sigs = []
+    for s, r in zip(ctx.signals, recs):
+        p = refined.simulate_parts(params, r.t, r.u, r.u2)
+        y = p["y"]
+        if po is not None:
+            y = y + po["per_recording"].get(s.name, po["offset_um"]) - po["offset_um"]
+        sigs.append(dataclasses.replace(s, v=p["v"], h=p["h"], hyst=p["hyst"], yb=y, ydyn=p["y_dyn"] + off))
+    cal_h = [refined.simulate_parts(params, r.t, r.u, r.u2)["h"] for r in ctx.cal]
+    return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={},
+                               nuisance=None)
+
+
+def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
+    """Exact check of candidate ``c`` in fold f: its term (setting and coefficients fitted on fold f) added to the
+    fold-f model, the recordings simulated, the error scored on fold 1 - f against the model without it."""
+    new = model_with(ctx.base, {c.name: c.term.term(ctx, c.setting[f], c.coef[f])})
+    ys = simulate_refined(new, recs, ctx.names)
+    e_new = np.concatenate([(s.y - y)[v] for s, y, v in zip(ctx.signals, ys, ctx.valid)])
+    e_old = residual(ctx)
+    test = fold_all == 1 - f
+    return {"params": new, "sse_before": float(np.sum(e_old[test] ** 2)), "sse_after": float(np.sum(e_new[test] ** 2)),
+            "n": int(np.sum(test)), "ys": ys}
+
+
+def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
+    """Drive-side dynamics candidates that all pass: told apart by their exact residual above the calibration's
+    band (discriminate.py); reorders ``evals`` in place."""
+    dd = [c for c in evals if c.significant and c.term.group == "drive_dynamics"]
+    if len(dd) <= 1 or fc_hp <= 0:
+        return
+    hp = []
+    for c in dd:
+        c.exact = [_exact_fold(fctx[f], c, f, fold_all, recs) for f in (0, 1)]
+        h = np.zeros(fold_all.size)
+        for f in (0, 1):
+            sel = fold_all == 1 - f
+            h[sel] = highpassed(fctx[f], c.exact[f]["ys"], fc_hp)[sel]
+        hp.append(h)
+    order, text = discriminate_group(dd, hp, fold_all, block_all, fc_hp)
+    log("    " + text)
+    pos = [i for i, c in enumerate(evals) if any(c is x for x in dd)]
+    for i, k in zip(pos, order):
+        evals[i] = dd[k]
+    for c in dd:
+        c.discrimination = text
+
+
+def _first_exact(evals, fctx, fold_all, recs, span, log):
+    """The first significant candidate whose exact refined model lowers the held-out error in each fold."""
+    for c in evals:
+        if not c.significant or c.veto:
+            continue
+        ex = c.exact or [_exact_fold(fctx[f], c, f, fold_all, recs) for f in (0, 1)]
+        c.exact_fold_ratios = [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0 else 1.0
+                               for x in ex]
+        n_ex = sum(x["n"] for x in ex)
+        c.exact_before = float(np.sqrt(sum(x["sse_before"] for x in ex) / max(n_ex, 1)) / span)
+        c.exact_after = float(np.sqrt(sum(x["sse_after"] for x in ex) / max(n_ex, 1)) / span)
+        log(f"    exact {c.name}: {c.exact_fold_ratios} {c.exact_before:.4f} -> {c.exact_after:.4f}")
+        if max(c.exact_fold_ratios) < 1.0:
+            c.exact = ex
+            return c
+        c.veto = ("the exact simulation of the refined model with this term does not lower the held-out "
+                  f"error in each fold (ratios {c.exact_fold_ratios[0]:.2f}, {c.exact_fold_ratios[1]:.2f})")
+    return None
+
+
+def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
+    """Forward selection: per round every remaining term is evaluated (cross-validated, nested), the drive-side
+    group discriminated, and the first significant candidate whose exact model improves each fold accepted;
+    then the term is fitted on all settled samples and every context is re-derived by exact simulation.
+
+    Returns
+    -------
+    (accepted, rounds, ctx_all, fctx)
+        Accepted candidates in order, the evaluations of every round, the refined model's context on all data
+        and per fold (the terms fitted on fold f only: the model whose held-out error on fold 1 - f is scored).
+    """
+    accepted, rounds = [], []
+    candidates = [t for t in terms if t.applicable(ctx)]
+    ctx_all, fctx = ctx, [ctx, ctx]
+    span = ctx.y_span
+    for _ in range(max_terms):
+        groups = {a.term.group for a in accepted if a.term.group}
+        todo = [t for t in candidates if t.name not in {a.name for a in accepted}
+                and not (t.group and t.group in groups)]
+        if not todo:
+            break
+        p_max = sg.ALPHA / max(len(todo), 1)
+        es = [residual(fctx[0])]
+        es.append(es[0] if fctx[1] is fctx[0] else residual(fctx[1]))
+        evals = sorted((_evaluate(fctx, t, es, fold_all, block_all, rows, p_max) for t in todo),
+                       key=lambda c: c.ratio)
+        _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
+        rounds.append(evals)
+        best = _first_exact(evals, fctx, fold_all, recs, span, log)
+        log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
+                             f"n{c.n_active}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"
+                             for c in evals[:6]))
+        if best is None:
+            break
+        # setting and coefficients on all selection samples, applied to the all-data model
+        allmask = fold_all >= 0
+        e_all = residual(ctx_all)
+        term = best.term
+        N = None
+        if term.nested:
+            Nall = hysteresis_nuisance(ctx_all)
+            N = (Nall[train_rows(allmask, rows)], Nall[:0])
+        st, _, _, _, th = best_setting(ctx_all, term, e_all, allmask, np.zeros(e_all.size, bool), rows, N)
+        best.setting_all, best.coef_all = st, th
+        best.described = term.describe(ctx_all, st, th)
+        c_term = np.array(th, float)
+        c_term[term.nuisance_columns(ctx_all, c_term.size)] = 0.0  # where the term acts: its own columns only
+        best.contrib = [np.asarray(term.regressors(ctx_all, s, st), float) @ c_term for s in ctx_all.signals]
+        ctx_all = rebase(ctx_all, model_with(ctx_all.base, {term.name: term.term(ctx_all, st, th)}), recs)
+        fctx = [rebase(fctx[f], best.exact[f]["params"], recs) for f in (0, 1)]
+        accepted.append(best)
+    return accepted, rounds, ctx_all, fctx

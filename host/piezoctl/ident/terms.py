@@ -1,0 +1,636 @@
+"""The vocabulary of missing physics: one :class:`Term` class per effect.
+
+A term is a block of the ``refined`` model (docs/model-file.md) placed where a stage
+has it::
+
+    u -> delay -> amplifier bandwidth -> slew limit -> saturation        (stage "drive")
+      -> hysteresis H + asymmetric polynomial + rate-dependent width    (stage "hysteresis")
+      -> creep                                                           (stage "creep")
+      -> dynamics G + extra mode                                         (stage "dynamics")
+      -> + offset + coupling from u2 + thermal drift + sensor offset
+      -> sensor nonlinearity -> y                                        (stage "output")
+
+Each class owns, for its effect:
+
+- ``settings(ctx)`` and ``refine(ctx, setting, level)``: the grid of its nonlinear
+  parameter (a time constant, a frequency, a limit) and finer settings around the best;
+- ``columns(ctx, s, setting)``: its regressors for one recording, linear in its
+  coefficients (the diagnosis fits them on the current model's residual);
+- ``model_params(ctx, setting, coef)``: the fitted term as the model file stores it;
+- ``apply(p, st)``: its part of the refined model's simulation;
+- ``describe(ctx, setting, coef)``: the fitted values with units and one phrase.
+
+The regressor and the simulation share one function per term (``basis`` or ``drive``),
+so the linearization the diagnosis tests and the model it writes cannot drift apart.
+
+``ctx`` is the diagnosis' context (``piezoctl.diagnose.run.Ctx``: the current model's
+parameters, the recordings with the model's signals, the calibration); ``s`` one
+recording's signals (``t``, ``u``, ``u2``, ``dt``, ``v``, ``h``, ``hyst``, ``yb``,
+``ydyn``, ``index``). This module does not import the diagnosis.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
+from ..models.hysteresis import hysteresis_channels, hysteresis_parts, scale_channels
+
+__all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G"]
+
+
+@dataclasses.dataclass
+class SimState:
+    """Signals of one simulation of the refined model, filled stage by stage.
+
+    ``t`` [s], ``dt`` [s], ``u`` the drive [V], ``u2`` the other axis' drive [V] or None,
+    ``ue`` the drive after the drive terms [V], ``v`` its normalized value, ``h`` H's
+    output [um] (no offset), ``hyst`` its hysteretic part [um], ``w`` after creep [um],
+    ``y`` the output [um] as far as the stages went."""
+
+    params: dict
+    t: np.ndarray
+    dt: float
+    u: np.ndarray
+    u2: np.ndarray | None
+    ue: np.ndarray | None = None
+    v: np.ndarray | None = None
+    h: np.ndarray | None = None
+    hyst: np.ndarray | None = None
+    w: np.ndarray | None = None
+    y: np.ndarray | None = None
+
+
+def G(params: dict, x) -> np.ndarray:
+    """The model's dynamics G applied to x (along axis 0)."""
+    return filt(params["dynamics"]["b"], params["dynamics"]["a"], x)
+
+
+class Term:
+    """A vocabulary entry (see the module docstring). Subclasses set the class attributes and override
+    ``columns``, ``model_params``, ``apply`` and ``describe``; ``settings``/``refine``/``lower`` as needed."""
+
+    name = ""
+    signature = ""
+    stage = "output"
+    group = ""          # terms of one group refit the same part of the base; at most one is accepted
+    intercept = False   # a constant column is fitted with the term and added to the model's offset
+    nested = True       # tested against free gains on the hysteresis channels refitted on the same fold
+
+    def applicable(self, ctx) -> bool:
+        return True
+
+    def settings(self, ctx) -> list:
+        return [None]
+
+    def refine(self, ctx, setting, level) -> list:
+        """Finer settings around ``setting`` at refinement level 1, 2 (tried on the same training data)."""
+        return []
+
+    def n_nuisance(self, ctx) -> int:
+        """Leading regressor columns that are a nuisance (a refit of the base's own structure)."""
+        return 0
+
+    def own_lower(self, ctx):
+        """Lower bounds of the term's own coefficients (None: unconstrained)."""
+        return None
+
+    # --- the linearization the diagnosis fits -------------------------------------------------
+    def columns(self, ctx, s, setting) -> np.ndarray:
+        raise NotImplementedError
+
+    def regressors(self, ctx, s, setting) -> np.ndarray:
+        X = np.asarray(self.columns(ctx, s, setting), float)
+        if X.ndim == 1:
+            X = X[:, None]
+        return np.column_stack([X, np.ones(X.shape[0])]) if self.intercept else X
+
+    def nuisance_columns(self, ctx, k: int) -> list:
+        """Indices of the nuisance columns among the ``k`` regressor columns."""
+        return list(range(self.n_nuisance(ctx))) + ([k - 1] if self.intercept else [])
+
+    def lower(self, ctx):
+        lb = self.own_lower(ctx)
+        if lb is None:
+            return None
+        return list(lb) + ([-np.inf] if self.intercept else [])
+
+    # --- the model ------------------------------------------------------------------------------
+    def model_params(self, ctx, setting, coef) -> dict:
+        raise NotImplementedError
+
+    def term(self, ctx, setting, coef) -> dict:
+        """The term for the model file; keys ``_dynamics``/``_hysteresis`` replace the model's."""
+        coef = np.asarray(coef, float)
+        if not self.intercept:
+            return self.model_params(ctx, setting, coef)
+        out = dict(self.model_params(ctx, setting, coef[:-1]))
+        import copy
+        hp = copy.deepcopy(out.get("_hysteresis", ctx.base["hysteresis"]))
+        hp["offset"] = float(hp.get("offset", 0.0)) + float(coef[-1])
+        out["_hysteresis"] = hp
+        return out
+
+    def apply(self, p: dict, st: SimState) -> None:
+        raise NotImplementedError
+
+    def describe(self, ctx, setting, coef) -> tuple[dict, str]:
+        return self.describe_own(ctx, setting, np.asarray(coef, float)[:-1] if self.intercept else coef)
+
+    def describe_own(self, ctx, setting, coef) -> tuple[dict, str]:
+        raise NotImplementedError
+
+
+def _geo_refine(grid, x, level) -> list:
+    """The two points a factor r^(1/2^level) either side of ``x``, r the geometric grid's mean ratio."""
+    g = np.asarray(grid, float)
+    if x is None or g.size < 2 or not np.all(g > 0):
+        return []
+    r = float(np.exp(np.mean(np.diff(np.log(g)))))
+    if r <= 1.0:
+        return []
+    f = r ** (0.5 ** level)
+    return [float(x) / f, float(x) * f]
+
+
+# --- drive stage: delay, amplifier bandwidth, slew limit, saturation ---------------------------------------
+# These change the drive's path. The base dynamics fitted on a slow calibration absorb part of them (a 1 ms
+# delay seen only below 20 Hz is fitted as a lag), so each setting is tried as the base would have been fitted
+# with it: the drive term in front of the current hysteresis, G refitted on the calibration only (ARX, the
+# base's order rule), the recordings re-simulated; the regressor is the change of the dynamics' output (terms
+# after the dynamics - offsets, drift, coupling - cancel in it). The refitted G goes into the model with the term.
+
+def h_of_drive(ctx, ue, u, h_now) -> np.ndarray:
+    """H output [um] of the current model's hysteresis for a changed drive ``ue`` [V]; ``h_now`` (its output
+    for the unchanged drive ``u``) when the change does nothing."""
+    if np.array_equal(ue, u):
+        return h_now
+    v = (ue - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
+    return hysteresis_parts(ctx.base["hysteresis"], v)[0]
+
+
+class _DriveTerm(Term):
+    stage = "drive"
+    group = "drive_dynamics"
+    key = ""          # the model file's parameter
+
+    @staticmethod
+    def drive(u, setting, dt) -> np.ndarray:
+        raise NotImplementedError
+
+    def h_with(self, ctx, setting, u, h_now, dt):
+        return h_of_drive(ctx, self.drive(u, setting, dt), u, h_now)
+
+    def refit_dynamics(self, ctx, setting):
+        """(b, a) of G refitted on the calibration with this term at ``setting`` in front."""
+        key = (self.name, float(setting))
+        if key in ctx.refit_cache:
+            return ctx.refit_cache[key]
+        from .base import band_cps, fit_dynamics
+        if "band" not in ctx.refit_cache:  # the calibration's band hardly depends on the term's setting
+            ctx.refit_cache["band"] = band_cps(ctx.cal_h, ctx.cal_k0)
+        xs = [self.h_with(ctx, setting, r.u, h, r.dt) for r, h in zip(ctx.cal, ctx.cal_h)]
+        off = float(ctx.base["hysteresis"].get("offset", 0.0))
+        ba = fit_dynamics(xs, [np.asarray(r.y, float) - off for r in ctx.cal], ctx.cal_k0, max_rows=40_000,
+                          band=ctx.refit_cache["band"])
+        ctx.refit_cache[key] = ba
+        return ba
+
+    def columns(self, ctx, s, setting):
+        b, a = self.refit_dynamics(ctx, setting)
+        return (filt(b, a, self.h_with(ctx, setting, s.u, s.h, s.dt)) - G(ctx.base, s.h))[:, None]
+
+    def model_params(self, ctx, setting, coef):
+        b, a = self.refit_dynamics(ctx, setting)
+        return {self.key: float(setting), "_dynamics": {"b": list(map(float, b)), "a": list(map(float, a))}}
+
+    def apply(self, p, st):
+        st.ue = self.drive(st.ue, float(p[self.key]), st.dt)
+
+
+class Delay(_DriveTerm):
+    name = "delay"
+    key = "samples"
+    signature = "a constant lag at every frequency (edges shifted, not rounded)"
+    DELAYS = (1, 2, 3, 4, 6, 8, 10, 12, 16, 20, 25, 32, 40, 50, 64)
+
+    @staticmethod
+    def drive(u, d, dt):
+        """The drive delayed by ``d`` samples (fractional: linear interpolation), held at its first value."""
+        u = np.asarray(u, float)
+        if d <= 0:
+            return u
+        idx = np.arange(u.size) - float(d)
+        return np.interp(idx, np.arange(u.size), u, left=u[0])
+
+    def settings(self, ctx):
+        return list(self.DELAYS)
+
+    def h_with(self, ctx, setting, u, h_now, dt):
+        return self.drive(h_now, setting, dt)   # H is rate independent: delaying its input delays its output
+
+    def describe_own(self, ctx, d, coef):
+        return ({"samples": float(d), "seconds": d * ctx.dt},
+                f"the measurement lags by {d:g} samples ({1000 * d * ctx.dt:.2f} ms) at every frequency: with this "
+                f"delay in front of the model (dynamics refitted on the calibration) edges and corners line up")
+
+
+class AmplifierBandwidth(_DriveTerm):
+    name = "amplifier_bandwidth"
+    key = "hz"
+    signature = "high-frequency attenuation and phase lag of a first-order pole (edges rounded)"
+
+    @staticmethod
+    def drive(u, hz, dt):
+        return lowpass(u, hz, dt)
+
+    def settings(self, ctx):
+        fs = 1.0 / ctx.dt
+        return [float(f) for f in np.geomspace(fs / 500.0, fs / 4.0, 14)]
+
+    def refine(self, ctx, setting, level):
+        return _geo_refine(self.settings(ctx), setting, level)
+
+    def describe_own(self, ctx, fc, coef):
+        return ({"hz": round(fc, 1)},
+                f"the drive is low-passed before the actuator (first order, {fc:.0f} Hz; dynamics refitted on the "
+                f"calibration): edges are rounded exponentially and fast content is attenuated and delayed")
+
+
+class AmplifierSlewLimit(_DriveTerm):
+    name = "amplifier_slew_limit"
+    key = "v_per_s"
+    signature = "residual only where |du/dt| exceeds a limit; edges become ramps"
+
+    @staticmethod
+    def drive(u, v_per_s, dt):
+        return slew_limit(u, float(v_per_s) * dt)
+
+    def applicable(self, ctx):
+        return ctx.max_step > 0
+
+    def settings(self, ctx):
+        return [float(ctx.max_step * q) / ctx.dt for q in (0.03, 0.05, 0.1, 0.2, 0.35, 0.5, 0.7)]
+
+    def refine(self, ctx, setting, level):
+        return _geo_refine(self.settings(ctx), setting, level)
+
+    def describe_own(self, ctx, vps, coef):
+        return ({"v_per_s": round(vps, 1)},
+                f"large fast drive changes are rate limited at about {vps / 1000:.1f} V/ms "
+                f"(amplifier current limit): edges become ramps whose length grows with the step size")
+
+
+class Saturation(Term):
+    name = "saturation"
+    stage = "drive"
+    signature = "residual only beyond a drive threshold, growing with the excess"
+    COARSE = tuple(0.025 * i for i in range(15))   # threshold below the largest drive, fraction of the span
+
+    @staticmethod
+    def drive(u, lo, hi):
+        """The drive clipped to [lo, hi] [V] (None: no limit on that side)."""
+        return np.clip(u, -np.inf if lo is None else lo, np.inf if hi is None else hi)
+
+    def settings(self, ctx):
+        lo, hi = ctx.u_lo, ctx.u_hi
+        span = hi - lo
+        return [(None, hi - q * span) for q in self.COARSE[1:]] + [(lo + q * span, None) for q in self.COARSE[1:]]
+
+    def refine(self, ctx, setting, level):
+        lo, hi = setting
+        d = 0.025 * (ctx.u_hi - ctx.u_lo) * 0.5 ** level   # the grid step halved per level
+        return [(lo, hi - d), (lo, hi + d)] if hi is not None else [(lo - d, hi), (lo + d, hi)]
+
+    def columns(self, ctx, s, setting):
+        # exact for the current model: H reverses at the limit, not where the command does; coefficient ~1
+        return G(ctx.base, h_of_drive(ctx, self.drive(s.u, *setting), s.u, s.h) - s.h)[:, None]
+
+    def model_params(self, ctx, setting, coef):
+        return {"lo_v": setting[0], "hi_v": setting[1]}
+
+    def apply(self, p, st):
+        st.ue = self.drive(st.ue, p.get("lo_v"), p.get("hi_v"))
+
+    def describe_own(self, ctx, setting, coef):
+        lo, hi = setting
+        where = f"above {hi:.1f} V" if hi is not None else f"below {lo:.1f} V"
+        return ({"lo_v": lo, "hi_v": hi},
+                f"the displacement stops following the drive {where}: the residual is zero inside that range and "
+                f"grows with the excess (a clipped drive)")
+
+
+# --- hysteresis stage: asymmetric polynomial, rate-dependent width ------------------------------------------
+
+class AsymmetricHysteresis(Term):
+    name = "asymmetric_hysteresis"
+    stage = "hysteresis"
+    intercept = True
+    signature = "even function of the drive (loop not point-symmetric)"
+
+    @staticmethod
+    def basis(u, mid, half) -> np.ndarray:
+        q = (np.asarray(u, float) - mid) / half
+        return np.column_stack([q ** 2, q ** 3])
+
+    def columns(self, ctx, s, setting):
+        return G(ctx.base, self.basis(s.u, ctx.u_mid_all, ctx.u_half_all))
+
+    def model_params(self, ctx, setting, coef):
+        return {"c2_um": float(coef[0]), "c3_um": float(coef[1]), "mid_v": float(ctx.u_mid_all),
+                "half_v": float(ctx.u_half_all)}
+
+    def apply(self, p, st):
+        st.h = st.h + self.basis(st.ue, float(p["mid_v"]), float(p["half_v"])) @ [float(p["c2_um"]), float(p["c3_um"])]
+
+    def describe_own(self, ctx, setting, coef):
+        return ({"c2_um": round(float(coef[0]), 4), "c3_um": round(float(coef[1]), 4)},
+                f"the loop is not point-symmetric: an even function of the drive ({coef[0]:+.3f} um s^2) is missing, "
+                f"largest at the ends of the stroke that calibration did not reach")
+
+
+class RateDependentHysteresis(Term):
+    name = "rate_dependent_hysteresis"
+    stage = "hysteresis"
+    intercept = True
+    signature = "residual grows with |du/dt| times the hysteretic part (loop width grows with rate)"
+    REFS = (0.3, 1.0, 3.0, 10.0, 30.0, 100.0)  # FS/s
+
+    @staticmethod
+    def basis(v, hyst, dt, ref, cutoff=RATE_CUTOFF_HZ) -> np.ndarray:
+        r = drive_rate(v, dt, cutoff)
+        return r / (r + ref) * hyst
+
+    def settings(self, ctx):
+        return list(self.REFS)
+
+    def own_lower(self, ctx):
+        return [0.0]   # loops widen with rate, never narrow
+
+    def columns(self, ctx, s, ref):
+        return G(ctx.base, self.basis(s.v, s.hyst, s.dt, ref))
+
+    def model_params(self, ctx, ref, coef):
+        return {"gain": float(coef[0]), "ref_fs_per_s": float(ref), "rate_cutoff_hz": RATE_CUTOFF_HZ}
+
+    def apply(self, p, st):
+        st.h = st.h + float(p["gain"]) * self.basis(st.v, st.hyst, st.dt, float(p["ref_fs_per_s"]),
+                                                     float(p.get("rate_cutoff_hz", RATE_CUTOFF_HZ)))
+
+    def describe_own(self, ctx, ref, coef):
+        vps = ref * ctx.base["u_half"]
+        return ({"gain": round(float(coef[0]), 4), "ref_v_per_s": round(vps, 1)},
+                f"the hysteresis loop widens with the drive rate (width x (1 + {coef[0]:.2f} r / (r + {vps:.0f} V/s))); "
+                f"the residual grows with |du/dt| and changes sign with the direction")
+
+
+# --- creep stage ----------------------------------------------------------------------------------------------
+
+class Creep(Term):
+    """Kelvin-Voigt chain ``w = h + sum g_i (lp_tau_i(h) - h)``, tested nested: its leading regressors are the
+    current hysteresis' channels through G (free gains: the hysteresis refitted with the chain, since a fast
+    calibration turned part of a slow creep into a mean level and a wider loop), then per time constant the
+    chain's deviation through G, and a constant. Gains >= 0: an element only adds compliance; free signs turn
+    the chain into an arbitrary slow filter."""
+
+    name = "creep"
+    stage = "creep"
+    intercept = True
+    nested = False     # it carries its own (richer) nuisance
+    signature = "residual correlated with the low-passed drive history; large after steps and dwells"
+    TAUS = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0)   # [s]: faster "creep" is a lag of the dynamics, not creep
+
+    @staticmethod
+    def basis(h, taus, dt) -> np.ndarray:
+        return np.column_stack([lowpass_tau(h, tau, dt) - h for tau in taus]) if len(taus) else np.zeros((len(h), 0))
+
+    def taus(self, ctx):
+        return [tau for tau in self.TAUS if tau < 2.0 * ctx.duration]
+
+    def _channels(self, ctx, u):
+        v = (np.asarray(u, float) - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
+        return hysteresis_channels(ctx.base["hysteresis"], v)
+
+    def n_nuisance(self, ctx):
+        return self._channels(ctx, np.zeros(2)).shape[1]
+
+    def own_lower(self, ctx):
+        return np.concatenate([np.full(self.n_nuisance(ctx), -np.inf), np.zeros(len(self.taus(ctx)))])
+
+    def columns(self, ctx, s, setting):
+        return G(ctx.base, np.column_stack([self._channels(ctx, s.u), self.basis(s.h, self.taus(ctx), s.dt)]))
+
+    def model_params(self, ctx, setting, coef):
+        n = self.n_nuisance(ctx)
+        hp = scale_channels(ctx.base["hysteresis"], coef[:n])
+        return {"tau_s": list(self.taus(ctx)), "gain": [float(c) for c in coef[n:]], "static_gain": 0.0,
+                "h_ref_um": 0.0, "_hysteresis": hp}
+
+    def apply(self, p, st):
+        st.w = st.h + self.basis(st.h, [float(x) for x in p["tau_s"]], st.dt) @ np.asarray(p["gain"], float) \
+            + float(p.get("static_gain", 0.0)) * (st.h - float(p.get("h_ref_um", 0.0)))
+
+    def describe_own(self, ctx, setting, coef):
+        taus = self.taus(ctx)
+        g = np.asarray(coef, float)[self.n_nuisance(ctx):]
+        main = taus[int(np.argmax(np.abs(g)))] if g.size else 0.0
+        return ({"tau_s": taus, "gain": [round(float(c), 5) for c in g], "total_gain": round(float(g.sum()), 5)},
+                f"the residual follows the low-passed drive history (Kelvin-Voigt creep, total {100 * g.sum():.2f} % "
+                f"of the hysteresis output, strongest time constant {main:g} s), largest in the seconds after a step")
+
+
+# --- dynamics stage ---------------------------------------------------------------------------------------------
+
+class UnmodeledResonance(Term):
+    name = "unmodeled_resonance"
+    stage = "dynamics"
+    signature = "residual energy in a narrow band above the calibration band, ringing after corners"
+    DAMPINGS = (0.005, 0.01, 0.02, 0.05)
+
+    @staticmethod
+    def basis(y, freq_hz, damping, dt) -> np.ndarray:
+        """The mode M applied to y minus y, with and without the ZOH's one-sample delay (the ring's timing within
+        a sample is not known)."""
+        bm, am = mode_filter(freq_hz, damping, dt)
+        return np.column_stack([filt(bm, am, y) - y, filt(bm[1:], am, y) - y])
+
+    def applicable(self, ctx):
+        return bool(ctx.peak_freqs)
+
+    def settings(self, ctx):
+        # around each residual peak (a damped ring's peak is not exactly its mode frequency)
+        return [(f * q, z) for f in ctx.peak_freqs for q in (0.97, 0.98, 0.99, 1.0, 1.01, 1.02, 1.03)
+                for z in self.DAMPINGS]
+
+    def columns(self, ctx, s, setting):
+        return self.basis(s.ydyn, setting[0], setting[1], s.dt)
+
+    def model_params(self, ctx, setting, coef):
+        return {"freq_hz": float(setting[0]), "damping": float(setting[1]), "gain": float(coef[0]),
+                "gain_lead": float(coef[1])}
+
+    def apply(self, p, st):
+        st.y = st.y + self.basis(st.y, float(p["freq_hz"]), float(p["damping"]), st.dt) @ \
+            [float(p["gain"]), float(p.get("gain_lead", 0.0))]
+
+    def describe_own(self, ctx, setting, coef):
+        return ({"freq_hz": round(setting[0], 1), "damping": setting[1], "gain": round(float(coef[0] + coef[1]), 4)},
+                f"the residual rings at {setting[0]:.0f} Hz (damping {setting[1]:g}) after fast edges and triangle "
+                f"corners, above the calibration's band: a mode with {100 * (coef[0] + coef[1]):.1f} % of the static gain")
+
+
+# --- output stage -------------------------------------------------------------------------------------------------
+
+class CrossCoupling(Term):
+    """The other axis' drive through this axis' dynamics (a proxy for the other's), its acceleration (through a
+    mode of the other axis when it rings, with and without the ZOH delay) and its product with the position."""
+
+    name = "cross_coupling"
+    signature = "residual explained by the other axis' drive/motion, growing with its frequency"
+
+    @staticmethod
+    def basis(params, u2, y, dt, u2_ref, y_center, mode=None) -> np.ndarray:
+        xg = G(params, np.asarray(u2, float))
+        x = xg - u2_ref
+        cols = [x, None, x * (y - y_center)]
+        if mode is not None:
+            bm, am = mode_filter(mode[0], mode[1], dt)
+            cols.append(np.gradient(np.gradient(filt(bm[1:], am, xg), dt), dt))
+            xg = filt(bm, am, xg)
+        cols[1] = np.gradient(np.gradient(xg, dt), dt)
+        return np.column_stack(cols)
+
+    def applicable(self, ctx):
+        return any(s.u2 is not None and np.ptp(s.u2) > 1e-6 for s in ctx.signals)
+
+    def settings(self, ctx):
+        # None: the other axis follows G; (f, zeta): it moves through a mode at a residual peak
+        return [None] + [(f, z) for f in ctx.peak_freqs for z in UnmodeledResonance.DAMPINGS]
+
+    def columns(self, ctx, s, setting):
+        if s.u2 is None:
+            return np.zeros((s.t.size, 3 if setting is None else 4))
+        return self.basis(ctx.base, s.u2, s.yb, s.dt, ctx.u2_ref, ctx.y_center, setting)
+
+    def model_params(self, ctx, setting, coef):
+        out = {"c_static_um_per_v": float(coef[0]), "c_accel_um_per_v_s2": float(coef[1]),
+               "c_pos_per_um_v": float(coef[2]), "y_center_um": float(ctx.y_center), "u2_ref_v": float(ctx.u2_ref)}
+        if setting is not None:
+            out.update(mode_hz=float(setting[0]), mode_damping=float(setting[1]),
+                       c_accel_lead_um_per_v_s2=float(coef[3]))
+        return out
+
+    def apply(self, p, st):
+        if st.u2 is None:
+            return
+        mode = (float(p["mode_hz"]), float(p["mode_damping"])) if p.get("mode_hz") else None
+        X = self.basis(st.params, st.u2, st.y, st.dt, float(p.get("u2_ref_v", 0.0)), float(p["y_center_um"]), mode)
+        c = [float(p["c_static_um_per_v"]), float(p["c_accel_um_per_v_s2"]), float(p["c_pos_per_um_v"])]
+        if mode is not None:
+            c.append(float(p.get("c_accel_lead_um_per_v_s2", 0.0)))
+        st.y = st.y + X @ c
+
+    def describe_own(self, ctx, setting, coef):
+        par = {"static_um_per_v": float(coef[0]), "accel_um_per_v_s2": float(coef[1]),
+               "position_dependence_per_um_v": float(coef[2])}
+        ring = ""
+        if setting is not None:
+            par.update(other_axis_mode_hz=round(setting[0], 1), other_axis_mode_damping=setting[1])
+            ring = f", ringing at {setting[0]:.0f} Hz after the other axis' steps (it moves through that mode)"
+        return (par, f"the residual follows the other axis' motion (u2): {1000 * coef[0]:+.2f} nm per volt of u2 plus "
+                     f"a term in its acceleration, i.e. coupling that grows with frequency{ring}")
+
+
+class ThermalDrift(Term):
+    name = "thermal_drift"
+    signature = "slow trend with time (or temperature), independent of the drive"
+    TAUS = (5.0, 15.0, 50.0, 150.0, 500.0)
+
+    @staticmethod
+    def basis(t, tau) -> np.ndarray:
+        tt = np.asarray(t, float) - float(t[0])
+        return np.column_stack([1.0 - np.exp(-tt / tau), tt])
+
+    def settings(self, ctx):
+        return list(self.TAUS)
+
+    def columns(self, ctx, s, tau):
+        return self.basis(s.t, tau)
+
+    def model_params(self, ctx, tau, coef):
+        return {"amplitude_um": float(coef[0]), "tau_s": float(tau), "slope_um_per_s": float(coef[1])}
+
+    def apply(self, p, st):
+        st.y = st.y + self.basis(st.t, float(p["tau_s"])) @ [float(p["amplitude_um"]),
+                                                              float(p.get("slope_um_per_s", 0.0))]
+
+    def describe_own(self, ctx, tau, coef):
+        return ({"amplitude_um": round(float(coef[0]), 4), "tau_s": tau, "slope_um_per_s": float(coef[1])},
+                f"the residual drifts with time since the start of each recording ({coef[0]:+.3f} um with time "
+                f"constant {tau:g} s, {coef[1] * 60:+.3f} um/min), whatever the drive does")
+
+
+class SensorOffset(Term):
+    name = "sensor_offset"
+    signature = "a constant per recording (session)"
+
+    def columns(self, ctx, s, setting):
+        X = np.zeros((s.t.size, ctx.n_rec))
+        X[:, s.index] = 1.0
+        return X
+
+    def model_params(self, ctx, setting, coef):
+        return {"offset_um": float(np.mean(coef)), "per_recording": {n: float(c) for n, c in zip(ctx.names, coef)}}
+
+    def apply(self, p, st):
+        st.y = st.y + float(p["offset_um"])
+
+    def describe_own(self, ctx, setting, coef):
+        per = {n: round(float(c), 4) for n, c in zip(ctx.names, coef)}
+        return ({"offset_um_per_recording": per},
+                "the residual is a constant per recording (" + ", ".join(f"{n}: {c:+.3f} um" for n, c in per.items())
+                + "): the sensor's zero moved between sessions")
+
+
+class SensorNonlinearity(Term):
+    name = "sensor_nonlinearity"
+    intercept = True
+    signature = "static function of the measured displacement"
+
+    @staticmethod
+    def basis(y, mid, half) -> np.ndarray:
+        q = (np.asarray(y, float) - mid) / half
+        return np.column_stack([q ** 2, q ** 3])
+
+    def columns(self, ctx, s, setting):
+        return self.basis(s.yb, ctx.y_center, ctx.y_half)
+
+    def model_params(self, ctx, setting, coef):
+        return {"c2_um": float(coef[0]), "c3_um": float(coef[1]), "mid_um": float(ctx.y_center),
+                "half_um": float(ctx.y_half)}
+
+    def apply(self, p, st):
+        st.y = st.y + self.basis(st.y, float(p["mid_um"]), float(p["half_um"])) @ [float(p["c2_um"]),
+                                                                                    float(p["c3_um"])]
+
+    def describe_own(self, ctx, setting, coef):
+        return ({"c2_um": round(float(coef[0]), 4), "c3_um": round(float(coef[1]), 4)},
+                f"the residual is a static function of the displacement itself ({coef[0]:+.3f} um q^2 "
+                f"{coef[1]:+.3f} um q^3 over the stroke), the same on rising and falling branches at equal y")
+
+
+# the order in which the refined model applies its terms (each within its stage)
+TERM_ORDER = ("delay", "amplifier_bandwidth", "amplifier_slew_limit", "saturation",
+              "asymmetric_hysteresis", "rate_dependent_hysteresis", "creep", "unmodeled_resonance",
+              "cross_coupling", "thermal_drift", "sensor_offset", "sensor_nonlinearity")
+
+TERMS: dict[str, Term] = {T.name: T() for T in (
+    Creep, ThermalDrift, SensorOffset, CrossCoupling, RateDependentHysteresis, UnmodeledResonance, Delay,
+    AmplifierSlewLimit, AmplifierBandwidth, SensorNonlinearity, Saturation, AsymmetricHysteresis)}
+
+# the diagnosis' vocabulary, in the order candidates are listed
+VOCABULARY = ("creep", "thermal_drift", "sensor_offset", "cross_coupling", "rate_dependent_hysteresis",
+              "unmodeled_resonance", "delay", "amplifier_slew_limit", "amplifier_bandwidth",
+              "sensor_nonlinearity", "saturation", "asymmetric_hysteresis")
