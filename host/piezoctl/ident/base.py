@@ -26,7 +26,7 @@ Fit (``fit_base``):
    ``PLANE_KNOTS`` x ``RIDGES`` (and with or without one Bouc-Wen column, its
    shape searched on the reversible curve alone) by the held-out RMS error (the
    smallest size within 2 % of the best). Only play counts R the calibration
-   can resolve are offered: at least 4 R distinct reversal levels
+   can resolve are offered: at least 2 R distinct reversal levels
    (:func:`reversal_levels`); a periodic calibration (two levels) gets R = 1,
    the reversible curve with the Bouc-Wen column. No parametric family: the grid of a Preisach
    density, not a law, is what is chosen.
@@ -60,11 +60,11 @@ __all__ = ["fit_base", "fit_dynamics", "band_cps", "plausible", "block_masks", "
            "MAX_ROWS", "smoothness_penalty", "reversal_levels"]
 
 MAX_ROWS = 150_000       # samples entering the joint least-squares problem (evenly strided)
-CV_ROWS = 60_000         # samples entering each size's cross-validation
+CV_ROWS = 24_000         # samples entering each size's cross-validation
 PLANE_PLAYS = (1, 4, 8, 16)  # R: play thresholds r_j = j / R [normalized drive], j = 0..R-1 (R = 1: no plays,
                              # only the reversible curve F_0(v), with the Bouc-Wen column a Duhem-type model)
 PLANE_KNOTS = (6, 12, 24)  # K: knots across the full normalized range [-1, 1] (for r = 0)
-RIDGES = (1e-8, 1e-6, 1e-4, 1e-2)   # weights of the roughness penalty (relative to the data's Gram diagonal)
+RIDGES = (1e-6, 1e-4, 1e-2, 1e-1, 1.0)   # weights of the roughness penalty (relative to the data's Gram diagonal)
 BW_BETAS = tuple(float(x) for x in np.geomspace(0.5, 40.0, 7))   # Bouc-Wen column shapes [1/normalized drive]
 BW_GAMMA_RATIOS = (-0.6, -0.3, 0.0, 0.3, 0.6)                    # gamma / beta; Nelder-Mead refines
 CV_BLOCKS = 32           # interleaved blocks per calibration recording in the size cross-validation
@@ -338,15 +338,24 @@ def _select_dynamics(xs, ys, k0s, max_rows, refine, band=None):
     models, scores = {}, {}
     for order in ORDERS:
         m = _arx([x[k0:] for x, k0 in zip(xs, k0s)], [y[k0:] for y, k0 in zip(ys, k0s)], order, max_rows)
-        if m is not None and order > 0 and refine:
-            m = _oe_refine(m, xs, ys, k0s)
         models[order] = m
         scores[order] = _sim_rmse(m, xs, ys, k0s) if m is not None else float("inf")
-    best = 0
     band = band_cps(xs, k0s) if band is None else band
-    for order in ORDERS[1:]:
-        if plausible(models[order], band) and scores[order] < 0.95 * scores[best]:
-            best = order
+
+    def pick():
+        best = 0
+        for order in ORDERS[1:]:
+            if plausible(models[order], band) and scores[order] < 0.95 * scores[best]:
+                best = order
+        return best
+
+    best = pick()
+    if refine:   # output-error refinement of the chosen order and the next (the costly part: a simulation per step)
+        for order in (best, min(best + 2, ORDERS[-1])):
+            if order > 0 and models[order] is not None:
+                models[order] = _oe_refine(models[order], xs, ys, k0s)
+                scores[order] = _sim_rmse(models[order], xs, ys, k0s)
+        best = pick()
     return models[best], best, scores
 
 
@@ -397,18 +406,32 @@ def reversal_levels(vs, k0s, deadband: float = 0.02, resolution: float = 1.0 / 3
     return len(levels)
 
 
-def _cv_sizes(Ps, vs, v_rest, ys, qs, k0s, spans, r_all):
+def _path_points(v, rows) -> np.ndarray:
+    """Indices that keep the drive's path: ``rows``, every turning point, the first and the last sample. Plays
+    and the Bouc-Wen state are exact on this subsequence (rate independent, and exact for any step within a
+    monotone run), so the size search runs on it instead of every sample."""
+    d = np.sign(np.diff(v))
+    nz = np.flatnonzero(d)
+    turn = nz[np.flatnonzero(d[nz][1:] != d[nz][:-1]) + 1] if nz.size > 1 else np.zeros(0, int)
+    return np.unique(np.concatenate([rows, turn, [0, v.size - 1]]).astype(np.intp))
+
+
+def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all):
     """Cross-validated choice of (R, K, ridge, Bouc-Wen column) on the quasi-static rows: returns
-    (layout, ridge, table)."""
+    (layout, ridge, table). The operators run on the drive's path points only (:func:`_path_points`)."""
     ns = [y.size for y in ys]
     Ts = _trends(ns, k0s)
     rows = [_strided(q, max(1000, CV_ROWS // len(ys))) for q in qs]
     folds = [block_masks(n, CV_BLOCKS)[r] % 2 for n, r in zip(ns, rows)]
     yr = [y[r] for y, r in zip(ys, rows)]
+    keep = [_path_points(v, r) for v, r in zip(vs, rows)]
+    pos = [np.searchsorted(k, r) for k, r in zip(keep, rows)]
+    vk = [np.ascontiguousarray(v[k]) for v, k in zip(vs, keep)]
+    Pk = [play_states(v, r_all, v_rest) for v in vk]
 
     def design(lay):
-        return [np.column_stack([plane_columns(P, lay, r, v, v_rest), T[r], np.ones(r.size)])
-                for P, v, T, r in zip(Ps, vs, Ts, rows)]
+        return [np.column_stack([plane_columns(P, lay, p, v, v_rest), T[r], np.ones(r.size)])
+                for P, v, T, r, p in zip(Pk, vk, Ts, rows, pos)]
 
     # the Bouc-Wen column's shape, with the reversible curve alone (R = 1): a grid, then Nelder-Mead on
     # (log beta, gamma / beta)
@@ -424,9 +447,9 @@ def _cv_sizes(Ps, vs, v_rest, ys, qs, k0s, spans, r_all):
                                      "initial_simplex": [z0, z0 + [0.25, 0.0], z0 + [0.0, 0.15]]})
     z = sol.x if sol.fun < sc0 else z0
     best_bw = (None, (float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95)) * float(np.exp(z[0]))))
-    # thresholds the calibration's reversals can resolve: about four reversal levels per play threshold
+    # thresholds the calibration's reversals can resolve: at least two reversal levels per play threshold
     n_rev = reversal_levels(vs, k0s)
-    plays = [R for R in PLANE_PLAYS if R == 1 or 4 * R <= n_rev]
+    plays = [R for R in PLANE_PLAYS if R == 1 or 2 * R <= n_rev]
     table, best = [], None
     for bw in (None, best_bw[1]):
         for R in plays:
@@ -518,13 +541,21 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
     v_rest = (u_rest - mid) / half
     vs = [(rec.u - mid) / half for rec in recordings]
     r_all = np.array(sorted({j / R for R in PLANE_PLAYS for j in range(R)}))
-    Ps = [play_states(v, r_all, v_rest) for v in vs]
-    spans = [(min(float(P[k0:, i].min()) for P, k0 in zip(Ps, k0s)), max(float(P[k0:, i].max()) for P, k0 in zip(Ps, k0s)))
-             for i in range(r_all.size)]
+    # each play's range over the settled samples: its extremes lie at the drive's turning points
+    spans = []
+    for v, k0 in zip(vs, k0s):
+        kp = _path_points(v, np.zeros(0, np.intp))
+        P = play_states(np.ascontiguousarray(v[kp]), r_all, v_rest)[kp >= k0]
+        spans.append((P.min(axis=0), P.max(axis=0)) if P.size else (np.full(r_all.size, np.inf),
+                                                                    np.full(r_all.size, -np.inf)))
+    spans = [(float(min(s[0][i] for s in spans)), float(max(s[1][i] for s in spans))) for i in range(r_all.size)]
     qs = [_quasi_static(v, 1.0 / fs0, k0) for v, k0 in zip(vs, k0s)]
     if sum(int(q.sum()) for q in qs) < 200:   # nothing slow: size on every settled sample
         qs = [np.arange(v.size) >= k0 for v, k0 in zip(vs, k0s)]
-    layout, ridge, table = _cv_sizes(Ps, vs, v_rest, ys, qs, k0s, spans, r_all)
+    layout, ridge, table = _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all)
+    r_used = np.array(sorted({r_all[i] for i in layout.index}))
+    Ps = [play_states(v, r_used, v_rest) for v in vs]
+    layout.index = [int(np.flatnonzero(r_used == r_all[i])[0]) for i in layout.index]
     th = _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, None, max_rows)
     band = band_cps(_plane_output(Ps, vs, v_rest, layout, th), k0s)
     Gba, order, scores = (np.array([1.0]), np.array([1.0])), 0, {}

@@ -1,0 +1,165 @@
+"""The diagnosis base (ident/base.py): the Preisach plane's operators, its fit on a hysteresis law it does not
+contain, and the Term classes (ident/terms.py): their regressors are the linearization of the refined model's
+own simulation."""
+
+import numpy as np
+import pytest
+
+from piezoctl.diagnose.run import locate
+from piezoctl.ident import refined
+from piezoctl.ident.base import fit_base, reversal_levels
+from piezoctl.ident.terms import TERMS
+from piezoctl.io.recording import Recording
+from piezoctl.models.hysteresis import (add_to_features, hat_basis, hysteresis_channels, hysteresis_features,
+                                        hysteresis_parts, interp_linear_ext, scale_channels)
+from piezoctl.models.play import play_outputs
+
+FS = 10_000.0
+
+
+def _per_sample_plays(u, r, y0):
+    f = np.array(y0, float)
+    out = np.empty((u.size, r.size))
+    for k in range(u.size):
+        f = np.maximum(u[k] - r, np.minimum(u[k] + r, f))
+        out[k] = f
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_plays_by_runs_equal_the_recursion_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 4000))
+    u = np.cumsum(rng.normal(size=n)) + np.repeat(rng.normal(size=n // 7 + 1), 7)[:n] * 3
+    if seed % 2:
+        u = np.round(u)          # plateaus: zero steps belong to the run before them
+    r = rng.uniform(0, 3, 9)
+    y0 = rng.normal(size=9) * 2
+    assert np.array_equal(play_outputs(u, r, y0=y0), _per_sample_plays(u, r, y0))
+
+
+def test_hat_basis_is_a_partition_of_unity_continued_linearly():
+    knots = np.linspace(-0.4, 0.9, 7)
+    x = np.linspace(-2, 2, 4001)
+    B = hat_basis(x, knots)
+    assert np.allclose(B.sum(axis=1), 1.0)
+    vals = np.random.default_rng(2).normal(size=7)
+    inside = (x >= knots[0]) & (x <= knots[-1])
+    assert np.allclose((B @ vals)[inside], np.interp(x[inside], knots, vals))
+    f = interp_linear_ext(x, knots, vals)
+    assert np.allclose(f, B @ vals)
+    beyond = x > knots[-1]   # the last segment's slope continues
+    slope = (vals[-1] - vals[-2]) / (knots[-1] - knots[-2])
+    assert np.allclose(f[beyond], vals[-1] + slope * (x[beyond] - knots[-1]))
+
+
+def _plane(rng, bw=True):
+    r = [0.0, 0.25, 0.5, 0.75]
+    knots = [np.linspace(-1 + x, 1 - x, 9 - 2 * i) for i, x in enumerate(r)]
+    values = [np.concatenate([[0.0], np.cumsum(rng.uniform(0.2, 1.0, k.size - 1))]) for k in knots]
+    hp = {"type": "plane", "r": r, "knots": [k.tolist() for k in knots], "values": [v.tolist() for v in values],
+          "offset": 0.3, "v_rest": -1.0, "v_lo": -1.0, "v_hi": 1.0}
+    if bw:
+        hp["bw"] = {"beta": 2.0, "gamma": 0.4, "c_h": 1.5}
+    return hp
+
+
+@pytest.mark.parametrize("hp", [
+    _plane(np.random.default_rng(0)), _plane(np.random.default_rng(1), bw=False),
+    {"type": "pi", "r": [0.1, 0.4], "w": [1.0, 2.0], "poly": [0.5, 0.1, 0.2], "v_lo": -1, "v_hi": 1, "v_rest": 0},
+    {"type": "bouc_wen", "beta": 2.0, "gamma": 0.5, "c_h": 1.3, "poly": [0.5, 0.1, 0.2], "v_lo": -1, "v_hi": 1,
+     "v_rest": 0}])
+def test_channels_and_features_reproduce_the_operator(hp):
+    v = 0.95 * np.sin(np.linspace(0, 30, 3000)) * np.linspace(1, 0.3, 3000)
+    h, hyst = hysteresis_parts(hp, v)
+    C = hysteresis_channels(hp, v)
+    assert np.allclose(C.sum(axis=1), h)
+    g = np.linspace(-0.3, 0.4, C.shape[1])
+    assert np.allclose(hysteresis_parts(scale_channels(hp, g), v)[0], C @ (1 + g))
+    F, th = hysteresis_features(hp, v)
+    assert np.allclose(F @ th, h)
+    d = np.linspace(0.1, -0.2, th.size)
+    assert np.allclose(hysteresis_parts(add_to_features(hp, d), v)[0], F @ (th + d))
+
+
+def _relay_stage(u, rng_seed=7, n=24):
+    """A Preisach model written the naive way (a grid of relays with a random smooth positive density), not
+    through plays: the truth the plane must approximate without containing it."""
+    rng = np.random.default_rng(rng_seed)
+    a = np.linspace(-1, 1, n)
+    A, B = np.meshgrid(a, a, indexing="ij")
+    up = A >= B                                   # alpha >= beta
+    cx, cy = rng.uniform(-0.5, 0.5, 2)
+    mu = (0.2 + np.exp(-((A - cx) ** 2 + (B - cy) ** 2) / 0.3)) * up
+    mu /= mu.sum()
+    v = (u - 75.0) / 75.0
+    state = -np.ones_like(mu)                     # demagnetized from below: every relay down
+    out = np.empty(v.size)
+    for k, x in enumerate(v):
+        state[(A <= x) & up] = 1.0
+        state[(B >= x) & up] = -1.0
+        out[k] = np.sum(mu * state)
+    return 20.0 * out + 5.0 * v                   # [um]: hysteresis plus a reversible part
+
+
+def _rec(u, y):
+    t = np.arange(u.size) / FS
+    return Recording(t=t, u=u, y=y)
+
+
+def test_base_fits_a_preisach_law_it_does_not_contain_within_twice_the_noise():
+    rng = np.random.default_rng(3)
+    t = np.arange(int(12 * FS)) / FS
+    cal_u = 75 + 72 * np.sin(2 * np.pi * 2 * t) * np.exp(-t / 5)          # decaying sine
+    fo = np.concatenate([np.linspace(3, 147, 4000)] + [np.concatenate([np.linspace(147, lv, 1500),
+                                                                         np.linspace(lv, 147, 1500)])
+                                                         for lv in np.linspace(10, 140, 14)])   # FORC sweeps
+    noise = 0.005
+    cal = [_rec(u, _relay_stage(u) + rng.normal(0, noise, u.size)) for u in (cal_u, fo)]
+    base = fit_base(cal)
+    info = base.pop("base_info")
+    assert info["plane"]["reversal_levels"] >= 16 and info["plane"]["plays"] >= 4
+    # reveal: nested triangles and a random walk inside the calibrated range
+    tt = np.arange(int(6 * FS)) / FS
+    tri = 75 + np.interp(tt % 1.0, [0, 0.5, 1], [-1, 1, -1]) * np.where(tt < 3, 60, 30)
+    walk = 75 + 55 * np.sin(np.cumsum(rng.normal(0, 0.004, tt.size)))
+    for u in (tri, walk):
+        y = _relay_stage(u) + rng.normal(0, noise, u.size)
+        e = (refined.simulate(base, np.arange(u.size) / FS, u) - y)[int(0.5 * FS):]
+        assert np.sqrt(np.mean(e ** 2)) < 2.0 * noise
+
+
+def test_periodic_calibration_leaves_the_plane_at_one_play():
+    t = np.arange(int(8 * FS)) / FS
+    v = np.sin(2 * np.pi * 1.0 * t)
+    assert reversal_levels([v], [5000]) == 2
+    decaying = np.sin(2 * np.pi * 2.0 * t) * np.exp(-t / 3)
+    assert reversal_levels([decaying], [0]) > 16
+
+
+def test_term_regressors_are_the_linearized_simulation():
+    """For a term linear in its coefficients, the refined model with the term minus the model without equals its
+    regressors times the coefficients: the regressor and the simulation are the same code."""
+    rng = np.random.default_rng(4)
+    n = int(3 * FS)
+    t = np.arange(n) / FS
+    u = 75 + 60 * np.sin(2 * np.pi * 3 * t) + np.repeat(rng.uniform(-8, 8, 30), n // 30)
+    base = {"fs_hz": FS, "u_mid": 75.0, "u_half": 75.0, "hysteresis": _plane(rng),
+            "dynamics": {"b": [0.3, 0.2], "a": [1.0, -0.5]}, "terms": {}}
+    y = refined.simulate(base, t, u) + rng.normal(0, 0.01, n)
+    recs = [Recording(t=t, u=u, y=y, path="a.csv")]
+    ctx, _, _ = locate(base, recs, recs, ["a.csv"], 0.5, 1.0)
+    s = ctx.signals[0]
+    y0 = refined.simulate(base, t, u)
+    cases = {"thermal_drift": (15.0, [0.2, 0.01]), "sensor_offset": (None, [0.3]),
+             "asymmetric_hysteresis": (None, [0.4, -0.2, 0.0]), "rate_dependent_hysteresis": (3.0, [0.2, 0.0]),
+             "unmodeled_resonance": ((900.0, 0.02), [0.05, 0.02]), "sensor_nonlinearity": (None, [0.05, 0.02, 0.0])}
+    for name, (setting, coef) in cases.items():
+        term = TERMS[name]
+        X = term.regressors(ctx, s, setting)
+        par = dict(base, terms={name: {k: v for k, v in term.term(ctx, setting, coef).items() if k[0] != "_"}})
+        if "_hysteresis" in term.term(ctx, setting, coef):
+            par["hysteresis"] = term.term(ctx, setting, coef)["_hysteresis"]
+        d = refined.simulate(par, t, u) - y0
+        tol = 1e-9 if name != "sensor_nonlinearity" else 1e-6   # evaluated at the model output vs the measured span
+        assert np.max(np.abs(d - X @ coef)) < tol * max(1.0, np.max(np.abs(d))), name
