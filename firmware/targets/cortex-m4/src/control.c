@@ -44,10 +44,25 @@ void piezo_control_default_cfg(piezo_ctl_cfg_t *cfg)
     cfg->notch.b0_q24 = 1 << 24; /* pass-through until configured */
 }
 
+/* The board's converters and amplifier (weak: the PIL image puts the stage
+ * model's in their place). Until the converter drivers exist: 16-bit codes,
+ * a 0..150 V amplifier and a 0..100 um sensor, the ranges the identity
+ * registers report. */
+__attribute__((weak)) void piezo_control_board(piezo_ctl_cfg_t *cfg, piezo_control_range_t *range)
+{
+    piezo_control_default_cfg(cfg);
+    range->drive_min_mv = 0;
+    range->drive_max_mv = 150000;
+    range->position_min_nm = 0;
+    range->position_max_nm = 100000;
+}
+
+piezo_control_range_t piezo_control_range;
+
 int piezo_control_init(void)
 {
     piezo_ctl_cfg_t cfg;
-    piezo_control_default_cfg(&cfg);
+    piezo_control_board(&cfg, &piezo_control_range);
     return piezo_ctl_init(&piezo_axis, &cfg);
 }
 
