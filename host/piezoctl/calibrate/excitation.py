@@ -25,6 +25,10 @@ def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: i
     """
     out = []
     tick = ctl.identity.tick_hz
+    # a board's recorder is smaller than the SIL's (8192 samples on the
+    # STM32F405): decimate more rather than record less
+    cap = ctl.identity.rec_capacity // 2
+    decimation = max(decimation, int(np.ceil(periods / f_hz * tick / cap)))
     frames = int(round(periods / f_hz * tick / decimation))
     for top in tops:
         amp = int(np.floor(top * 32767.0))
@@ -41,12 +45,24 @@ def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: i
 
 def chirp(ctl, *, f0: float = 5.0, f1: float = 2000.0, duration_s: float = 3.0, amp_frac: float = 0.01,
           centre_frac: float = 0.5) -> dict:
-    """A linear chirp in DIRECT mode; ``t`` [s], ``u`` [V], ``y`` [um] at the full tick rate."""
+    """A linear chirp in DIRECT mode; ``t`` [s], ``u`` [V], ``y`` [um].
+
+    At the full tick rate when the recorder holds ``duration_s`` of two
+    signals; otherwise (a board's recorder) recorded every second tick (still
+    2.5 samples per period at ``f1`` = 2 kHz) and shortened to what the
+    recorder holds.
+    """
     amp = int(amp_frac * 32767)
     offset = int((2 * centre_frac - 1) * 32767)
-    frames = int(duration_s * ctl.identity.tick_hz)
+    tick = ctl.identity.tick_hz
+    cap = ctl.identity.rec_capacity // 2
+    dec = 1
+    if duration_s * tick > cap:
+        dec = max(1, min(2, int(tick // (2.5 * f1))))
+        duration_s = min(duration_s, cap * dec / tick)
+    frames = int(duration_s * tick / dec)
     ctl.configure_wave("chirp", offset_q15=offset, amplitude_q15=amp, f_hz=f0, f_end_hz=f1, duration_s=duration_s)
-    cols = ctl.capture(["u", "y"], frames, trigger="software", start_wave=True)
+    cols = ctl.capture(["u", "y"], frames, decimation=dec, trigger="software", start_wave=True)
     ctl.command("stop_wave")
     return {"t": cols["t"], "u": cols["u"], "y": cols["y"]}
 

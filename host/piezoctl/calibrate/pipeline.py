@@ -70,9 +70,12 @@ def _park(ctl, bottom_q15: int, seconds: float = 0.2, steps: int = 40) -> None:
     ctl.arm(False)
 
 
-def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 1.0) -> dict:
+def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 1.0,
+              target: dict | None = None) -> dict:
     """Calibrate the controller ``ctl`` and write ``out``/{model.json, table.bin, summary.json, report.html}.
 
+    ``target`` (what ran: ``kind``, ``transport``, for QEMU ``image`` and
+    ``image_sha256``) goes into the summary as it is.
     Returns the summary (also written as ``summary.json``).
     """
     t_start = time.monotonic()
@@ -233,6 +236,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         "scale": sc.to_dict(),
         "files": {"model": "model.json", "table": "table.bin", "report": "report.html", "data": "data/"},
         "duration_s": None,
+        "target": target,
     }
     from .report import write_report
     summary["duration_s"] = time.monotonic() - t_start
