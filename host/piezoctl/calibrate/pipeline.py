@@ -132,7 +132,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
     params["controller_scale"] = sc.to_dict()
     save_model(out / "model.json", chosen, params, model.provenance)
     model = load_model(out / "model.json")
-    frf = tfid.frf_from_time(ch["t"], ch["u"], ch["y"], fmin=5.0, fmax=2000.0, coherence_min=0.8)
+    frf = excitation.chirp_frf(ch, fmin=5.0, fmax=2000.0, coherence_min=0.8)
     tf = tfid.fit_tf(frf, 2, method="pso-wcls")
     poles = np.asarray(tf.poles)
     f_res = float(np.max(np.abs(poles)) / (2 * np.pi)) if poles.size else float("nan")
