@@ -106,7 +106,8 @@ def qemu_image() -> pathlib.Path:
 # written in one piece cannot be broken by a gap (docs/target-cortex-m4.md).
 QEMU_ARGS = ["-M", "netduinoplus2", "-nodefaults", "-display", "none",
              "-chardev", "pty,id=uart1", "-serial", "chardev:uart1",
-             "-semihosting-config", "enable=on,target=native", "-icount", "shift=0,sleep=on"]
+             "-semihosting-config", "enable=on,target=native"]
+ICOUNT = "shift=0,sleep=on"
 
 
 class QemuTarget:
@@ -116,8 +117,9 @@ class QemuTarget:
     ``image`` is the ELF that runs; ``describe()`` gives the summary's ``target``.
     """
 
-    def __init__(self, image: str | None = None, baud: int = 115200):
+    def __init__(self, image: str | None = None, baud: int = 115200, icount: str = ICOUNT):
         self.image = pathlib.Path(image) if image else None
+        self.icount = icount
         self.baud = baud
         self.proc = None
         self.port = None
@@ -128,7 +130,7 @@ class QemuTarget:
             self.image = qemu_image()
         if not self.image.exists():
             raise CliError(f"no PIL image {self.image}")
-        cmd = ["qemu-system-arm", *QEMU_ARGS, "-kernel", str(self.image)]
+        cmd = ["qemu-system-arm", *QEMU_ARGS, "-icount", self.icount, "-kernel", str(self.image)]
         try:
             self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         except OSError as exc:
