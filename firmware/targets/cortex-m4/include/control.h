@@ -8,6 +8,7 @@
 #include <stdint.h>
 
 #include "controller.h"
+#include "store.h"
 
 /** The axis the tick runs (piezo_control_tick() in tick.h). */
 extern piezo_ctl_t piezo_axis;
@@ -31,6 +32,10 @@ void piezo_control_board(piezo_ctl_cfg_t *cfg, piezo_control_range_t *range);
 
 /** piezo_ctl_init() with the board's configuration (piezo_control_board): disarmed, IDLE, no table. */
 int piezo_control_init(void);
+
+/** The table storage the image attaches at boot (weak: the flash sectors 10
+ *  and 11; the PIL image: RAM). */
+const piezo_storage_t *piezo_control_storage(void);
 
 /** ADC codes of this axis' sensor and the other axis' (weak default: zero codes). */
 void piezo_adc_read(int32_t adc[2]);

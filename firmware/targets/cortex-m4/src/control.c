@@ -12,6 +12,7 @@
 
 #include "board.h"
 #include "controller.h"
+#include "flash_f4.h"
 #include "control.h"
 #include "tick.h"
 
@@ -84,4 +85,13 @@ void piezo_control_tick(void)
     piezo_adc_read(adc);
     piezo_ctl_tick(&piezo_axis, adc, &dac);
     piezo_dac_write(dac);
+}
+
+/* Tables persist in flash sectors 10 and 11 (flash_f4.c); the PIL image puts
+ * RAM in their place (QEMU models no flash interface). */
+__attribute__((weak)) const piezo_storage_t *piezo_control_storage(void)
+{
+    static piezo_storage_t io;
+    io = piezo_f4_flash_storage();
+    return &io;
 }

@@ -16,6 +16,9 @@ int main(void)
     if (piezo_control_init() != 0) {
         piezo_board_fault("control init", 0);
     }
+    /* a stored table that does not load is reported by the status registers;
+     * the unit then runs without one */
+    (void)piezo_ctl_attach_store(&piezo_axis, piezo_control_storage());
     if (piezo_comm_init() != 0) {
         piezo_board_fault("comm init", 0);
     }

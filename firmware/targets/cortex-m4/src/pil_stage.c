@@ -21,6 +21,7 @@
 #include "board.h"
 #include "control.h"
 #include "converters.h"
+#include "flash_f4.h"
 #include "sil_loop.h"
 #include "stage_model.h"
 
@@ -81,4 +82,17 @@ void PendSV_Handler(void)
     stage_adc[0] = adc[0];
     stage_adc[1] = adc[1];
     stage_steps = stage_steps + 1u;
+}
+
+/* Tables in RAM behind the flash driver's storage interface (QEMU 7.2 models
+ * no flash interface, and its flash is ROM): the same A/B store, lost when
+ * QEMU exits. */
+#define PIL_SLOT_BYTES (PIEZO_STORE_RECORD_BYTES + PIEZO_TABLE_MAX_BYTES)
+static uint8_t pil_flash[2u * PIL_SLOT_BYTES];
+
+const piezo_storage_t *piezo_control_storage(void)
+{
+    static piezo_storage_t io;
+    io = piezo_ram_storage(pil_flash, PIL_SLOT_BYTES);
+    return &io;
 }
