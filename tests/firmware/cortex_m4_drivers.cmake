@@ -8,3 +8,11 @@ if(TARGET test_flash_f4)
   # a few polls, not the chip's 2 s: the model's busy time is counted in polls
   target_compile_definitions(test_flash_f4 PRIVATE PIEZO_FLASH_BSY_POLLS=1000u)
 endif()
+
+# The reference design's converters (AD5791 DAC, AD7980 ADC) against a fake
+# SPI peripheral with both parts on it.
+piezo_add_cmocka_test(test_converters_spi SOURCES test_converters_spi.c fake_spi.c
+                      ${PIEZO_CM4_DIR}/src/converters_spi.c)
+if(TARGET test_converters_spi)
+  target_include_directories(test_converters_spi PRIVATE ${PIEZO_CM4_DIR}/include)
+endif()
