@@ -1,3 +1,4 @@
+# (Named to sort after protocol.cmake: test_usb_dev links its test_modbus_regs.)
 # Drivers of the Cortex-M4 target tested on the host (and as target images)
 # against models of their peripherals: the STM32F405 flash interface.
 set(PIEZO_CM4_DIR ${PROJECT_SOURCE_DIR}/firmware/targets/cortex-m4)
@@ -15,4 +16,12 @@ piezo_add_cmocka_test(test_converters_spi SOURCES test_converters_spi.c fake_spi
                       ${PIEZO_CM4_DIR}/src/converters_spi.c)
 if(TARGET test_converters_spi)
   target_include_directories(test_converters_spi PRIVATE ${PIEZO_CM4_DIR}/include)
+endif()
+
+# USB device layer (descriptors, chapter 9 requests, bulk endpoints with the
+# usb_bulk framing): QEMU models no OTG, so the host drives it as a host would.
+piezo_add_cmocka_test(test_usb_dev SOURCES test_usb_dev.c ${PIEZO_CM4_DIR}/src/usb_dev.c
+                      LIBS piezo_protocol test_modbus_regs)
+if(TARGET test_usb_dev)
+  target_include_directories(test_usb_dev PRIVATE ${PIEZO_CM4_DIR}/include)
 endif()
