@@ -16,8 +16,8 @@
  * the tick running (status reads are single 32-bit loads, the recorder
  * window is a buffer the tick appends to). Writes change the controller's
  * state, which the tick uses: they run with interrupts masked, so a tick sees
- * a request whole or not at all. Each write starts right after a tick has
- * ended, so it delays the next tick only if it takes longer than the rest of
+ * a request whole or not at all (table commands excepted, below). Each write
+ * starts right after a tick has ended, so it delays the next tick only if it takes longer than the rest of
  * the period (tick_time_max_ns would show it; tools/bench-target measures
  * it with every kind of write).
  */
@@ -38,6 +38,13 @@ static uint8_t reply[PIEZO_RTU_ADU_MAX];
 static uint8_t masked_write(void *ctx, uint16_t addr, uint16_t count, const uint16_t *values)
 {
     uint8_t rc;
+    if (addr == PIEZO_HOLDING_TABLE_COMMAND && count == 1u) {
+        /* commit, rollback, clear: their long part (checking the image,
+         * loading it into the spare coefficient set, persisting it) touches
+         * nothing the tick reads; the swap is one byte the tick takes at its
+         * start (controller.c, piezo_ctl_commit). So the tick keeps running. */
+        return inner.write_holding(ctx, addr, count, values);
+    }
     /* start right after a tick: a write shorter than the period minus the
      * tick's work (about 98 us) then never delays the next one */
     uint32_t t0 = piezo_tick_count();
