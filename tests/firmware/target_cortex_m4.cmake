@@ -25,3 +25,10 @@ piezo_add_cmocka_test(test_usb_dev SOURCES test_usb_dev.c ${PIEZO_CM4_DIR}/src/u
 if(TARGET test_usb_dev)
   target_include_directories(test_usb_dev PRIVATE ${PIEZO_CM4_DIR}/include)
 endif()
+
+# The OTG FS driver's register sequences against a fake core (QEMU has no OTG).
+piezo_add_cmocka_test(test_usb_otgfs SOURCES test_usb_otgfs.c fake_otgfs.c ${PIEZO_CM4_DIR}/src/usb_otgfs.c
+                      ${PIEZO_CM4_DIR}/src/usb_dev.c LIBS piezo_protocol test_modbus_regs)
+if(TARGET test_usb_otgfs)
+  target_include_directories(test_usb_otgfs PRIVATE ${PIEZO_CM4_DIR}/include)
+endif()
