@@ -18,6 +18,7 @@ import time
 
 from ..calibrate.target import QemuTarget
 from ..commands.flash import flash_image
+from ..errors import CliError
 from ..device import connect
 from ..calibrate.feedback import notch
 from ..golden.ctl import dcc_image, eupi_image
@@ -30,7 +31,16 @@ def busy_tick(image: str | None = None, icount: str = "shift=0,sleep=off", reps:
     """Run the phases; returns ``{"phases": [(name, requests, tick_time_max_ns)], "image": ...}``."""
     phases = []
     with QemuTarget(image=image, icount=icount) as q:
-        ctl = connect(q.port, timeout=10.0)
+        # under sleep=off a request delayed on this host can reach the
+        # firmware as two frames (emulated time jumps while it waits): the
+        # first identity read is retried, a dropped request later fails the run
+        for attempt in range(3):
+            try:
+                ctl = connect(q.port, timeout=10.0)
+                break
+            except CliError:
+                if attempt == 2:
+                    raise
 
         def mark(name: str, requests: int) -> None:
             phases.append((name, requests, ctl.status()["tick_time_max_ns"]))
