@@ -130,6 +130,8 @@ class QemuTarget:
             self.image = qemu_image()
         if not self.image.exists():
             raise CliError(f"no PIL image {self.image}")
+        import hashlib
+        self._sha256 = hashlib.sha256(self.image.read_bytes()).hexdigest()  # of the bytes QEMU loads
         cmd = ["qemu-system-arm", *QEMU_ARGS, "-icount", self.icount, "-kernel", str(self.image)]
         try:
             self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -149,9 +151,8 @@ class QemuTarget:
         return self
 
     def describe(self) -> dict:
-        import hashlib
         return {"kind": "qemu", "transport": "rtu", "image": str(self.image.resolve()),
-                "image_sha256": hashlib.sha256(self.image.read_bytes()).hexdigest()}
+                "image_sha256": self._sha256}
 
     def stats(self) -> str:
         return self._stats
