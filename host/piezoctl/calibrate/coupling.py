@@ -216,7 +216,7 @@ def calibrate_two_axis(c1, port: str, out: pathlib.Path, summary1: dict, *, kind
     if c2.identity.axis != 1:
         raise CliError(f"{port}: axis 2 answers as axis {c2.identity.axis + 1}")
     _log("axis 2: its own calibration")
-    summary2 = calibrate(c2, out / "axis2", kinds=kinds)
+    summary2 = calibrate(c2, out / "axis2", kinds=kinds, target=summary1.get("target"))
     ctls = {1: c1, 2: c2}
     sums = {1: summary1, 2: summary2}
     dirs = {1: out, 2: out / "axis2"}

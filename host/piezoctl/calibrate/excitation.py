@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["forc_sweeps", "chirp", "triangle_run", "multitone_run"]
+__all__ = ["forc_sweeps", "chirp", "chirp_frf", "triangle_run", "multitone_run"]
 
 
 def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: int = 2,
@@ -25,6 +25,10 @@ def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: i
     """
     out = []
     tick = ctl.identity.tick_hz
+    # a board's recorder is smaller than the SIL's (8192 samples on the
+    # STM32F405): decimate more rather than record less
+    cap = ctl.identity.rec_capacity // 2
+    decimation = max(decimation, int(np.ceil(periods / f_hz * tick / cap)))
     frames = int(round(periods / f_hz * tick / decimation))
     for top in tops:
         amp = int(np.floor(top * 32767.0))
@@ -40,15 +44,73 @@ def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: i
 
 
 def chirp(ctl, *, f0: float = 5.0, f1: float = 2000.0, duration_s: float = 3.0, amp_frac: float = 0.01,
-          centre_frac: float = 0.5) -> dict:
-    """A linear chirp in DIRECT mode; ``t`` [s], ``u`` [V], ``y`` [um] at the full tick rate."""
+          centre_frac: float = 0.5, bands=(5.0, 60.0, 400.0, 2000.0)) -> dict:
+    """A linear chirp in DIRECT mode; ``t`` [s], ``u`` [V], ``y`` [um].
+
+    At the full tick rate when the recorder holds ``duration_s`` of two
+    signals (the SIL's). A board's recorder (8192 samples on the STM32F405)
+    holds 0.4 s: a 5 Hz - 2 kHz chirp that short leaves its low end to a few
+    cycles at the edge of the analysis window, and the group delay read from
+    it (the preview) came out between 1 and 32 ticks from run to run. Then the
+    chirp is played in ``bands`` (edges [Hz]), each swept a quarter beyond its
+    edges and recorded whole, every second tick (2.5 samples per period at
+    2 kHz); ``bands`` in the result lists each recording with the range it
+    measures, and ``t``, ``u``, ``y`` are the recordings one after the other.
+    :func:`chirp_frf` estimates the frequency response either way.
+    """
     amp = int(amp_frac * 32767)
     offset = int((2 * centre_frac - 1) * 32767)
-    frames = int(duration_s * ctl.identity.tick_hz)
-    ctl.configure_wave("chirp", offset_q15=offset, amplitude_q15=amp, f_hz=f0, f_end_hz=f1, duration_s=duration_s)
-    cols = ctl.capture(["u", "y"], frames, trigger="software", start_wave=True)
-    ctl.command("stop_wave")
-    return {"t": cols["t"], "u": cols["u"], "y": cols["y"]}
+    tick = ctl.identity.tick_hz
+    cap = ctl.identity.rec_capacity // 2
+    if duration_s * tick <= cap:
+        frames = int(duration_s * tick)
+        ctl.configure_wave("chirp", offset_q15=offset, amplitude_q15=amp, f_hz=f0, f_end_hz=f1,
+                           duration_s=duration_s)
+        cols = ctl.capture(["u", "y"], frames, trigger="software", start_wave=True)
+        ctl.command("stop_wave")
+        return {"t": cols["t"], "u": cols["u"], "y": cols["y"], "bands": None}
+    dec = max(1, min(2, int(tick // (2.5 * f1))))
+    frames = cap
+    dur = frames * dec / tick
+    recs = []
+    for lo, hi in zip(bands[:-1], bands[1:]):
+        ctl.configure_wave("chirp", offset_q15=offset, amplitude_q15=amp, f_hz=lo / 1.25,
+                           f_end_hz=min(hi * 1.25, tick / (2.5 * dec)), duration_s=dur)
+        cols = ctl.capture(["u", "y"], frames, decimation=dec, trigger="software", start_wave=True)
+        ctl.command("stop_wave")
+        recs.append({"t": cols["t"], "u": cols["u"], "y": cols["y"], "f_lo": lo, "f_hi": hi})
+    t = np.concatenate([r["t"] + k * dur for k, r in enumerate(recs)])
+    return {"t": t, "u": np.concatenate([r["u"] for r in recs]), "y": np.concatenate([r["y"] for r in recs]),
+            "bands": recs}
+
+
+def chirp_frf(ch: dict, *, fmin: float = 5.0, fmax: float = 2000.0, coherence_min: float = 0.8):
+    """The frequency response of a :func:`chirp` (Welch H1, ``piezoctl.ident.tf``);
+    played in bands, each band's estimate over its own range, joined."""
+    from ..ident import tf as tfid
+    if not ch.get("bands"):
+        return tfid.frf_from_time(ch["t"], ch["u"], ch["y"], fmin=fmin, fmax=fmax, coherence_min=coherence_min)
+    parts = []
+    for b in ch["bands"]:
+        lo, hi = max(fmin, b["f_lo"]), min(fmax, b["f_hi"])
+        # three half-overlapping segments: a coherence that means something
+        f = tfid.frf_from_time(b["t"], b["u"], b["y"], nperseg=len(b["t"]) // 2, fmin=lo, fmax=hi,
+                               coherence_min=coherence_min)
+        keep = f.f_hz < hi if b is not ch["bands"][-1] else f.f_hz <= hi
+        parts.append(tfid.FRF(f.f_hz[keep], f.mag[keep], f.phase_deg[keep],
+                              None if f.coherence is None else f.coherence[keep]))
+    f_hz = np.concatenate([p.f_hz for p in parts])
+    mag = np.concatenate([p.mag for p in parts])
+    # each band's phase is unwrapped on its own; join them continuously
+    ph = [parts[0].phase_deg]
+    for p in parts[1:]:
+        if p.phase_deg.size and ph[-1].size:
+            p_shift = 360.0 * np.round((ph[-1][-1] - p.phase_deg[0]) / 360.0)
+            ph.append(p.phase_deg + p_shift)
+        else:
+            ph.append(p.phase_deg)
+    coh = None if any(p.coherence is None for p in parts) else np.concatenate([p.coherence for p in parts])
+    return tfid.FRF(f_hz, mag, np.concatenate(ph), coh)
 
 
 def _settled_capture(ctl, period_s: float, periods: int, settle_periods: int) -> dict:

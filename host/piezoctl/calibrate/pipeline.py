@@ -70,9 +70,12 @@ def _park(ctl, bottom_q15: int, seconds: float = 0.2, steps: int = 40) -> None:
     ctl.arm(False)
 
 
-def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 1.0) -> dict:
+def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 1.0,
+              target: dict | None = None) -> dict:
     """Calibrate the controller ``ctl`` and write ``out``/{model.json, table.bin, summary.json, report.html}.
 
+    ``target`` (what ran: ``kind``, ``transport``, for QEMU ``image`` and
+    ``image_sha256``) goes into the summary as it is.
     Returns the summary (also written as ``summary.json``).
     """
     t_start = time.monotonic()
@@ -129,7 +132,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
     params["controller_scale"] = sc.to_dict()
     save_model(out / "model.json", chosen, params, model.provenance)
     model = load_model(out / "model.json")
-    frf = tfid.frf_from_time(ch["t"], ch["u"], ch["y"], fmin=5.0, fmax=2000.0, coherence_min=0.8)
+    frf = excitation.chirp_frf(ch, fmin=5.0, fmax=2000.0, coherence_min=0.8)
     tf = tfid.fit_tf(frf, 2, method="pso-wcls")
     poles = np.asarray(tf.poles)
     f_res = float(np.max(np.abs(poles)) / (2 * np.pi)) if poles.size else float("nan")
@@ -233,6 +236,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         "scale": sc.to_dict(),
         "files": {"model": "model.json", "table": "table.bin", "report": "report.html", "data": "data/"},
         "duration_s": None,
+        "target": target,
     }
     from .report import write_report
     summary["duration_s"] = time.monotonic() - t_start

@@ -76,3 +76,93 @@ class SilTarget:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
         self._tmp.cleanup()
+
+
+def qemu_image() -> pathlib.Path:
+    """The PIL image ``piezoctl-pil`` (an ELF), built with the ``cortex-m4`` preset if missing.
+
+    ``PIEZOCTL_PIL_IMAGE`` names another image; ``PIEZOCTL_CM4_BUILD`` another build directory.
+    """
+    if os.environ.get("PIEZOCTL_PIL_IMAGE"):
+        return pathlib.Path(os.environ["PIEZOCTL_PIL_IMAGE"])
+    build = pathlib.Path(os.environ.get("PIEZOCTL_CM4_BUILD", ROOT / "build" / "cortex-m4"))
+    elf = build / "firmware" / "targets" / "cortex-m4" / "piezoctl-pil"
+    try:
+        if not (build / "CMakeCache.txt").exists():
+            subprocess.run(["cmake", "--preset", "cortex-m4"], cwd=ROOT, check=True, capture_output=True)
+        subprocess.run(["cmake", "--build", str(build), "--target", "piezoctl-pil", "-j", "1"],
+                       cwd=ROOT, check=True, capture_output=True)
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise CliError(f"cannot build the PIL image (piezoctl-pil): {exc}") from None
+    return elf
+
+
+# QEMU's netduinoplus2 (STM32F405) with USART1 on a pseudo-terminal.
+# -icount shift=0: one instruction is one nanosecond of emulated time, so the
+# tick (SysTick) and the work in it are counted in instructions, whatever the
+# host's load; sleep=on: while the processor waits (WFI) emulated time passes
+# with real time, so the RTU framer's silence (tick stamps, firmware comm.c)
+# is never shorter than the silence the host left on the line, and a request
+# written in one piece cannot be broken by a gap (docs/target-cortex-m4.md).
+QEMU_ARGS = ["-M", "netduinoplus2", "-nodefaults", "-display", "none",
+             "-chardev", "pty,id=uart1", "-serial", "chardev:uart1",
+             "-semihosting-config", "enable=on,target=native"]
+ICOUNT = "shift=0,sleep=on"
+
+
+class QemuTarget:
+    """The PIL image under ``qemu-system-arm`` for the duration of a ``with`` block.
+
+    ``port`` is ``rtu:/dev/pts/N:115200:N`` (a pseudo-terminal has no parity).
+    ``image`` is the ELF that runs; ``describe()`` gives the summary's ``target``.
+    """
+
+    def __init__(self, image: str | None = None, baud: int = 115200, icount: str = ICOUNT):
+        self.image = pathlib.Path(image) if image else None
+        self.icount = icount
+        self.baud = baud
+        self.proc = None
+        self.port = None
+        self._stats = ""
+
+    def __enter__(self) -> "QemuTarget":
+        if self.image is None:
+            self.image = qemu_image()
+        if not self.image.exists():
+            raise CliError(f"no PIL image {self.image}")
+        import hashlib
+        self._sha256 = hashlib.sha256(self.image.read_bytes()).hexdigest()  # of the bytes QEMU loads
+        cmd = ["qemu-system-arm", *QEMU_ARGS, "-icount", self.icount, "-kernel", str(self.image)]
+        try:
+            self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        except OSError as exc:
+            raise CliError(f"cannot start qemu-system-arm: {exc}") from None
+        lines = []
+        while True:
+            line = self.proc.stdout.readline()
+            if not line:
+                self.proc.wait()
+                raise CliError("QEMU did not start: " + " ".join(lines).strip())
+            lines.append(line)
+            m = re.search(r"redirected to (\S+)", line)
+            if m:
+                break
+        self.port = f"rtu:{m.group(1)}:{self.baud}:N"
+        return self
+
+    def describe(self) -> dict:
+        return {"kind": "qemu", "transport": "rtu", "image": str(self.image.resolve()),
+                "image_sha256": self._sha256}
+
+    def stats(self) -> str:
+        return self._stats
+
+    def __exit__(self, *exc) -> None:
+        if self.proc and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                out, _ = self.proc.communicate(timeout=10)
+                self._stats = (out or "").strip()
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()

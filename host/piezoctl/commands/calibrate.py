@@ -17,15 +17,17 @@ from __future__ import annotations
 import pathlib
 
 from ..calibrate.pipeline import calibrate
-from ..calibrate.target import SilTarget
+from ..calibrate.target import QemuTarget, SilTarget
 from ..device import connect
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("calibrate", help="calibrate a stage end to end (identify, flash, accept, report)",
                        description=__doc__.splitlines()[0])
-    p.add_argument("--target", required=True, help="sil (start a virtual controller) or a PORT: tcp:HOST:PORT, "
-                                                    "rtu:DEVICE[:BAUD], usb[:VID:PID]")
+    p.add_argument("--target", required=True, help="sil (start a virtual controller), qemu (the firmware image "
+                                                    "with the stage model under QEMU, over Modbus RTU) or a PORT: "
+                                                    "tcp:HOST:PORT, rtu:DEVICE[:BAUD], usb[:VID:PID]")
+    p.add_argument("--image", metavar="ELF", help="with --target qemu: the PIL image (default: build piezoctl-pil)")
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--stage", metavar="PARAMS.json", help="with --target sil: the stage parameter file")
     p.add_argument("--models", default="eupi,kp", help="candidate model kinds, best held-out error wins "
@@ -33,10 +35,14 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _calibrate(port: str, out: pathlib.Path, kinds) -> dict:
+def _target_of(port: str) -> dict:
+    return {"kind": "port", "transport": port.split(":", 1)[0], "port": port}
+
+
+def _calibrate(port: str, out: pathlib.Path, kinds, target: dict | None = None, timeout: float = 1.0) -> dict:
     """Axis 1; on a two-axis controller also axis 2 (DIR/axis2) and the cross-axis coupling."""
-    ctl = connect(port)
-    summary = calibrate(ctl, out, kinds=kinds)
+    ctl = connect(port, timeout=timeout)
+    summary = calibrate(ctl, out, kinds=kinds, target=target or _target_of(port))
     if ctl.identity.n_axes == 2:
         from ..calibrate.coupling import calibrate_two_axis
         summary = calibrate_two_axis(ctl, port, out, summary, kinds=kinds)
@@ -48,7 +54,12 @@ def run(args) -> int:
     kinds = tuple(k.strip() for k in args.models.split(",") if k.strip())
     if args.target == "sil":
         with SilTarget(stage=args.stage) as sil:
-            summary = _calibrate(sil.port, out, kinds)
+            summary = _calibrate(sil.port, out, kinds, {"kind": "sil", "transport": "tcp"})
+    elif args.target == "qemu":
+        # the recorder's readout walks the buffer per register (regmap.c): the
+        # last windows take longer than a second of emulated work
+        with QemuTarget(image=args.image) as pil:
+            summary = _calibrate(pil.port, out, kinds, pil.describe(), timeout=10.0)
     else:
         summary = _calibrate(args.target, out, kinds)
     print(f"calibrated: {summary['model']} -> {summary['table_kind']} table {summary['table_crc_hex']}; "

@@ -22,6 +22,16 @@ void piezo_tick_stop(void);
 /** Ticks since piezo_tick_start() (wraps after 2^32 ticks, about 5 days). */
 uint32_t piezo_tick_count(void);
 
+/** Processor cycles (168 MHz) from the instant the last tick was due to the
+ *  end of its work: entry latency, any wait behind masked code, and the work. */
+uint32_t piezo_tick_time_cycles(void);
+
+/** The largest piezo_tick_time_cycles() since start or the last reset. */
+uint32_t piezo_tick_time_max_cycles(void);
+
+/** Start a new maximum. */
+void piezo_tick_time_reset(void);
+
 /** The control loop's work for one tick, called from the SysTick handler. */
 void piezo_control_tick(void);
 

@@ -12,6 +12,7 @@
 
 #include "board.h"
 #include "controller.h"
+#include "flash_f4.h"
 #include "control.h"
 #include "tick.h"
 
@@ -44,10 +45,25 @@ void piezo_control_default_cfg(piezo_ctl_cfg_t *cfg)
     cfg->notch.b0_q24 = 1 << 24; /* pass-through until configured */
 }
 
+/* The board's converters and amplifier (weak: the PIL image puts the stage
+ * model's in their place). Until the converter drivers exist: 16-bit codes,
+ * a 0..150 V amplifier and a 0..100 um sensor, the ranges the identity
+ * registers report. */
+__attribute__((weak)) void piezo_control_board(piezo_ctl_cfg_t *cfg, piezo_control_range_t *range)
+{
+    piezo_control_default_cfg(cfg);
+    range->drive_min_mv = 0;
+    range->drive_max_mv = 150000;
+    range->position_min_nm = 0;
+    range->position_max_nm = 100000;
+}
+
+piezo_control_range_t piezo_control_range;
+
 int piezo_control_init(void)
 {
     piezo_ctl_cfg_t cfg;
-    piezo_control_default_cfg(&cfg);
+    piezo_control_board(&cfg, &piezo_control_range);
     return piezo_ctl_init(&piezo_axis, &cfg);
 }
 
@@ -69,4 +85,13 @@ void piezo_control_tick(void)
     piezo_adc_read(adc);
     piezo_ctl_tick(&piezo_axis, adc, &dac);
     piezo_dac_write(dac);
+}
+
+/* Tables persist in flash sectors 10 and 11 (flash_f4.c); the PIL image puts
+ * RAM in their place (QEMU models no flash interface). */
+__attribute__((weak)) const piezo_storage_t *piezo_control_storage(void)
+{
+    static piezo_storage_t io;
+    io = piezo_f4_flash_storage();
+    return &io;
 }

@@ -1,23 +1,13 @@
 /*
- * main.c - the firmware image: board, Modbus UART, then the 10 kHz tick runs
- * the control loop (piezo_control_tick) while the background loop serves the
- * line.
+ * main.c - the firmware image: board, control loop, Modbus RTU on USART1,
+ * then the 10 kHz tick runs the control loop (piezo_control_tick) while the
+ * background loop serves the line (comm.c).
  */
 #include "board.h"
+#include "comm.h"
 #include "control.h"
 #include "tick.h"
 #include "uart.h"
-
-#define PIEZO_MODBUS_BAUD 115200u
-
-/* The Modbus RTU framer (another issue) takes the received bytes; until it is
- * there they are dropped. */
-__attribute__((weak)) void piezo_comm_byte(uint8_t byte, uint32_t tick);
-__attribute__((weak)) void piezo_comm_byte(uint8_t byte, uint32_t tick)
-{
-    (void)byte;
-    (void)tick;
-}
 
 int main(void)
 {
@@ -26,13 +16,16 @@ int main(void)
     if (piezo_control_init() != 0) {
         piezo_board_fault("control init", 0);
     }
+    /* a stored table that does not load is reported by the status registers;
+     * the unit then runs without one */
+    (void)piezo_ctl_attach_store(&piezo_axis, piezo_control_storage());
+    if (piezo_comm_init() != 0) {
+        piezo_board_fault("comm init", 0);
+    }
     piezo_tick_start(PIEZO_TICK_RELOAD);
     piezo_irq_enable();
     for (;;) {
-        int c = piezo_uart_getc();
-        if (c >= 0) {
-            piezo_comm_byte((uint8_t)c, piezo_uart_last_rx_tick());
-        } else {
+        if (!piezo_comm_poll()) {
             piezo_wait_for_interrupt();
         }
     }

@@ -22,6 +22,8 @@ void BusFault_Handler(void);
 void UsageFault_Handler(void);
 void NMI_Handler(void);
 void SysTick_Handler(void);
+/* PendSV: the PIL image runs the stage model there (pil_stage.c); elsewhere unused. */
+void PendSV_Handler(void) __attribute__((weak, alias("Default_Handler")));
 void USART1_IRQHandler(void);
 
 #define PIEZO_STACK_CANARY 0x5AC4A11Eu
@@ -40,7 +42,7 @@ const piezo_vector_t piezo_vector_table[16u + PIEZO_N_IRQ] = {
     [6] = UsageFault_Handler,
     [11] = Default_Handler, /* SVCall */
     [12] = Default_Handler, /* DebugMonitor */
-    [14] = Default_Handler, /* PendSV */
+    [14] = PendSV_Handler,
     [15] = SysTick_Handler,
     [16u + PIEZO_IRQ_USART1] = USART1_IRQHandler,
 };

@@ -1,0 +1,46 @@
+"""The chirp in bands for a small recorder (``piezoctl.calibrate.excitation``):
+joined, the bands' frequency responses give the delay and the resonance that
+the calibration's feedback design reads from them."""
+
+import numpy as np
+import scipy.signal as sig
+
+from piezoctl.calibrate.excitation import chirp_frf
+from piezoctl.calibrate.feedback import group_delay_ticks, resonance_hz
+
+TICK = 10000
+F_RES, ZETA, DELAY = 970.0, 0.012, 2
+
+
+def _stage(u):
+    """Two ticks of delay, then a second-order mode (unit DC gain), at the tick rate."""
+    w = 2 * np.pi * F_RES
+    b, a = sig.cont2discrete(([w * w], [1, 2 * ZETA * w, w * w]), 1 / TICK, method="zoh")[:2]
+    y = sig.lfilter(np.ravel(b), a, u)
+    return np.concatenate([np.zeros(DELAY), y[:-DELAY]])
+
+
+def _band(lo, hi, frames=4096, dec=2, seed=0):
+    n = frames * dec
+    t = np.arange(n) / TICK
+    u = 0.01 * sig.chirp(t, lo / 1.25, t[-1], min(hi * 1.25, TICK / (2.5 * dec)))
+    y = _stage(u) + 1e-6 * np.random.default_rng(seed).standard_normal(n)
+    return {"t": t[::dec], "u": u[::dec], "y": y[::dec], "f_lo": lo, "f_hi": hi}
+
+
+def test_banded_chirp_gives_the_delay_and_the_resonance():
+    edges = (5.0, 60.0, 400.0, 2000.0)
+    bands = [_band(lo, hi, seed=k) for k, (lo, hi) in enumerate(zip(edges[:-1], edges[1:]))]
+    ch = {"t": None, "u": None, "y": None, "bands": bands}
+    frf = chirp_frf(ch, fmin=5.0, fmax=2000.0, coherence_min=0.8)
+    assert np.all(np.diff(frf.f_hz) > 0)
+    f_res = resonance_hz(frf)
+    assert abs(f_res - F_RES) < 0.02 * F_RES
+    # expected: the delay, half a tick of the zero-order hold, the mode's 2 zeta / w
+    expected = DELAY + 0.5 + 2 * ZETA / (2 * np.pi * F_RES) * TICK
+    sel = frf.f_hz < f_res / 3.0
+    slope = np.polyfit(frf.f_hz[sel], frf.phase_deg[sel], 1, w=frf.mag[sel])[0]
+    assert abs(-slope / 360.0 * TICK - expected) < 0.1
+    assert group_delay_ticks(frf, TICK, f_res / 3.0) == round(expected)
+    # the joined phase is continuous across the band edges
+    assert np.max(np.abs(np.diff(frf.phase_deg[frf.f_hz < 800]))) < 20.0
