@@ -193,8 +193,9 @@ class _DriveTerm(Term):
             ctx.refit_cache["band"] = band_cps(ctx.cal_h, ctx.cal_k0)
         xs = [self.h_with(ctx, setting, r.u, h, r.dt) for r, h in zip(ctx.cal, ctx.cal_h)]
         off = float(ctx.base["hysteresis"].get("offset", 0.0))
+        order = len(ctx.base["dynamics"]["a"]) - 1   # the current model's order: one ARX fit per setting
         ba = fit_dynamics(xs, [np.asarray(r.y, float) - off for r in ctx.cal], ctx.cal_k0, max_rows=40_000,
-                          band=ctx.refit_cache["band"])
+                          band=ctx.refit_cache["band"], orders=(order,))
         ctx.refit_cache[key] = ba
         return ba
 
