@@ -164,7 +164,8 @@ int main(int argc, char **argv)
                      i == 0 ? "" : ".axis2");
             uint32_t slot = PIEZO_STORE_RECORD_BYTES + PIEZO_TABLE_MAX_BYTES;
             if (piezo_flash_file_open(&flash[i], path, 2u * slot) != 0) {
-                fprintf(stderr, "sil-stage: cannot open flash file %s: %s\n", path, strerror(errno));
+                fprintf(stderr, "sil-stage: cannot open flash file %s: %s\n", path,
+                        flash[i].why[0] ? flash[i].why : strerror(errno));
                 return 1;
             }
             store[i] = piezo_flash_file_storage(&flash[i], slot);
