@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import os
 import pkgutil
 import sys
@@ -41,6 +42,9 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         ap.print_help()
         return 0
+    if not os.environ.get("PIEZOCTL_DEBUG"):
+        # pymodbus logs a failed connect on stderr; the command reports it as its one error line
+        logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     try:
         return int(args.func(args) or 0)
     except CliError as exc:
