@@ -85,7 +85,8 @@ def simulate_model(model, t, u, u2=None, x2=None) -> np.ndarray:
     try:
         kw = {"x2": np.asarray(x2, dtype=np.float64)} \
             if x2 is not None and "x2" in inspect.signature(mod.simulate).parameters else {}
-        y = np.asarray(mod.simulate(model.params, t, u, u2, **kw), dtype=np.float64)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # checked by check_finite
+            y = np.asarray(mod.simulate(model.params, t, u, u2, **kw), dtype=np.float64)
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, CliError):
             raise
