@@ -16,6 +16,7 @@ partial output (and an existing ``DIR`` as it was).
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import sys
@@ -109,6 +110,17 @@ def _publish(tmp: Path, out: Path) -> None:
     tmp.rmdir()
 
 
+def _repoint(out: Path, tmp: Path) -> None:
+    """Paths of the cleaned copies in the written files: from the temporary folder to ``out``."""
+    old, new = json.dumps(str(tmp))[1:-1], json.dumps(str(out.resolve()))[1:-1]
+    for name in ("diagnosis.json", "base_model.json", "refined_model.json", "report.html"):
+        f = out / name
+        if f.exists():
+            text = f.read_text(encoding="utf-8")
+            if old in text:
+                f.write_text(text.replace(old, new), encoding="utf-8")
+
+
 def run(args) -> int:
     from ..diagnose.run import diagnose
     if not (args.settle_s >= 0):
@@ -133,6 +145,8 @@ def run(args) -> int:
                        report=not args.no_report, png=args.png,
                        log=(lambda *a, **k: None) if args.quiet else print)
         _publish(tmp, out)
+        if any(r.dropped for r in recs):
+            _repoint(out, tmp)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
