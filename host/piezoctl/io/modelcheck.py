@@ -223,6 +223,7 @@ def _check_cascade(c: _Checker) -> None:
 def _check_refined(c: _Checker) -> None:
     c.num("u_mid")
     c.num("u_half", positive=True)
+    c.num("fs_hz", positive=True, optional=True)
     if not isinstance(c.get("hysteresis"), dict):
         raise c.fail("hysteresis", "expected an object")
     dyn = c.get("dynamics")
