@@ -24,14 +24,15 @@ def data_file(tmp_path):
 def test_round_trip_and_provenance(tmp_path, data_file):
     prov = make_provenance([str(data_file)], {"kp_levels": 10}, nrmse=[0.0123], rows=[2],
                            metrics={"time_s": 0.5})
-    params = {"w": np.arange(3.0), "L": np.int64(10), "nested": {"a": np.float32(0.5)}}
+    params = {"u_min": -1.0, "u_max": 1.0, "L": np.int64(2), "nmin": -1.0, "nmax": 1.0, "s": 1.0, "N": 3,
+              "w": np.arange(3.0), "offset": 0.0, "nested": {"a": np.float32(0.5)}}
     out = tmp_path / "m.json"
     save_model(out, "kp", params, prov)
     doc = json.loads(out.read_text())
     assert doc["format"] == FORMAT == "piezoctl-model" and doc["version"] == VERSION == 1
     m = load_model(out)
     assert m.kind == "kp" and m.version == 1
-    assert m.params == {"w": [0.0, 1.0, 2.0], "L": 10, "nested": {"a": 0.5}}
+    assert m.params["w"] == [0.0, 1.0, 2.0] and m.params["L"] == 2 and m.params["nested"] == {"a": 0.5}
     d = m.provenance["data"][0]
     assert d["sha256"] == hashlib.sha256(data_file.read_bytes()).hexdigest()
     assert d["rows"] == 2 and d["nrmse"] == pytest.approx(0.0123)
@@ -52,7 +53,9 @@ def test_save_refuses_nan_and_unknown_kind(tmp_path, data_file):
 
 
 def good_doc(data_file):
-    return {"format": FORMAT, "version": 1, "kind": "preisach", "params": {"n": 10},
+    return {"format": FORMAT, "version": 1, "kind": "preisach",
+            "params": {"u_min": 0.0, "u_max": 1.0, "n": 2, "alpha": [0.0, 0.0], "p1": 0.0, "p2": 0.0,
+                       "offset": 0.0},
             "provenance": {"tool_version": "0.1.0", "created": "2025-01-01T00:00:00Z",
                            "data": [{"path": str(data_file), "sha256": file_sha256(data_file),
                                      "nrmse": 0.1}],

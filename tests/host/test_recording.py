@@ -85,9 +85,9 @@ def test_missing_file(tmp_path):
 
 
 def test_bad_sample_rate_metadata(tmp_path):
-    rec = load_recording(write(tmp_path, "# sample_rate_hz: fast\nt,u,y\n0,0,0\n1,0,0\n"))
-    with pytest.raises(RecordingError, match="sample_rate_hz"):
-        rec.sample_rate_hz
+    # refused when the file is loaded (issue 13 item 8), naming the metadata line
+    with pytest.raises(RecordingError, match="line 1: metadata sample_rate_hz 'fast'"):
+        load_recording(write(tmp_path, "# sample_rate_hz: fast\nt,u,y\n0,0,0\n1,0,0\n"))
 
 
 def test_save_refuses_bad_input(tmp_path):

@@ -3,6 +3,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -62,28 +63,101 @@ static int ff_erase(void *ctx, uint32_t addr, uint32_t len)
     return fsync(f->fd) == 0 ? 0 : -1;
 }
 
+static uint32_t le32(const uint8_t *b)
+{
+    return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
+}
+
+/* What a slot record's first word says: 1 erased, 2 committed (store magic), 0 neither. */
+static int record_kind(const uint8_t *rec)
+{
+    uint32_t w = le32(rec);
+    return w == 0xFFFFFFFFu ? 1 : w == PIEZO_STORE_MAGIC ? 2 : 0;
+}
+
+static int refuse(piezo_flash_file_t *f, const char *fmt, unsigned long long a, unsigned long long b,
+                  const uint8_t *head, size_t nhead)
+{
+    char hex[3 * 8 + 1] = "";
+    for (size_t i = 0; i < nhead && i < 8; i++) {
+        snprintf(hex + 3 * i, sizeof hex - 3 * i, "%02x ", head[i]);
+    }
+    int n = snprintf(f->why, sizeof f->why, fmt, a, b);
+    if (nhead > 0 && n > 0 && (size_t)n < sizeof f->why) {
+        snprintf(f->why + n, sizeof f->why - (size_t)n, "; it begins %s", hex);
+    }
+    close(f->fd);
+    f->fd = -1;
+    errno = EINVAL;
+    return -1;
+}
+
 int piezo_flash_file_open(piezo_flash_file_t *f, const char *path, uint32_t size)
 {
     struct stat st;
-    f->fd = open(path, O_RDWR | O_CREAT, 0644);
+    uint32_t slot = size / 2u;
+    uint8_t rec[2][PIEZO_STORE_RECORD_BYTES];
+    f->why[0] = '\0';
     f->size = size;
+    f->fd = open(path, O_RDWR | O_CREAT, 0644);
     if (f->fd < 0) {
         return -1;
     }
     if (fstat(f->fd, &st) != 0) {
+        int e = errno;
         close(f->fd);
+        f->fd = -1;
+        errno = e;
         return -1;
     }
-    if ((uint64_t)st.st_size != size) {
-        /* new (or of another layout): a fresh, erased part */
-        if (ftruncate(f->fd, 0) != 0 || ff_erase(f, 0, size) != 0) {
+    if (!S_ISREG(st.st_mode)) {
+        return refuse(f, "not a regular file (mode %llo)%.0llu", (unsigned long long)(st.st_mode & 0170000u), 0,
+                      NULL, 0);
+    }
+    if (st.st_size == 0) {
+        /* new (or empty): a fresh, erased part */
+        if (ff_erase(f, 0, size) != 0) {
             int e = errno;
             close(f->fd);
+            f->fd = -1;
             errno = e;
             return -1;
         }
+        return 0;
     }
-    return 0;
+    /* an existing file: read what is there, change nothing unless it is a flash image of this layout */
+    uint8_t head[8];
+    ssize_t got = pread(f->fd, head, sizeof head, 0);
+    size_t nhead = got > 0 ? (size_t)got : 0u;
+    int k0 = -1, k1 = -1;
+    if ((uint64_t)st.st_size >= PIEZO_STORE_RECORD_BYTES &&
+        pread(f->fd, rec[0], sizeof rec[0], 0) == (ssize_t)sizeof rec[0]) {
+        k0 = record_kind(rec[0]);
+    }
+    if ((uint64_t)st.st_size >= (uint64_t)slot + PIEZO_STORE_RECORD_BYTES &&
+        pread(f->fd, rec[1], sizeof rec[1], (off_t)slot) == (ssize_t)sizeof rec[1]) {
+        k1 = record_kind(rec[1]);
+    }
+    if ((uint64_t)st.st_size == size) {
+        if (k0 > 0 && k1 > 0) {
+            return 0;
+        }
+        return refuse(f, "not a flash image: %llu bytes as expected, but slot records hold no store magic "
+                         "(slot A %llu); file left untouched",
+                      (unsigned long long)st.st_size, (unsigned long long)(k0 > 0), head, nhead);
+    }
+    if ((uint64_t)st.st_size < size && k0 > 0) {
+        return refuse(f, "truncated flash image: %llu of %llu bytes (a table in it would be lost); "
+                         "file left untouched, restore it or remove it to start erased",
+                      (unsigned long long)st.st_size, (unsigned long long)size, head, nhead);
+    }
+    if ((uint64_t)st.st_size > size && k0 > 0) {
+        return refuse(f, "a flash image of another layout: %llu bytes, this build uses %llu; file left untouched",
+                      (unsigned long long)st.st_size, (unsigned long long)size, head, nhead);
+    }
+    return refuse(f, "not a flash image: %llu bytes (a flash file is %llu) with no store record; "
+                     "file left untouched",
+                  (unsigned long long)st.st_size, (unsigned long long)size, head, nhead);
 }
 
 void piezo_flash_file_close(piezo_flash_file_t *f)

@@ -15,9 +15,19 @@
 typedef struct {
     int fd;
     uint32_t size;
+    char why[192]; /* after a failed open: what was found, one line (empty if errno says it all) */
 } piezo_flash_file_t;
 
-/** Opens (creating, erased) a flash file of size bytes; returns 0 or -1 with errno. */
+/**
+ * Opens a flash file of size bytes (two slots of size / 2), creating it erased
+ * when it does not exist or is empty. An existing file is used only if it is a
+ * flash image of this layout: exactly size bytes, and each slot's 16-byte
+ * record either erased (0xFF) or starting with PIEZO_STORE_MAGIC. Anything
+ * else is refused and left untouched (never truncated): a file of another
+ * size or content ("not a flash image"), or a flash image cut short ("truncated
+ * flash image", which would lose a table). Returns 0, or -1 with errno
+ * (EINVAL for a refused file) and f->why saying what was found.
+ */
 int piezo_flash_file_open(piezo_flash_file_t *f, const char *path, uint32_t size);
 void piezo_flash_file_close(piezo_flash_file_t *f);
 /** Storage callbacks over the file, two slots of slot_bytes. */

@@ -9,7 +9,10 @@
  *
  * PORT 0 picks a free port for axis 0. Axis i (two-axis stages) is served on
  * TCP port PORT + i (the picked port + i) and on RTU unit id i + 1. Tables persist in FILE (a flash
- * emulation; default $TMPDIR/piezoctl-sil-<port>.flash). One line on stdout
+ * emulation; default $TMPDIR/piezoctl-sil-<port>.flash; a missing or empty FILE is created
+ * erased, an existing one is used only if it is a flash image of this build's layout, and
+ * anything else, a truncated image included, is refused with exit status 1 and left untouched:
+ * flash_file.h). One line on stdout
  * says when it is ready and where; on exit it prints the tick statistics, as
  * a sentence and as a `sil-stage: stats key=value ...` line.
  *
@@ -164,7 +167,8 @@ int main(int argc, char **argv)
                      i == 0 ? "" : ".axis2");
             uint32_t slot = PIEZO_STORE_RECORD_BYTES + PIEZO_TABLE_MAX_BYTES;
             if (piezo_flash_file_open(&flash[i], path, 2u * slot) != 0) {
-                fprintf(stderr, "sil-stage: cannot open flash file %s: %s\n", path, strerror(errno));
+                fprintf(stderr, "sil-stage: cannot open flash file %s: %s\n", path,
+                        flash[i].why[0] ? flash[i].why : strerror(errno));
                 return 1;
             }
             store[i] = piezo_flash_file_storage(&flash[i], slot);

@@ -4,13 +4,34 @@
 ``--recordings`` are the data it does not match. Writes ``DIR/diagnosis.json``,
 ``DIR/base_model.json``, ``DIR/refined_model.json`` (kind ``refined``; both run
 with ``piezoctl simulate --model``) and ``DIR/report.html``.
+
+This wrapper checks the inputs before the diagnosis runs: every recording is
+loaded once here (the loader's checks, the outlier rule; ``--drop-outliers``
+drops and reports), the recordings must share one sample rate (the message
+names the file that differs) and be long enough (:data:`MIN_SETTLED_SAMPLES`
+samples after ``--settle-s``). The diagnosis writes into a sibling temporary
+directory that becomes ``DIR`` only when it succeeds: a failed run leaves no
+partial output (and an existing ``DIR`` as it was).
 """
 
 from __future__ import annotations
 
-from ..errors import CliError
+import json
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
 
-__all__ = ["add_parser", "run"]
+from ..errors import CliError
+from ..io.recording import describe_dropped, load_recording, save_recording
+
+__all__ = ["add_parser", "run", "check_inputs", "MIN_SETTLED_SAMPLES", "RATE_TOLERANCE"]
+
+# Samples each recording needs after --settle-s: the diagnosis splits every
+# recording into at least 6 cross-validation blocks and fits filters per block.
+MIN_SETTLED_SAMPLES = 600
+RATE_TOLERANCE = 0.01   # relative sample-rate difference accepted between recordings
 
 
 def add_parser(sub) -> None:
@@ -25,20 +46,110 @@ def add_parser(sub) -> None:
     p.add_argument("--settle-s", type=float, default=0.5, metavar="S",
                    help="seconds at the start of every recording left out of fits and scores (default 0.5)")
     p.add_argument("--max-terms", type=int, default=4, metavar="N", help="at most N added terms (default 4)")
+    p.add_argument("--drop-outliers", action="store_true",
+                   help="drop rows with non-physical values (docs/recordings.md) and say where, instead of "
+                        "refusing the file; the cleaned copies are kept in DIR/cleaned/")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     p.add_argument("--png", action="store_true", help="also write the report's figures as DIR/plots/*.png")
     p.add_argument("--quiet", action="store_true", help="print only the result")
     p.set_defaults(func=run)
 
 
+def check_inputs(paths: list[str], settle_s: float, drop_outliers: bool = False) -> list:
+    """Load every recording once and check what the diagnosis needs; return the recordings.
+
+    Raises
+    ------
+    CliError
+        A recording the loader refuses, a sample rate differing from the
+        first file's (naming both files), or too few samples after settling.
+    """
+    recs = [load_recording(p, drop_outliers=drop_outliers) for p in paths]
+    ref = recs[0]
+    for r in recs:
+        if r.dropped:
+            print(describe_dropped(r), file=sys.stderr)
+        n_settle = int(round(settle_s * r.sample_rate_hz))
+        if len(r) - n_settle < MIN_SETTLED_SAMPLES:
+            raise CliError(f"{r.path}: {len(r)} samples, {max(len(r) - n_settle, 0)} after --settle-s {settle_s:g}; "
+                           f"diagnose needs at least {MIN_SETTLED_SAMPLES} after settling")
+        if abs(r.sample_rate_hz / ref.sample_rate_hz - 1) > RATE_TOLERANCE:
+            raise CliError(f"{r.path}: sample rate {r.sample_rate_hz:.6g} Hz differs from {ref.path} "
+                           f"({ref.sample_rate_hz:.6g} Hz); all recordings must share one sample rate")
+    return recs
+
+
+def _cleaned_copies(recs, paths, where: Path) -> list[str]:
+    """Paths to pass on: the original file, or a cleaned copy in ``where`` when rows were dropped."""
+    out = []
+    for i, (r, p) in enumerate(zip(recs, paths)):
+        if not r.dropped:
+            out.append(p)
+            continue
+        d = where / f"{i:02d}"
+        d.mkdir(parents=True, exist_ok=True)
+        q = d / os.path.basename(p)
+        save_recording(q, r, meta={**r.meta, "cleaned_from": os.path.abspath(p),
+                                   "dropped_rows": len({o.line for o in r.dropped})})
+        out.append(str(q))
+    return out
+
+
+def _publish(tmp: Path, out: Path) -> None:
+    """Move the finished output from ``tmp`` to ``out`` (a rename when ``out`` does not exist)."""
+    if not out.exists():
+        os.rename(tmp, out)
+        return
+    if not out.is_dir():
+        raise CliError(f"--out {out}: exists and is not a directory")
+    for entry in tmp.iterdir():
+        dest = out / entry.name
+        if dest.is_dir() and not dest.is_symlink():
+            shutil.rmtree(dest)
+        os.replace(entry, dest)
+    tmp.rmdir()
+
+
+def _repoint(out: Path, tmp: Path) -> None:
+    """Paths of the cleaned copies in the written files: from the temporary folder to ``out``."""
+    old, new = json.dumps(str(tmp))[1:-1], json.dumps(str(out.resolve()))[1:-1]
+    for name in ("diagnosis.json", "base_model.json", "refined_model.json", "report.html"):
+        f = out / name
+        if f.exists():
+            text = f.read_text(encoding="utf-8")
+            if old in text:
+                f.write_text(text.replace(old, new), encoding="utf-8")
+
+
 def run(args) -> int:
     from ..diagnose.run import diagnose
-    if args.settle_s < 0:
+    if not (args.settle_s >= 0):
         raise CliError(f"--settle-s {args.settle_s:g}: must be >= 0")
     if args.max_terms < 0:
         raise CliError(f"--max-terms {args.max_terms}: must be >= 0")
-    doc = diagnose(args.calibration, args.recordings, args.out, settle_s=args.settle_s, max_terms=args.max_terms,
-                   report=not args.no_report, png=args.png, log=(lambda *a, **k: None) if args.quiet else print)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CliError(f"--out {out}: exists and is not a directory")
+    paths = list(args.calibration) + list(args.recordings)
+    recs = check_inputs(paths, args.settle_s, args.drop_outliers)
+    parent = out.resolve().parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=parent))
+    except OSError as exc:
+        raise CliError(f"--out {out}: cannot create: {exc.strerror or exc}") from None
+    try:
+        used = _cleaned_copies(recs, paths, tmp / "cleaned")
+        ncal = len(args.calibration)
+        doc = diagnose(used[:ncal], used[ncal:], str(tmp), settle_s=args.settle_s, max_terms=args.max_terms,
+                       report=not args.no_report, png=args.png,
+                       log=(lambda *a, **k: None) if args.quiet else print)
+        _publish(tmp, out)
+        if any(r.dropped for r in recs):
+            _repoint(out, tmp)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     fit = doc["fit"]
     print(f"named: {', '.join(doc['named'])}")
     print(f"NRMSE base {fit['base']['nrmse']:.4f} -> refined {fit['refined']['nrmse']:.4f} "

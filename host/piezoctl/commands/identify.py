@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import inspect
+import sys
 import time
 
 import numpy as np
@@ -32,7 +33,7 @@ from ..errors import CliError
 from ..ident import MODEL_KINDS, get_kind
 from ..ident.common import IdentError, Options, add_common_options, nrmse
 from ..io.modelfile import make_provenance, save_model
-from ..io.recording import Recording, load_recording
+from ..io.recording import Recording, describe_dropped, load_recording
 
 __all__ = ["add_parser", "run", "apply_delay", "skip_start", "identify"]
 
@@ -40,7 +41,7 @@ __all__ = ["add_parser", "run", "apply_delay", "skip_start", "identify"]
 _KIND_DESTS: dict[str, list[str]] = {}
 _KIND_BROKEN: dict[str, str] = {}
 
-COMMAND_OPTION_DESTS = ("u_range", "offset", "max_fit_rows", "delay_s", "skip_s")
+COMMAND_OPTION_DESTS = ("u_range", "offset", "max_fit_rows", "delay_s", "skip_s", "drop_outliers")
 
 
 class _Recorder:
@@ -78,6 +79,9 @@ def add_parser(sub) -> None:
     common.add_argument("--skip-s", type=float, default=0.0, metavar="S",
                         help="drop the first S seconds of every data file before fitting "
                              "(e.g. a start-up step and its ringing; default 0)")
+    common.add_argument("--drop-outliers", action="store_true",
+                        help="drop rows with non-physical values (docs/recordings.md) and say where, "
+                             "instead of refusing the file")
     _KIND_DESTS.clear()
     _KIND_BROKEN.clear()
     for kind in MODEL_KINDS:
@@ -141,7 +145,10 @@ def identify(kind: str, data_paths: list[str], options: Options, out: str | None
     if kind in _KIND_BROKEN:
         raise CliError(f"model kind {kind} is not available: {_KIND_BROKEN[kind]}")
     mod = get_kind(kind)
-    raw = [load_recording(p) for p in data_paths]
+    raw = [load_recording(p, drop_outliers=bool(options.get("drop_outliers", False))) for p in data_paths]
+    for r in raw:
+        if r.dropped:
+            print(describe_dropped(r), file=sys.stderr)
     recs = []
     delay_samples = []
     for r in raw:

@@ -6,20 +6,32 @@ header ``t,y``, one row per input row. ``--stage PARAMS.json`` runs the C stage
 model (SIL, :mod:`piezoctl.sil.stage`) instead, the same code the SIL build
 runs; for a two-axis stage it writes the first axis (``piezoctl stage
 simulate`` writes both). The two options are mutually exclusive.
+
+The input needs ``t`` and ``u`` only (``y`` is not read; ``u2`` and ``x2`` are
+used when present). Before running, the model's working size (samples x
+values per sample, :func:`piezoctl.io.modelcheck.work_columns`) is bounded by
+:data:`MAX_WORK_VALUES`; after, an output that is not finite everywhere is
+refused (naming the first row) and nothing is written.
 """
 
 from __future__ import annotations
 
 import inspect
+import sys
 
 import numpy as np
 
 from ..errors import CliError
 from ..ident import get_kind
+from ..io.modelcheck import work_columns
 from ..io.modelfile import load_model
-from ..io.recording import load_recording, write_csv
+from ..io.recording import describe_dropped, load_recording, write_csv
 
-__all__ = ["add_parser", "run", "simulate_model", "STAGE_SIMULATOR"]
+__all__ = ["add_parser", "run", "simulate_model", "STAGE_SIMULATOR", "MAX_WORK_VALUES"]
+
+# At most this many float64 values held by a model's simulation (samples x values
+# per sample): 2.5e8 values, 2 GB.
+MAX_WORK_VALUES = 250_000_000
 
 
 def _simulate_stage(params_path, t, u, u2):
@@ -42,7 +54,9 @@ def add_parser(sub) -> None:
     src.add_argument("--model", metavar="MODEL.json", help="model file written by piezoctl identify")
     src.add_argument("--stage", metavar="PARAMS.json", help="stage parameters for the C stage model (SIL)")
     p.add_argument("--input", required=True, metavar="X.csv", help="recording whose t, u (and u2) drive the model "
-                                                                   "(y is not needed but the file must be a valid recording)")
+                                                                   "(columns t,u are enough; y is not read)")
+    p.add_argument("--drop-outliers", action="store_true",
+                   help="drop rows with non-physical values (docs/recordings.md) instead of refusing the input")
     p.add_argument("--out", required=True, metavar="P.csv", help="output CSV, header t,y")
     p.set_defaults(func=run)
 
@@ -71,7 +85,8 @@ def simulate_model(model, t, u, u2=None, x2=None) -> np.ndarray:
     try:
         kw = {"x2": np.asarray(x2, dtype=np.float64)} \
             if x2 is not None and "x2" in inspect.signature(mod.simulate).parameters else {}
-        y = np.asarray(mod.simulate(model.params, t, u, u2, **kw), dtype=np.float64)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # checked by check_finite
+            y = np.asarray(mod.simulate(model.params, t, u, u2, **kw), dtype=np.float64)
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, CliError):
             raise
@@ -82,12 +97,39 @@ def simulate_model(model, t, u, u2=None, x2=None) -> np.ndarray:
     return y
 
 
+def check_work_size(model, samples: int) -> None:
+    """Refuse a run whose working size exceeds :data:`MAX_WORK_VALUES` (before allocating)."""
+    cols = work_columns(model.kind, model.params)
+    if samples * cols > MAX_WORK_VALUES:
+        raise CliError(f"{model.path}: kind {model.kind} would hold {samples} samples x {cols} values "
+                       f"= {samples * cols * 8 / 2**30:.1f} GiB (limit {MAX_WORK_VALUES * 8 / 2**30:.1f} GiB); "
+                       f"simulate a shorter input")
+
+
+def check_finite(y: np.ndarray, what: str, rec) -> None:
+    """Refuse non-finite output, naming the first input row it belongs to."""
+    bad = np.nonzero(~np.isfinite(y))[0]
+    if bad.size:
+        i = int(bad[0])
+        raise CliError(f"{what} gives a non-finite output ({y[i]}) at t = {rec.t[i]:.6g} s (sample {i}; "
+                       f"{bad.size} such samples) on {rec.path}; nothing written")
+
+
 def run(args) -> int:
-    rec = load_recording(args.input)
+    rec = load_recording(args.input, require=("t", "u"), drop_outliers=getattr(args, "drop_outliers", False))
+    if rec.dropped:
+        print(describe_dropped(rec), file=sys.stderr)
     if args.stage:
         y = np.asarray(STAGE_SIMULATOR(args.stage, rec.t, rec.u, rec.u2), dtype=np.float64)
+        what = f"stage model {args.stage}"
     else:
         model = load_model(args.model)
+        if model.kind == "hammerstein" and rec.u2 is None:
+            raise CliError(f"{args.input}: a hammerstein model is driven by the other axis: "
+                           f"the input needs a column u2")
+        check_work_size(model, len(rec))
         y = simulate_model(model, rec.t, rec.u, rec.u2, rec.x2)
+        what = f"{model.path} (kind {model.kind})"
+    check_finite(y, what, rec)
     write_csv(args.out, {"t": rec.t, "y": y})
     return 0

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import CliError
+from ..io.recording import load_recording
 from ..sil import stage as sil_stage
 
 
@@ -33,29 +34,17 @@ def _usage(p) -> int:
 
 
 def read_drive_csv(path: str) -> dict[str, np.ndarray]:
-    """Columns of a recording-format CSV as float arrays (``#`` lines skipped)."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            lines = [ln.strip() for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
-    except OSError as exc:
-        raise CliError(f"{path}: {exc.strerror}") from exc
-    if not lines:
-        raise CliError(f"{path}: no header line")
-    names = [c.strip() for c in lines[0].split(",")]
-    for need in ("t", "u"):
-        if need not in names:
-            raise CliError(f"{path}: no column '{need}' in the header ({', '.join(names)})")
-    rows = []
-    for i, ln in enumerate(lines[1:], start=2):
-        cells = ln.split(",")
-        if len(cells) != len(names):
-            raise CliError(f"{path}: data row {i - 1}: {len(cells)} values, the header has {len(names)}")
-        try:
-            rows.append([float(c) for c in cells])
-        except ValueError as exc:
-            raise CliError(f"{path}: data row {i - 1}: {exc}") from exc
-    data = np.array(rows, dtype=np.float64).reshape(len(rows), len(names))
-    return {n: data[:, j] for j, n in enumerate(names)}
+    """The drive columns t [s], u [V] (and u2 [V]) of a recording-format CSV.
+
+    Read by :func:`piezoctl.io.recording.load_recording` (``y`` not required),
+    so a drive gets the recordings' checks: numbers, finite, time increasing,
+    non-physical values refused naming file, line and column.
+    """
+    rec = load_recording(path, require=("t", "u"))
+    cols = {"t": rec.t, "u": rec.u}
+    if rec.u2 is not None:
+        cols["u2"] = rec.u2
+    return cols
 
 
 def run(args) -> int:

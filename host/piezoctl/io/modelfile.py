@@ -34,6 +34,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import CliError
+from .modelcheck import MAX_DEPTH, ModelFileError, check_params
 
 __all__ = [
     "FORMAT", "VERSION", "Model", "ModelFileError",
@@ -43,11 +44,9 @@ __all__ = [
 FORMAT = "piezoctl-model"
 VERSION = 1
 
+MAX_FILE_BYTES = 256 << 20   # a 100-level KP model is about 200 kB
+
 _HEX64 = re.compile(r"^[0-9a-f]{64}$")
-
-
-class ModelFileError(CliError):
-    """A model file is missing, malformed, of another format or version."""
 
 
 @dataclasses.dataclass
@@ -240,11 +239,17 @@ def load_model(path: str | os.PathLike) -> Model:
     ModelFileError
         Unreadable file, invalid JSON (with line and column), another
         ``format``, a ``version`` other than 1 (a newer one says so), unknown
-        ``kind``, ``params`` not an object, or incomplete ``provenance``.
+        ``kind``, ``params`` not an object, or incomplete ``provenance``;
+        JSON nested too deeply; and (a :class:`~piezoctl.io.modelcheck.ModelCheckError`)
+        parameters that do not fit their kind (:func:`~piezoctl.io.modelcheck.check_params`:
+        types, sizes, ranges, consistency).
     """
     where = os.fspath(path)
     try:
-        with open(path, "r", encoding="utf-8") as fh:
+        size = os.path.getsize(path)
+        if size > MAX_FILE_BYTES:
+            raise ModelFileError(f"{where}: {size} bytes; a model file is at most {MAX_FILE_BYTES} bytes")
+        with open(path, "r", encoding="utf-8-sig") as fh:
             text = fh.read()
     except OSError as exc:
         raise ModelFileError(f"{where}: cannot read: {exc.strerror or exc}") from None
@@ -254,6 +259,9 @@ def load_model(path: str | os.PathLike) -> Model:
         doc = json.loads(text, parse_constant=_refuse_constant)
     except json.JSONDecodeError as exc:
         raise ModelFileError(f"{where}: line {exc.lineno} column {exc.colno}: invalid JSON: {exc.msg}") from None
+    except RecursionError:
+        raise ModelFileError(f"{where}: JSON nested too deeply to read (a model file nests at most "
+                             f"{MAX_DEPTH} levels)") from None
     except ValueError as exc:
         raise ModelFileError(f"{where}: invalid JSON: {exc}") from None
     if not isinstance(doc, dict):
@@ -275,6 +283,7 @@ def load_model(path: str | os.PathLike) -> Model:
     _check_kind(doc["kind"], where)
     if not isinstance(doc["params"], dict):
         raise ModelFileError(f"{where}: 'params' must be an object")
+    check_params(doc["kind"], doc["params"], where)
     _check_provenance(doc["provenance"], where)
     return Model(kind=doc["kind"], params=doc["params"], provenance=doc["provenance"],
                  version=version, path=where)

@@ -36,7 +36,8 @@ class PymodbusClient(RegisterClient):
         else:
             raise ValueError(f"pymodbus does not carry {spec.kind!r}")
         if not self._client.connect():
-            what = ("cannot connect" if spec.kind == "tcp" else "cannot open serial device")
+            what = (f"cannot connect to {spec.host}:{spec.port} (host unreachable or no Modbus TCP server there)"
+                    if spec.kind == "tcp" else f"cannot open serial device {spec.device}")
             raise PortUnreachableError(f"{self.name}: {what}")
 
     def close(self) -> None:
