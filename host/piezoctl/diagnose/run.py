@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import tempfile
 import time
 from pathlib import Path
 
@@ -285,8 +283,8 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
     calibration, recordings : list of str
         Recording CSV files: calibration (fits the base model) and the recordings to explain.
     out_dir : str
-        Output directory. Written whole or not at all: the outputs are made in a temporary directory
-        beside it and moved into place when the diagnosis succeeded.
+        Output directory (created). The command (``commands/diagnose.py``) passes a temporary directory
+        that it publishes only when the diagnosis succeeded.
     settle_s : float
         Seconds [s] at the start of each recording left out of every fit and score.
     max_terms : int
@@ -304,46 +302,24 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
         The diagnosis document (as written).
     """
     t_start = time.perf_counter()
-    final = Path(out_dir)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    out = Path(tempfile.mkdtemp(prefix=f".{final.name}.", dir=final.parent))
-    try:
-        cal, recs, names = load(calibration, recordings)
-        base, base_info = fit_base_model(cal, calibration, settle_s, out, log, t_start)
-        ctx, located, outside_doc = locate(base, cal, recs, names, settle_s, block_s)
-        fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
-        block_all = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
-        e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
-        log(f"residual analysis done ({time.perf_counter() - t_start:.1f} s); base held-out NRMSE "
-            f"{np.sqrt(np.mean(e ** 2)) / ctx.y_span:.4f}")
-        fc_hp = min(3.0 * calibration_band_hz(cal, ctx.cal_k0), 0.1 / ctx.dt)
-        accepted, rounds, ctx_all, fctx = select(ctx, [TERMS[n] for n in VOCABULARY], recs, fold_all, block_all,
-                                                 max_terms, DEFAULTS["max_rows"], fc_hp, log)
-        log(f"selection done ({time.perf_counter() - t_start:.1f} s): {[a.name for a in accepted] or ['none']}")
-        fit, yr_all, held_pred = refine(ctx, ctx_all, fctx, recs, names, calibration, recordings, cal, settle_s, out)
-        doc = document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibration, recordings)
-        write_outputs(doc, out, ctx, yr_all, held_pred, report, png, t_start)
-        _move_into(out, final)
-    finally:
-        if out.exists():
-            shutil.rmtree(out, ignore_errors=True)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cal, recs, names = load(calibration, recordings)
+    base, base_info = fit_base_model(cal, calibration, settle_s, out, log, t_start)
+    ctx, located, outside_doc = locate(base, cal, recs, names, settle_s, block_s)
+    fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
+    block_all = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+    e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
+    log(f"residual analysis done ({time.perf_counter() - t_start:.1f} s); base held-out NRMSE "
+        f"{np.sqrt(np.mean(e ** 2)) / ctx.y_span:.4f}")
+    fc_hp = min(3.0 * calibration_band_hz(cal, ctx.cal_k0), 0.1 / ctx.dt)
+    accepted, rounds, ctx_all, fctx = select(ctx, [TERMS[n] for n in VOCABULARY], recs, fold_all, block_all,
+                                             max_terms, DEFAULTS["max_rows"], fc_hp, log)
+    log(f"selection done ({time.perf_counter() - t_start:.1f} s): {[a.name for a in accepted] or ['none']}")
+    fit, yr_all, held_pred = refine(ctx, ctx_all, fctx, recs, names, calibration, recordings, cal, settle_s, out)
+    doc = document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibration, recordings)
+    write_outputs(doc, out, ctx, yr_all, held_pred, report, png, t_start)
     return doc
-
-
-def _move_into(tmp: Path, final: Path) -> None:
-    """Move the finished outputs into ``final``: the directory itself when it does not exist, else file by file
-    (a directory the user named is never removed; only the files this command writes are replaced)."""
-    if not final.exists():
-        os.replace(tmp, final)
-        return
-    for item in tmp.iterdir():
-        dest = final / item.name
-        if item.is_dir():
-            dest.mkdir(exist_ok=True)
-            for f in item.iterdir():
-                os.replace(f, dest / f.name)
-        else:
-            os.replace(item, dest)
 
 
 def _jsonable(x):
