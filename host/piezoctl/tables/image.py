@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import __version__, interface
 
-__all__ = ["Section", "TableImage", "build_image", "parse_image", "TableImageError",
+__all__ = ["Section", "TableImage", "build_image", "parse_image", "check_image", "check_sections", "TableImageError",
            "tool_version_word"]
 
 _FMT = {"uint16": "<H", "uint32": "<I", "int32": "<i"}
@@ -196,8 +196,16 @@ def parse_image(img: bytes) -> TableImage:
         off += padded
     if off != end:
         raise TableImageError("bad_length", "bytes after the last section")
-    check_sections(hdr["kind"], sections)
     return TableImage(header=hdr, sections=sections, crc=crc)
+
+
+def check_image(img: bytes) -> TableImage:
+    """:func:`parse_image` and :func:`check_sections`: what a commit checks
+    before it runs the table's kernel (``piezo_table_check`` and
+    ``piezo_table_check_specs``)."""
+    t = parse_image(img)
+    check_sections(t.header["kind"], t.sections)
+    return t
 
 
 def check_sections(kind: int, sections: dict) -> None:
