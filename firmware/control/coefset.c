@@ -334,10 +334,7 @@ uint16_t piezo_coefset_load_info(piezo_coefset_t *cs, piezo_ff_state_t *ff, cons
         break;
     }
     if (r == 0u) {
-        cs->kind = info->kind; /* the sweep runs the set through piezo_ff_process */
-        r = piezo_coefset_sweep(cs, ff, NULL);
-    }
-    if (r == 0u) {
+        cs->kind = info->kind;
         cs->crc = info->crc;
         cs->version = info->table_version;
     } else {

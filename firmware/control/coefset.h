@@ -20,7 +20,8 @@
  *     and a0_inv * (a0 + k_ex) = 1 within the rounding of a0_inv. The host
  *     runs the same integer check before it builds a table
  *     (piezoctl.tables.build.firmware_small_gain);
- *   - the sweep (piezo_coefset_sweep): the set's own kernel, in its own
+ *   - at commit (the controller's, after the load): the sweep
+ *     (piezo_coefset_sweep): the set's own kernel, in its own
  *     integer arithmetic, over the whole q15 reference range, both directions
  *     and minor loops nested inside each half (PIEZO_CS_SWEEP_STEP_Q15 per
  *     sample, about 5600 samples), the drive fed back as the tick does.
@@ -125,6 +126,8 @@ typedef struct {
  * the kernel checks. Returns PIEZO_TABLE_REASON_OK or the reason; on failure
  * cs->kind is 0 and cs must not be used. piezo_coefset_load_info() takes an
  * image already checked by piezo_table_check() (the controller's commit).
+ * Neither runs the sweep: the controller's commit and boot do, after the load
+ * (a benchmark may load a table whose straight line is only a placeholder).
  */
 uint16_t piezo_coefset_load(piezo_coefset_t *cs, piezo_ff_state_t *ff, const uint8_t *img, uint32_t len);
 uint16_t piezo_coefset_load_info(piezo_coefset_t *cs, piezo_ff_state_t *ff, const piezo_table_info_t *info);

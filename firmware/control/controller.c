@@ -52,7 +52,7 @@ static uint16_t load_xc_spare(piezo_ctl_t *c, const piezo_table_info_t *info, in
 
 /* Loads an image into the set that is neither active nor previous and binds
  * its kernel state; neither of those is touched. */
-static uint16_t load_spare(piezo_ctl_t *c, const piezo_table_info_t *info, int8_t *spare)
+static uint16_t load_spare(piezo_ctl_t *c, const piezo_table_info_t *info, int8_t *spare, int sweep)
 {
     uint16_t r;
     int8_t i = 0;
@@ -61,6 +61,13 @@ static uint16_t load_spare(piezo_ctl_t *c, const piezo_table_info_t *info, int8_
     }
     *spare = i;
     r = piezo_coefset_load_info(&c->set[*spare], &c->ff[*spare], info);
+    if (r == PIEZO_TABLE_REASON_OK && sweep) {
+        /* the kernel over the whole reference range, here: never in the tick */
+        r = piezo_coefset_sweep(&c->set[*spare], &c->ff[*spare], NULL);
+        if (r != PIEZO_TABLE_REASON_OK) {
+            c->set[*spare].kind = 0u;
+        }
+    }
     if (r == PIEZO_TABLE_REASON_OK && piezo_ff_bind(&c->ff[*spare], &c->set[*spare]) != PIEZO_OK) {
         c->set[*spare].kind = 0u;
         r = PIEZO_TABLE_REASON_OUT_OF_RANGE;
@@ -84,14 +91,14 @@ uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io)
     }
     if ((r = piezo_table_check(c->staged, len, &info)) != PIEZO_TABLE_REASON_OK ||
                    (r = piezo_table_check_specs(&info)) != PIEZO_TABLE_REASON_OK ||
-        (r = check_stage(c, &info)) != PIEZO_TABLE_REASON_OK || (r = load_spare(c, &info, &spare)) != PIEZO_TABLE_REASON_OK) {
+        (r = check_stage(c, &info)) != PIEZO_TABLE_REASON_OK || (r = load_spare(c, &info, &spare, 1)) != PIEZO_TABLE_REASON_OK) {
         return r;
     }
     c->active = spare; /* before the first tick: no swap needed */
     /* the previous table, kept loaded so a rollback needs no flash read */
     len = piezo_store_load(&c->store, 1, c->staged, sizeof c->staged);
     if (len != 0u && piezo_table_check(c->staged, len, &info) == PIEZO_TABLE_REASON_OK &&
-        piezo_table_check_specs(&info) == PIEZO_TABLE_REASON_OK && check_stage(c, &info) == PIEZO_TABLE_REASON_OK && load_spare(c, &info, &spare) == PIEZO_TABLE_REASON_OK) {
+        piezo_table_check_specs(&info) == PIEZO_TABLE_REASON_OK && check_stage(c, &info) == PIEZO_TABLE_REASON_OK && load_spare(c, &info, &spare, 1) == PIEZO_TABLE_REASON_OK) {
         c->previous = spare;
     }
     memset(c->staged, 0, sizeof c->staged);
@@ -509,7 +516,7 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint8_t session, uint32_t len)
                 c->xc_pending = spare;
                 c->last_commit_xc = 1u;
             }
-        } else if ((r = load_spare(c, &info, &spare)) == PIEZO_TABLE_REASON_OK) {
+        } else if ((r = load_spare(c, &info, &spare, session != PIEZO_CTL_SESSION_LOCAL)) == PIEZO_TABLE_REASON_OK) {
             if (c->have_store && (r = piezo_store_save(&c->store, c->staged, len)) != PIEZO_TABLE_REASON_OK) {
                 c->set[spare].kind = 0u;
             } else {

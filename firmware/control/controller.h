@@ -253,8 +253,10 @@ int piezo_ctl_stage_write(piezo_ctl_t *c, uint8_t session, uint32_t offset, cons
 int piezo_ctl_clear_staged(piezo_ctl_t *c, uint8_t session);
 /** Check and commit the staged image (len 0: all staged bytes). */
 uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint8_t session, uint32_t len);
-/** Unlock, stage a whole image and commit it, as an upload would: for a
- *  target that loads a table of its own (or a test). Returns the reason. */
+/** Stage a whole image and commit it in the target's own session: for a
+ *  target that loads a table compiled into it (or a test). Every check of a
+ *  commit but the sweep runs (the sweep checks tables that arrive over a
+ *  session and tables booted from the store). Returns the reason. */
 uint16_t piezo_ctl_load_image(piezo_ctl_t *c, const uint8_t *img, uint32_t len);
 uint16_t piezo_ctl_rollback(piezo_ctl_t *c, uint8_t session);
 /** CRC of the active cross-coupling table (0 when none). */

@@ -75,7 +75,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         fail();
     }
     before = piezo_ctl_active_crc(&ctl);
-    r = piezo_ctl_load_image(&ctl, img, len);
+    /* over a session, as a client's upload: every check, the sweep included */
+    piezo_ctl_set_key(&ctl, TEST_UNLOCK_KEY);
+    if (piezo_ctl_unlock(&ctl, 1u, TEST_UNLOCK_KEY, 0u) != 0 || piezo_ctl_stage_write(&ctl, 1u, 0u, img, len) != 0) {
+        fail();
+    }
+    r = piezo_ctl_commit(&ctl, 1u, 0u);
     tick(0);
 #ifdef FUZZ_COMMIT_TRACE /* -DFUZZ_COMMIT_TRACE: the reason of each input on stderr */
     fprintf(stderr, "image of %u bytes: reason %u\n", (unsigned)len, (unsigned)r);
