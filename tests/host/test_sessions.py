@@ -95,3 +95,27 @@ def test_provisioned_key(tmp_path):
         connect(s.spec, key="0C0FFEE5").unlock()
     finally:
         s.stop()
+
+
+def test_idle_and_half_sent_connections_do_not_lock_clients_out(sil):
+    """Four connections that never send, then three half-sent requests: a new
+    client is served once they have idled evict_min_idle_ms, and a half-sent
+    request is closed after partial_timeout_ms (docs/protocol.md)."""
+    import socket
+    import time
+
+    slots = interface.MODBUS_TCP["slots"]
+    idle = [socket.create_connection(("127.0.0.1", sil.port)) for _ in range(slots)]
+    time.sleep(interface.MODBUS_TCP["evict_min_idle_ms"] / 1000.0 + 0.2)
+    ctl = connect(sil.spec)
+    assert ctl.status()["tick_count"] > 0
+    half = socket.create_connection(("127.0.0.1", sil.port))
+    half.sendall(bytes([0, 1, 0, 0, 0, 6, 1, 4]))  # 8 of 12 bytes
+    half.settimeout(5.0)
+    t0 = time.monotonic()
+    assert half.recv(10) == b""
+    dt = time.monotonic() - t0
+    assert interface.MODBUS_TCP["partial_timeout_ms"] / 1000.0 - 0.1 <= dt < 3.0
+    assert ctl.status()["tick_count"] > 0  # the polling client kept its slot
+    for s in idle + [half]:
+        s.close()
