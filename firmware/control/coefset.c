@@ -15,9 +15,9 @@ static uint16_t reason_of(int err)
         return PIEZO_TABLE_REASON_OK;
     case PIEZO_EORDER:
         return PIEZO_TABLE_REASON_NOT_MONOTONIC;
-    case PIEZO_ERANGE:
-        return PIEZO_TABLE_REASON_BAD_LENGTH;
     default:
+        /* PIEZO_EINVAL and PIEZO_ERANGE: a value or a kernel bound (the
+         * section counts were checked against the set's capacity before) */
         return PIEZO_TABLE_REASON_OUT_OF_RANGE;
     }
 }
@@ -219,48 +219,139 @@ static uint16_t load_eupi_inverse(piezo_coefset_t *cs, piezo_ff_state_t *ff, con
     return r != 0u ? r : check_small_gain(cs);
 }
 
-uint16_t piezo_coefset_load(piezo_coefset_t *cs, piezo_ff_state_t *ff, const uint8_t *img, uint32_t len)
+/* Drive of the sweep's reference r through the set (u_applied: the drive of
+ * the previous sample, as the tick feeds it back). */
+#define SWEEP_BINS (65536u >> 6)
+
+/* rail: per 64-LSB bin of the reference, where the rising major branch sat
+ * on a rail (bit 0 bottom, bit 1 top); NULL on other segments. check_rail:
+ * the falling major branch refuses a bin railed the same way, if the table's
+ * own straight line reaches that reference inside the drive range. */
+static uint16_t sweep_segment(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int32_t *r, int32_t to,
+                              int16_t *u, piezo_sweep_stats_t *st, uint8_t *rail, int check_rail)
 {
-    piezo_table_info_t info;
+    int32_t dir = to > *r ? 1 : -1;
+    while (*r != to) {
+        int32_t next = *r + dir * (int32_t)PIEZO_CS_SWEEP_STEP_Q15;
+        int16_t un;
+        if ((dir > 0 && next > to) || (dir < 0 && next < to)) {
+            next = to;
+        }
+        *r = next;
+        un = piezo_ff_process(ff, cs, (int16_t)next, *u);
+        st->samples++;
+        /* monotone: along a rising reference the drive must not fall (and
+         * the reverse), beyond the rounding of the kernels */
+        if (dir * ((int32_t)un - *u) < -(int32_t)PIEZO_CS_SWEEP_TOL_Q15) {
+            return PIEZO_TABLE_REASON_NOT_MONOTONIC;
+        }
+        if (dir * ((int32_t)un - *u) < st->worst_step_q15) {
+            st->worst_step_q15 = dir * ((int32_t)un - *u);
+        }
+        /* a reference inside the central part of the position range that
+         * gets the same rail whichever way it is approached */
+        if (rail != NULL) {
+            uint32_t bin = (uint32_t)(next + 32768) >> 6;
+            uint8_t at = un == PIEZO_Q15_MIN ? 1u : un == PIEZO_Q15_MAX ? 2u : 0u;
+            int16_t ul = piezo_line_q15((int16_t)next, cs->open_loop_gain_q24, cs->open_loop_offset_q15);
+            if (!check_rail) {
+                rail[bin] |= at;
+            } else if ((rail[bin] & at) != 0u && ul >= -(int32_t)PIEZO_CS_SWEEP_LINE_Q15 &&
+                       ul <= (int32_t)PIEZO_CS_SWEEP_LINE_Q15) {
+                return PIEZO_TABLE_REASON_OUTPUT_RANGE;
+            }
+        }
+        *u = un;
+    }
+    return PIEZO_TABLE_REASON_OK;
+}
+
+/* The sweep's reversal points (q15 reference): the whole range up and down
+ * twice, then minor loops nested inside the upper and the lower half. */
+static const int32_t sweep_points[] = {
+    PIEZO_Q15_MIN, PIEZO_Q15_MAX, PIEZO_Q15_MIN, PIEZO_Q15_MAX, 0, 16384, 8192, 12288, 10240,
+    PIEZO_Q15_MIN, -16384, -24576, -20480, -22528, 0,
+};
+
+uint16_t piezo_coefset_sweep(piezo_coefset_t *cs, piezo_ff_state_t *ff, piezo_sweep_stats_t *stats)
+{
+    piezo_sweep_stats_t local;
+    piezo_sweep_stats_t *st = stats != NULL ? stats : &local;
+    uint8_t rail[SWEEP_BINS];
+    int32_t r;
+    int16_t u;
+    uint16_t res = PIEZO_TABLE_REASON_OK;
+    st->samples = 0u;
+    st->worst_step_q15 = 0;
+    /* the open-loop line first: the middle of the position range must have
+     * a drive inside the drive range */
+    {
+        int16_t ul = piezo_line_q15(0, cs->open_loop_gain_q24, cs->open_loop_offset_q15);
+        if (ul == PIEZO_Q15_MIN || ul == PIEZO_Q15_MAX) {
+            return PIEZO_TABLE_REASON_OUTPUT_RANGE;
+        }
+    }
+    if (piezo_ff_bind(ff, cs) != PIEZO_OK) {
+        return PIEZO_TABLE_REASON_OUT_OF_RANGE;
+    }
+    /* the reset state: the drive rested at the bottom of the range */
+    r = PIEZO_Q15_MIN;
+    u = piezo_ff_process(ff, cs, (int16_t)r, PIEZO_Q15_MIN);
+    memset(rail, 0, sizeof rail);
+    for (size_t i = 1; i < sizeof sweep_points / sizeof sweep_points[0] && res == PIEZO_TABLE_REASON_OK; i++) {
+        /* segments 1 and 2: the major loop, rising then falling */
+        res = sweep_segment(ff, cs, &r, sweep_points[i], &u, st, i <= 2u ? rail : NULL, i == 2u);
+    }
+    (void)piezo_ff_bind(ff, cs); /* leave the state as a fresh bind does */
+    return res;
+}
+
+uint16_t piezo_coefset_load_info(piezo_coefset_t *cs, piezo_ff_state_t *ff, const piezo_table_info_t *info)
+{
     const piezo_section_t *ctl;
     uint16_t r;
     cs->kind = 0u;
-    if ((r = piezo_table_check(img, len, &info)) != 0u) {
+    if ((r = need(info, PIEZO_SECTION_CTL_SCALARS, PIEZO_SECTION_TYPE_INT32, 4u, 4u, &ctl)) != 0u) {
         return r;
     }
-    if ((r = need(&info, PIEZO_SECTION_CTL_SCALARS, PIEZO_SECTION_TYPE_INT32, 4u, 4u, &ctl)) != 0u) {
-        return r;
-    }
+    /* ranges: interface.toml (checked by piezo_table_check) */
     cs->open_loop_gain_q24 = piezo_section_i32(ctl, 0);
     cs->open_loop_offset_q15 = piezo_section_i32(ctl, 1);
     cs->y_to_u_gain_q24 = piezo_section_i32(ctl, 2);
     cs->y_offset_q15 = piezo_section_i32(ctl, 3);
-    /* gains positive; offsets within +-2 FS so that r g + o 2^24 fits int64 easily */
-    if (cs->open_loop_gain_q24 <= 0 || cs->y_to_u_gain_q24 <= 0 ||
-        cs->open_loop_offset_q15 < -65536 || cs->open_loop_offset_q15 > 65536 ||
-        cs->y_offset_q15 < -65536 || cs->y_offset_q15 > 65536) {
-        return PIEZO_TABLE_REASON_OUT_OF_RANGE;
-    }
-    switch (info.kind) {
+    switch (info->kind) {
     case PIEZO_TABLE_KIND_KP_DCC:
-        r = load_kp_dcc(cs, ff, &info);
+        r = load_kp_dcc(cs, ff, info);
         break;
     case PIEZO_TABLE_KIND_RKP:
-        r = load_rkp(cs, ff, &info);
+        r = load_rkp(cs, ff, info);
         break;
     case PIEZO_TABLE_KIND_EUPI_INVERSE:
-        r = load_eupi_inverse(cs, ff, &info);
+        r = load_eupi_inverse(cs, ff, info);
         break;
     default:
         r = PIEZO_TABLE_REASON_BAD_KIND;
         break;
     }
     if (r == 0u) {
-        cs->kind = info.kind;
-        cs->crc = info.crc;
-        cs->version = info.table_version;
+        cs->kind = info->kind;
+        cs->crc = info->crc;
+        cs->version = info->table_version;
+    } else {
+        cs->kind = 0u;
     }
     return r;
+}
+
+uint16_t piezo_coefset_load(piezo_coefset_t *cs, piezo_ff_state_t *ff, const uint8_t *img, uint32_t len)
+{
+    piezo_table_info_t info;
+    uint16_t r;
+    cs->kind = 0u;
+    if ((r = piezo_table_check(img, len, &info)) != 0u || (r = piezo_table_check_specs(&info)) != 0u) {
+        return r;
+    }
+    return piezo_coefset_load_info(cs, ff, &info);
 }
 
 int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs)
@@ -309,22 +400,25 @@ int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_
     }
 }
 
-uint16_t piezo_image_kind(const uint8_t *img, uint32_t len)
-{
-    return len >= PIEZO_TABLE_HDR_BYTES ? piezo_le16(img + PIEZO_TABLE_HDR_KIND_OFFSET) : 0u;
-}
-
 uint16_t piezo_xcset_load(piezo_xcset_t *xs, struct piezo_xc *st, const uint8_t *img, uint32_t len)
 {
     piezo_table_info_t info;
+    uint16_t r;
+    xs->kind = 0u;
+    if ((r = piezo_table_check(img, len, &info)) != 0u || (r = piezo_table_check_specs(&info)) != 0u) {
+        return r;
+    }
+    return piezo_xcset_load_info(xs, st, &info);
+}
+
+uint16_t piezo_xcset_load_info(piezo_xcset_t *xs, struct piezo_xc *st, const piezo_table_info_t *ip)
+{
+    const piezo_table_info_t info = *ip;
     const piezo_section_t *sc, *a, *b, *e, *eta, *xi;
     struct piezo_xc_coef *k = &xs->xc;
     uint32_t m, nch, npow, ndeg;
     uint16_t r;
     xs->kind = 0u;
-    if ((r = piezo_table_check(img, len, &info)) != 0u) {
-        return r;
-    }
     if (info.kind != PIEZO_TABLE_KIND_CROSS_COUPLING) {
         return PIEZO_TABLE_REASON_BAD_KIND;
     }

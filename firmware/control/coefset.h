@@ -8,7 +8,8 @@
  * leaves the running table as it was.
  *
  * Validation on load (reason codes from common/interface.toml):
- *   - the image itself: piezo_table_check() (CRC, versions, lengths, sections);
+ *   - the image itself: piezo_table_check() (CRC, versions, lengths, sections,
+ *     every element in its documented range), done once by the caller;
  *   - every section the kind needs, with the right type and count;
  *   - ranges and order: each kernel's own init check (thresholds monotonic,
  *     weights and gains in range) on a scratch instance;
@@ -18,7 +19,20 @@
  *     a bound on |d(G_UPI + P - k_ex u)/du| for |u| <= 1 (normalized drive),
  *     and a0_inv * (a0 + k_ex) = 1 within the rounding of a0_inv. The host
  *     runs the same integer check before it builds a table
- *     (piezoctl.tables.build.firmware_small_gain).
+ *     (piezoctl.tables.build.firmware_small_gain);
+ *   - at commit (the controller's, after the load): the sweep
+ *     (piezo_coefset_sweep): the set's own kernel, in its own
+ *     integer arithmetic, over the whole q15 reference range, both directions
+ *     and minor loops nested inside each half (PIEZO_CS_SWEEP_STEP_Q15 per
+ *     sample, about 5600 samples), the drive fed back as the tick does.
+ *     Refused: a drive that falls while the reference rises (or the reverse)
+ *     by more than PIEZO_CS_SWEEP_TOL_Q15 (not_monotonic); a reference whose
+ *     drive sits on the same q15 rail on the rising and on the falling major
+ *     branch (64-LSB bins) although the table's own straight line (the
+ *     stage's uncompensated drive, ctl_scalars) reaches it with a drive
+ *     within +-PIEZO_CS_SWEEP_LINE_Q15, and a line on a rail at the middle
+ *     of the position range (output_range). It runs at commit, in the main
+ *     context: never in the tick.
  */
 #ifndef PIEZO_COEFSET_H
 #define PIEZO_COEFSET_H
@@ -26,6 +40,7 @@
 #include <stdint.h>
 
 #include "dcc.h"
+#include "table_image.h"
 #include "eupi_inv.h"
 #include "kp.h"
 #include "rkp.h"
@@ -96,12 +111,29 @@ typedef struct {
     int64_t inv_work_q39[PIEZO_CS_MAX_UPI_R * PIEZO_CS_MAX_UPI_A];
 } piezo_ff_state_t;
 
+/* The commit sweep (see above). */
+#define PIEZO_CS_SWEEP_STEP_Q15 64u      /* reference step per sample */
+#define PIEZO_CS_SWEEP_TOL_Q15 64u       /* drive may move against the reference by this much */
+#define PIEZO_CS_SWEEP_LINE_Q15 28672u  /* no rail where the line's drive is within 7/8 FS */
+
+typedef struct {
+    uint32_t samples;        /* kernel calls */
+    int32_t worst_step_q15;  /* most negative drive step along the reference's direction */
+} piezo_sweep_stats_t;
+
 /**
  * Fill cs from an image (len bytes) and validate it; ff is scratch state for
  * the kernel checks. Returns PIEZO_TABLE_REASON_OK or the reason; on failure
- * cs->kind is 0 and cs must not be used.
+ * cs->kind is 0 and cs must not be used. piezo_coefset_load_info() takes an
+ * image already checked by piezo_table_check() (the controller's commit).
+ * Neither runs the sweep: the controller's commit and boot do, after the load
+ * (a benchmark may load a table whose straight line is only a placeholder).
  */
 uint16_t piezo_coefset_load(piezo_coefset_t *cs, piezo_ff_state_t *ff, const uint8_t *img, uint32_t len);
+uint16_t piezo_coefset_load_info(piezo_coefset_t *cs, piezo_ff_state_t *ff, const piezo_table_info_t *info);
+
+/** Run the sweep on a loaded set (ff is bound and left bound and reset). */
+uint16_t piezo_coefset_sweep(piezo_coefset_t *cs, piezo_ff_state_t *ff, piezo_sweep_stats_t *stats);
 
 /** Bind the feedforward state to a loaded set and reset it. Returns a piezo_err code. */
 int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs);
@@ -137,14 +169,12 @@ typedef struct {
     int32_t xi_q24[PIEZO_XC_MAX_CH * PIEZO_XC_MAX_M * PIEZO_XC_MAX_DEG];
 } piezo_xcset_t;
 
-/** Kind field of an image's header (0 if len cannot hold a header). */
-uint16_t piezo_image_kind(const uint8_t *img, uint32_t len);
-
 /**
  * Fill xs from a cross_coupling image and validate it; st is the kernel
  * instance, initialized on success. Returns PIEZO_TABLE_REASON_OK or the
  * reason; on failure xs->kind is 0.
  */
 uint16_t piezo_xcset_load(piezo_xcset_t *xs, struct piezo_xc *st, const uint8_t *img, uint32_t len);
+uint16_t piezo_xcset_load_info(piezo_xcset_t *xs, struct piezo_xc *st, const piezo_table_info_t *info);
 
 #endif /* PIEZO_COEFSET_H */

@@ -24,6 +24,7 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
     c->xc_active = -1;
     c->xc_pending = -1;
     c->xc_previous = -1;
+    c->staged_owner = -1;
     c->wave_cfg.kind = PIEZO_WAVE_OFF;
     if ((rc = piezo_pid_init(&c->pid, &c->cfg.pid)) != PIEZO_OK ||
         (rc = piezo_biquad_init(&c->notch, &c->cfg.notch)) != PIEZO_OK ||
@@ -35,21 +36,23 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
     return PIEZO_OK;
 }
 
+static uint16_t check_stage(const piezo_ctl_t *c, const piezo_table_info_t *info);
+
 /* A cross-coupling image into the coupling slot that is neither active nor
  * previous. */
-static uint16_t load_xc_spare(piezo_ctl_t *c, const uint8_t *img, uint32_t len, int8_t *spare)
+static uint16_t load_xc_spare(piezo_ctl_t *c, const piezo_table_info_t *info, int8_t *spare)
 {
     int8_t i = 0;
     while (i == c->xc_active || i == c->xc_previous) {
         i++;
     }
     *spare = i;
-    return piezo_xcset_load(&c->xset[i], &c->xc[i], img, len);
+    return piezo_xcset_load_info(&c->xset[i], &c->xc[i], info);
 }
 
 /* Loads an image into the set that is neither active nor previous and binds
  * its kernel state; neither of those is touched. */
-static uint16_t load_spare(piezo_ctl_t *c, const uint8_t *img, uint32_t len, int8_t *spare)
+static uint16_t load_spare(piezo_ctl_t *c, const piezo_table_info_t *info, int8_t *spare, int sweep)
 {
     uint16_t r;
     int8_t i = 0;
@@ -57,7 +60,14 @@ static uint16_t load_spare(piezo_ctl_t *c, const uint8_t *img, uint32_t len, int
         i++;
     }
     *spare = i;
-    r = piezo_coefset_load(&c->set[*spare], &c->ff[*spare], img, len);
+    r = piezo_coefset_load_info(&c->set[*spare], &c->ff[*spare], info);
+    if (r == PIEZO_TABLE_REASON_OK && sweep) {
+        /* the kernel over the whole reference range, here: never in the tick */
+        r = piezo_coefset_sweep(&c->set[*spare], &c->ff[*spare], NULL);
+        if (r != PIEZO_TABLE_REASON_OK) {
+            c->set[*spare].kind = 0u;
+        }
+    }
     if (r == PIEZO_TABLE_REASON_OK && piezo_ff_bind(&c->ff[*spare], &c->set[*spare]) != PIEZO_OK) {
         c->set[*spare].kind = 0u;
         r = PIEZO_TABLE_REASON_OUT_OF_RANGE;
@@ -70,6 +80,7 @@ uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io)
     uint32_t len;
     int8_t spare;
     uint16_t r;
+    piezo_table_info_t info;
     if (piezo_store_open(&c->store, io, c->staged) != PIEZO_OK) {
         return PIEZO_TABLE_REASON_STORAGE_FAILED;
     }
@@ -78,14 +89,16 @@ uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io)
     if (len == 0u) {
         return PIEZO_TABLE_REASON_OK; /* nothing stored yet */
     }
-    r = load_spare(c, c->staged, len, &spare);
-    if (r != PIEZO_TABLE_REASON_OK) {
+    if ((r = piezo_table_check(c->staged, len, &info)) != PIEZO_TABLE_REASON_OK ||
+                   (r = piezo_table_check_specs(&info)) != PIEZO_TABLE_REASON_OK ||
+        (r = check_stage(c, &info)) != PIEZO_TABLE_REASON_OK || (r = load_spare(c, &info, &spare, 1)) != PIEZO_TABLE_REASON_OK) {
         return r;
     }
     c->active = spare; /* before the first tick: no swap needed */
     /* the previous table, kept loaded so a rollback needs no flash read */
     len = piezo_store_load(&c->store, 1, c->staged, sizeof c->staged);
-    if (len != 0u && load_spare(c, c->staged, len, &spare) == PIEZO_TABLE_REASON_OK) {
+    if (len != 0u && piezo_table_check(c->staged, len, &info) == PIEZO_TABLE_REASON_OK &&
+        piezo_table_check_specs(&info) == PIEZO_TABLE_REASON_OK && check_stage(c, &info) == PIEZO_TABLE_REASON_OK && load_spare(c, &info, &spare, 1) == PIEZO_TABLE_REASON_OK) {
         c->previous = spare;
     }
     memset(c->staged, 0, sizeof c->staged);
@@ -324,30 +337,112 @@ void piezo_ctl_stop_wave(piezo_ctl_t *c)
     c->wave.running = 0u;
 }
 
-int piezo_ctl_unlock(piezo_ctl_t *c, uint16_t key)
+void piezo_ctl_set_key(piezo_ctl_t *c, uint32_t key)
 {
-    if (key == 0u) {
-        c->unlocked = 0u;
-        return PIEZO_OK;
+    c->key = key;
+    c->unlocked = 0u;
+    c->unlock_bad_run = 0u;
+}
+
+void piezo_ctl_set_stage(piezo_ctl_t *c, const piezo_ctl_stage_t *stage)
+{
+    c->stage = *stage;
+}
+
+static uint8_t session_bit(uint8_t session)
+{
+    return (uint8_t)(1u << (session & 7u));
+}
+
+int piezo_ctl_is_unlocked(const piezo_ctl_t *c, uint8_t session)
+{
+    return session < PIEZO_CTL_SESSIONS && (c->unlocked & session_bit(session)) != 0u;
+}
+
+/* How long after the last wrong key every unlock is refused [ms]: none
+ * before backoff_after wrong keys in a row, then backoff_base doubling up to
+ * backoff_max, and lockout_ms from lockout_after on. */
+static uint32_t wait_ms(uint32_t bad_run)
+{
+    uint32_t w = PIEZO_UNLOCK_BACKOFF_BASE_MS;
+    if (bad_run >= PIEZO_UNLOCK_LOCKOUT_AFTER) {
+        return PIEZO_UNLOCK_LOCKOUT_MS;
     }
-    if (key != PIEZO_MODBUS_UNLOCK_KEY) {
-        c->unlocked = 0u;
-        c->st.bad_unlocks++;
+    if (bad_run < PIEZO_UNLOCK_BACKOFF_AFTER) {
+        return 0u;
+    }
+    for (uint32_t i = PIEZO_UNLOCK_BACKOFF_AFTER; i < bad_run && w < PIEZO_UNLOCK_BACKOFF_MAX_MS; i++) {
+        w *= 2u;
+    }
+    return w < PIEZO_UNLOCK_BACKOFF_MAX_MS ? w : PIEZO_UNLOCK_BACKOFF_MAX_MS;
+}
+
+uint32_t piezo_ctl_unlock_wait_ms(const piezo_ctl_t *c, uint32_t now_ms)
+{
+    uint32_t w = wait_ms(c->unlock_bad_run), since = now_ms - c->bad_at_ms;
+    return c->unlock_bad_run == 0u || since >= w ? 0u : w - since;
+}
+
+int piezo_ctl_unlock(piezo_ctl_t *c, uint8_t session, uint32_t key, uint32_t now_ms)
+{
+    if (session >= PIEZO_CTL_SESSIONS) {
         return PIEZO_EINVAL;
     }
-    c->unlocked = 1u;
+    if (piezo_ctl_unlock_wait_ms(c, now_ms) != 0u) {
+        return PIEZO_EBUSY; /* backoff or lockout: not even a right key counts */
+    }
+    if (c->key == 0u || key != c->key) {
+        c->unlocked &= (uint8_t)~session_bit(session);
+        c->st.bad_unlocks++;
+        c->unlock_bad_run++;
+        c->bad_at_ms = now_ms;
+        return PIEZO_EKEY;
+    }
+    c->unlock_bad_run = 0u;
+    c->unlocked |= session_bit(session);
     return PIEZO_OK;
 }
 
-int piezo_ctl_stage_write(piezo_ctl_t *c, uint32_t offset, const uint8_t *data, uint32_t len)
+void piezo_ctl_lock(piezo_ctl_t *c, uint8_t session)
 {
-    if (!c->unlocked) {
-        c->st.table_result = PIEZO_TABLE_REASON_LOCKED;
-        return PIEZO_EORDER;
+    c->unlocked &= (uint8_t)~session_bit(session);
+}
+
+void piezo_ctl_end_session(piezo_ctl_t *c, uint8_t session)
+{
+    piezo_ctl_lock(c, session);
+    if (c->staged_owner == (int8_t)session) {
+        c->staged_len = 0u; /* the upload dies with its session */
+        c->staged_owner = -1;
+    }
+}
+
+/* May this session change the staged bank? (unlocked, and no other
+ * session's upload in it) */
+static uint16_t may_stage(const piezo_ctl_t *c, uint8_t session)
+{
+    if (!piezo_ctl_is_unlocked(c, session)) {
+        return PIEZO_TABLE_REASON_LOCKED;
+    }
+    if (c->staged_len != 0u && c->staged_owner >= 0 && c->staged_owner != (int8_t)session) {
+        return PIEZO_TABLE_REASON_NOT_OWNER;
+    }
+    return PIEZO_TABLE_REASON_OK;
+}
+
+int piezo_ctl_stage_write(piezo_ctl_t *c, uint8_t session, uint32_t offset, const uint8_t *data, uint32_t len)
+{
+    uint16_t r = may_stage(c, session);
+    if (r != PIEZO_TABLE_REASON_OK) {
+        c->st.table_result = r;
+        return PIEZO_EPERM;
     }
     if (offset > sizeof c->staged || len > sizeof c->staged - offset) {
         c->st.table_result = PIEZO_TABLE_REASON_BAD_LENGTH;
         return PIEZO_ERANGE;
+    }
+    if (c->staged_len == 0u) {
+        c->staged_owner = (int8_t)session;
     }
     memcpy(c->staged + offset, data, len);
     if (offset + len > c->staged_len) {
@@ -356,44 +451,72 @@ int piezo_ctl_stage_write(piezo_ctl_t *c, uint32_t offset, const uint8_t *data, 
     return PIEZO_OK;
 }
 
-/* The image length the staged header claims, or 0 if it cannot be one. */
-static uint32_t staged_image_len(const piezo_ctl_t *c)
+int piezo_ctl_clear_staged(piezo_ctl_t *c, uint8_t session)
 {
-    uint32_t payload;
-    if (c->staged_len < PIEZO_TABLE_HDR_BYTES + 4u) {
-        return 0u;
+    uint16_t r = may_stage(c, session);
+    if (r != PIEZO_TABLE_REASON_OK) {
+        c->st.table_result = r;
+        return PIEZO_EPERM;
     }
-    payload = piezo_le32(c->staged + PIEZO_TABLE_HDR_PAYLOAD_LEN_OFFSET);
-    if (payload > PIEZO_TABLE_MAX_BYTES || PIEZO_TABLE_HDR_BYTES + payload + 4u > c->staged_len) {
-        return 0u;
-    }
-    return PIEZO_TABLE_HDR_BYTES + payload + 4u;
+    c->staged_len = 0u;
+    c->staged_owner = -1;
+    return PIEZO_OK;
 }
 
-uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len)
+/* Is the image built for this controller's stage and axis? (1 mV / 1 nm of
+ * rounding between the host's and the target's conversion) */
+static uint16_t check_stage(const piezo_ctl_t *c, const piezo_table_info_t *info)
+{
+    const piezo_ctl_stage_t *s = &c->stage;
+    if (!s->known) {
+        return PIEZO_TABLE_REASON_OK; /* a target that does not say (unit tests, bench images) */
+    }
+    if (info->axis != s->axis) {
+        return PIEZO_TABLE_REASON_WRONG_AXIS;
+    }
+    if ((int64_t)info->drive_min_mv - s->drive_min_mv > 1 || (int64_t)s->drive_min_mv - info->drive_min_mv > 1 ||
+        (int64_t)info->drive_max_mv - s->drive_max_mv > 1 || (int64_t)s->drive_max_mv - info->drive_max_mv > 1 ||
+        (int64_t)info->position_min_nm - s->position_min_nm > 1 ||
+        (int64_t)s->position_min_nm - info->position_min_nm > 1 ||
+        (int64_t)info->position_max_nm - s->position_max_nm > 1 ||
+        (int64_t)s->position_max_nm - info->position_max_nm > 1) {
+        return PIEZO_TABLE_REASON_WRONG_STAGE;
+    }
+    return PIEZO_TABLE_REASON_OK;
+}
+
+uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint8_t session, uint32_t len)
 {
     uint16_t r;
     int8_t spare;
-    if (!c->unlocked) {
-        r = PIEZO_TABLE_REASON_LOCKED;
-    } else if (c->pending >= 0) {
+    piezo_table_info_t info;
+    if ((r = may_stage(c, session)) != PIEZO_TABLE_REASON_OK) {
+        c->st.table_result = r;
+        return r; /* someone else's upload stays theirs */
+    } else if (c->pending >= 0 || c->xc_pending >= 0) {
         r = PIEZO_TABLE_REASON_BUSY;
     } else if (c->staged_len == 0u) {
         r = PIEZO_TABLE_REASON_NOTHING_STAGED;
     } else {
         if (len == 0u) {
-            len = staged_image_len(c);
+            len = c->staged_len; /* the image is what was uploaded */
         }
-        if (len == 0u || len > c->staged_len) {
+        /* the header is read once, here, after its CRC: everything below
+         * dispatches on info */
+        if (len > c->staged_len) {
             r = PIEZO_TABLE_REASON_BAD_LENGTH;
-        } else if (piezo_image_kind(c->staged, len) == PIEZO_TABLE_KIND_CROSS_COUPLING) {
+        } else if ((r = piezo_table_check(c->staged, len, &info)) != PIEZO_TABLE_REASON_OK ||
+                   (r = piezo_table_check_specs(&info)) != PIEZO_TABLE_REASON_OK ||
+                   (r = check_stage(c, &info)) != PIEZO_TABLE_REASON_OK) {
+            /* refused as it is */
+        } else if (info.kind == PIEZO_TABLE_KIND_CROSS_COUPLING) {
             /* the coupling slot: not written to the store */
-            if ((r = load_xc_spare(c, c->staged, len, &spare)) == PIEZO_TABLE_REASON_OK) {
+            if ((r = load_xc_spare(c, &info, &spare)) == PIEZO_TABLE_REASON_OK) {
                 c->xc_previous = c->xc_active;
                 c->xc_pending = spare;
                 c->last_commit_xc = 1u;
             }
-        } else if ((r = load_spare(c, c->staged, len, &spare)) == PIEZO_TABLE_REASON_OK) {
+        } else if ((r = load_spare(c, &info, &spare, session != PIEZO_CTL_SESSION_LOCAL)) == PIEZO_TABLE_REASON_OK) {
             if (c->have_store && (r = piezo_store_save(&c->store, c->staged, len)) != PIEZO_TABLE_REASON_OK) {
                 c->set[spare].kind = 0u;
             } else {
@@ -406,6 +529,7 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len)
     }
     if (r != PIEZO_TABLE_REASON_BUSY) {
         c->staged_len = 0u; /* every commit consumes the upload, good or bad */
+        c->staged_owner = -1;
     }
     c->st.table_result = r;
     return r;
@@ -413,21 +537,30 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len)
 
 uint16_t piezo_ctl_load_image(piezo_ctl_t *c, const uint8_t *img, uint32_t len)
 {
-    if (img == NULL || piezo_ctl_unlock(c, PIEZO_MODBUS_UNLOCK_KEY) != PIEZO_OK) {
-        return PIEZO_TABLE_REASON_LOCKED;
+    uint8_t was = c->unlocked;
+    uint16_t r;
+    if (img == NULL) {
+        return PIEZO_TABLE_REASON_BAD_LENGTH;
     }
+    /* the target's own session: local code needs no key */
+    c->unlocked |= session_bit(PIEZO_CTL_SESSION_LOCAL);
     c->staged_len = 0u;
-    if (piezo_ctl_stage_write(c, 0u, img, len) != PIEZO_OK) {
-        return c->st.table_result;
+    c->staged_owner = -1;
+    if (piezo_ctl_stage_write(c, PIEZO_CTL_SESSION_LOCAL, 0u, img, len) != PIEZO_OK) {
+        r = c->st.table_result;
+    } else {
+        r = piezo_ctl_commit(c, PIEZO_CTL_SESSION_LOCAL, len);
     }
-    return piezo_ctl_commit(c, len);
+    c->unlocked = (uint8_t)(was & ~session_bit(PIEZO_CTL_SESSION_LOCAL));
+    return r;
 }
 
-uint16_t piezo_ctl_rollback(piezo_ctl_t *c)
+uint16_t piezo_ctl_rollback(piezo_ctl_t *c, uint8_t session)
 {
     uint16_t r;
     int8_t prev = c->previous;
-    if (c->unlocked && c->last_commit_xc) {
+    int unlocked = piezo_ctl_is_unlocked(c, session);
+    if (unlocked && c->last_commit_xc) {
         /* the coupling slot (RAM only): back to the previous coupling table or none */
         if (c->xc_pending >= 0) {
             r = PIEZO_TABLE_REASON_BUSY;
@@ -443,13 +576,12 @@ uint16_t piezo_ctl_rollback(piezo_ctl_t *c)
             }
             c->xc_previous = -1;
             c->last_commit_xc = 0u;
-            c->staged_len = 0u;
             r = PIEZO_TABLE_REASON_OK;
         }
         c->st.table_result = r;
         return r;
     }
-    if (!c->unlocked) {
+    if (!unlocked) {
         r = PIEZO_TABLE_REASON_LOCKED;
     } else if (c->pending >= 0) {
         r = PIEZO_TABLE_REASON_BUSY;
@@ -461,7 +593,6 @@ uint16_t piezo_ctl_rollback(piezo_ctl_t *c)
         (void)piezo_ff_bind(&c->ff[prev], &c->set[prev]);
         c->previous = -1; /* one level: the rolled-back table is not kept */
         c->pending = prev;
-        c->staged_len = 0u;
         r = PIEZO_TABLE_REASON_OK;
     }
     c->st.table_result = r;

@@ -122,6 +122,23 @@ typedef struct {
     uint16_t table_result;     /* reason code of the last table command */
 } piezo_ctl_status_t;
 
+/* Sessions: who holds an unlock and owns the staged upload. A transport
+ * numbers its sessions 0..PIEZO_CTL_SESSIONS-2 (TCP: one per connection
+ * slot; RTU: the line); the last one is the target's own code
+ * (piezo_ctl_load_image). */
+#define PIEZO_CTL_SESSIONS 8u
+#define PIEZO_CTL_SESSION_LOCAL 7u
+
+/* The stage a controller drives, as its identity registers say; an image
+ * built for another one is refused (wrong_stage, wrong_axis). known = 0: the
+ * target does not say, and nothing is compared. */
+typedef struct {
+    uint8_t known;
+    uint16_t axis;
+    int32_t drive_min_mv, drive_max_mv;
+    int32_t position_min_nm, position_max_nm;
+} piezo_ctl_stage_t;
+
 typedef struct {
     piezo_ctl_cfg_t cfg;
     piezo_ctl_status_t st;
@@ -158,7 +175,12 @@ typedef struct {
     uint8_t staged[PIEZO_TABLE_MAX_BYTES];
     uint32_t staged_len;
     uint32_t staged_crc;       /* CRC field of the last complete staged image */
-    uint8_t unlocked;
+    int8_t staged_owner;       /* session that staged it, -1 = none */
+    uint8_t unlocked;          /* bit s: session s is unlocked */
+    uint32_t key;              /* provisioned unlock key, 0 = none (every unlock refused) */
+    uint32_t unlock_bad_run;   /* wrong keys in a row (any session) */
+    uint32_t bad_at_ms;        /* when the last one came */
+    piezo_ctl_stage_t stage;
     piezo_store_t store;
     uint8_t have_store;
 
@@ -207,14 +229,36 @@ void piezo_ctl_clear_faults(piezo_ctl_t *c);
 int piezo_ctl_start_wave(piezo_ctl_t *c);  /* from wave_cfg; triggers a SOFTWARE recorder */
 void piezo_ctl_stop_wave(piezo_ctl_t *c);
 
-/* Tables. Writes need piezo_ctl_unlock() with the key first. */
-int piezo_ctl_unlock(piezo_ctl_t *c, uint16_t key);
-int piezo_ctl_stage_write(piezo_ctl_t *c, uint32_t offset, const uint8_t *data, uint32_t len);
-uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint32_t len);
-/** Unlock, stage a whole image and commit it, as an upload would: for a
- *  target that loads a table of its own (or a test). Returns the reason. */
+/* Provisioning: the unlock key (>= 32 bits; 0 = none, every unlock refused)
+ * and the stage this controller drives. */
+void piezo_ctl_set_key(piezo_ctl_t *c, uint32_t key);
+void piezo_ctl_set_stage(piezo_ctl_t *c, const piezo_ctl_stage_t *stage);
+
+/* Unlock, per session. A wrong key returns PIEZO_EKEY; from
+ * PIEZO_UNLOCK_BACKOFF_AFTER wrong keys in a row (any session) every unlock
+ * is refused with PIEZO_EBUSY for a backoff that doubles with each further
+ * wrong key, and from PIEZO_UNLOCK_LOCKOUT_AFTER for PIEZO_UNLOCK_LOCKOUT_MS.
+ * now_ms: the caller's clock (wraps at 2^32). */
+int piezo_ctl_unlock(piezo_ctl_t *c, uint8_t session, uint32_t key, uint32_t now_ms);
+/** Milliseconds until an unlock is considered again (0: now). */
+uint32_t piezo_ctl_unlock_wait_ms(const piezo_ctl_t *c, uint32_t now_ms);
+int piezo_ctl_is_unlocked(const piezo_ctl_t *c, uint8_t session);
+void piezo_ctl_lock(piezo_ctl_t *c, uint8_t session);
+/** The session ended (connection closed): its unlock and its upload go. */
+void piezo_ctl_end_session(piezo_ctl_t *c, uint8_t session);
+
+/* Tables. The staged bank belongs to the session that wrote its first byte;
+ * another session's write, clear or commit is refused (not_owner). */
+int piezo_ctl_stage_write(piezo_ctl_t *c, uint8_t session, uint32_t offset, const uint8_t *data, uint32_t len);
+int piezo_ctl_clear_staged(piezo_ctl_t *c, uint8_t session);
+/** Check and commit the staged image (len 0: all staged bytes). */
+uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint8_t session, uint32_t len);
+/** Stage a whole image and commit it in the target's own session: for a
+ *  target that loads a table compiled into it (or a test). Every check of a
+ *  commit but the sweep runs (the sweep checks tables that arrive over a
+ *  session and tables booted from the store). Returns the reason. */
 uint16_t piezo_ctl_load_image(piezo_ctl_t *c, const uint8_t *img, uint32_t len);
-uint16_t piezo_ctl_rollback(piezo_ctl_t *c);
+uint16_t piezo_ctl_rollback(piezo_ctl_t *c, uint8_t session);
 /** CRC of the active cross-coupling table (0 when none). */
 uint32_t piezo_ctl_coupling_crc(const piezo_ctl_t *c);
 /** CRC and version of the active table (0, 0 when none). */

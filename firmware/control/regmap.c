@@ -18,6 +18,21 @@ void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl)
     m->rec_cfg = ctl->rec.cfg;
 }
 
+void piezo_regmap_provision(piezo_regmap_t *m, uint32_t key)
+{
+    piezo_ctl_stage_t st = {1u, m->axis, m->drive_min_mv, m->drive_max_mv, m->position_min_nm, m->position_max_nm};
+    piezo_ctl_set_stage(m->ctl, &st);
+    piezo_ctl_set_key(m->ctl, key);
+}
+
+/* The controller's clock in ms, from its tick count (between ticks: a
+ * division is fine here). */
+static uint32_t now_ms(const piezo_regmap_t *m)
+{
+    uint32_t hz = m->tick_hz != 0u ? m->tick_hz : 10000u;
+    return (uint32_t)((uint64_t)m->ctl->st.ticks * 1000u / hz);
+}
+
 /* The descriptor holding address a, and the word within it, or NULL. */
 static const piezo_reg_desc_t *find(const piezo_reg_desc_t *tab, unsigned n, uint16_t a, uint32_t *word)
 {
@@ -140,7 +155,8 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
     const piezo_ctl_cfg_t *g = &c->cfg;
     const piezo_wave_cfg_t *w = &c->wave_cfg;
     switch (d->id) {
-    case PIEZO_HREG_UNLOCK: return c->unlocked;
+    case PIEZO_HREG_UNLOCK: return (uint32_t)piezo_ctl_is_unlocked(c, m->session);
+    case PIEZO_HREG_UNLOCK_KEY: return 0u;
     case PIEZO_HREG_MODE: return c->mode;
     case PIEZO_HREG_ARM: return c->st.armed;
     case PIEZO_HREG_SETPOINT_Q15: return (uint16_t)c->setpoint_q15;
@@ -241,6 +257,7 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     const piezo_ctl_t *c = m->ctl;
     uint32_t v = p->value;
     switch (p->d->id) {
+    case PIEZO_HREG_UNLOCK: return v == 0u;
     case PIEZO_HREG_MODE: return v <= PIEZO_MODE_DIRECT && !c->st.armed;
     case PIEZO_HREG_ARM: return v <= 1u && (v == 0u || c->st.faults == 0u);
     case PIEZO_HREG_COMMAND:
@@ -261,8 +278,11 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     case PIEZO_HREG_REC_DECIMATION: return v >= 1u && v <= 0xFFFFu;
     case PIEZO_HREG_REC_TRIGGER: return v <= PIEZO_REC_FALLING;
     case PIEZO_HREG_TABLE_OFFSET: return v < PIEZO_TABLE_MAX_BYTES && (v & 1u) == 0u;
-    case PIEZO_HREG_TABLE_WINDOW: return c->unlocked;
-    case PIEZO_HREG_TABLE_COMMAND: return v >= 1u && v <= 3u && c->unlocked;
+    case PIEZO_HREG_TABLE_WINDOW:
+        /* this session's upload, or a new one */
+        return piezo_ctl_is_unlocked(c, m->session) &&
+               (c->staged_len == 0u || c->staged_owner < 0 || c->staged_owner == (int8_t)m->session);
+    case PIEZO_HREG_TABLE_COMMAND: return v >= 1u && v <= 3u && piezo_ctl_is_unlocked(c, m->session);
     case PIEZO_HREG_BAD_LIMIT: return v >= 1u;
     case PIEZO_HREG_PREVIEW_TICKS: return v <= PIEZO_CTL_MAX_PREVIEW;
     case PIEZO_HREG_SHAPER_TICKS: return v <= PIEZO_CTL_MAX_SHAPER;
@@ -324,7 +344,8 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd)
         return;
     }
     switch (p->d->id) {
-    case PIEZO_HREG_UNLOCK: (void)piezo_ctl_unlock(c, (uint16_t)v); break;
+    case PIEZO_HREG_UNLOCK: piezo_ctl_lock(c, m->session); break;
+    case PIEZO_HREG_UNLOCK_KEY: break; /* done before anything else (write_holding) */
     case PIEZO_HREG_MODE: (void)piezo_ctl_set_mode(c, (uint8_t)v); break;
     case PIEZO_HREG_ARM: (void)piezo_ctl_arm(c, (uint8_t)v); break;
     case PIEZO_HREG_SETPOINT_Q15: c->setpoint_q15 = s16(v); break;
@@ -387,7 +408,7 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd)
     case PIEZO_HREG_TABLE_OFFSET: m->table_offset = v; break;
     case PIEZO_HREG_TABLE_WINDOW: {
         uint8_t b[2] = {(uint8_t)v, (uint8_t)(v >> 8)};
-        (void)piezo_ctl_stage_write(c, m->table_offset + 2u * p->elem, b, 2u); /* bounds checked */
+        (void)piezo_ctl_stage_write(c, m->session, m->table_offset + 2u * p->elem, b, 2u); /* checked */
         break;
     }
     case PIEZO_HREG_TABLE_COMMAND: *table_cmd = (uint16_t)v; break;
@@ -431,9 +452,26 @@ static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uin
         }
         config |= (d->flags & PIEZO_REG_CONFIG) != 0u;
     }
-    /* 2. state and values: configuration needs the key (written by an
-     *    earlier request) and a disarmed unit; every value must be legal */
-    if (config && (!c->unlocked || c->st.armed)) {
+    /* 2. the key first: a request may unlock and write (a wrong key, or
+     *    one during the backoff, refuses the whole request); then state and
+     *    values: configuration needs this session unlocked and a disarmed
+     *    unit; every value must be legal */
+    for (unsigned i = 0; i < n; i++) {
+        if (p[i].d->id == PIEZO_HREG_UNLOCK_KEY) {
+            int rc;
+            if (addr > p[i].d->addr || addr + count < p[i].d->addr + 2u) {
+                return PIEZO_MB_EX_ILLEGAL_DATA_VALUE; /* both halves, one request */
+            }
+            rc = piezo_ctl_unlock(c, m->session, p[i].value, now_ms(m));
+            if (rc == PIEZO_EBUSY) {
+                return PIEZO_MB_EX_SERVER_DEVICE_BUSY;
+            }
+            if (rc != PIEZO_OK) {
+                return PIEZO_MB_EX_ILLEGAL_DATA_VALUE;
+            }
+        }
+    }
+    if (config && (!piezo_ctl_is_unlocked(c, m->session) || c->st.armed)) {
         return PIEZO_MB_EX_ILLEGAL_DATA_VALUE;
     }
     for (unsigned i = 0; i < n; i++) {
@@ -468,16 +506,26 @@ static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uin
         (void)piezo_limit_init(&c->limit, &c->cfg.limit, c->limit.prev_q15);
     }
     switch (table_cmd) {
-    case 1: (void)piezo_ctl_commit(c, 0u); break;
-    case 2: (void)piezo_ctl_rollback(c); break;
-    case 3: c->staged_len = 0u; break;
+    case 1: (void)piezo_ctl_commit(c, m->session, 0u); break;
+    case 2: (void)piezo_ctl_rollback(c, m->session); break;
+    case 3: (void)piezo_ctl_clear_staged(c, m->session); break;
     default: break;
     }
     return 0u;
 }
 
+static void session(void *ctx, uint8_t id, uint8_t event)
+{
+    piezo_regmap_t *m = ctx;
+    if (event == PIEZO_MB_SESSION_END) {
+        piezo_ctl_end_session(m->ctl, id);
+    } else {
+        m->session = id;
+    }
+}
+
 piezo_mb_regs_t piezo_regmap_regs(piezo_regmap_t *m)
 {
-    piezo_mb_regs_t r = {m, read_input, read_holding, write_holding};
+    piezo_mb_regs_t r = {m, read_input, read_holding, write_holding, session};
     return r;
 }

@@ -10,6 +10,12 @@
  * changes nothing and answers ILLEGAL DATA ADDRESS (no such register, or
  * read-only) or ILLEGAL DATA VALUE (value, lock or state).
  *
+ * Sessions (docs/protocol.md): the transport says whose request it is
+ * (piezo_mb_regs_t.session); the unlock, configuration writes and the staged
+ * upload are per session. unlock_key takes the provisioned key in one
+ * request: a wrong key is ILLEGAL DATA VALUE, an unlock during the backoff or
+ * lockout SERVER DEVICE BUSY (both counted in bad_unlocks).
+ *
  * Table upload: table_offset and table_window are adjacent, so one FC 16
  * request writes a chunk at its offset, and one FC 23 request reads a chunk
  * back. Recorder readout: rec_read_index and rec_window likewise, with FC 23.
@@ -35,10 +41,16 @@ typedef struct {
     uint32_t table_offset;
     uint32_t rec_read_index;
     piezo_rec_cfg_t rec_cfg;                  /* applied when the recorder is armed */
+    uint8_t session;                          /* whose request runs (PIEZO_MB_SESSION_*) */
 } piezo_regmap_t;
 
 /** Bind a map to a controller; identity fields are set by the caller after. */
 void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl);
+
+/** Provision the controller: the stage and axis of the identity fields
+ *  (set them first) and the unlock key (>= 32 bits, 0 = unlock disabled).
+ *  Call before piezo_ctl_attach_store(), so a stored table is checked too. */
+void piezo_regmap_provision(piezo_regmap_t *m, uint32_t key);
 
 /** The callbacks for piezo_mb_pdu_process() and the transports. */
 piezo_mb_regs_t piezo_regmap_regs(piezo_regmap_t *m);

@@ -48,6 +48,7 @@ const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
     {0x1004u, 1u, 0u, 1u, PIEZO_HREG_COMMAND},
     {0x1005u, 1u, 0u, 1u, PIEZO_HREG_REF_SOURCE},
     {0x1006u, 1u, PIEZO_REG_SIGNED, 1u, PIEZO_HREG_U2_Q15},
+    {0x1008u, 2u, 0u, 1u, PIEZO_HREG_UNLOCK_KEY},
     {0x1100u, 1u, 0u, 1u, PIEZO_HREG_WAVE_KIND},
     {0x1101u, 1u, PIEZO_REG_SIGNED, 1u, PIEZO_HREG_WAVE_OFFSET_Q15},
     {0x1102u, 1u, PIEZO_REG_SIGNED, 1u, PIEZO_HREG_WAVE_AMPLITUDE_Q15},
@@ -94,6 +95,81 @@ const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
     {0x301Au, 1u, PIEZO_REG_CONFIG, 1u, PIEZO_HREG_SHAPER_TICKS},
     {0x301Bu, 1u, PIEZO_REG_SIGNED | PIEZO_REG_CONFIG, 3u, PIEZO_HREG_SHAPER_Q15},
     {0x301Eu, 1u, PIEZO_REG_CONFIG, 1u, PIEZO_HREG_XCOUPLE_BYPASS},
+};
+
+const char *const piezo_table_reason_names[PIEZO_TABLE_REASON_N] = {
+    "ok",
+    "bad_magic",
+    "bad_layout_version",
+    "bad_interface_crc",
+    "bad_length",
+    "bad_crc",
+    "bad_kind",
+    "bad_section",
+    "out_of_range",
+    "not_monotonic",
+    "unstable_inverse",
+    "nothing_staged",
+    "locked",
+    "storage_failed",
+    "no_previous",
+    "busy",
+    "unknown_section",
+    "missing_section",
+    "output_range",
+    "wrong_stage",
+    "wrong_axis",
+    "not_owner",
+};
+
+const piezo_section_spec_t piezo_section_specs[PIEZO_SECTION_SPEC_N] = {
+    {PIEZO_SECTION_CTL_SCALARS, PIEZO_SECTION_TYPE_INT32, 0x0000000Eu, {(-2147483647 - 1), 2147483647}, 4u, 0u},
+    {PIEZO_SECTION_KP_GRID, PIEZO_SECTION_TYPE_INT32, 0x00000006u, {(-2147483647 - 1), 2147483647}, 4u, 4u},
+    {PIEZO_SECTION_KP_N1_Q15, PIEZO_SECTION_TYPE_INT16, 0x00000006u, {-32768, 32767}, 0u, 0u},
+    {PIEZO_SECTION_KP_N2_Q15, PIEZO_SECTION_TYPE_INT16, 0x00000006u, {-32768, 32767}, 0u, 0u},
+    {PIEZO_SECTION_DCC_C_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000002u, {-268435456, 268435456}, 0u, 0u},
+    {PIEZO_SECTION_DCC_G_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000006u, {1, 268435456}, 0u, 0u},
+    {PIEZO_SECTION_RKP_THETA_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000004u, {-268435456, 268435456}, 0u, 0u},
+    {PIEZO_SECTION_RKP_CENTER_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000004u, {-67108864, 67108864}, 0u, 0u},
+    {PIEZO_SECTION_RKP_INV_WIDTH_Q16, PIEZO_SECTION_TYPE_INT32, 0x00000004u, {1, 2147483647}, 0u, 0u},
+    {PIEZO_SECTION_RKP_ALPHA_Q16, PIEZO_SECTION_TYPE_INT32, 0x00000004u, {0, 65536}, 0u, 0u},
+    {PIEZO_SECTION_EUPI_INV_SCALARS, PIEZO_SECTION_TYPE_INT32, 0x00000008u, {(-2147483647 - 1), 2147483647}, 4u, 8u},
+    {PIEZO_SECTION_EUPI_CPI_INV_R_Q15, PIEZO_SECTION_TYPE_INT32, 0x00000008u, {0, 1048576}, 0u, 0u},
+    {PIEZO_SECTION_EUPI_CPI_INV_W_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000008u, {-268435456, 0}, 0u, 0u},
+    {PIEZO_SECTION_EUPI_UPI_R_Q15, PIEZO_SECTION_TYPE_INT32, 0x00000008u, {0, 32767}, 0u, 0u},
+    {PIEZO_SECTION_EUPI_UPI_A_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000008u, {1, 268435456}, 0u, 0u},
+    {PIEZO_SECTION_EUPI_UPI_W_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000008u, {0, 268435456}, 0u, 0u},
+    {PIEZO_SECTION_EUPI_POLY_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000008u, {-268435456, 268435456}, 0u, 0u},
+    {PIEZO_SECTION_XC_SCALARS, PIEZO_SECTION_TYPE_INT32, 0x00000020u, {(-2147483647 - 1), 2147483647}, 9u, 12u},
+    {PIEZO_SECTION_XC_A_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000020u, {-33554432, 33554432}, 0u, 0u},
+    {PIEZO_SECTION_XC_B_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000020u, {-33554432, 33554432}, 0u, 0u},
+    {PIEZO_SECTION_XC_E_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000020u, {(-2147483647 - 1), 2147483647}, 0u, 0u},
+    {PIEZO_SECTION_XC_ETA_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000020u, {-16777216, 16777216}, 0u, 0u},
+    {PIEZO_SECTION_XC_XI_Q24, PIEZO_SECTION_TYPE_INT32, 0x00000020u, {(-2147483647 - 1), 2147483647}, 0u, 0u},
+};
+
+const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N] = {
+    {1, 268435456},  /* open_loop_gain_q24 */
+    {-65536, 65536},  /* open_loop_offset_q15 */
+    {1, 268435456},  /* y_to_u_gain_q24 */
+    {-65536, 65536},  /* y_offset_q15 */
+    {-32768, 32767},  /* nmin_q15 */
+    {1, 32767},  /* rmax_q15 */
+    {1, 2147483647},  /* slope_q16 */
+    {1, 65535},  /* xsat_q15 */
+    {1, 268435456},  /* a0_inv_q24 */
+    {-268435456, 268435456},  /* kex_q24 */
+    {-268435456, 268435456},  /* p0_q24 */
+    {1, 268435456},  /* a0_q24 */
+    {1, 4},  /* m */
+    {1, 2},  /* n_ch */
+    {1, 8},  /* n_pow */
+    {1, 4},  /* n_deg */
+    {-32768, 32767},  /* u_center_q15 */
+    {(-2147483647 - 1), 2147483647},  /* u_gain_q16 */
+    {-32768, 32767},  /* x_center_q15 */
+    {(-2147483647 - 1), 2147483647},  /* x_gain_q16 */
+    {0, 1},  /* x_source */
 };
 
 const int16_t piezo_gauss_lut_q15[PIEZO_GAUSS_LUT_N] = {

@@ -4,8 +4,8 @@
 
 #include <stdint.h>
 
-#define PIEZO_LAYOUT_VERSION 1u
-#define PIEZO_INTERFACE_CRC32 0xC8E0D360u
+#define PIEZO_LAYOUT_VERSION 2u
+#define PIEZO_INTERFACE_CRC32 0x5F4E61C5u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -46,7 +46,13 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_TABLE_HDR_TOOL_VERSION_OFFSET 32u  /* uint32 */
 #define PIEZO_TABLE_HDR_BUILD_TIME_OFFSET 36u  /* uint32 */
 #define PIEZO_TABLE_HDR_DATA_SHA256_OFFSET 40u  /* bytes x16 */
-#define PIEZO_TABLE_HDR_BYTES 56u
+#define PIEZO_TABLE_HDR_AXIS_OFFSET 56u  /* uint16 */
+#define PIEZO_TABLE_HDR_RESERVED_OFFSET 58u  /* uint16 */
+#define PIEZO_TABLE_HDR_DRIVE_MIN_MV_OFFSET 60u  /* int32 */
+#define PIEZO_TABLE_HDR_DRIVE_MAX_MV_OFFSET 64u  /* int32 */
+#define PIEZO_TABLE_HDR_POSITION_MIN_NM_OFFSET 68u  /* int32 */
+#define PIEZO_TABLE_HDR_POSITION_MAX_NM_OFFSET 72u  /* int32 */
+#define PIEZO_TABLE_HDR_BYTES 76u
 #define PIEZO_SECTION_TYPE_INT16 1u
 #define PIEZO_SECTION_TYPE_INT32 2u
 #define PIEZO_SECTION_CTL_SCALARS 1u  /* int32: [open_loop_gain_q24, open_loop_offset_q15, y_to_u_gain_q24, y_offset_q15]: u = r g + o uncompensated; yd = r g' + o' into the DCC law */
@@ -88,12 +94,50 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_TABLE_REASON_STORAGE_FAILED 13u
 #define PIEZO_TABLE_REASON_NO_PREVIOUS 14u
 #define PIEZO_TABLE_REASON_BUSY 15u
+#define PIEZO_TABLE_REASON_UNKNOWN_SECTION 16u
+#define PIEZO_TABLE_REASON_MISSING_SECTION 17u
+#define PIEZO_TABLE_REASON_OUTPUT_RANGE 18u
+#define PIEZO_TABLE_REASON_WRONG_STAGE 19u
+#define PIEZO_TABLE_REASON_WRONG_AXIS 20u
+#define PIEZO_TABLE_REASON_NOT_OWNER 21u
+#define PIEZO_TABLE_REASON_N 22u
+extern const char *const piezo_table_reason_names[PIEZO_TABLE_REASON_N];
+
+/* Section specifications: id, element type, the kinds that need it (bit
+ * 1 << kind), and the range of every element: one range for all, or one
+ * per element (n_fields > 0: the section has exactly n_fields elements,
+ * their ranges piezo_section_fields[first_field ...]). */
+typedef struct {
+    int32_t min;
+    int32_t max;
+} piezo_range_t;
+typedef struct {
+    uint16_t id;
+    uint16_t type;
+    uint32_t kinds;
+    piezo_range_t range;
+    uint16_t n_fields;
+    uint16_t first_field;
+} piezo_section_spec_t;
+#define PIEZO_SECTION_SPEC_N 23u
+#define PIEZO_SECTION_FIELD_N 21u
+extern const piezo_section_spec_t piezo_section_specs[PIEZO_SECTION_SPEC_N];
+extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 
 /* Modbus register map (0-based addresses; 32-bit values high word first) */
 #define PIEZO_MODBUS_UNIT_ID 1u
 #define PIEZO_MODBUS_MAX_WRITE_REGISTERS 123u
 #define PIEZO_MODBUS_MAX_READ_REGISTERS 125u
-#define PIEZO_MODBUS_UNLOCK_KEY 0x50A5u
+#define PIEZO_UNLOCK_DEFAULT_SIL_KEY 0x50a5c0deu
+#define PIEZO_UNLOCK_BACKOFF_AFTER 3u
+#define PIEZO_UNLOCK_BACKOFF_BASE_MS 250u
+#define PIEZO_UNLOCK_BACKOFF_MAX_MS 30000u
+#define PIEZO_UNLOCK_LOCKOUT_AFTER 10u
+#define PIEZO_UNLOCK_LOCKOUT_MS 600000u
+#define PIEZO_TCP_SLOTS 4u
+#define PIEZO_TCP_IDLE_TIMEOUT_MS 30000u
+#define PIEZO_TCP_PARTIAL_TIMEOUT_MS 1000u
+#define PIEZO_TCP_EVICT_MIN_IDLE_MS 1000u
 #define PIEZO_INPUT_DEVICE_ID 0x0000u  /* uint16 */
 #define PIEZO_INPUT_FW_VERSION 0x0001u  /* uint32 */
 #define PIEZO_INPUT_LAYOUT_VERSION 0x0003u  /* uint16 */
@@ -137,6 +181,7 @@ extern const int16_t piezo_sine_lut_q15[PIEZO_SINE_LUT_N];
 #define PIEZO_HOLDING_COMMAND 0x1004u  /* uint16 */
 #define PIEZO_HOLDING_REF_SOURCE 0x1005u  /* uint16 */
 #define PIEZO_HOLDING_U2_Q15 0x1006u  /* int16 */
+#define PIEZO_HOLDING_UNLOCK_KEY 0x1008u  /* uint32 */
 #define PIEZO_HOLDING_WAVE_KIND 0x1100u  /* uint16 */
 #define PIEZO_HOLDING_WAVE_OFFSET_Q15 0x1101u  /* int16 */
 #define PIEZO_HOLDING_WAVE_AMPLITUDE_Q15 0x1102u  /* int16 */
@@ -251,6 +296,7 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_COMMAND,
     PIEZO_HREG_REF_SOURCE,
     PIEZO_HREG_U2_Q15,
+    PIEZO_HREG_UNLOCK_KEY,
     PIEZO_HREG_WAVE_KIND,
     PIEZO_HREG_WAVE_OFFSET_Q15,
     PIEZO_HREG_WAVE_AMPLITUDE_Q15,

@@ -20,11 +20,13 @@ static size_t exception(uint8_t *rsp, uint8_t function, uint8_t code)
     return 2u;
 }
 
-/* A callback's result as an exception code: 0, 01..04 pass, anything else
- * becomes SERVER DEVICE FAILURE. */
+/* A callback's result as an exception code: 0, 01..04 and 06 pass, anything
+ * else becomes SERVER DEVICE FAILURE. */
 static uint8_t app_result(uint8_t r)
 {
-    return r <= PIEZO_MB_EX_SERVER_DEVICE_FAILURE ? r : PIEZO_MB_EX_SERVER_DEVICE_FAILURE;
+    return r <= PIEZO_MB_EX_SERVER_DEVICE_FAILURE || r == PIEZO_MB_EX_SERVER_DEVICE_BUSY
+               ? r
+               : PIEZO_MB_EX_SERVER_DEVICE_FAILURE;
 }
 
 /* Starting address and starting address + quantity must both lie in the

@@ -55,7 +55,25 @@ typedef struct piezo_mb_regs {
     uint8_t (*read_holding)(void *ctx, uint16_t addr, uint16_t count, uint16_t *out);
     uint8_t (*write_holding)(void *ctx, uint16_t addr, uint16_t count,
                              const uint16_t *values);
+    /* Optional (NULL: one anonymous session). A transport with sessions
+     * calls it with PIEZO_MB_SESSION_BEGIN before each request of session
+     * `id` (TCP: the connection's slot; RTU: 0), and with
+     * PIEZO_MB_SESSION_END when that session is over (connection closed,
+     * timed out or replaced): what it unlocked and staged goes with it. */
+    void (*session)(void *ctx, uint8_t id, uint8_t event);
 } piezo_mb_regs_t;
+
+#define PIEZO_MB_SESSION_BEGIN 1u
+#define PIEZO_MB_SESSION_END 2u
+/* Session ids: the RTU line, TCP connection slots, the USB link. */
+#define PIEZO_MB_SESSION_RTU 0u
+#define PIEZO_MB_SESSION_TCP_FIRST 1u   /* slot i is session 1 + i (at most 5 slots) */
+#define PIEZO_MB_SESSION_USB 6u
+/* The RTU line's session ends after this long without a request to us. */
+#define PIEZO_MB_RTU_SESSION_IDLE_US 30000000u
+
+/* Exception code 06, SERVER DEVICE BUSY [AP 7]: the unlock backoff or lockout. */
+#define PIEZO_MB_EX_SERVER_DEVICE_BUSY 0x06u
 
 /* Processes one request PDU (req[0] is the function code) and writes the
  * response PDU or exception response to rsp. Returns the response length

@@ -108,6 +108,15 @@ size_t piezo_rtu_poll(piezo_rtu_t *r, uint32_t now_us, const piezo_mb_regs_t *re
     r->ready = 0u;
     const uint8_t *f = r->buf[r->rx ^ 1u];
     size_t pdu_len = (size_t)r->len[r->rx ^ 1u] - 3u;  /* minus address and CRC */
+    if (regs != NULL && regs->session != NULL) {
+        /* the line is one session; a master silent for the idle time starts a new one */
+        if (r->in_session != 0u && now_us - r->last_req_us >= PIEZO_MB_RTU_SESSION_IDLE_US) {
+            regs->session(regs->ctx, PIEZO_MB_SESSION_RTU, PIEZO_MB_SESSION_END);
+        }
+        regs->session(regs->ctx, PIEZO_MB_SESSION_RTU, PIEZO_MB_SESSION_BEGIN);
+        r->in_session = 1u;
+        r->last_req_us = now_us;
+    }
     if (f[0] == PIEZO_RTU_BROADCAST) {
         if (piezo_mb_pdu_is_broadcast_write(f[1]) == 0) {
             r->stats.not_for_us++;

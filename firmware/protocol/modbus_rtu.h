@@ -52,6 +52,9 @@ typedef struct piezo_rtu_stats {
 } piezo_rtu_stats_t;
 
 typedef struct piezo_rtu {
+    /* session of the line (regs->session): last request to us */
+    uint32_t last_req_us;
+    uint8_t in_session;
     /* configuration (piezo_rtu_init) */
     uint8_t unit_id;
     uint32_t t35_us;     /* silence after the last byte that ends a frame */
@@ -73,8 +76,8 @@ typedef struct piezo_rtu {
 uint16_t piezo_rtu_crc16(const uint8_t *data, size_t n);
 uint16_t piezo_rtu_crc16_update(uint16_t crc, uint8_t byte);
 
-/* Sets up a framer for unit_id (1..247) at baud (> 0). Returns 0, or -1 for
- * an invalid argument (the framer is then unusable). The only divisions of
+/* Sets up a framer for unit_id (1..247) at baud (> 0). Returns PIEZO_OK, or
+ * PIEZO_EINVAL (piezo_err.h) for an invalid argument (the framer is then unusable). The only divisions of
  * the framer are here. */
 int piezo_rtu_init(piezo_rtu_t *r, uint8_t unit_id, uint32_t baud);
 

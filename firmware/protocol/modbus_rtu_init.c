@@ -3,6 +3,8 @@
  * [SL x.y] = MODBUS over Serial Line V1.02. */
 #include "modbus_rtu.h"
 
+#include "piezo_err.h"
+
 /* ceil(bits_x10 * 100000 / baud) microseconds: bits_x10 is tenths of a bit. */
 static uint32_t bit_time_us(uint32_t bits_x10, uint32_t baud)
 {
@@ -13,11 +15,11 @@ static uint32_t bit_time_us(uint32_t bits_x10, uint32_t baud)
 int piezo_rtu_init(piezo_rtu_t *r, uint8_t unit_id, uint32_t baud)
 {
     if (r == NULL) {
-        return -1;
+        return PIEZO_EINVAL;
     }
     *r = (piezo_rtu_t){0};
     if (unit_id < 1u || unit_id > PIEZO_RTU_UNIT_MAX || baud == 0u) {
-        return -1;
+        return PIEZO_EINVAL;
     }
     r->unit_id = unit_id;
     uint32_t tchar = bit_time_us(110u, baud);  /* 11 bits per character [SL 2.5.1] */
@@ -34,5 +36,5 @@ int piezo_rtu_init(piezo_rtu_t *r, uint8_t unit_id, uint32_t baud)
     r->t35_us = t35;
     r->gap15_us = tchar + t15;
     r->gap35_us = tchar + t35;
-    return 0;
+    return PIEZO_OK;
 }

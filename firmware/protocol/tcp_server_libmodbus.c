@@ -9,12 +9,25 @@
 #include <poll.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <time.h>
 #include <unistd.h>
 
-static void conn_close(piezo_tcp_conn_t *c)
+static uint64_t now_ms(void)
 {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000u + (uint64_t)ts.tv_nsec / 1000000u;
+}
+
+/* Closes slot i and ends its session (its unlock and upload go with it). */
+static void slot_close(piezo_tcp_server_t *s, int i)
+{
+    piezo_tcp_conn_t *c = &s->conn[i];
     if (c->fd >= 0) {
         close(c->fd);
+        if (s->regs != NULL && s->regs->session != NULL) {
+            s->regs->session(s->regs->ctx, (uint8_t)(PIEZO_MB_SESSION_TCP_FIRST + i), PIEZO_MB_SESSION_END);
+        }
     }
     c->fd = -1;
     c->len = 0u;
@@ -34,6 +47,9 @@ int piezo_tcp_server_open(piezo_tcp_server_t *s, const char *address, uint16_t p
     }
     s->regs = regs;
     s->unit_id = unit_id;
+    s->idle_ms = PIEZO_TCP_IDLE_TIMEOUT_MS;
+    s->partial_ms = PIEZO_TCP_PARTIAL_TIMEOUT_MS;
+    s->evict_ms = PIEZO_TCP_EVICT_MIN_IDLE_MS;
     s->ctx = modbus_new_tcp(address != NULL ? address : PIEZO_TCP_DEFAULT_ADDRESS, port);
     if (s->ctx == NULL) {
         return -1;
@@ -71,23 +87,35 @@ static void accept_client(piezo_tcp_server_t *s)
     if (fd < 0) {
         return;  /* the client went away, or EAGAIN */
     }
-    for (int i = 0; i < PIEZO_TCP_MAX_CLIENTS; i++) {
+    uint64_t now = now_ms();
+    int slot = -1, idlest = -1;
+    for (int i = 0; i < PIEZO_TCP_MAX_CLIENTS && slot < 0; i++) {
         if (s->conn[i].fd < 0) {
-            if (fcntl(fd, F_SETFL, fcntl(fd, F_GETFL) | O_NONBLOCK) != 0) {
-                break;
-            }
-            s->conn[i].fd = fd;
-            s->conn[i].len = 0u;
-            return;
+            slot = i;
+        } else if (idlest < 0 || s->conn[i].last_ms < s->conn[idlest].last_ms) {
+            idlest = i;
         }
     }
-    close(fd);  /* no free slot (or fcntl failed): refuse */
+    if (slot < 0 && idlest >= 0 && s->conn[idlest].len == 0u && now - s->conn[idlest].last_ms >= s->evict_ms) {
+        slot_close(s, idlest); /* the longest-idle connection makes room */
+        s->evicted++;
+        slot = idlest;
+    }
+    if (slot < 0 || fcntl(fd, F_SETFL, fcntl(fd, F_GETFL) | O_NONBLOCK) != 0) {
+        s->refused++;
+        close(fd);  /* every slot busy (or fcntl failed): refuse */
+        return;
+    }
+    s->conn[slot].fd = fd;
+    s->conn[slot].len = 0u;
+    s->conn[slot].last_ms = now;
 }
 
 /* Reads what is there without blocking and answers complete requests. Returns
  * responses sent; closes the connection when the stream ends or is bad. */
-static int service_client(piezo_tcp_server_t *s, piezo_tcp_conn_t *c)
+static int service_client(piezo_tcp_server_t *s, int slot)
 {
+    piezo_tcp_conn_t *c = &s->conn[slot];
     int sent = 0;
     for (int frames = 0; frames < PIEZO_TCP_FRAMES_PER_POLL;) {
         /* Read only up to the end of the current frame: the header first,
@@ -95,35 +123,42 @@ static int service_client(piezo_tcp_server_t *s, piezo_tcp_conn_t *c)
         int want = piezo_mb_tcp_frame_len(c->buf, c->len);
         if (want < 0) {
             s->dropped++;
-            conn_close(c);
+            slot_close(s, slot);
             return sent;
         }
         size_t need = want == 0 ? PIEZO_MBAP_HDR : (size_t)want;
         if (c->len < need) {
             ssize_t n = recv(c->fd, &c->buf[c->len], need - c->len, 0);
             if (n == 0) {
-                conn_close(c);  /* orderly shutdown by the client */
+                slot_close(s, slot);  /* orderly shutdown by the client */
                 return sent;
             }
             if (n < 0) {
                 if (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
-                    conn_close(c);
+                    slot_close(s, slot);
                 }
                 return sent;
+            }
+            if (c->len == 0u) {
+                c->first_ms = now_ms(); /* the partial timeout runs from here */
             }
             c->len = (uint16_t)(c->len + (size_t)n);
             continue;
         }
         /* A complete frame of `need` bytes. */
         uint8_t rsp[PIEZO_TCP_ADU_MAX];
+        if (s->regs->session != NULL) {
+            s->regs->session(s->regs->ctx, (uint8_t)(PIEZO_MB_SESSION_TCP_FIRST + slot), PIEZO_MB_SESSION_BEGIN);
+        }
         size_t out = piezo_mb_tcp_process(s->regs, s->unit_id, c->buf, need, rsp, sizeof rsp);
         c->len = 0u;
+        c->last_ms = now_ms();
         frames++;
         if (out > 0u) {
             ssize_t w = send(c->fd, rsp, out, MSG_NOSIGNAL);
             if (w != (ssize_t)out) {
                 s->dropped++;  /* the client does not read its answers */
-                conn_close(c);
+                slot_close(s, slot);
                 return sent;
             }
             s->answered++;
@@ -155,7 +190,17 @@ int piezo_tcp_server_poll(piezo_tcp_server_t *s, int timeout_ms)
     int sent = 0;
     for (nfds_t k = 1; k < n; k++) {
         if (pfd[k].revents != 0) {
-            sent += service_client(s, &s->conn[slot[k]]);
+            sent += service_client(s, slot[k]);
+        }
+    }
+    /* the timeouts: a silent connection, a request that never completes */
+    uint64_t now = now_ms();
+    for (int i = 0; i < PIEZO_TCP_MAX_CLIENTS; i++) {
+        piezo_tcp_conn_t *c = &s->conn[i];
+        if (c->fd >= 0 && ((c->len > 0u && now - c->first_ms >= s->partial_ms) ||
+                           (c->len == 0u && now - c->last_ms >= s->idle_ms))) {
+            slot_close(s, i);
+            s->timed_out++;
         }
     }
     if ((pfd[0].revents & POLLIN) != 0) {
@@ -167,7 +212,7 @@ int piezo_tcp_server_poll(piezo_tcp_server_t *s, int timeout_ms)
 void piezo_tcp_server_close(piezo_tcp_server_t *s)
 {
     for (int i = 0; i < PIEZO_TCP_MAX_CLIENTS; i++) {
-        conn_close(&s->conn[i]);
+        slot_close(s, i);
     }
     if (s->listen_fd >= 0) {
         close(s->listen_fd);

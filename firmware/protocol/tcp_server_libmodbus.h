@@ -16,6 +16,16 @@
  * gets an exception response; a stream that cannot be a Modbus stream
  * (protocol id != 0, impossible length), a client that does not read its
  * answers, or a closed connection closes that connection only.
+ *
+ * Slots and timeouts (common/interface.toml [modbus.tcp], docs/protocol.md):
+ * PIEZO_TCP_SLOTS connections at once. A connection with no complete
+ * request for idle_ms is closed, and so is one whose request stays
+ * incomplete partial_ms after its first byte. A client that connects while
+ * every slot is taken replaces the connection that has been idle longest, if
+ * that one has been idle evict_ms; otherwise it is closed at once. Each slot
+ * is a session of the register map (piezo_mb_regs_t.session, id 1 + slot):
+ * it begins with every request and ends when the connection closes, for
+ * whatever reason, so an unlock or an upload never outlives its connection.
  */
 #ifndef PIEZO_TCP_SERVER_LIBMODBUS_H
 #define PIEZO_TCP_SERVER_LIBMODBUS_H
@@ -26,8 +36,9 @@
 
 #include "modbus_pdu.h"
 #include "modbus_tcp.h"
+#include "piezo_interface.h"
 
-#define PIEZO_TCP_MAX_CLIENTS 4
+#define PIEZO_TCP_MAX_CLIENTS ((int)PIEZO_TCP_SLOTS)
 #define PIEZO_TCP_DEFAULT_ADDRESS "127.0.0.1"
 /* Frames answered per client and poll: bounds the time one poll can take. */
 #define PIEZO_TCP_FRAMES_PER_POLL 8
@@ -35,6 +46,8 @@
 typedef struct piezo_tcp_conn {
     int fd;                             /* -1: free slot */
     uint16_t len;                       /* bytes of the current request so far */
+    uint64_t last_ms;                   /* connected, or last complete request */
+    uint64_t first_ms;                  /* first byte of the current request */
     uint8_t buf[PIEZO_TCP_ADU_MAX];
 } piezo_tcp_conn_t;
 
@@ -47,6 +60,12 @@ typedef struct piezo_tcp_server {
     piezo_tcp_conn_t conn[PIEZO_TCP_MAX_CLIENTS];
     unsigned long answered;             /* responses sent */
     unsigned long dropped;              /* connections closed for a bad stream */
+    unsigned long timed_out;            /* closed for the idle or the partial timeout */
+    unsigned long evicted;              /* replaced by a new client */
+    unsigned long refused;              /* new clients closed: every slot busy */
+    uint32_t idle_ms;                   /* timeouts, from interface.toml; a test may lower them */
+    uint32_t partial_ms;
+    uint32_t evict_ms;
 } piezo_tcp_server_t;
 
 /* Listens on address:port (address NULL: 127.0.0.1; port 0: a free port the

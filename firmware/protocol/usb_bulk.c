@@ -27,6 +27,9 @@ size_t piezo_usb_process(const piezo_mb_regs_t *regs, const uint8_t *req, size_t
     if (len == 0u || n != PIEZO_USB_HDR + len) {
         return 0u;
     }
+    if (regs->session != NULL) {
+        regs->session(regs->ctx, PIEZO_MB_SESSION_USB, PIEZO_MB_SESSION_BEGIN);
+    }
     size_t out = piezo_mb_pdu_process(regs, &req[PIEZO_USB_HDR], len, &rsp[PIEZO_USB_HDR],
                                       PIEZO_MB_PDU_MAX);
     if (out == 0u) {

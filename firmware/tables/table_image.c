@@ -82,6 +82,65 @@ static uint16_t parse_sections(const uint8_t *p, uint32_t len, uint16_t n, piezo
     return off == len ? PIEZO_TABLE_REASON_OK : PIEZO_TABLE_REASON_BAD_LENGTH;
 }
 
+static const piezo_section_spec_t *spec_of(uint16_t id)
+{
+    for (uint32_t i = 0; i < PIEZO_SECTION_SPEC_N; i++) {
+        if (piezo_section_specs[i].id == id) {
+            return &piezo_section_specs[i];
+        }
+    }
+    return NULL;
+}
+
+static int32_t element(const piezo_section_t *s, uint32_t i)
+{
+    return s->type == PIEZO_SECTION_TYPE_INT16 ? piezo_section_i16(s, i) : piezo_section_i32(s, i);
+}
+
+/* Every section against its specification (interface.toml): known for this
+ * kind, its type, its field count, every element in range; then every section
+ * the kind needs present. */
+uint16_t piezo_table_check_specs(const piezo_table_info_t *info)
+{
+    uint32_t bit, any = 0u;
+    if (info->kind >= 32u) {
+        return PIEZO_TABLE_REASON_BAD_KIND;
+    }
+    bit = 1u << info->kind;
+    for (uint32_t i = 0; i < PIEZO_SECTION_SPEC_N; i++) {
+        any |= piezo_section_specs[i].kinds;
+    }
+    if ((any & bit) == 0u) {
+        return PIEZO_TABLE_REASON_BAD_KIND;
+    }
+    for (uint16_t i = 0; i < info->n_sections; i++) {
+        const piezo_section_t *s = &info->section[i];
+        const piezo_section_spec_t *sp = spec_of(s->id);
+        if (sp == NULL || (sp->kinds & bit) == 0u) {
+            return PIEZO_TABLE_REASON_UNKNOWN_SECTION;
+        }
+        if (s->type != sp->type) {
+            return PIEZO_TABLE_REASON_BAD_SECTION;
+        }
+        if (sp->n_fields != 0u && s->count != sp->n_fields) {
+            return PIEZO_TABLE_REASON_BAD_LENGTH;
+        }
+        for (uint32_t k = 0; k < s->count; k++) {
+            const piezo_range_t *r = sp->n_fields != 0u ? &piezo_section_fields[sp->first_field + k] : &sp->range;
+            int32_t v = element(s, k);
+            if (v < r->min || v > r->max) {
+                return PIEZO_TABLE_REASON_OUT_OF_RANGE;
+            }
+        }
+    }
+    for (uint32_t i = 0; i < PIEZO_SECTION_SPEC_N; i++) {
+        if ((piezo_section_specs[i].kinds & bit) != 0u && piezo_table_section(info, piezo_section_specs[i].id) == NULL) {
+            return PIEZO_TABLE_REASON_MISSING_SECTION;
+        }
+    }
+    return PIEZO_TABLE_REASON_OK;
+}
+
 uint16_t piezo_table_check(const uint8_t *img, uint32_t len, piezo_table_info_t *info)
 {
     uint32_t payload_len;
@@ -111,9 +170,18 @@ uint16_t piezo_table_check(const uint8_t *img, uint32_t len, piezo_table_info_t 
         piezo_le16(img + PIEZO_TABLE_HDR_Q_COEF_FRAC_OFFSET) != PIEZO_Q24_FRAC) {
         return PIEZO_TABLE_REASON_BAD_LAYOUT_VERSION;
     }
+    if (piezo_le16(img + PIEZO_TABLE_HDR_RESERVED_OFFSET) != 0u) {
+        return PIEZO_TABLE_REASON_BAD_LAYOUT_VERSION;
+    }
     info->kind = piezo_le16(img + PIEZO_TABLE_HDR_KIND_OFFSET);
+    info->axis = piezo_le16(img + PIEZO_TABLE_HDR_AXIS_OFFSET);
+    info->drive_min_mv = (int32_t)piezo_le32(img + PIEZO_TABLE_HDR_DRIVE_MIN_MV_OFFSET);
+    info->drive_max_mv = (int32_t)piezo_le32(img + PIEZO_TABLE_HDR_DRIVE_MAX_MV_OFFSET);
+    info->position_min_nm = (int32_t)piezo_le32(img + PIEZO_TABLE_HDR_POSITION_MIN_NM_OFFSET);
+    info->position_max_nm = (int32_t)piezo_le32(img + PIEZO_TABLE_HDR_POSITION_MAX_NM_OFFSET);
     info->table_version = piezo_le32(img + PIEZO_TABLE_HDR_TABLE_VERSION_OFFSET);
     info->total_len = len;
     info->n_sections = piezo_le16(img + PIEZO_TABLE_HDR_N_SECTIONS_OFFSET);
-    return parse_sections(img + PIEZO_TABLE_HDR_BYTES, payload_len, info->n_sections, info);
+    uint16_t r = parse_sections(img + PIEZO_TABLE_HDR_BYTES, payload_len, info->n_sections, info);
+    return r;
 }

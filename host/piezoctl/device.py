@@ -8,6 +8,7 @@ types the interface definition gives (32-bit values high word first).
 
 from __future__ import annotations
 
+import os
 import struct
 import time
 from dataclasses import dataclass
@@ -19,6 +20,7 @@ from . import interface
 from .errors import CliError
 from .tables.from_model import Scale
 from .transport import open_port
+from .transport.errors import ModbusExceptionError
 
 __all__ = ["Controller", "DeviceError", "MODES", "SIGNALS", "WAVE_KINDS", "REC_TRIGGERS",
            "REASON_NAMES", "freq_word", "connect"]
@@ -35,6 +37,27 @@ REC_WINDOW = interface.HOLDING_REGISTERS["rec_window"][2]
 
 class DeviceError(CliError):
     """The controller refused or reported something the user must act on."""
+
+
+KEY_ENV = "PIEZOCTL_UNLOCK_KEY"
+
+
+def unlock_key(key: int | str | None = None) -> int:
+    """The controller's unlock key: ``key``, else ``$PIEZOCTL_UNLOCK_KEY`` (8 hex
+    digits), else sil-stage's documented development key
+    (``interface.MODBUS_UNLOCK["default_sil_key"]``)."""
+    if key is None:
+        key = os.environ.get(KEY_ENV)
+    if key is None:
+        return interface.MODBUS_UNLOCK["default_sil_key"]
+    if isinstance(key, str):
+        s = key[2:] if key.lower().startswith("0x") else key
+        if len(s) != 8 or any(c not in "0123456789abcdefABCDEF" for c in s) or int(s, 16) == 0:
+            raise CliError(f"unlock key {key!r}: want 8 hex digits (32 bits), not 0")
+        return int(s, 16)
+    if not 0 < int(key) < 2**32:
+        raise CliError("unlock key must be a nonzero 32-bit value")
+    return int(key)
 
 
 def freq_word(f_hz: float, tick_hz: float = 10000.0) -> int:
@@ -98,8 +121,9 @@ class Controller:
         from this tool's (the table layout and register map would not agree).
     """
 
-    def __init__(self, client, *, check: bool = True):
+    def __init__(self, client, *, check: bool = True, key: int | str | None = None):
         self.client = client
+        self.key = unlock_key(key)
         self.identity = self.read_identity()
         if check:
             if self.identity.device_id != 0x505A:
@@ -151,7 +175,28 @@ class Controller:
             self.client.write_holding(addr, [_u16(value)])
 
     def unlock(self) -> None:
-        self.write("unlock", interface.MODBUS_UNLOCK_KEY)
+        """Unlock this connection (its session) with the provisioned key.
+
+        Raises
+        ------
+        DeviceError
+            A wrong key (ILLEGAL DATA VALUE) or an unlock during the
+            controller's backoff or lockout after wrong keys (SERVER DEVICE BUSY).
+        """
+        try:
+            self.write("unlock_key", self.key)
+        except ModbusExceptionError as exc:
+            if exc.code == 3:
+                raise DeviceError(f"{self.client.name}: the controller refused the unlock key "
+                                  f"(set ${KEY_ENV} to the key it was provisioned with)") from None
+            if exc.code == 6:
+                raise DeviceError(f"{self.client.name}: unlock refused for now: too many wrong keys "
+                                  "(backoff or lockout, see docs/protocol.md)") from None
+            raise
+
+    def lock(self) -> None:
+        """Give up this session's unlock."""
+        self.write("unlock", 0)
 
     def set_mode(self, mode: str) -> None:
         self.write("mode", MODES[mode])
@@ -367,6 +412,7 @@ class Controller:
         return REASON_NAMES.get(self.status()["table_result"], "unknown")
 
 
-def connect(port: str, *, unit: int = interface.MODBUS_UNIT_ID, timeout: float = 1.0) -> Controller:
-    """Open PORT and check that a compatible controller answers."""
-    return Controller(open_port(port, unit=unit, timeout=timeout))
+def connect(port: str, *, unit: int = interface.MODBUS_UNIT_ID, timeout: float = 1.0,
+            key: int | str | None = None) -> Controller:
+    """Open PORT and check that a compatible controller answers; ``key``: see :func:`unlock_key`."""
+    return Controller(open_port(port, unit=unit, timeout=timeout), key=key)

@@ -30,4 +30,7 @@ static inline piezo_ctl_cfg_t unit_cfg(void)
     return c;
 }
 
+/* The unlock key the tests provision (>= 32 bits). */
+#define TEST_UNLOCK_KEY 0x5EC0A71Du
+
 #endif

@@ -71,7 +71,7 @@ if(TARGET piezo_daq_io AND TARGET piezo_stage AND TARGET PkgConfig::COMEDILIB)
 
     # The command line (firmware/targets/common/cmdline.c): help, the errors
     # and their exit status, before the configuration is read.
-    set(daq_usage "usage: daq-controller --config FILE --modbus-tcp HOST:PORT\n")
+    set(daq_usage "usage: daq-controller --config FILE --modbus-tcp HOST:PORT \\[--unlock-key HEX8\\]\n")
     piezo_add_cli_test(daq_controller_cli_help TARGET daq_controller ARGS -h
       EXPECT "^${daq_usage}status=0\n$")
     piezo_add_cli_test(daq_controller_cli_no_value TARGET daq_controller ARGS --config

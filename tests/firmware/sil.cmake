@@ -41,3 +41,16 @@ if(TARGET sil_stage)
   piezo_add_cli_test(sil_stage_cli_bad_port TARGET sil_stage ARGS --modbus-tcp 127.0.0.1:65536
     EXPECT "^sil-stage: bad port in 127.0.0.1:65536\nstatus=2\n$")
 endif()
+
+# The commit's checks on the calibrated SIL tables (issue 13): the absurd
+# images, ranges, sections, the kernel sweep and its time, stage and axis,
+# sessions, backoff and lockout.
+if(TARGET piezo_sil AND TARGET piezo_stage_shared)
+  piezo_add_cmocka_test(test_commit_checks
+    SOURCES ${CMAKE_CURRENT_LIST_DIR}/test_commit_checks.c
+    LIBS piezo_control
+    GOLDEN sil_tables
+    DEPENDS ${sil_stage_lib}
+    ENV PIEZOCTL_STAGE_LIB=$<TARGET_FILE:${sil_stage_lib}>)
+  add_dependencies(test_commit_checks golden_sil_tables)
+endif()

@@ -19,15 +19,22 @@ static int32_t tick(int16_t setpoint, int32_t adc)
     return dac;
 }
 
+/* session 1 holds the provisioned key */
+static void unlock_s1(void)
+{
+    piezo_ctl_set_key(&ctl, TEST_UNLOCK_KEY);
+    assert_int_equal(piezo_ctl_unlock(&ctl, 1, TEST_UNLOCK_KEY, 0), PIEZO_OK);
+}
+
 static uint16_t upload(const uint8_t *img, uint32_t len)
 {
-    assert_int_equal(piezo_ctl_unlock(&ctl, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
+    unlock_s1();
     /* in register-window sized chunks, as the protocol writes them */
     for (uint32_t off = 0; off < len; off += 246u) {
         uint32_t n = len - off < 246u ? len - off : 246u;
-        assert_int_equal(piezo_ctl_stage_write(&ctl, off, img + off, n), PIEZO_OK);
+        assert_int_equal(piezo_ctl_stage_write(&ctl, 1, off, img + off, n), PIEZO_OK);
     }
-    return piezo_ctl_commit(&ctl, 0);
+    return piezo_ctl_commit(&ctl, 1, 0);
 }
 
 static void setup_armed(uint8_t mode)
@@ -96,13 +103,14 @@ static void test_commit_needs_unlock_and_an_upload(void **state)
 {
     (void)state;
     setup_armed(PIEZO_MODE_FEEDFORWARD);
-    assert_int_equal(piezo_ctl_commit(&ctl, 0), PIEZO_TABLE_REASON_LOCKED);
-    assert_int_equal(piezo_ctl_stage_write(&ctl, 0, ctl_dcc_img, 10), PIEZO_EORDER);
-    assert_int_equal(piezo_ctl_unlock(&ctl, 0x1234), PIEZO_EINVAL);
+    assert_int_equal(piezo_ctl_commit(&ctl, 1, 0), PIEZO_TABLE_REASON_LOCKED);
+    assert_int_equal(piezo_ctl_stage_write(&ctl, 1, 0, ctl_dcc_img, 10), PIEZO_EPERM);
+    piezo_ctl_set_key(&ctl, TEST_UNLOCK_KEY);
+    assert_int_equal(piezo_ctl_unlock(&ctl, 1, 0x1234, 0), PIEZO_EKEY);
     assert_int_equal(ctl.st.bad_unlocks, 1);
-    assert_int_equal(piezo_ctl_unlock(&ctl, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
-    assert_int_equal(piezo_ctl_commit(&ctl, 0), PIEZO_TABLE_REASON_NOTHING_STAGED);
-    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_NO_PREVIOUS);
+    unlock_s1();
+    assert_int_equal(piezo_ctl_commit(&ctl, 1, 0), PIEZO_TABLE_REASON_NOTHING_STAGED);
+    assert_int_equal(piezo_ctl_rollback(&ctl, 1), PIEZO_TABLE_REASON_NO_PREVIOUS);
     assert_int_equal(piezo_ctl_active_crc(&ctl), 0);
 }
 
@@ -116,15 +124,15 @@ static void test_swap_happens_at_the_next_tick_and_rolls_back(void **state)
     assert_true(ctl.active >= 0);
     uint32_t crc_dcc = piezo_ctl_active_crc(&ctl);
     assert_int_equal(upload(ctl_eupi_img, CTL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OK);
-    assert_int_equal(piezo_ctl_commit(&ctl, 0), PIEZO_TABLE_REASON_BUSY); /* swap pending */
+    assert_int_equal(piezo_ctl_commit(&ctl, 1, 0), PIEZO_TABLE_REASON_BUSY); /* swap pending */
     (void)tick(0, 0);
-    assert_int_equal(piezo_ctl_commit(&ctl, 0), PIEZO_TABLE_REASON_NOTHING_STAGED);
+    assert_int_equal(piezo_ctl_commit(&ctl, 1, 0), PIEZO_TABLE_REASON_NOTHING_STAGED);
     assert_int_equal(ctl.set[ctl.active].kind, PIEZO_TABLE_KIND_EUPI_INVERSE);
-    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_OK);
-    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_BUSY);
+    assert_int_equal(piezo_ctl_rollback(&ctl, 1), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(piezo_ctl_rollback(&ctl, 1), PIEZO_TABLE_REASON_BUSY);
     (void)tick(0, 0);
     assert_true(piezo_ctl_active_crc(&ctl) == crc_dcc);
-    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_NO_PREVIOUS); /* one level */
+    assert_int_equal(piezo_ctl_rollback(&ctl, 1), PIEZO_TABLE_REASON_NO_PREVIOUS); /* one level */
 }
 
 static void test_tables_persist_across_reboot(void **state)
@@ -147,8 +155,8 @@ static void test_tables_persist_across_reboot(void **state)
     assert_int_equal(piezo_ctl_attach_store(&ctl, &io), PIEZO_TABLE_REASON_OK);
     assert_true(piezo_ctl_active_crc(&ctl) == crc_eupi);
     run_and_compare(ctl_eupi_u_q15, "eupi after reboot");
-    assert_int_equal(piezo_ctl_unlock(&ctl, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
-    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_OK);
+    unlock_s1();
+    assert_int_equal(piezo_ctl_rollback(&ctl, 1), PIEZO_TABLE_REASON_OK);
     (void)tick(0, 0);
     assert_true(piezo_ctl_active_crc(&ctl) == crc_dcc);
     /* a flash write that fails refuses the commit and keeps the running table */
@@ -164,8 +172,8 @@ static void test_tables_persist_across_reboot(void **state)
     assert_int_equal(piezo_ctl_attach_store(&ctl, &io), PIEZO_TABLE_REASON_OK);
     assert_true(piezo_ctl_active_crc(&ctl) == crc_dcc);
     run_and_compare(ctl_dcc_u_q15, "dcc after reboot");
-    assert_int_equal(piezo_ctl_unlock(&ctl, PIEZO_MODBUS_UNLOCK_KEY), PIEZO_OK);
-    assert_int_equal(piezo_ctl_rollback(&ctl), PIEZO_TABLE_REASON_NO_PREVIOUS);
+    unlock_s1();
+    assert_int_equal(piezo_ctl_rollback(&ctl, 1), PIEZO_TABLE_REASON_NO_PREVIOUS);
 }
 
 static void test_sensor_fault_disarms_and_ramps_down(void **state)
@@ -323,7 +331,7 @@ static void test_load_image_commits_or_names_the_refusal(void **state)
     (void)tick(0, 0);
     uint32_t crc = piezo_ctl_active_crc(&ctl);
     assert_int_equal(piezo_ctl_load_image(&ctl, ctl_bad[0].img, ctl_bad[0].len), ctl_bad[0].reason);
-    assert_int_equal(piezo_ctl_load_image(&ctl, NULL, 10), PIEZO_TABLE_REASON_LOCKED);
+    assert_int_equal(piezo_ctl_load_image(&ctl, NULL, 10), PIEZO_TABLE_REASON_BAD_LENGTH);
     assert_int_equal(piezo_ctl_load_image(&ctl, ctl_dcc_img, PIEZO_TABLE_MAX_BYTES + 1u), PIEZO_TABLE_REASON_BAD_LENGTH);
     (void)tick(0, 0);
     assert_true(piezo_ctl_active_crc(&ctl) == crc);

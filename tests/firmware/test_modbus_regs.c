@@ -86,6 +86,6 @@ piezo_mb_regs_t tregs_init(tregs_t *t)
     for (uint16_t a = 0; a < TREGS_INPUT_N; a++) {
         t->in[a] = tregs_input_value(a);
     }
-    piezo_mb_regs_t regs = {t, read_input, read_holding, write_holding};
+    piezo_mb_regs_t regs = {t, read_input, read_holding, write_holding, NULL};
     return regs;
 }

@@ -435,6 +435,41 @@ static void test_overrun_keeps_the_first_frame(void **state)
     assert_int_equal((reply[3] << 8) | reply[4], tregs_input_value(3));
 }
 
+/* The line is one session: it begins with every request to us and ends
+ * after PIEZO_MB_RTU_SESSION_IDLE_US without one. */
+static unsigned n_begin, n_end;
+static void session_cb(void *ctx, uint8_t id, uint8_t event)
+{
+    (void)ctx;
+    assert_int_equal(id, PIEZO_MB_SESSION_RTU);
+    if (event == PIEZO_MB_SESSION_BEGIN) {
+        n_begin++;
+    } else {
+        n_end++;
+    }
+}
+
+static void test_line_session_ends_after_silence(void **state)
+{
+    (void)state;
+    uint8_t f[8];
+    size_t n = read_frame(f, UNIT, 4, 0, 1);
+    uint32_t t;
+    n_begin = n_end = 0u;
+    regs.session = session_cb;
+    t = send_at(f, n, 1000u);
+    assert_true(piezo_rtu_poll(&rtu, t + T35, &regs, reply, sizeof reply) > 0u);
+    t = send_at(f, n, t + T35 + 1000000u); /* 1 s later: the same session */
+    assert_true(piezo_rtu_poll(&rtu, t + T35, &regs, reply, sizeof reply) > 0u);
+    assert_int_equal(n_begin, 2);
+    assert_int_equal(n_end, 0);
+    t = send_at(f, n, t + T35 + PIEZO_MB_RTU_SESSION_IDLE_US); /* silent too long: a new one */
+    assert_true(piezo_rtu_poll(&rtu, t + T35, &regs, reply, sizeof reply) > 0u);
+    assert_int_equal(n_begin, 3);
+    assert_int_equal(n_end, 1);
+    regs.session = NULL;
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -455,6 +490,7 @@ int main(void)
         cmocka_unit_test_setup(test_overflow_then_recovery_and_timestamp_wrap, setup),
         cmocka_unit_test_setup(test_small_reply_buffer_answers_nothing, setup),
         cmocka_unit_test_setup(test_overrun_keeps_the_first_frame, setup),
+        cmocka_unit_test_setup(test_line_session_ends_after_silence, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

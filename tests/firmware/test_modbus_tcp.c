@@ -207,6 +207,7 @@ static void test_server_limits_clients_and_poll_returns_at_once(void **state)
 {
     (void)state;
     int fds[PIEZO_TCP_MAX_CLIENTS + 1];
+    srv.evict_ms = 600000u; /* nobody idle long enough to be replaced */
     for (int i = 0; i <= PIEZO_TCP_MAX_CLIENTS; i++) {
         fds[i] = connect_client();
     }
@@ -227,6 +228,55 @@ static void test_server_limits_clients_and_poll_returns_at_once(void **state)
         assert_true(piezo_tcp_server_poll(&srv, 0) >= 0);
     }
     assert_int_equal(piezo_tcp_server_poll(&srv, 0), 0);
+}
+
+/* Every slot taken: a new client replaces the connection idle longest. */
+static void test_server_new_client_replaces_the_longest_idle(void **state)
+{
+    (void)state;
+    int fds[PIEZO_TCP_MAX_CLIENTS + 1];
+    uint8_t buf[16];
+    const uint8_t ok[] = {0, 1, 0, 0, 0, 6, 1, 0x04, 0x00, 0x00, 0x00, 0x01};
+    srv.evict_ms = 100u;
+    for (int i = 0; i < PIEZO_TCP_MAX_CLIENTS; i++) {
+        fds[i] = connect_client(); /* 500 ms each */
+    }
+    /* all but the first ask something: the first is the idlest */
+    for (int i = 1; i < PIEZO_TCP_MAX_CLIENTS; i++) {
+        assert_int_equal(send(fds[i], ok, sizeof ok, 0), (ssize_t)sizeof ok);
+        assert_int_equal(exchange(fds[i], buf, 11), 11);
+    }
+    fds[PIEZO_TCP_MAX_CLIENTS] = connect_client();
+    assert_int_equal(srv.evicted, 1);
+    assert_int_equal(srv.refused, 0);
+    (void)send(fds[0], ok, sizeof ok, MSG_NOSIGNAL);
+    assert_true(exchange(fds[0], buf, 11) <= 0); /* the idlest went */
+    for (int i = 1; i <= PIEZO_TCP_MAX_CLIENTS; i++) {
+        assert_int_equal(send(fds[i], ok, sizeof ok, 0), (ssize_t)sizeof ok);
+        assert_int_equal(exchange(fds[i], buf, 11), 11); /* the others, and the new one, are served */
+    }
+    for (int i = 0; i <= PIEZO_TCP_MAX_CLIENTS; i++) {
+        close(fds[i]);
+    }
+}
+
+/* A silent connection and a half-sent request are closed after their timeouts. */
+static void test_server_times_out_idle_and_half_sent(void **state)
+{
+    (void)state;
+    uint8_t buf[16];
+    const uint8_t half[] = {0, 1, 0, 0, 0, 6, 1, 0x04}; /* 8 of 12 bytes */
+    srv.idle_ms = 700u;
+    srv.partial_ms = 150u;
+    int idle = connect_client();
+    int part = connect_client(); /* idle has been silent 500 ms by now: closed */
+    assert_int_equal(srv.timed_out, 1);
+    assert_int_equal(send(part, half, sizeof half, 0), (ssize_t)sizeof half);
+    assert_true(exchange(part, buf, 1) <= 0); /* closed within partial_ms of its first byte */
+    assert_int_equal(srv.timed_out, 2);
+    assert_true(exchange(idle, buf, 1) <= 0);
+    close(idle);
+    close(part);
 }
 
 static void test_server_open_errors(void **state)
@@ -255,6 +305,9 @@ int main(void)
                                         server_teardown),
         cmocka_unit_test_setup_teardown(test_server_limits_clients_and_poll_returns_at_once,
                                         server_setup, server_teardown),
+        cmocka_unit_test_setup_teardown(test_server_new_client_replaces_the_longest_idle, server_setup,
+                                        server_teardown),
+        cmocka_unit_test_setup_teardown(test_server_times_out_idle_and_half_sent, server_setup, server_teardown),
         cmocka_unit_test_setup(test_server_open_errors, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -20,6 +20,7 @@ static void setup(void)
     piezo_regmap_init(&map, &ctl);
     map.drive_min_mv = 0;
     map.drive_max_mv = 150000;
+    piezo_ctl_set_key(&ctl, TEST_UNLOCK_KEY); /* the stage stays unknown: ctl images carry none */
     regs = piezo_regmap_regs(&map);
 }
 
@@ -50,6 +51,13 @@ static uint8_t write_regs(uint16_t addr, uint16_t n, const uint16_t *v)
 static uint8_t write1(uint16_t addr, uint16_t v)
 {
     return write_regs(addr, 1, &v);
+}
+
+/* The key into unlock_key, both registers in one request. */
+static uint8_t write_key(uint32_t key)
+{
+    uint16_t v[2] = {(uint16_t)(key >> 16), (uint16_t)key};
+    return write_regs(PIEZO_HOLDING_UNLOCK_KEY, 2, v);
 }
 
 static uint8_t read_regs(uint8_t fc, uint16_t addr, uint16_t n, uint16_t *out)
@@ -140,9 +148,10 @@ static void test_table_upload_readback_commit(void **state)
         assert_int_equal(write_regs(PIEZO_HOLDING_TABLE_OFFSET, 3, v), PIEZO_MB_EX_ILLEGAL_DATA_VALUE);
         assert_int_equal(ctl.staged_len, 0);
     }
-    assert_int_equal(write1(PIEZO_HOLDING_UNLOCK, 0x1111), 0); /* wrong key: accepted as a write, counted */
+    /* wrong key: an exception, counted */
+    assert_int_equal(write_key(0x1111u), PIEZO_MB_EX_ILLEGAL_DATA_VALUE);
     assert_int_equal(read_u32(PIEZO_MB_FC_READ_INPUT, PIEZO_INPUT_BAD_UNLOCKS) >> 16, 1);
-    assert_int_equal(write1(PIEZO_HOLDING_UNLOCK, PIEZO_MODBUS_UNLOCK_KEY), 0);
+    assert_int_equal(write_key(TEST_UNLOCK_KEY), 0);
     upload(ctl_dcc_img, CTL_DCC_IMG_LEN);
     /* read back every chunk with FC 23 (offset written, window read) */
     for (uint32_t off = 0; off < CTL_DCC_IMG_LEN; off += 2u * PIEZO_HOLDING_TABLE_WINDOW_COUNT) {
@@ -184,7 +193,7 @@ static void test_configuration_needs_key_and_disarm(void **state)
     setup();
     uint16_t kp[2] = {0x0080, 0x0000}; /* 0.5 in q24 */
     assert_int_equal(write_regs(PIEZO_HOLDING_PID_KP_Q24, 2, kp), PIEZO_MB_EX_ILLEGAL_DATA_VALUE);
-    assert_int_equal(write1(PIEZO_HOLDING_UNLOCK, PIEZO_MODBUS_UNLOCK_KEY), 0);
+    assert_int_equal(write_key(TEST_UNLOCK_KEY), 0);
     assert_int_equal(write_regs(PIEZO_HOLDING_PID_KP_Q24, 2, kp), 0);
     assert_int_equal(ctl.cfg.pid.kp_q24, 1 << 23);
     /* min above max: refused, nothing changed */

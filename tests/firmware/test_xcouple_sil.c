@@ -186,6 +186,14 @@ static void test_uncompensated_coupling_is_the_stages(void **state)
 /* The coupling table has slots of its own: commit, refusal and rollback
  * leave the feedforward slot alone; rollback after a coupling commit acts on
  * the coupling slot (to none when there was no previous coupling table). */
+/* A rollback from session 1, unlocked with a provisioned key. */
+static uint16_t rollback_s1(piezo_ctl_t *c)
+{
+    piezo_ctl_set_key(c, 0x5EC0A71Du);
+    assert_int_equal(piezo_ctl_unlock(c, 1u, 0x5EC0A71Du, 0u), PIEZO_OK);
+    return piezo_ctl_rollback(c, 1u);
+}
+
 static void test_coupling_slot_commit_and_rollback(void **state)
 {
     (void)state;
@@ -212,17 +220,17 @@ static void test_coupling_slot_commit_and_rollback(void **state)
     assert_int_equal(piezo_ctl_load_image(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
     assert_true(c->xc_previous >= 0 && c->xc_previous != c->xc_active);
-    assert_int_equal(piezo_ctl_rollback(c), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(rollback_s1(c), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
     assert_true(c->xc_active >= 0 && c->xc_previous < 0);
     /* a second rollback is a feedforward rollback: there is none */
-    assert_int_equal(piezo_ctl_rollback(c), PIEZO_TABLE_REASON_NO_PREVIOUS);
+    assert_int_equal(rollback_s1(c), PIEZO_TABLE_REASON_NO_PREVIOUS);
     assert_true(c->xc_active >= 0);
     /* a commit then a rollback with no previous coupling table: compensation off */
     assert_int_equal(piezo_sil_init(&sil, &params, 1u), PIEZO_OK);
     assert_int_equal(piezo_ctl_load_image(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
-    assert_int_equal(piezo_ctl_rollback(c), PIEZO_TABLE_REASON_OK);
+    assert_int_equal(rollback_s1(c), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
     assert_true(c->xc_active < 0);
     assert_int_equal(piezo_ctl_coupling_crc(c), 0u);

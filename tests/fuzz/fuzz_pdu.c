@@ -27,7 +27,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         fuzz_inner = tregs_init(&bank);
         ready = 1;
     }
-    piezo_mb_regs_t regs = {&bank, fuzz_read_input, fuzz_read_holding, fuzz_write_holding};
+    piezo_mb_regs_t regs = {&bank, fuzz_read_input, fuzz_read_holding, fuzz_write_holding, NULL};
     static uint16_t before[sizeof bank.hold / sizeof bank.hold[0]];
     memcpy(before, bank.hold, sizeof before);
     fuzz_writes_ok = 0;

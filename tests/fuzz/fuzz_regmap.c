@@ -50,7 +50,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 #define H_TABLE_OFFSET 0x2000u
 #define H_TABLE_WINDOW 0x2002u
 #define H_TABLE_COMMAND 0x2080u
-#define H_UNLOCK 0x1000u
+#define H_UNLOCK_KEY 0x1008u
 #define WINDOW 121u
 #define MAX_GOOD 64u
 #define MAX_HOLD 4096u
@@ -108,7 +108,7 @@ static int is_good(uint32_t crc)
 }
 
 /* the register map's callbacks with the server's own contract checked (fuzz_regs_check.h) */
-static const piezo_mb_regs_t regs = {&map, fuzz_read_input, fuzz_read_holding, fuzz_write_holding};
+static const piezo_mb_regs_t regs = {&map, fuzz_read_input, fuzz_read_holding, fuzz_write_holding, NULL};
 
 /* Every holding register's value, read through map m (descriptor order). */
 static unsigned snapshot_holding(piezo_regmap_t *m, uint16_t *out)
@@ -197,7 +197,7 @@ static size_t request(const uint8_t *req, size_t len, uint8_t *rsp)
     uint8_t fc = req[0];
     int exc = rsp[0] == (uint8_t)(fc | 0x80u) && rsp[0] != fc;
     if (exc) {
-        if (n != 2u || rsp[1] < 1u || rsp[1] > 4u) {
+        if (n != 2u || rsp[1] < 1u || (rsp[1] > 4u && rsp[1] != 6u)) {
             fail();
         }
     } else if (rsp[0] != fc) {
@@ -216,6 +216,11 @@ static size_t request(const uint8_t *req, size_t len, uint8_t *rsp)
          * the state differs, the registers are compared to tell which broke. */
         piezo_regmap_t map_now = map;
         map_now.ctl = &ctl_before;
+        /* a refused key is counted, and locks the session that sent it */
+        ctl_before.st.bad_unlocks = ctl.st.bad_unlocks;
+        ctl_before.unlock_bad_run = ctl.unlock_bad_run;
+        ctl_before.bad_at_ms = ctl.bad_at_ms;
+        ctl_before.unlocked = ctl.unlocked;
         if (memcmp(&ctl_before, &ctl, sizeof ctl) != 0 || memcmp(&map_before, &map_now, sizeof map) != 0) {
             unsigned nb = snapshot_holding(&map_before, hold_before);
             if (snapshot_holding(&map, hold_after) != nb ||
@@ -285,6 +290,7 @@ static void setup(void)
     map.drive_min_mv = 0;
     map.drive_max_mv = 150000;
     map.position_max_nm = 100000;
+    piezo_ctl_set_key(&ctl, TEST_UNLOCK_KEY);
     fuzz_inner = piezo_regmap_regs(&map);
     n_good = 0u;
 }
@@ -321,13 +327,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         }
         case 2: {
             NEED(1);
-            uint16_t key = PIEZO_MODBUS_UNLOCK_KEY;
+            uint32_t key = TEST_UNLOCK_KEY;
             if (data[i++] & 1u) {
                 NEED(2);
-                key = (uint16_t)(data[i] | (data[i + 1] << 8));
+                key = (uint32_t)(data[i] | (data[i + 1] << 8));
                 i += 2;
             }
-            (void)fc06(H_UNLOCK, key, rsp);
+            uint8_t req[10] = {PIEZO_MB_FC_WRITE_MULTIPLE, (uint8_t)(H_UNLOCK_KEY >> 8), (uint8_t)H_UNLOCK_KEY, 0u, 2u,
+                               4u, (uint8_t)(key >> 24), (uint8_t)(key >> 16), (uint8_t)(key >> 8), (uint8_t)key};
+            (void)request(req, sizeof req, rsp);
             break;
         }
         case 3: {
@@ -345,7 +353,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         }
         case 4: {
             uint32_t len = staged_image_len(&ctl);
-            if (len != 0u && (len & 1u) == 0u && ctl.unlocked) {
+            if (len != 0u && (len & 1u) == 0u && piezo_ctl_is_unlocked(&ctl, map.session)) {
                 uint8_t crc[4];
                 uint32_t v = crc32_ref(ctl.staged, len - 4u);
                 for (int k = 0; k < 4; k++) {

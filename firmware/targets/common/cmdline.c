@@ -46,3 +46,29 @@ int piezo_cli_modbus_tcp(const char *prog, const char *spec, char *host, unsigne
         return 2;
     }
 }
+
+int piezo_cli_unlock_key(const char *prog, const char *spec, unsigned long *key)
+{
+    const char *p = spec;
+    unsigned long v = 0u;
+    int n = 0;
+    if (p[0] == '0' && (p[1] == 'x' || p[1] == 'X')) {
+        p += 2;
+    }
+    for (; *p != '\0' && n <= 8; p++, n++) {
+        int d = (*p >= '0' && *p <= '9') ? *p - '0'
+                : (*p >= 'a' && *p <= 'f') ? *p - 'a' + 10
+                : (*p >= 'A' && *p <= 'F') ? *p - 'A' + 10
+                                           : -1;
+        if (d < 0) {
+            break;
+        }
+        v = (v << 4) | (unsigned long)d;
+    }
+    if (*p != '\0' || n != 8 || v == 0u) {
+        fprintf(stderr, "%s: --unlock-key wants 8 hex digits (32 bits), got %s\n", prog, spec);
+        return 2;
+    }
+    *key = v;
+    return 0;
+}

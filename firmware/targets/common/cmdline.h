@@ -39,4 +39,11 @@ int piezo_cli_parse(int argc, char **argv, const char *prog, const piezo_cli_opt
  */
 int piezo_cli_modbus_tcp(const char *prog, const char *spec, char *host, unsigned long host_len, long *port);
 
+/**
+ * The value of --unlock-key: the controller's unlock key, exactly 8 hex
+ * digits (optionally after 0x), not 0. Returns 0; or 2 after "PROG:
+ * --unlock-key wants 8 hex digits (32 bits), got SPEC" on stderr.
+ */
+int piezo_cli_unlock_key(const char *prog, const char *spec, unsigned long *key);
+
 #endif /* PIEZO_CMDLINE_H */

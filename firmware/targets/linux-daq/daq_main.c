@@ -52,7 +52,7 @@ static void on_signal(int sig)
 
 static void usage(FILE *f)
 {
-    fprintf(f, "usage: daq-controller --config FILE --modbus-tcp HOST:PORT\n");
+    fprintf(f, "usage: daq-controller --config FILE --modbus-tcp HOST:PORT [--unlock-key HEX8]\n");
 }
 
 static const char *conv_name(int conv)
@@ -75,7 +75,9 @@ int main(int argc, char **argv)
     piezo_daq_loop_t loop;
     piezo_rt_result_t rt;
     int n_open = 0, status = 0, cli;
-    const piezo_cli_opt_t opts[] = {{"--config", &cfg_path}, {"--modbus-tcp", &tcp_spec}};
+    const char *key_arg = NULL;
+    unsigned long key = 0u; /* none: every unlock refused (tables and configuration read-only) */
+    const piezo_cli_opt_t opts[] = {{"--config", &cfg_path}, {"--modbus-tcp", &tcp_spec}, {"--unlock-key", &key_arg}};
 
     cli = piezo_cli_parse(argc, argv, "daq-controller", opts, sizeof opts / sizeof opts[0], usage);
     if (cli != PIEZO_CLI_RUN) {
@@ -89,6 +91,10 @@ int main(int argc, char **argv)
     if (piezo_cli_modbus_tcp("daq-controller", tcp_spec, host, sizeof host, &port) != 0) {
         return 2;
     }
+    if (key_arg != NULL && piezo_cli_unlock_key("daq-controller", key_arg, &key) != 0) {
+        return 2;
+    }
+
     if (piezo_daq_config_load(cfg_path, &cfg, errbuf, sizeof errbuf) != 0) {
         fprintf(stderr, "daq-controller: %s\n", errbuf);
         return 2;
@@ -129,6 +135,7 @@ int main(int argc, char **argv)
         map[i].drive_max_mv = (int32_t)(scale[i].drive_max_v * 1000.0);
         map[i].position_min_nm = (int32_t)(scale[i].position_min_um * 1000.0);
         map[i].position_max_nm = (int32_t)(scale[i].position_max_um * 1000.0);
+        piezo_regmap_provision(&map[i], (uint32_t)key);
         regs[i] = piezo_regmap_regs(&map[i]);
         snprintf(path, sizeof path, "%s%s", cfg.flash, i == 0 ? "" : ".axis2");
         if (piezo_flash_file_open(&flash[i], path, 2u * slot) != 0) {
@@ -170,6 +177,9 @@ int main(int argc, char **argv)
     if (!rt.locked) {
         fprintf(stderr, "daq-controller: warning: mlockall refused (%s): page faults may delay ticks\n",
                 strerror(rt.lock_errno));
+    }
+    if (key_arg == NULL) {
+        fprintf(stderr, "daq-controller: no --unlock-key: tables and configuration cannot be written\n");
     }
     printf("daq-controller: ready tcp=%s:%u axes=%d device=%s rate=%u Hz sched=%s", host,
            (unsigned)piezo_tcp_server_port(&tcp[0]), g_daq.n_axes, cfg.device, (unsigned)cfg.tick_hz,

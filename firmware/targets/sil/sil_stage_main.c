@@ -59,7 +59,7 @@ static void on_signal(int sig)
 static void usage(FILE *f)
 {
     fprintf(f, "usage: sil-stage --modbus-tcp HOST:PORT [--modbus-rtu-pty LINK] [--stage PARAMS.json]\n"
-               "                 [--flash FILE] [--seed N] [--rtu-baud BAUD]\n");
+               "                 [--flash FILE] [--seed N] [--rtu-baud BAUD] [--unlock-key HEX8]\n");
 }
 
 static int open_pty(const char *link, int *slave_keep)
@@ -87,10 +87,12 @@ static int open_pty(const char *link, int *slave_keep)
 int main(int argc, char **argv)
 {
     const char *tcp_spec = NULL, *pty_link = NULL, *stage_path = NULL, *flash_path = NULL;
-    const char *seed_arg = NULL, *baud_arg = NULL;
+    const char *seed_arg = NULL, *baud_arg = NULL, *key_arg = NULL;
+    unsigned long key = PIEZO_UNLOCK_DEFAULT_SIL_KEY; /* a development stage: documented default */
     const piezo_cli_opt_t opts[] = {
         {"--modbus-tcp", &tcp_spec}, {"--modbus-rtu-pty", &pty_link}, {"--stage", &stage_path},
         {"--flash", &flash_path},    {"--seed", &seed_arg},           {"--rtu-baud", &baud_arg},
+        {"--unlock-key", &key_arg},
     };
     uint64_t seed = 1;
     uint32_t baud = 115200;
@@ -108,6 +110,9 @@ int main(int argc, char **argv)
     cli = piezo_cli_parse(argc, argv, "sil-stage", opts, sizeof opts / sizeof opts[0], usage);
     if (cli != PIEZO_CLI_RUN) {
         return cli; /* 0 after --help, 2 for a bad command line */
+    }
+    if (key_arg != NULL && piezo_cli_unlock_key("sil-stage", key_arg, &key) != 0) {
+        return 2;
     }
     if (seed_arg != NULL) {
         seed = strtoull(seed_arg, NULL, 10);
@@ -145,6 +150,8 @@ int main(int argc, char **argv)
         map[i].drive_max_mv = (int32_t)(sc->drive_max_v * 1000.0);
         map[i].position_min_nm = (int32_t)(sc->position_min_um * 1000.0);
         map[i].position_max_nm = (int32_t)(sc->position_max_um * 1000.0);
+        /* the stage and the key before the stored table is loaded (checked against both) */
+        piezo_regmap_provision(&map[i], (uint32_t)key);
         regs[i] = piezo_regmap_regs(&map[i]);
         /* PORT 0: axis 1 on a free port, axis i on that port + i (as for a given PORT) */
         long p_i = port == 0 ? (i == 0 ? 0 : (long)piezo_tcp_server_port(&tcp[0]) + i) : port + i;

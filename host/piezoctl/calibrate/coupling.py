@@ -240,7 +240,7 @@ def calibrate_two_axis(c1, port: str, out: pathlib.Path, summary1: dict, *, kind
         drive_per_um = line / ci.scale.p_half
         tab = coupling_table(params, cj.scale, ci.scale, drive_per_um, x_source=0,
                              table_version=int(time.time()), fit_nrmse=float(np.mean(resid)),
-                             build_time=int(time.time()))
+                             build_time=int(time.time()), axis=ci.identity.axis, stage=ci.scale)
         (out / f"coupling_table_axis{i}.bin").write_bytes(tab.image)
         crc = flash_coupling(ci, tab.image)
         ev = evaluate_coupling(ci, cj, _comp_of(sums[i], dirs[i]), _comp_of(sums[j], dirs[j]))

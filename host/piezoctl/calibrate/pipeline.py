@@ -164,7 +164,9 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
     data = model.provenance.get("data", [])
     digest = __import__("hashlib").sha256("".join(d.get("sha256", "") for d in data).encode()).digest()
     img = build_image(comp.table_kind, comp.sections, table_version=int(time.time()),
-                      fit_nrmse=heldout[chosen], build_time=int(time.time()), data_sha256=digest)
+                      fit_nrmse=heldout[chosen], build_time=int(time.time()), data_sha256=digest,
+                      axis=ctl.identity.axis, drive_range_v=(sc.drive_min_v, sc.drive_max_v),
+                      position_range_um=(sc.position_min_um, sc.position_max_um))
     (out / "table.bin").write_bytes(img)
     crc = flash_image(ctl, img, quiet=True)
     _log(5, f"table {comp.table_kind} ({len(img)} bytes, crc {crc:#010x}) staged, verified, committed, active")

@@ -12,7 +12,7 @@ from __future__ import annotations
 from ..errors import CliError
 from ..io.modelfile import load_model
 from ..tables.from_model import SUPPORTED_KINDS, Scale, table_from_model
-from ..tables.image import TableImageError, parse_image
+from ..tables.image import TableImageError, check_image
 
 
 def add_parser(sub) -> None:
@@ -27,6 +27,8 @@ def add_parser(sub) -> None:
                    help="drive of q15 -1 and +1 [V]")
     b.add_argument("--position-range", nargs=2, type=float, metavar=("UM_MIN", "UM_MAX"),
                    help="position of q15 -1 and +1 [um]")
+    b.add_argument("--axis", type=int, default=None,
+                   help="controller axis the table is for (default: the --port controller's, else 0)")
     b.add_argument("--table-version", type=int, help="version stamped in the header (default: Unix time)")
     b.set_defaults(func=run_build)
 
@@ -34,7 +36,10 @@ def add_parser(sub) -> None:
 def scale_for(args, model) -> Scale:
     if args.port:
         from ..device import connect
-        return connect(args.port).scale
+        ctl = connect(args.port)
+        if args.axis is None:
+            args.axis = ctl.identity.axis
+        return ctl.scale
     if args.drive_range and args.position_range:
         return Scale(*args.drive_range, *args.position_range)
     if args.drive_range or args.position_range:
@@ -56,8 +61,8 @@ def run_build(args) -> int:
                        f"(supported: {', '.join(SUPPORTED_KINDS)})")
     scale = scale_for(args, model)
     try:
-        img = table_from_model(model, scale, table_version=args.table_version)
-        t = parse_image(img)
+        img = table_from_model(model, scale, table_version=args.table_version, axis=args.axis or 0)
+        t = check_image(img)
     except TableImageError as exc:
         raise CliError(f"table refused: {exc}") from None
     with open(args.out, "wb") as fh:

@@ -359,9 +359,11 @@ def build_tables(path: Path | None = None) -> Tables:
     a, b = straight_line(v, y)
     info["line_rms_um"] = float(np.sqrt(np.mean((a * y + b - v) ** 2))) * um_per_fs / a
     # both tables carry the straight line for OPEN_LOOP (the uncompensated baseline)
+    stage = dict(axis=0, drive_range_v=(sc.drive_min_v, sc.drive_max_v),
+                 position_range_um=(sc.position_min_um, sc.position_max_um))
     eupi_img = build_image("eupi_inverse", [ctl_section(a, b)] + eupi_inverse_sections(q, ep.a0),
-                           table_version=1)
-    dcc_img = build_image("kp_dcc", [ctl_section(a, b, 1.0, -c)] + kp_dcc_sections(d), table_version=2)
+                           table_version=1, **stage)
+    dcc_img = build_image("kp_dcc", [ctl_section(a, b, 1.0, -c)] + kp_dcc_sections(d), table_version=2, **stage)
     fb = design_feedback(sc, path)
     return Tables(sc, eupi_img, dcc_img, a, b, ref_off, ref_amp, fb, info)
 

@@ -120,7 +120,7 @@ def build(path=STAGE):
     g_um_per_v = static_gain(path)
     d_half = 0.5 * (sc.drive_max_v - sc.drive_min_v)
     drive_per_um = 1.0 / (g_um_per_v * d_half)   # FS of drive per um
-    tab = coupling_table(params, sc, sc, drive_per_um, x_source=0)
+    tab = coupling_table(params, sc, sc, drive_per_um, x_source=0, axis=0, stage=sc)
     return tab, sc, g_um_per_v, params, hold_um
 
 

@@ -39,7 +39,7 @@ class CouplingTable:
 
 def coupling_table(params: dict, drive_scale, position_scale, drive_per_um: float, *, x_source: int = 0,
                    table_version: int = 1, fit_nrmse: float = 0.0, build_time: int = 0,
-                   data_sha256: bytes = b"") -> CouplingTable:
+                   data_sha256: bytes = b"", axis: int = 0, stage=None) -> CouplingTable:
     """Image of the coupling table for one axis.
 
     Parameters
@@ -53,9 +53,17 @@ def coupling_table(params: dict, drive_scale, position_scale, drive_per_um: floa
         The position input's scale (q15 <-> um).
     drive_per_um : float
         This axis' drive [FS] per um of displacement: 1 / static gain.
+    axis : int
+        The controller axis the table goes to.
+    stage : Scale, optional
+        That axis' own scale (drive and position ranges), stamped into the
+        header; a controller of another stage refuses the table. None: no
+        stage (only a controller that does not know its own accepts it).
     """
     kf = gxc.from_hammerstein(params, drive_scale, position_scale, drive_per_um)
     kq = gxc.quantize(kf)
+    st = {} if stage is None else dict(drive_range_v=(stage.drive_min_v, stage.drive_max_v),
+                                       position_range_um=(stage.position_min_um, stage.position_max_um))
     img = build_image("cross_coupling", cross_coupling_sections(kq, x_source), table_version=table_version,
-                      fit_nrmse=fit_nrmse, build_time=build_time, data_sha256=data_sha256)
+                      fit_nrmse=fit_nrmse, build_time=build_time, data_sha256=data_sha256, axis=axis, **st)
     return CouplingTable(img, kf, kq, x_source)

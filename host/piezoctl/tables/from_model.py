@@ -228,7 +228,7 @@ def compile_model(model: Model, scale: Scale, *, margin: float = 0.02) -> Compil
 
 
 def table_from_model(model: Model, scale: Scale, *, table_version: int | None = None,
-                     margin: float = 0.02) -> bytes:
+                     margin: float = 0.02, axis: int = 0) -> bytes:
     """Build the table image of an identified model for a controller's scale.
 
     Parameters
@@ -239,6 +239,9 @@ def table_from_model(model: Model, scale: Scale, *, table_version: int | None = 
         The controller's q15 scale.
     table_version : int, optional
         Version stamped into the header (default: Unix time).
+    axis : int
+        The controller axis the table is for; with ``scale`` it is stamped
+        into the header, and a controller of another stage or axis refuses it.
     margin : float
         Small-gain margin the EUPI inverse must keep [FS per FS, in the model's output units].
 
@@ -254,4 +257,6 @@ def table_from_model(model: Model, scale: Scale, *, table_version: int | None = 
     now = int(time.time())
     return build_image(comp.table_kind, comp.sections,
                        table_version=int(table_version if table_version is not None else now),
-                       fit_nrmse=nrmse, build_time=now, data_sha256=digest)
+                       fit_nrmse=nrmse, build_time=now, data_sha256=digest, axis=axis,
+                       drive_range_v=(scale.drive_min_v, scale.drive_max_v),
+                       position_range_um=(scale.position_min_um, scale.position_max_um))

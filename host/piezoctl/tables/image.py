@@ -16,10 +16,10 @@ import numpy as np
 
 from .. import __version__, interface
 
-__all__ = ["Section", "TableImage", "build_image", "parse_image", "TableImageError",
+__all__ = ["Section", "TableImage", "build_image", "parse_image", "check_image", "check_sections", "TableImageError",
            "tool_version_word"]
 
-_FMT = {"uint16": "<H", "uint32": "<I"}
+_FMT = {"uint16": "<H", "uint32": "<I", "int32": "<i"}
 _SECTION_DTYPE = {interface.SECTION_TYPES["int16"]: np.dtype("<i2"),
                   interface.SECTION_TYPES["int32"]: np.dtype("<i4")}
 
@@ -69,8 +69,18 @@ def _section_bytes(sec: Section) -> bytes:
     return struct.pack("<HHI", sec.id, sec.type, vals.size) + data
 
 
+def _milli(v: float) -> int:
+    """V -> mV, um -> nm, rounded (the controller allows 1 LSB of difference)."""
+    m = int(round(float(v) * 1000.0))
+    if not -(1 << 31) <= m < (1 << 31):
+        raise TableImageError("out_of_range", f"range end {v} does not fit the header")
+    return m
+
+
 def build_image(kind: str, sections: list[Section], *, table_version: int = 1,
                 fit_nrmse: float = 0.0, build_time: int = 0, data_sha256: bytes = b"",
+                axis: int = 0, drive_range_v: tuple[float, float] = (0.0, 0.0),
+                position_range_um: tuple[float, float] = (0.0, 0.0),
                 layout_version: int = interface.LAYOUT_VERSION,
                 interface_crc: int = interface.INTERFACE_CRC32) -> bytes:
     """Assemble an image.
@@ -89,6 +99,14 @@ def build_image(kind: str, sections: list[Section], *, table_version: int = 1,
         Unix time [s].
     data_sha256 : bytes
         SHA-256 of the recordings (the first 16 bytes are kept).
+    axis : int
+        Axis the table is built for (the controller's ``axis`` register).
+    drive_range_v, position_range_um : (float, float)
+        The stage the table is built for: drive [V] and position [um] of q15
+        -1 and +1, as the controller reports them; stored in mV and nm. A
+        controller that drives another stage refuses the table
+        (``wrong_stage``); (0, 0) is no stage and is refused by any
+        controller that knows its own.
     layout_version, interface_crc : int
         Override only to make deliberately wrong images for tests.
 
@@ -112,6 +130,9 @@ def build_image(kind: str, sections: list[Section], *, table_version: int = 1,
         "fit_nrmse_ppm": int(round(min(max(fit_nrmse, 0.0), 4000.0) * 1e6)),
         "tool_version": tool_version_word(), "build_time": build_time,
         "data_sha256": (bytes(data_sha256) + b"\0" * 16)[:16],
+        "axis": int(axis), "reserved": 0,
+        "drive_min_mv": _milli(drive_range_v[0]), "drive_max_mv": _milli(drive_range_v[1]),
+        "position_min_nm": _milli(position_range_um[0]), "position_max_nm": _milli(position_range_um[1]),
     }
     head = bytearray(interface.TABLE_HEADER_BYTES)
     for name, typ, off, count in interface.TABLE_HEADER:
@@ -152,8 +173,8 @@ def parse_image(img: bytes) -> TableImage:
                               f"this tool speaks {interface.LAYOUT_VERSION}")
     if hdr["interface_crc"] != interface.INTERFACE_CRC32:
         raise TableImageError("bad_interface_crc", f"interface CRC {hdr['interface_crc']:#010x}")
-    if hdr["q_signal_frac"] != 15 or hdr["q_coef_frac"] != 24:
-        raise TableImageError("bad_layout_version", "Q formats differ")
+    if hdr["q_signal_frac"] != 15 or hdr["q_coef_frac"] != 24 or hdr["reserved"] != 0:
+        raise TableImageError("bad_layout_version", "Q formats differ, or the reserved field is not 0")
     sections, off, end = {}, hb, len(img) - 4
     for _ in range(hdr["n_sections"]):
         if end - off < 8:
@@ -176,3 +197,38 @@ def parse_image(img: bytes) -> TableImage:
     if off != end:
         raise TableImageError("bad_length", "bytes after the last section")
     return TableImage(header=hdr, sections=sections, crc=crc)
+
+
+def check_image(img: bytes) -> TableImage:
+    """:func:`parse_image` and :func:`check_sections`: what a commit checks
+    before it runs the table's kernel (``piezo_table_check`` and
+    ``piezo_table_check_specs``)."""
+    t = parse_image(img)
+    check_sections(t.header["kind"], t.sections)
+    return t
+
+
+def check_sections(kind: int, sections: dict) -> None:
+    """The firmware's section checks (``table_image.c``, ``check_specs``):
+    every section known for the kind, of its type and field count, every
+    element in its range (``interface.TABLE_SECTION_RANGES``), and every
+    section the kind needs present."""
+    names = {v[0]: k for k, v in interface.TABLE_SECTIONS.items()}
+    kind_name = {v: k for k, v in interface.TABLE_KINDS.items()}.get(kind)
+    if kind_name is None or not any(kind_name in v[2] for v in interface.TABLE_SECTIONS.values()):
+        raise TableImageError("bad_kind", f"kind {kind}")
+    for sid, vals in sections.items():
+        name = names.get(sid)
+        if name is None or kind_name not in interface.TABLE_SECTIONS[name][2]:
+            raise TableImageError("unknown_section", f"section {sid} is not part of a {kind_name} table")
+        ranges = interface.TABLE_SECTION_RANGES[name]
+        if ranges[0][0] is not None and len(vals) != len(ranges):
+            raise TableImageError("bad_length", f"{name}: {len(vals)} elements, needs {len(ranges)}")
+        for i, v in enumerate(vals):
+            field, lo, hi = ranges[i] if ranges[0][0] is not None else ranges[0]
+            if not lo <= int(v) <= hi:
+                raise TableImageError("out_of_range", f"{name}[{i}]{' (' + field + ')' if field else ''} = {int(v)} "
+                                      f"outside [{lo}, {hi}]")
+    for name, (sid, _t, kinds) in interface.TABLE_SECTIONS.items():
+        if kind_name in kinds and sid not in sections:
+            raise TableImageError("missing_section", f"a {kind_name} table needs section {name}")

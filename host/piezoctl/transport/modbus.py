@@ -3,6 +3,8 @@ pinned to pymodbus 3.16.1 in host/requirements.lock)."""
 
 from __future__ import annotations
 
+import time
+
 from .. import interface
 from .client import RegisterClient
 from .errors import (ModbusExceptionError, PortUnreachableError, ProtocolError,
@@ -25,6 +27,9 @@ class PymodbusClient(RegisterClient):
 
         self.name = spec.text
         self.unit = unit
+        self._tcp = spec.kind == "tcp"
+        self._last_ok = time.monotonic()
+        self.reconnects = 0
         if spec.kind == "tcp":
             self._client = ModbusTcpClient(spec.host, port=spec.port, timeout=timeout,
                                            retries=retries)
@@ -48,13 +53,28 @@ class PymodbusClient(RegisterClient):
 
         what = f"{self.name}: {_FUNCTION_NAMES[function]} {address:#06x}+{count}"
         try:
-            rsp = call()
+            try:
+                rsp = call()
+            except ConnectionException:
+                # The controller closes a TCP connection that was idle (its
+                # idle timeout, or a new client taking the slot: docs/protocol.md);
+                # the request never reached it. Connect again and send it once
+                # more. The new connection is a new session: locked, no upload.
+                idle_s = interface.MODBUS_TCP["evict_min_idle_ms"] / 1000.0
+                if not self._tcp or time.monotonic() - self._last_ok < idle_s:
+                    raise
+                self._client.close()
+                if not self._client.connect():
+                    raise
+                self.reconnects += 1
+                rsp = call()
         except ConnectionException as exc:
             raise PortUnreachableError(f"{what}: connection lost ({exc})") from None
         except ModbusIOException:
             raise TransportTimeoutError(f"{what}: no answer within the timeout") from None
         except ModbusException as exc:
             raise ProtocolError(f"{what}: {exc}") from None
+        self._last_ok = time.monotonic()
         if rsp.isError():
             code = getattr(rsp, "exception_code", None)
             if code is None:
