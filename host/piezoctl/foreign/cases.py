@@ -11,6 +11,7 @@ Seeds 0..9 are for development; seeds >= 100 are held out (never looked at while
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import os
 import zlib
@@ -39,7 +40,8 @@ SLOW_CAL = ("rate_dependent_hysteresis", "delay", "amplifier_slew_limit", "ampli
 @dataclasses.dataclass
 class Rec:
     """One recording to simulate: drive ``u`` [V], other axis ``u2`` [V] or None, session
-    time of its start ``t_session`` [s], sensor ``session``, hold before it ``pre_s`` [s]."""
+    time of its start ``t_session`` [s], sensor ``session``, hold before it ``pre_s`` [s],
+    and ``warmup_s`` [s] of the same periodic drive before it (not recorded)."""
 
     name: str
     u: np.ndarray
@@ -47,6 +49,7 @@ class Rec:
     t_session: float
     session: int
     pre_s: float
+    warmup_s: float = 0.0     # the same (periodic) drive ran this long before the recording [s]
 
 
 @dataclasses.dataclass
@@ -60,6 +63,21 @@ class Case:
     calibration: list
     reveal: list
     info: dict
+
+    def without_effects(self) -> Stage:
+        """A copy of the stage with every concealed effect switched off (the same law,
+        modes, amplifier and sensor otherwise): the reference an effect is measured against."""
+        st = copy.deepcopy(self.stage)
+        st.creep = st.drift = st.coupling = st.rate = st.asym = None
+        st.slew_v_per_s = st.amp_fc_hz = None
+        st.delay_samples = 1
+        st.rails_v = (-30.0, 160.0)
+        if "unmodeled_resonance" in self.truth:
+            res = st.modes.pop()
+            st.modes[0].r += res.r
+        st.sensor.offset_by_session = {0: st.sensor.offset_by_session[0]}
+        st.sensor.nl_by_session = {0: st.sensor.nl_by_session[0]}
+        return st
 
 
 def case_plan(n: int, multi: bool = False) -> list[tuple]:
@@ -254,7 +272,7 @@ def draw_case(seed: int, index: int, truth: tuple, scale: float = 1.0, design: s
     drift_design = "thermal_drift" in designs
     short = drift_design
     dur = (lambda a, b: S * _u(rng, a, b)) if not short else (lambda a, b: S * _u(rng, 4, 7))
-    kinds = ["decaying_sine", "triangles"] if creep_design else \
+    kinds = ["triangles", "small_triangles"] if creep_design else \
         list(rng.permutation(["decaying_sine", "forc", "random_walk", "triangles"]))[:int(rng.integers(3, 5))]
     rate_cap = None                            # largest calibration drive rate [V/s]
     if slow:
@@ -275,10 +293,14 @@ def draw_case(seed: int, index: int, truth: tuple, scale: float = 1.0, design: s
             u = sg.forc(lo, hi, int(rng.integers(6, 13)), rate, start_v=c)
         elif k == "random_walk":
             u = sg.random_walk(dur(8, 15), lo, hi, fcap(_u(rng, 0.5, 3.0), span / 4), rng)
+        elif k == "small_triangles":          # creep design: periodic, after a warm-up
+            f, a = _u(rng, 2.0, 4.0), _u(rng, 0.15, 0.3) * span
+            u = sg.triangle(round(dur(8, 15) * f) / f, f, c - a, c + a)
         else:
-            f = _u(rng, 1.0, 2.0) if creep_design else _u(rng, 0.2, 2.0)
-            u = sg.triangle(dur(8, 15), fcap(f), lo, hi)
-        cal.append(Rec(f"cal_{k}", u, None, 0.0, 0, 0.0))
+            f = fcap(_u(rng, 1.0, 2.0) if creep_design else _u(rng, 0.2, 2.0))
+            d = dur(8, 15)
+            u = sg.triangle(round(d * f) / f if creep_design else d, f, lo, hi)
+        cal.append(Rec(f"cal_{k}", u, None, 0.0, 0, 0.0, 20.0 if creep_design else 0.0))
     amp = _u(rng, 1.0, 4.0)
     if rate_cap is not None:
         cal_top = min(cal_top, rate_cap / (2 * np.pi * amp))
@@ -298,7 +320,8 @@ def draw_case(seed: int, index: int, truth: tuple, scale: float = 1.0, design: s
         if d == "creep":
             n = int(rng.integers(5, 9))
             levels = rng.uniform(lo + 0.05 * span, hi - 0.05 * span, n)
-            rev.append(Rec("rev_steps_dwell", sg.steps(levels, S * _u(rng, 2, 6), _u(rng, 0.01, 0.03)), None, 0, 1, 0))
+            levels[1::2] = hi - (levels[1::2] - lo)       # alternate low and high
+            rev.append(Rec("rev_steps_dwell", sg.steps(levels, max(S * _u(rng, 3, 8), 2.0), _u(rng, 0.01, 0.03)), None, 0, 1, 0))
         elif d == "thermal_drift":
             rev.append(Rec("rev_long_triangle", sg.triangle(S * _u(rng, 30, 50), _u(rng, 0.2, 1.0), lo, hi), None, 0, 1, 0))
             rev.append(Rec("rev_long_walk", sg.random_walk(S * _u(rng, 20, 30), lo, hi, _u(rng, 0.3, 1.5), rng), None, 0, 1, 0))
@@ -320,9 +343,9 @@ def draw_case(seed: int, index: int, truth: tuple, scale: float = 1.0, design: s
             rev.append(Rec("rev_slow_triangle", sg.triangle(S * _u(rng, 6, 10), _u(rng, 0.2, 1), lo, hi), None, 0, 1, 0))
         elif d == "unmodeled_resonance":
             n = int(rng.integers(6, 12))
-            rev.append(Rec("rev_steps", sg.steps(rng.uniform(lo + 0.1 * span, hi - 0.1 * span, n), S * _u(rng, 0.5, 1.5)), None, 0, 1, 0))
+            rev.append(Rec("rev_steps", sg.steps(rng.uniform(lo + 0.1 * span, hi - 0.1 * span, 4 * n), S * _u(rng, 0.15, 0.4)), None, 0, 1, 0))
             fr = eff["res"].f_hz
-            rev.append(Rec("rev_chirp_wide", sg.chirp(S * _u(rng, 4, 8), 5.0, min(1.3 * fr, 4800.0), _u(rng, 1, 3), c), None, 0, 1, 0))
+            rev.append(Rec("rev_chirp_wide", sg.chirp(S * _u(rng, 4, 8), fr / 4, min(1.3 * fr, 4800.0), _u(rng, 2, 5), c), None, 0, 1, 0))
         elif d == "delay":
             f = np.geomspace(_u(rng, 20, 40), rev_top, 4)
             rev.append(Rec("rev_fast_sines", sg.sines(f, _u(rng, 5, 20), c, S * _u(rng, 2, 4)), None, 0, 1, 0))
@@ -414,7 +437,13 @@ def write_case(case: Case, directory: str, seed_noise: int = 0) -> dict:
         for k, r in enumerate(recs):
             n = r.u.size
             u2 = r.u2
-            y = case.stage.run(r.u, u2, r.t_session, r.session, r.pre_s, rng)
+            if r.warmup_s > 0:                 # periodic drive: run it before, keep the end
+                reps = int(np.ceil(r.warmup_s * FS_HZ / n)) + 1
+                uu = np.tile(r.u, reps)
+                u2u = None if u2 is None else np.tile(u2, reps)
+                y = case.stage.run(uu, u2u, r.t_session - (reps - 1) * n / FS_HZ, r.session, r.pre_s, rng)[-n:]
+            else:
+                y = case.stage.run(r.u, u2, r.t_session, r.session, r.pre_s, rng)
             t = np.arange(n) / FS_HZ
             cols = {"t": t, "u": r.u, "y": y}
             if u2 is not None:

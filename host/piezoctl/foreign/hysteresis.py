@@ -196,7 +196,7 @@ class GeneralizedPI(_Elements):
     Ascending edge ``g_up(v) - r_j``, descending edge ``g_dn(v) + r_j``, where
     ``g(v) = v + a (v^2 - 1) / 2 + b (v^3 - v) / 3`` with different (a, b) up and down,
     both increasing on the domain. 8 to 24 plays, radii from r_min to 0.25..0.9 (drive
-    units), weights decaying, plus a linear part of 0 to 30 %.
+    units), weights decaying, plus a linear part of 0.2 to 0.6 of the plays' weight.
     """
 
     name = "generalized_pi"
@@ -213,10 +213,10 @@ class GeneralizedPI(_Elements):
         x = np.linspace(-V_LIM, V_LIM, 301)
         gap = np.max(np.abs(self._g(x, self.cu) - self._g(x, self.cd)))
         n = int(rng.integers(8, 25))
-        rmax = rng.uniform(0.25, 0.9)
+        rmax = rng.uniform(0.1, 0.5)
         self.r = np.linspace(0.5 * gap + 1e-3, 0.5 * gap + rmax, n)
         self.weights = _positive_profile(rng, n, rng.uniform(0.5, 3.0))
-        self.linear = rng.uniform(0.0, 0.3) * self.weights.sum()
+        self.linear = rng.uniform(0.2, 0.6) * self.weights.sum()
         return self
 
     @staticmethod
@@ -236,7 +236,7 @@ class MaxwellSlip(_Elements):
     """Maxwell slip: 3 to 10 elasto-slide elements (stiffness k_i, slip force f_i) in
     parallel with the piezo's elastic path; the element deflection is ``v - play_{f_i/k_i}(v)``
     and the output is ``c v - sum k_i (v - play_i)``. Stiffness log-uniform over a decade,
-    slip deflection 0.02..0.8 (drive units)."""
+    slip deflection 0.02..0.5 (drive units)."""
 
     name = "maxwell_slip"
 
@@ -245,7 +245,7 @@ class MaxwellSlip(_Elements):
         self = cls()
         n = int(rng.integers(3, 11))
         k = np.exp(rng.uniform(0, np.log(10), n))
-        self.r = np.sort(rng.uniform(0.02, 0.8, n))
+        self.r = np.sort(rng.uniform(0.02, 0.5, n))
         frac = rng.uniform(0.15, 0.6)                 # hysteretic share of the stiffness
         k = k / k.sum() * frac
         self.weights = k                               # + sum k_i play_i
@@ -263,7 +263,7 @@ class MaxwellSlip(_Elements):
 class KrasnoselskiiPokrovskii(_Elements):
     """KP operator: ramp kernels on a grid of thresholds (beta < alpha) with a random
     smooth positive density (2 to 4 Gaussian bumps in centre/half-width coordinates over a
-    floor), ramp width a, plus a linear part of 5 to 40 %."""
+    floor), ramp width a, plus a linear part of 0.3 to 1.0 (kernels span 2 in total)."""
 
     name = "kp"
 
@@ -279,11 +279,11 @@ class KrasnoselskiiPokrovskii(_Elements):
         c, r = (self.alpha + self.beta) / 2, (self.alpha - self.beta) / 2
         mu = 0.05 + np.zeros_like(c)
         for _ in range(int(rng.integers(2, 5))):
-            c0, r0 = rng.uniform(-0.8, 0.8), rng.uniform(0.0, 0.6)
-            sc, sr = rng.uniform(0.2, 0.8), rng.uniform(0.1, 0.5)
+            c0, r0 = rng.uniform(-0.8, 0.8), rng.uniform(0.0, 0.3)
+            sc, sr = rng.uniform(0.2, 0.8), rng.uniform(0.05, 0.25)
             mu += rng.uniform(0.3, 1.0) * np.exp(-0.5 * ((c - c0) / sc) ** 2 - 0.5 * ((r - r0) / sr) ** 2)
         self.weights = mu / mu.sum()
-        self.linear = rng.uniform(0.05, 0.4)
+        self.linear = rng.uniform(0.3, 1.0)
         return self
 
     def _edges(self, v, w):
@@ -302,7 +302,8 @@ class KrasnoselskiiPokrovskii(_Elements):
 class Preisach(Law):
     """Classical Preisach model (relays +-1) with a random smooth positive density
     mu(alpha, beta) on alpha >= beta: 2 to 5 Gaussian bumps in centre/half-width
-    coordinates, a ridge near the diagonal (half-width 0.02..0.15) and a floor. The Everett
+    coordinates (centre -0.8..0.8, half-width 0..0.25), a ridge near the diagonal (decay 0.02..0.15)
+    and a floor, plus a linear part of 0.5 to 1.5 times the relays' total weight. The Everett
     function is tabulated on a 241-point grid and interpolated bilinearly; the output
     follows the stack of dominant extrema (exact wiping-out and return-point memory)."""
 
@@ -318,13 +319,13 @@ class Preisach(Law):
         c, r = (A + B) / 2, np.maximum((A - B) / 2, 0)
         mu = 0.02 + 0.3 * rng.uniform(0.2, 1.0) * np.exp(-r / rng.uniform(0.02, 0.15))
         for _ in range(int(rng.integers(2, 6))):
-            c0, r0 = rng.uniform(-0.8, 0.8), rng.uniform(0.0, 0.5)
-            sc, sr = rng.uniform(0.2, 0.9), rng.uniform(0.08, 0.4)
+            c0, r0 = rng.uniform(-0.8, 0.8), rng.uniform(0.0, 0.25)
+            sc, sr = rng.uniform(0.2, 0.9), rng.uniform(0.05, 0.25)
             mu = mu + rng.uniform(0.2, 1.0) * np.exp(-0.5 * ((c - c0) / sc) ** 2 - 0.5 * ((r - r0) / sr) ** 2)
         mu = np.where(A >= B, mu, 0.0) * self.dx ** 2
         # E[i, j] = sum over a <= x_i, b >= x_j of mu (mu is zero for b > a)
         self.E = np.cumsum(np.cumsum(mu[:, ::-1], axis=1)[:, ::-1], axis=0)
-        self.linear = rng.uniform(0.0, 0.3) * self.E[-1, 0]
+        self.linear = rng.uniform(0.5, 1.5) * self.E[-1, 0]
         return self
 
     def _ev(self, a, b):
@@ -415,7 +416,7 @@ class ColemanHodgdon(Law):
 class BoucWen(Law):
     """Rate-independent Bouc-Wen: ``dz/dv = A - |z|^n (beta sign(z dv) + gamma)``, output
     ``rho v + (1 - rho) z / z_s``, exponent n in 0.5..0.85 or 1.3..3 (never 1), beta
-    0.5..2, gamma in (-beta, beta) / 2, rho 0.2..0.7. The flow in z is autonomous within a
+    0.5..2, gamma in (-beta, beta) / 2, rho 0.4..0.8. The flow in z is autonomous within a
     monotone run, so one tabulated solution and its inverse give every run in closed form."""
 
     name = "bouc_wen"
@@ -428,7 +429,7 @@ class BoucWen(Law):
         self.beta = rng.uniform(0.5, 2.0)
         self.gamma = rng.uniform(-0.5, 0.5) * self.beta
         self.A = 1.0
-        self.rho = rng.uniform(0.2, 0.7)
+        self.rho = rng.uniform(0.4, 0.8)
         self.zs = (self.A / (self.beta + self.gamma)) ** (1 / self.n)
         # F(s): solution of dz/ds = A - |z|^n (beta sign z + gamma), F(0) = -zs (descending limit)
         ns, smax = 40001, 4.0
