@@ -415,8 +415,9 @@ class ColemanHodgdon(Law):
 
 class BoucWen(Law):
     """Rate-independent Bouc-Wen: ``dz/dv = A - |z|^n (beta sign(z dv) + gamma)``, output
-    ``rho v + (1 - rho) z / z_s``, exponent n in 0.5..0.85 or 1.3..3 (never 1), beta
-    0.5..2, gamma in (-beta, beta) / 2, rho 0.4..0.8. The flow in z is autonomous within a
+    ``v - kappa z / z_s`` (the piezo's hysteretic term subtracts from the linear one),
+    exponent n in 0.5..0.85 or 1.3..3 (never 1), beta 0.5..2, gamma in (-beta, beta) / 2,
+    kappa 0.3..0.9 of the largest value that keeps the output increasing. The flow in z is autonomous within a
     monotone run, so one tabulated solution and its inverse give every run in closed form."""
 
     name = "bouc_wen"
@@ -429,8 +430,9 @@ class BoucWen(Law):
         self.beta = rng.uniform(0.5, 2.0)
         self.gamma = rng.uniform(-0.5, 0.5) * self.beta
         self.A = 1.0
-        self.rho = rng.uniform(0.4, 0.8)
         self.zs = (self.A / (self.beta + self.gamma)) ** (1 / self.n)
+        max_slope = self.A + self.zs ** self.n * (self.beta - self.gamma)   # dz/dv right after a reversal
+        self.kappa = rng.uniform(0.3, 0.9) * self.zs / max_slope
         # F(s): solution of dz/ds = A - |z|^n (beta sign z + gamma), F(0) = -zs (descending limit)
         ns, smax = 40001, 4.0
         h = smax / (ns - 1)
@@ -461,7 +463,7 @@ class BoucWen(Law):
                 z[s + 1:e + 1] = self._flow(z[s], seg - v[s])
             else:
                 z[s + 1:e + 1] = -self._flow(-z[s], v[s] - seg)
-        return self.rho * v + (1 - self.rho) * z / self.zs
+        return v - self.kappa * z / self.zs
 
     def describe(self):
         return f"Bouc-Wen n={self.n:.2f} beta={self.beta:.2f} gamma={self.gamma:.2f}"
