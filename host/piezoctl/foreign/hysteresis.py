@@ -404,13 +404,15 @@ class ColemanHodgdon(Law):
 
     def _raw(self, v, width=None):
         out = np.empty(v.size)
-        out[0] = -V_LIM - self.c3 * V_LIM ** 3   # approx. lower saturation (normalized later)
-        # start on the descending branch's limit: run a few down sweeps from there
+        out[0] = -V_LIM - self.c3 * V_LIM ** 3   # start on the anhysteretic curve at -V_LIM
         h = out[0]
         for s, e, d in monotone_runs(v):
             out[s + 1:e + 1] = self._branch(d, v[s], h, v[s + 1:e + 1])
             h = out[e]
         return out
+
+    def describe(self):
+        return f"Coleman-Hodgdon alpha={self.alpha:.2f} gamma={self.gamma:.2f} c3={self.c3:.2f}"
 
 
 class BoucWen(Law):
