@@ -234,13 +234,20 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
 def hysteresis_nuisance(ctx):
     """The nested tests' nuisance (n_settled, m): the current model's hysteresis channels through its dynamics
     (free gains on them refit the base's own flexibility on the new data: loop width per play threshold, the
-    reversible curve's gain), stacked over the settled samples; cached on the context. No constant: an offset
+    reversible curve's gain), centred on the calibration, stacked over the settled samples; cached on the
+    context. No constant: an offset
     between the calibration's session and the recordings' is a finding (sensor_offset), not the base's misfit
     (with a constant here, the valve's 1 um session offset was absorbed and the verdict was `none`)."""
     if ctx.nuisance is None:
         hp = ctx.base["hysteresis"]
         b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
-        ctx.nuisance = np.vstack([filt(b, a, hysteresis_channels(hp, s.v))[v] for s, v in zip(ctx.signals, ctx.valid)])
+        # each channel centred on its mean over the settled calibration: a gain on the reversible curve (which
+        # spans the stroke) must not stand in for an offset either
+        cal = [hysteresis_channels(hp, (r.u - float(ctx.base["u_mid"])) / float(ctx.base["u_half"]))[k0:]
+               for r, k0 in zip(ctx.cal, ctx.cal_k0)]
+        mean = np.concatenate(cal).mean(axis=0) if cal else 0.0
+        ctx.nuisance = np.vstack([filt(b, a, hysteresis_channels(hp, s.v) - mean)[v]
+                                  for s, v in zip(ctx.signals, ctx.valid)])
     return ctx.nuisance
 
 
