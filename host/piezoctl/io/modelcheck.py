@@ -224,8 +224,19 @@ def _check_refined(c: _Checker) -> None:
     c.num("u_mid")
     c.num("u_half", positive=True)
     c.num("fs_hz", positive=True, optional=True)
-    if not isinstance(c.get("hysteresis"), dict):
+    hyst = c.get("hysteresis")
+    if not isinstance(hyst, dict):
         raise c.fail("hysteresis", "expected an object")
+    if hyst.get("type") == "plane":   # the diagnosis base: per play threshold, increasing knots and their values
+        r, knots, values = hyst.get("r"), hyst.get("knots"), hyst.get("values")
+        if not (isinstance(r, list) and isinstance(knots, list) and isinstance(values, list)) or not r \
+                or not len(r) == len(knots) == len(values) or len(r) > 64:
+            raise c.fail("hysteresis.r", "plane: r, knots and values must be lists of one length (1..64)")
+        for j, (kn, va) in enumerate(zip(knots, values)):
+            if not (isinstance(kn, list) and isinstance(va, list)) or not 2 <= len(kn) == len(va) <= 256:
+                raise c.fail(f"hysteresis.knots[{j}]", "plane: 2..256 knots with one value each")
+            if any(not isinstance(x, (int, float)) for x in kn + va) or any(b <= a for a, b in zip(kn, kn[1:])):
+                raise c.fail(f"hysteresis.knots[{j}]", "plane: knots must be numbers, strictly increasing")
     dyn = c.get("dynamics")
     if not isinstance(dyn, dict):
         raise c.fail("dynamics", "expected an object")
