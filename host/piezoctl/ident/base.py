@@ -73,6 +73,7 @@ ORDERS = (0, 2, 4, 6)
 QS_LP_HZ = 20.0          # quasi-static: drive within QS_TOL of its zero-phase low-pass at this frequency
 QS_TOL = 0.005           # of the calibrated drive span
 QS_GUARD_S = 0.02        # [s] after the drive was last fast
+QS_MIN_FRACTION = 0.5    # fewer quasi-static samples than this fraction of the settled ones: size on all of them
 MIN_PLAY_SPAN = 0.02     # a play whose output moved less than this [normalized drive] is left out
 TREND_ORDER = 3
 G_OUT_MAX = 3.0          # largest |G| allowed above twice the calibration's band (where it has no evidence)
@@ -565,7 +566,10 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
                                                                     np.full(r_all.size, -np.inf)))
     spans = [(float(min(s[0][i] for s in spans)), float(max(s[1][i] for s in spans))) for i in range(r_all.size)]
     qs = [_quasi_static(v, 1.0 / fs0, k0) for v, k0 in zip(vs, k0s)]
-    if sum(int(q.sum()) for q in qs) < 200:   # nothing slow: size on every settled sample
+    n_settled = sum(v.size - k0 for v, k0 in zip(vs, k0s))
+    if sum(int(q.sum()) for q in qs) < max(200, QS_MIN_FRACTION * n_settled):
+        # mostly fast (a 20 Hz FORC sweep: only the ramps' middles are slow, over a narrow band of the drive,
+        # which cannot size a plane): size on every settled sample
         qs = [np.arange(v.size) >= k0 for v, k0 in zip(vs, k0s)]
     layout, ridge, table = _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all)
     r_used = np.array(sorted({r_all[i] for i in layout.index}))
