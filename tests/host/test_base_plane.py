@@ -11,7 +11,8 @@ from piezoctl.ident.base import fit_base, reversal_levels
 from piezoctl.ident.terms import TERMS
 from piezoctl.io.recording import Recording
 from piezoctl.models.hysteresis import (add_to_features, hat_basis, hysteresis_channels, hysteresis_features,
-                                        hysteresis_parts, interp_linear_ext, scale_channels)
+                                        hysteresis_groups, hysteresis_parts, interp_linear_ext, scale_channels,
+                                        scale_groups)
 from piezoctl.models.play import play_outputs
 
 FS = 10_000.0
@@ -76,6 +77,10 @@ def test_channels_and_features_reproduce_the_operator(hp):
     assert np.allclose(C.sum(axis=1), h)
     g = np.linspace(-0.3, 0.4, C.shape[1])
     assert np.allclose(hysteresis_parts(scale_channels(hp, g), v)[0], C @ (1 + g))
+    Gr = hysteresis_groups(hp, v)
+    assert np.allclose(Gr.sum(axis=1), h) and Gr.shape[1] <= 3
+    gg = np.linspace(0.2, -0.1, Gr.shape[1])
+    assert np.allclose(hysteresis_parts(scale_groups(hp, gg), v)[0], Gr @ (1 + gg))
     F, th = hysteresis_features(hp, v)
     assert np.allclose(F @ th, h)
     d = np.linspace(0.1, -0.2, th.size)

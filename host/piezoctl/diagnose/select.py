@@ -19,7 +19,7 @@ import numpy as np
 from ..dsp import filt
 from ..ident import refined
 from ..ident.terms import Term
-from ..models.hysteresis import hysteresis_channels
+from ..models.hysteresis import hysteresis_groups
 from . import significance as sg
 from .discriminate import discriminate_group, highpassed
 
@@ -232,9 +232,9 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
 
 
 def hysteresis_nuisance(ctx):
-    """The nested tests' nuisance (n_settled, m): the current model's hysteresis channels through its dynamics
-    (free gains on them refit the base's own flexibility on the new data: loop width per play threshold, the
-    reversible curve's gain), centred on the calibration, stacked over the settled samples; cached on the
+    """The nested tests' nuisance (n_settled, m): the current model's hysteresis groups through its dynamics
+    (free gains on them refit the base's own flexibility on the new data: the reversible curve's gain, the loop
+    width, the Bouc-Wen column; see ``models.hysteresis.hysteresis_groups``), centred on the calibration, stacked over the settled samples; cached on the
     context. No constant: an offset
     between the calibration's session and the recordings' is a finding (sensor_offset), not the base's misfit
     (with a constant here, the valve's 1 um session offset was absorbed and the verdict was `none`)."""
@@ -243,10 +243,10 @@ def hysteresis_nuisance(ctx):
         b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
         # each channel centred on its mean over the settled calibration: a gain on the reversible curve (which
         # spans the stroke) must not stand in for an offset either
-        cal = [hysteresis_channels(hp, (r.u - float(ctx.base["u_mid"])) / float(ctx.base["u_half"]))[k0:]
+        cal = [hysteresis_groups(hp, (r.u - float(ctx.base["u_mid"])) / float(ctx.base["u_half"]))[k0:]
                for r, k0 in zip(ctx.cal, ctx.cal_k0)]
         mean = np.concatenate(cal).mean(axis=0) if cal else 0.0
-        ctx.nuisance = np.vstack([filt(b, a, hysteresis_channels(hp, s.v) - mean)[v]
+        ctx.nuisance = np.vstack([filt(b, a, hysteresis_groups(hp, s.v) - mean)[v]
                                   for s, v in zip(ctx.signals, ctx.valid)])
     return ctx.nuisance
 

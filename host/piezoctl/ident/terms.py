@@ -36,7 +36,7 @@ import dataclasses
 import numpy as np
 
 from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
-from ..models.hysteresis import hysteresis_channels, hysteresis_parts, scale_channels
+from ..models.hysteresis import hysteresis_groups, hysteresis_parts, scale_groups
 
 __all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G"]
 
@@ -391,7 +391,7 @@ class RateDependentHysteresis(Term):
 
 class Creep(Term):
     """Kelvin-Voigt chain ``w = h + sum g_i (lp_tau_i(h) - h)``, tested nested: its leading regressors are the
-    current hysteresis' channels through G (free gains: the hysteresis refitted with the chain, since a fast
+    current hysteresis' groups through G (free gains: the hysteresis refitted with the chain, since a fast
     calibration turned part of a slow creep into a mean level and a wider loop), then per time constant the
     chain's deviation through G, and a constant. Gains >= 0: an element only adds compliance; free signs turn
     the chain into an arbitrary slow filter."""
@@ -410,22 +410,22 @@ class Creep(Term):
     def taus(self, ctx):
         return [tau for tau in self.TAUS if tau < 2.0 * ctx.duration]
 
-    def _channels(self, ctx, u):
+    def _groups(self, ctx, u):
         v = (np.asarray(u, float) - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
-        return hysteresis_channels(ctx.base["hysteresis"], v)
+        return hysteresis_groups(ctx.base["hysteresis"], v)
 
     def n_nuisance(self, ctx):
-        return self._channels(ctx, np.zeros(2)).shape[1]
+        return self._groups(ctx, np.zeros(2)).shape[1]
 
     def own_lower(self, ctx):
         return np.concatenate([np.full(self.n_nuisance(ctx), -np.inf), np.zeros(len(self.taus(ctx)))])
 
     def columns(self, ctx, s, setting):
-        return G(ctx.base, np.column_stack([self._channels(ctx, s.u), self.basis(s.h, self.taus(ctx), s.dt)]))
+        return G(ctx.base, np.column_stack([self._groups(ctx, s.u), self.basis(s.h, self.taus(ctx), s.dt)]))
 
     def model_params(self, ctx, setting, coef):
         n = self.n_nuisance(ctx)
-        hp = scale_channels(ctx.base["hysteresis"], coef[:n])
+        hp = scale_groups(ctx.base["hysteresis"], coef[:n])
         return {"tau_s": list(self.taus(ctx)), "gain": [float(c) for c in coef[n:]], "static_gain": 0.0,
                 "h_ref_um": 0.0, "_hysteresis": hp}
 

@@ -39,7 +39,7 @@ from .play import play_outputs
 
 __all__ = ["bouc_wen_h", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
            "poly_clamped", "hysteresis_features", "add_to_features", "hysteresis_channels",
-           "scale_channels"]
+           "scale_channels", "hysteresis_groups", "scale_groups"]
 
 _STATE_CACHE: "collections.OrderedDict" = collections.OrderedDict()
 _STATE_CACHE_MAX_SAMPLES = 20_000_000   # about 160 MB of float64
@@ -326,3 +326,43 @@ def scale_channels(hp: dict, gains) -> dict:
     if out.get("bw"):
         out["bw"]["c_h"] = float(out["bw"]["c_h"]) * float(g[n])
     return out
+
+
+def hysteresis_groups(hp: dict, v) -> np.ndarray:
+    """The operator's output in at most three groups (n, m) that sum to H (without offset) [um]: the reversible
+    curve, the hysteretic part (every play of threshold > 0 together), the Bouc-Wen column; for ``pi`` and
+    ``bouc_wen`` the same two channels as :func:`hysteresis_channels`. Free gains on these are the diagnosis'
+    refit of the base's own flexibility: the reversible gain and the loop width. A gain per play threshold
+    (up to 16) is so flexible that it also stands in for a session offset over the drive range a recording
+    covers."""
+    C = hysteresis_channels(hp, v)
+    if hp.get("type", "pi") != "plane":
+        return C
+    n = len(hp["values"])
+    r0 = [j for j, r in enumerate(hp["r"]) if float(r) == 0.0]
+    rest = [j for j in range(n) if j not in r0]
+    cols = [C[:, r0].sum(axis=1)] if r0 else []
+    if rest:
+        cols.append(C[:, rest].sum(axis=1))
+    if hp.get("bw"):
+        cols.append(C[:, n])
+    return np.column_stack(cols)
+
+
+def scale_groups(hp: dict, gains) -> dict:
+    """A copy of ``hp`` whose groups (see :func:`hysteresis_groups`) are multiplied by ``1 + gains``."""
+    if hp.get("type", "pi") != "plane":
+        return scale_channels(hp, gains)
+    n = len(hp["values"])
+    r0 = [j for j, r in enumerate(hp["r"]) if float(r) == 0.0]
+    rest = [j for j in range(n) if j not in r0]
+    g = list(np.asarray(gains, float))
+    per = np.zeros(n + (1 if hp.get("bw") else 0))
+    k = 0
+    for group in (r0, rest):
+        if group:
+            per[group] = g[k]
+            k += 1
+    if hp.get("bw"):
+        per[n] = g[k]
+    return scale_channels(hp, per)
