@@ -103,6 +103,14 @@ size_t piezo_rtu_poll(piezo_rtu_t *r, uint32_t now_us, const piezo_mb_regs_t *re
         end_frame(r);
     }
     if (r->ready == 0u) {
+        /* the line's session ends once the master has been silent for the
+         * idle time, not only when its next request comes: what it unlocked
+         * and staged does not outlive it (another session may stage then) */
+        if (r->in_session != 0u && regs != NULL && regs->session != NULL &&
+            now_us - r->last_req_us >= PIEZO_MB_RTU_SESSION_IDLE_US) {
+            regs->session(regs->ctx, PIEZO_MB_SESSION_RTU, PIEZO_MB_SESSION_END);
+            r->in_session = 0u;
+        }
         return 0u;
     }
     r->ready = 0u;

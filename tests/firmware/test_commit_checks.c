@@ -229,6 +229,36 @@ static void test_each_check_has_its_reason(void **state)
 
 /* The DCC table with its weights' sign inverted (each in range): the drive
  * falls while the reference rises. */
+/* The CPI-inverse thresholds r'_i act on v = y_r - G2, up to 17 FS
+ * (eupi_inv.h): their documented range is [0, 32] FS, not [0, 1). So a
+ * threshold of 40000 (1.22 FS) is committed as the last threshold, refused
+ * as the first (the order breaks), and the last above 32 FS is refused. */
+static void test_cpi_inverse_threshold_above_full_scale(void **state)
+{
+    (void)state;
+    piezo_table_info_t info;
+    const piezo_section_t *r;
+    setup_with_table();
+
+    eupi_copy(&info);
+    put32(elem0(&info, PIEZO_SECTION_EUPI_CPI_INV_R_Q15), 40000u);
+    fix_crc(img, SIL_EUPI_IMG_LEN);
+    assert_refused(upload(S1, img, SIL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_NOT_MONOTONIC);
+
+    eupi_copy(&info);
+    r = piezo_table_section(&info, PIEZO_SECTION_EUPI_CPI_INV_R_Q15);
+    put32(img + (r->data - img) + 4u * (r->count - 1u), (1u << 20) + 1u);
+    fix_crc(img, SIL_EUPI_IMG_LEN);
+    assert_refused(upload(S1, img, SIL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OUT_OF_RANGE);
+
+    eupi_copy(&info);
+    r = piezo_table_section(&info, PIEZO_SECTION_EUPI_CPI_INV_R_Q15);
+    put32(img + (r->data - img) + 4u * (r->count - 1u), 40000u);
+    fix_crc(img, SIL_EUPI_IMG_LEN);
+    assert_int_equal(upload(S1, img, SIL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OK);
+    assert_true(piezo_ctl_active_crc(&ctl) == piezo_le32(img + SIL_EUPI_IMG_LEN - 4u));
+}
+
 static void test_sweep_refuses_an_inverted_table(void **state)
 {
     (void)state;
@@ -386,6 +416,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_sixteen_absurd_images_are_refused),
         cmocka_unit_test(test_each_check_has_its_reason),
+        cmocka_unit_test(test_cpi_inverse_threshold_above_full_scale),
         cmocka_unit_test(test_sweep_refuses_an_inverted_table),
         cmocka_unit_test(test_sweep_time),
         cmocka_unit_test(test_stage_and_axis_must_match),

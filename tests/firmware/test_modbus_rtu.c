@@ -470,6 +470,34 @@ static void test_line_session_ends_after_silence(void **state)
     regs.session = NULL;
 }
 
+/* Polled while the line is silent, the session ends at the idle time itself
+ * (once), and the next request begins a new one. */
+static void test_line_session_ends_while_polled_in_silence(void **state)
+{
+    (void)state;
+    uint8_t f[8];
+    size_t n = read_frame(f, UNIT, 4, 0, 1);
+    uint32_t t;
+    n_begin = n_end = 0u;
+    regs.session = session_cb;
+    t = send_at(f, n, 1000u);
+    assert_true(piezo_rtu_poll(&rtu, t + T35, &regs, reply, sizeof reply) > 0u);
+    assert_int_equal(piezo_rtu_poll(&rtu, t + T35 + PIEZO_MB_RTU_SESSION_IDLE_US - 1u, &regs, reply,
+                                    sizeof reply), 0u);
+    assert_int_equal(n_end, 0);
+    assert_int_equal(piezo_rtu_poll(&rtu, t + T35 + PIEZO_MB_RTU_SESSION_IDLE_US, &regs, reply,
+                                    sizeof reply), 0u);
+    assert_int_equal(n_end, 1);
+    assert_int_equal(piezo_rtu_poll(&rtu, t + T35 + 2u * PIEZO_MB_RTU_SESSION_IDLE_US, &regs, reply,
+                                    sizeof reply), 0u);
+    assert_int_equal(n_end, 1); /* once */
+    t = send_at(f, n, t + T35 + 2u * PIEZO_MB_RTU_SESSION_IDLE_US + 1000u);
+    assert_true(piezo_rtu_poll(&rtu, t + T35, &regs, reply, sizeof reply) > 0u);
+    assert_int_equal(n_begin, 2);
+    assert_int_equal(n_end, 1);
+    regs.session = NULL;
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -491,6 +519,7 @@ int main(void)
         cmocka_unit_test_setup(test_small_reply_buffer_answers_nothing, setup),
         cmocka_unit_test_setup(test_overrun_keeps_the_first_frame, setup),
         cmocka_unit_test_setup(test_line_session_ends_after_silence, setup),
+        cmocka_unit_test_setup(test_line_session_ends_while_polled_in_silence, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

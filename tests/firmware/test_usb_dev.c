@@ -227,6 +227,29 @@ static void test_bus_reset_forgets_address_and_configuration(void **state)
     assert_int_equal(dev.configuration, 0);
 }
 
+/* The USB link's session ends at a bus reset and at SET_CONFIGURATION, so an
+ * unlock or upload of the host before does not outlive it. */
+static unsigned usb_ends;
+static void count_session(void *ctx, uint8_t id, uint8_t event)
+{
+    (void)ctx;
+    if (id == PIEZO_MB_SESSION_USB && event == PIEZO_MB_SESSION_END) {
+        usb_ends++;
+    }
+}
+
+static void test_bus_reset_and_configuration_end_the_session(void **state)
+{
+    (void)state;
+    regs.session = count_session;
+    usb_ends = 0u;
+    enumerate();
+    assert_int_equal(usb_ends, 1); /* SET_CONFIGURATION */
+    piezo_usbd_reset(&dev);
+    assert_int_equal(usb_ends, 2);
+    regs.session = NULL;
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -240,6 +263,7 @@ int main(void)
         cmocka_unit_test_setup(test_answers_that_fill_their_last_packet_end_with_a_zlp, fresh),
         cmocka_unit_test_setup(test_a_malformed_request_gets_no_answer, fresh),
         cmocka_unit_test_setup(test_bus_reset_forgets_address_and_configuration, fresh),
+        cmocka_unit_test_setup(test_bus_reset_and_configuration_end_the_session, fresh),
     };
     return cmocka_run_group_tests_name("usb_dev", tests, NULL, NULL);
 }

@@ -71,3 +71,8 @@ def test_the_board_image_serves_its_register_map_over_rtu():
         assert st["tick_count"] > 0 and st["drive_q15"] == -32768  # safe drive: 0 V
         assert "sensor_implausible" in st["faults_names"]
         assert not st["armed"]
+        # built without -DPIEZO_FW_UNLOCK_KEY: no key, every unlock refused (docs/target-cortex-m4.md)
+        from piezoctl.device import DeviceError
+        with pytest.raises(DeviceError, match="refused the unlock key"):
+            ctl.unlock()
+        assert ctl.status()["bad_unlocks"] == 1

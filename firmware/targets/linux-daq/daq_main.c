@@ -139,7 +139,8 @@ int main(int argc, char **argv)
         regs[i] = piezo_regmap_regs(&map[i]);
         snprintf(path, sizeof path, "%s%s", cfg.flash, i == 0 ? "" : ".axis2");
         if (piezo_flash_file_open(&flash[i], path, 2u * slot) != 0) {
-            fprintf(stderr, "daq-controller: cannot open flash file %s: %s\n", path, strerror(errno));
+            fprintf(stderr, "daq-controller: cannot open flash file %s: %s\n", path,
+                    flash[i].why[0] ? flash[i].why : strerror(errno));
             status = 1;
             break;
         }

@@ -21,8 +21,10 @@
 extern piezo_regmap_t piezo_comm_map;
 extern piezo_rtu_t piezo_comm_rtu;
 
-/** Bind the register map to piezo_axis, set the identity, set up the framer
- *  (unit id from the interface, PIEZO_MODBUS_BAUD). Returns 0 or -1. */
+/** Bind the register map to piezo_axis, set the identity, provision the
+ *  controller (stage, axis, the image's unlock key), set up the framer (unit
+ *  id from the interface, PIEZO_MODBUS_BAUD). Call after piezo_control_init()
+ *  and before piezo_ctl_attach_store(). Returns 0 or -1. */
 int piezo_comm_init(void);
 
 /** One pass of the server: received bytes into the framer, a complete

@@ -53,7 +53,8 @@ typedef struct {
 /** Bind to a register map; the state of a bus reset (address 0, not configured). */
 void piezo_usbd_init(piezo_usbd_t *d, const piezo_mb_regs_t *regs);
 
-/** Bus reset: address 0, not configured, transfers dropped. */
+/** Bus reset: address 0, not configured, transfers dropped; the USB link's
+ *  Modbus session (PIEZO_MB_SESSION_USB) ends, as at SET_CONFIGURATION. */
 void piezo_usbd_reset(piezo_usbd_t *d);
 
 /** A SETUP packet. Returns PIEZO_USBD_STALL (the request is not supported:

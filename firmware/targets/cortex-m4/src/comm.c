@@ -29,6 +29,14 @@
 #include "tick.h"
 #include "uart.h"
 
+/* The unlock key this image is provisioned with (docs/protocol.md, "Sessions,
+ * unlock and lockout"), set per image by CMakeLists.txt: the PIL image (a
+ * simulated stage) has the development key, the board image the cache
+ * variable PIEZO_FW_UNLOCK_KEY, or 0 (every unlock refused) without one. */
+#ifndef PIEZO_COMM_UNLOCK_KEY
+#error "PIEZO_COMM_UNLOCK_KEY: set by the image's target in CMakeLists.txt"
+#endif
+
 piezo_regmap_t piezo_comm_map;
 piezo_rtu_t piezo_comm_rtu;
 static piezo_mb_regs_t regs;
@@ -73,6 +81,9 @@ int piezo_comm_init(void)
     piezo_comm_map.drive_max_mv = piezo_control_range.drive_max_mv;
     piezo_comm_map.position_min_nm = piezo_control_range.position_min_nm;
     piezo_comm_map.position_max_nm = piezo_control_range.position_max_nm;
+    /* the stage and the key before a stored table is loaded (main.c attaches
+     * the store after this): a stored table is checked against both */
+    piezo_regmap_provision(&piezo_comm_map, (uint32_t)PIEZO_COMM_UNLOCK_KEY);
     inner = piezo_regmap_regs(&piezo_comm_map);
     regs = inner;
     regs.write_holding = masked_write;

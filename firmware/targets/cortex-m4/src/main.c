@@ -16,12 +16,14 @@ int main(void)
     if (piezo_control_init() != 0) {
         piezo_board_fault("control init", 0);
     }
-    /* a stored table that does not load is reported by the status registers;
-     * the unit then runs without one */
-    (void)piezo_ctl_attach_store(&piezo_axis, piezo_control_storage());
+    /* the register map provisions the controller (stage, axis, unlock key)
+     * before the stored table is loaded and checked against them */
     if (piezo_comm_init() != 0) {
         piezo_board_fault("comm init", 0);
     }
+    /* a stored table that does not load is reported by the status registers;
+     * the unit then runs without one */
+    (void)piezo_ctl_attach_store(&piezo_axis, piezo_control_storage());
     piezo_tick_start(PIEZO_TICK_RELOAD);
     piezo_irq_enable();
     for (;;) {

@@ -44,8 +44,20 @@ static const uint8_t str_product[24] = {24, DESC_STRING, 'p', 0, 'i', 0, 'e', 0,
                                         't', 0, 'l', 0, '-', 0, 'f', 0, 'w', 0};
 static const uint8_t str_serial[10] = {10, DESC_STRING, '0', 0, '0', 0, '0', 0, '1', 0};
 
+/* The USB link's session (modbus_pdu.h) ends with the host that had it: at a
+ * bus reset (a replug, a host that re-enumerates) and at SET_CONFIGURATION
+ * (a new configuration starts a new link). What it unlocked and staged goes
+ * with it, as with a closed TCP connection. */
+static void end_session(piezo_usbd_t *d)
+{
+    if (d->regs != NULL && d->regs->session != NULL) {
+        d->regs->session(d->regs->ctx, PIEZO_MB_SESSION_USB, PIEZO_MB_SESSION_END);
+    }
+}
+
 void piezo_usbd_reset(piezo_usbd_t *d)
 {
+    end_session(d);
     d->address = 0u;
     d->pending_address = 0u;
     d->configuration = 0u;
@@ -125,6 +137,7 @@ int piezo_usbd_setup(piezo_usbd_t *d, const uint8_t s[8])
             return PIEZO_USBD_STALL; /* 9.4.7: only in the addressed or configured state */
         }
         d->configuration = (uint8_t)wvalue;
+        end_session(d);
         piezo_usb_rx_init(&d->rx);
         d->rsp_len = 0u;
         d->rsp_pos = 0u;
