@@ -1,4 +1,5 @@
-"""The SIL target: start ``sil_stage`` (the virtual controller) for calibrate."""
+"""Calibrate's targets: ``sil_stage`` (the virtual controller, Modbus TCP) and the PIL image under QEMU
+(Modbus RTU on a pseudo-terminal), each started for the duration of a calibration."""
 
 from __future__ import annotations
 
@@ -14,18 +15,23 @@ from ..errors import CliError
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 
 
+def _build(preset: str, build: pathlib.Path, target: str, what: str, jobs: int) -> None:
+    """Configure ``build`` with CMake preset ``preset`` if needed and build ``target``."""
+    try:
+        if not (build / "CMakeCache.txt").exists():
+            subprocess.run(["cmake", "--preset", preset], cwd=ROOT, check=True, capture_output=True)
+        subprocess.run(["cmake", "--build", str(build), "--target", target, "-j", str(jobs)],
+                       cwd=ROOT, check=True, capture_output=True)
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise CliError(f"cannot build {what} ({target}): {exc}") from None
+
+
 def sil_binary() -> pathlib.Path:
     """The sil_stage executable, built with the ``sil`` preset if missing."""
     build = pathlib.Path(os.environ.get("PIEZOCTL_BUILD", ROOT / "build" / "sil"))
     exe = build / "sil_stage"
     if not exe.exists():
-        try:
-            if not (build / "CMakeCache.txt").exists():
-                subprocess.run(["cmake", "--preset", "sil"], cwd=ROOT, check=True, capture_output=True)
-            subprocess.run(["cmake", "--build", str(build), "--target", "sil_stage", "-j", "2"],
-                           cwd=ROOT, check=True, capture_output=True)
-        except (OSError, subprocess.CalledProcessError) as exc:
-            raise CliError(f"cannot build the virtual controller (sil_stage): {exc}") from None
+        _build("sil", build, "sil_stage", "the virtual controller", jobs=2)
     return exe
 
 
@@ -86,15 +92,8 @@ def qemu_image() -> pathlib.Path:
     if os.environ.get("PIEZOCTL_PIL_IMAGE"):
         return pathlib.Path(os.environ["PIEZOCTL_PIL_IMAGE"])
     build = pathlib.Path(os.environ.get("PIEZOCTL_CM4_BUILD", ROOT / "build" / "cortex-m4"))
-    elf = build / "firmware" / "targets" / "cortex-m4" / "piezoctl-pil"
-    try:
-        if not (build / "CMakeCache.txt").exists():
-            subprocess.run(["cmake", "--preset", "cortex-m4"], cwd=ROOT, check=True, capture_output=True)
-        subprocess.run(["cmake", "--build", str(build), "--target", "piezoctl-pil", "-j", "1"],
-                       cwd=ROOT, check=True, capture_output=True)
-    except (OSError, subprocess.CalledProcessError) as exc:
-        raise CliError(f"cannot build the PIL image (piezoctl-pil): {exc}") from None
-    return elf
+    _build("cortex-m4", build, "piezoctl-pil", "the PIL image", jobs=1)   # incremental: always up to date
+    return build / "firmware" / "targets" / "cortex-m4" / "piezoctl-pil"
 
 
 # QEMU's netduinoplus2 (STM32F405) with USART1 on a pseudo-terminal.

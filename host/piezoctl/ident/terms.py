@@ -175,6 +175,10 @@ class _DriveTerm(Term):
     stage = "drive"
     group = "drive_dynamics"
     key = ""          # the model file's parameter
+    geometric = False  # the grid is geometric and refined around its best point
+
+    def refine(self, ctx, setting, level):
+        return _geo_refine(self.settings(ctx), setting, level) if self.geometric else []
 
     @staticmethod
     def drive(u, setting, dt) -> np.ndarray:
@@ -241,6 +245,7 @@ class Delay(_DriveTerm):
 class AmplifierBandwidth(_DriveTerm):
     name = "amplifier_bandwidth"
     key = "hz"
+    geometric = True
     signature = "high-frequency attenuation and phase lag of a first-order pole (edges rounded)"
 
     @staticmethod
@@ -251,9 +256,6 @@ class AmplifierBandwidth(_DriveTerm):
         fs = 1.0 / ctx.dt
         return [float(f) for f in np.geomspace(fs / 500.0, fs / 4.0, 14)]
 
-    def refine(self, ctx, setting, level):
-        return _geo_refine(self.settings(ctx), setting, level)
-
     def describe_own(self, ctx, fc, coef):
         return ({"hz": round(fc, 1)},
                 f"the drive is low-passed before the actuator (first order, {fc:.0f} Hz; dynamics refitted on the "
@@ -263,6 +265,7 @@ class AmplifierBandwidth(_DriveTerm):
 class AmplifierSlewLimit(_DriveTerm):
     name = "amplifier_slew_limit"
     key = "v_per_s"
+    geometric = True
     signature = "residual only where |du/dt| exceeds a limit; edges become ramps"
 
     @staticmethod
@@ -274,9 +277,6 @@ class AmplifierSlewLimit(_DriveTerm):
 
     def settings(self, ctx):
         return [float(ctx.max_step * q) / ctx.dt for q in (0.03, 0.05, 0.1, 0.2, 0.35, 0.5, 0.7)]
-
-    def refine(self, ctx, setting, level):
-        return _geo_refine(self.settings(ctx), setting, level)
 
     def describe_own(self, ctx, vps, coef):
         return ({"v_per_s": round(vps, 1)},
