@@ -551,23 +551,34 @@ class ThermalDrift(Term):
 
     @staticmethod
     def basis(t, tau) -> np.ndarray:
+        """[1 - exp(-t/tau), t] from the recording's start; tau >= 1e30 (``inf``): the slope alone."""
         tt = np.asarray(t, float) - float(t[0])
-        return np.column_stack([1.0 - np.exp(-tt / tau), tt])
+        tau = float(tau)
+        return np.column_stack([np.zeros(tt.size) if tau >= 1e30 else 1.0 - np.exp(-tt / tau), tt])
 
     def settings(self, ctx):
-        return list(self.TAUS)
+        # a time constant is offered only when the recordings are at least twice as long: over a shorter span
+        # the exponential and the slope are nearly collinear and fit with cancelling values (12 um "drift" over
+        # the valve's 5 s runs); otherwise the slope alone
+        return [tau for tau in self.TAUS if tau <= 0.5 * ctx.duration] + [np.inf]
 
     def columns(self, ctx, s, tau):
         return self.basis(s.t, tau)
 
     def model_params(self, ctx, tau, coef):
-        return {"amplitude_um": float(coef[0]), "tau_s": float(tau), "slope_um_per_s": float(coef[1])}
+        lin = float(tau) >= 1e30
+        return {"amplitude_um": 0.0 if lin else float(coef[0]), "tau_s": 1e300 if lin else float(tau),
+                "slope_um_per_s": float(coef[1])}
 
     def apply(self, p, st):
         st.y = st.y + self.basis(st.t, float(p["tau_s"])) @ [float(p["amplitude_um"]),
                                                               float(p.get("slope_um_per_s", 0.0))]
 
     def describe_own(self, ctx, tau, coef):
+        if float(tau) >= 1e30:
+            return ({"slope_um_per_s": float(coef[1])},
+                    f"the residual drifts linearly with time since the start of each recording "
+                    f"({coef[1] * 60:+.3f} um/min), whatever the drive does")
         return ({"amplitude_um": round(float(coef[0]), 4), "tau_s": tau, "slope_um_per_s": float(coef[1])},
                 f"the residual drifts with time since the start of each recording ({coef[0]:+.3f} um with time "
                 f"constant {tau:g} s, {coef[1] * 60:+.3f} um/min), whatever the drive does")
