@@ -325,6 +325,13 @@ class Saturation(Term):
 
 # --- hysteresis stage: asymmetric polynomial, rate-dependent width ------------------------------------------
 
+def _square_cube(x, mid, half) -> np.ndarray:
+    """[q^2, q^3], q = (x - mid) / half: the asymmetric term applies it to the drive, the sensor nonlinearity to
+    the displacement (one shape, two physics told apart by the signal it acts on)."""
+    q = (np.asarray(x, float) - mid) / half
+    return np.column_stack([q ** 2, q ** 3])
+
+
 class AsymmetricHysteresis(Term):
     name = "asymmetric_hysteresis"
     stage = "hysteresis"
@@ -333,8 +340,7 @@ class AsymmetricHysteresis(Term):
 
     @staticmethod
     def basis(u, mid, half) -> np.ndarray:
-        q = (np.asarray(u, float) - mid) / half
-        return np.column_stack([q ** 2, q ** 3])
+        return _square_cube(u, mid, half)
 
     def columns(self, ctx, s, setting):
         return G(ctx.base, self.basis(s.u, ctx.u_mid_all, ctx.u_half_all))
@@ -613,8 +619,7 @@ class SensorNonlinearity(Term):
 
     @staticmethod
     def basis(y, mid, half) -> np.ndarray:
-        q = (np.asarray(y, float) - mid) / half
-        return np.column_stack([q ** 2, q ** 3])
+        return _square_cube(y, mid, half)
 
     def columns(self, ctx, s, setting):
         return self.basis(s.yb, ctx.y_center, ctx.y_half)
