@@ -25,6 +25,8 @@ void SysTick_Handler(void);
 /* PendSV: the PIL image runs the stage model there (pil_stage.c); elsewhere unused. */
 void PendSV_Handler(void) __attribute__((weak, alias("Default_Handler")));
 void USART1_IRQHandler(void);
+/* OTG FS: usb_board.c in the firmware and PIL images; elsewhere unused. */
+void OTG_FS_IRQHandler(void) __attribute__((weak, alias("Default_Handler")));
 
 #define PIEZO_STACK_CANARY 0x5AC4A11Eu
 
@@ -45,6 +47,7 @@ const piezo_vector_t piezo_vector_table[16u + PIEZO_N_IRQ] = {
     [14] = PendSV_Handler,
     [15] = SysTick_Handler,
     [16u + PIEZO_IRQ_USART1] = USART1_IRQHandler,
+    [16u + PIEZO_IRQ_OTG_FS] = OTG_FS_IRQHandler,
 };
 
 void Reset_Handler(void)
