@@ -6,7 +6,7 @@
  *
  * Init (RM0090): GPIOA's clock (RCC_AHB1ENR.GPIOAEN, 6.3.10), PA11 (DM) and
  * PA12 (DP) in alternate function AF10 at high speed (8.4.1, 8.4.3, 8.4.10;
- * datasheet DS8626 table 9), then the OTG FS clock (RCC_AHB2ENR.OTGFSEN,
+ * the datasheet's alternate function map), then the OTG FS clock (RCC_AHB2ENR.OTGFSEN,
  * 6.3.11; 48 MHz from the PLL's Q output, board.c), then the core
  * (piezo_otgfs_init: every wait bounded), and only when the core came up its
  * interrupt in the NVIC (OTG_FS, position 67, RM0090 table 61). QEMU 7.2

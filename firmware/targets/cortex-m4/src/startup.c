@@ -7,7 +7,7 @@
  * copy, run main() and hand its status to piezo_board_exit().
  *
  * Why RAM: while a flash sector erases (1-2 s) or a word programs, every
- * fetch from the flash stalls (RM0090 3.5.4). The tick's vector, its handler
+ * fetch from the flash stalls (RM0090 section 3). The tick's vector, its handler
  * and everything it calls (link.ld's .ramfunc, checked by check_image.py
  * ram) then come from RAM, so the tick keeps running during a table commit.
  */
