@@ -20,7 +20,6 @@ extern uint32_t piezo_bss_start[], piezo_bss_end[];
 extern uint32_t piezo_stack_top[], piezo_stack_limit[];
 extern uint32_t piezo_ramfunc_start[], piezo_ramfunc_end[], piezo_ramfunc_load[];
 extern uint32_t piezo_ram_vectors[];
-_Static_assert(16u + PIEZO_N_IRQ == 98u, "link.ld's .ram_vectors holds 98 words (512-byte aligned)");
 
 int main(void);
 void Reset_Handler(void);
