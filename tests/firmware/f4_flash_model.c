@@ -21,10 +21,16 @@ static void start_busy(void)
     f4_model.sr |= PIEZO_FLASH_SR_BSY;
 }
 
+int f4_model_hold_depth;
+unsigned f4_model_busy_polls_unheld;
+
 uint32_t piezo_f4_flash_rd(uint32_t off)
 {
     if (off == PIEZO_FLASH_SR) {
         uint32_t v = f4_model.sr;
+        if ((v & PIEZO_FLASH_SR_BSY) != 0u && f4_model_hold_depth == 0) {
+            f4_model_busy_polls_unheld++; /* an interrupt from the flash could stall the tick */
+        }
         if ((f4_model.sr & PIEZO_FLASH_SR_BSY) != 0u && !f4_model.stuck_busy) {
             if (f4_model.busy_reads > 0u) {
                 f4_model.busy_reads--;
@@ -132,4 +138,10 @@ void piezo_f4_mem_wr32(uint32_t addr, uint32_t value)
     }
     f4_model.words_programmed++;
     start_busy();
+}
+
+/* the chip's BASEPRI hold (flash_f4_mmio.c): counted, checked balanced */
+void piezo_f4_flash_hold(int on)
+{
+    f4_model_hold_depth += on ? 1 : -1;
 }

@@ -30,6 +30,10 @@ typedef struct {
 } f4_flash_model_t;
 
 extern f4_flash_model_t f4_model;
+/* piezo_f4_flash_hold(): its depth (0 when balanced), and the polls that found
+ * BSY set while not held (reset by the test) */
+extern int f4_model_hold_depth;
+extern unsigned f4_model_busy_polls_unheld;
 
 /** Reset: CR locked, SR clear, both sectors erased (0xFF). */
 void f4_model_reset(uint32_t busy_len);

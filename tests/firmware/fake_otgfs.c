@@ -31,6 +31,10 @@ void fake_otg_rx(uint32_t ep, uint32_t kind, const uint8_t *data, uint32_t n)
 
 uint32_t piezo_otg_rd(uint32_t off)
 {
+    fotg.accesses++;
+    if (fotg.absent) {
+        return 0u;
+    }
     if (off == OTG_GRSTCTL) {
         return 1u << 31; /* AHB idle; resets and flushes done */
     }
@@ -46,6 +50,10 @@ uint32_t piezo_otg_rd(uint32_t off)
 
 void piezo_otg_wr(uint32_t off, uint32_t value)
 {
+    fotg.accesses++;
+    if (fotg.absent) {
+        return;
+    }
     if (off == OTG_FIFO(0) || off == OTG_FIFO(1)) {
         unsigned ep = off == OTG_FIFO(0) ? 0u : 1u;
         for (unsigned b = 0; b < 4u && fotg.tx_len[ep] < sizeof fotg.tx[ep]; b++) {

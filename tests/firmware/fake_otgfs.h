@@ -17,6 +17,8 @@ typedef struct {
     uint8_t tx[2][512];
     unsigned tx_len[2];
     unsigned tx_packets[2];
+    unsigned accesses; /* reads and writes so far (for ordering checks) */
+    int absent;        /* no core: every register reads 0, writes are lost (QEMU) */
 } fake_otg_t;
 
 extern fake_otg_t fotg;

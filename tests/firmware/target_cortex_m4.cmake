@@ -32,3 +32,13 @@ piezo_add_cmocka_test(test_usb_otgfs SOURCES test_usb_otgfs.c fake_otgfs.c ${PIE
 if(TARGET test_usb_otgfs)
   target_include_directories(test_usb_otgfs PRIVATE ${PIEZO_CM4_DIR}/include)
 endif()
+
+# The firmware image's USB glue (usb_board.c: clock, pins, interrupt, the
+# background poll) against the fake core and a record of its RCC/GPIO/NVIC
+# writes: the init order of RM0090, init without a core (QEMU), dispatch.
+piezo_add_cmocka_test(test_usb_board SOURCES test_usb_board.c fake_otgfs.c ${PIEZO_CM4_DIR}/src/usb_board.c
+                      ${PIEZO_CM4_DIR}/src/usb_otgfs.c ${PIEZO_CM4_DIR}/src/usb_dev.c
+                      LIBS piezo_protocol test_modbus_regs)
+if(TARGET test_usb_board)
+  target_include_directories(test_usb_board PRIVATE ${PIEZO_CM4_DIR}/include)
+endif()

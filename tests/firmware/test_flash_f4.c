@@ -26,9 +26,13 @@ static void test_erase_unlocks_erases_one_sector_and_locks(void **state)
 {
     (void)state;
     f4_model_reset(5u);
+    f4_model_busy_polls_unheld = 0u;
     f4_model.mem[1][100] = 0x00;
     f4_model.mem[0][100] = 0x00;
     assert_int_equal(piezo_f4_flash_erase_sector(11u), 0);
+    /* the erase is waited for with only the tick let in, and released after */
+    assert_int_equal(f4_model_busy_polls_unheld, 0);
+    assert_int_equal(f4_model_hold_depth, 0);
     assert_int_equal(f4_model.erases[1], 1);
     assert_int_equal(f4_model.erases[0], 0);
     assert_int_equal(f4_model.mem[1][100], 0xFF);
@@ -54,7 +58,10 @@ static void test_program_words_with_psize_x32_pads_the_tail(void **state)
     (void)state;
     const uint8_t data[7] = {1, 2, 3, 4, 5, 6, 7};
     f4_model_reset(3u);
+    f4_model_busy_polls_unheld = 0u;
     assert_int_equal(piezo_f4_flash_program(PIEZO_FLASH_SLOT_A_ADDR + 16u, data, sizeof data), 0);
+    assert_int_equal(f4_model_busy_polls_unheld, 0);
+    assert_int_equal(f4_model_hold_depth, 0);
     assert_int_equal(f4_model.words_programmed, 2);
     assert_memory_equal(&f4_model.mem[0][16], data, sizeof data);
     assert_int_equal(f4_model.mem[0][23], 0xFF); /* padding leaves the cell erased */

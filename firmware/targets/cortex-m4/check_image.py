@@ -10,6 +10,13 @@ floating point where the tick runs.
                                     handler is such a helper or holds such an
                                     instruction, and no indirect call hides a
                                     callee from this check
+    check_image.py ram IMAGE.elf ROOT...
+                                    the linked image: every function reachable
+                                    from each ROOT runs from RAM (0x20000000..)
+                                    and loads no literal that is the address
+                                    of a symbol in the flash (the code that must run while a flash
+                                    sector erases: the tick, the flash driver's
+                                    waits; docs/target-cortex-m4.md)
 
 Exits 1 with the offending symbols or instructions named. Needs binutils for
 arm-none-eabi (ARM_NM, ARM_OBJDUMP override the tool names).
@@ -41,16 +48,19 @@ def run(cmd):
     return subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
 
 
-def disassemble(path):
-    """{function: [(mnemonic, operands)]} from objdump -d."""
+def disassemble(path, addrs=None):
+    """{function: [(mnemonic, operands)]} from objdump -d; addrs, when given,
+    gets {function: address}."""
     funcs, cur = {}, None
     for line in run([OBJDUMP, "-d", "--no-show-raw-insn", path]).splitlines():
-        m = re.match(r"^[0-9a-f]+ <([^>]+)>:$", line)
+        m = re.match(r"^([0-9a-f]+) <([^>]+)>:$", line)
         if m:
-            cur = m.group(1)
+            cur = m.group(2)
             funcs[cur] = []
+            if addrs is not None:
+                addrs[cur] = int(m.group(1), 16)
             continue
-        m = re.match(r"^\s+[0-9a-f]+:\s+(\S+)\s*([^;@]*)", line)
+        m = re.match(r"^\s*[0-9a-f]+:\s+(\S+)\s*([^;@]*)", line)  # RAM addresses have 8 digits, no indent
         if m and cur is not None:
             funcs[cur].append((m.group(1), m.group(2).strip()))
     return funcs
@@ -116,7 +126,68 @@ def check_tick(image, root=ROOT):
     return 0
 
 
+FLASH = (0x08000000, 0x08100000)
+RAM = (0x20000000, 0x20020000)
+
+
+def reachable(funcs, root):
+    """Functions reached from root by direct calls and branches."""
+    seen, todo = set(), [root]
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        for op, args in funcs.get(name, []):
+            if BRANCH.match(op):
+                m = re.search(r"<([^>+]+)(?:\+0x[0-9a-f]+)?>", args)
+                if m and m.group(1) != name:
+                    todo.append(m.group(1))
+    return seen
+
+
+def flash_symbols(image):
+    """Addresses of the symbols that lie in the flash (Thumb bit cleared)."""
+    out = set()
+    for line in run([NM, image]).splitlines():
+        parts = line.split()
+        if len(parts) == 3:
+            a = int(parts[0], 16) & ~1
+            if FLASH[0] <= a < FLASH[1]:
+                out.add(a)
+    return out
+
+
+def check_ram(image, roots):
+    addrs = {}
+    funcs = disassemble(image, addrs)
+    in_flash = flash_symbols(image)
+    problems, seen = [], set()
+    for root in roots:
+        if root not in funcs:
+            problems.append(f"no {root}")
+            continue
+        seen |= reachable(funcs, root)
+    for name in sorted(seen):
+        a = addrs.get(name)
+        if a is None or not RAM[0] <= a < RAM[1]:
+            problems.append(f"{name} at {a:#010x} is not in RAM" if a is not None else f"{name}: no address")
+        for op, args in funcs.get(name, []):
+            if op == ".word":
+                v = int(args.split()[0], 0)
+                if (v & ~1) in in_flash:
+                    problems.append(f"{name}: literal {v:#010x} is the address of a symbol in the flash")
+    if problems:
+        print(f"check_image: {image}: code that must run during a flash erase is not all in RAM:", file=sys.stderr)
+        print("\n".join("  " + p for p in problems), file=sys.stderr)
+        return 1
+    print(f"check_image: RAM-resident from {', '.join(roots)}: {len(seen)} functions, no flash symbol's address in their literals")
+    return 0
+
+
 def main(argv):
+    if len(argv) >= 4 and argv[1] == "ram":
+        return check_ram(argv[2], argv[3:])
     if len(argv) < 3 or argv[1] not in ("core", "tick"):
         print(__doc__, file=sys.stderr)
         return 2

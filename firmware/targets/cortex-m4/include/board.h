@@ -53,6 +53,7 @@
 
 /* STM32F405 interrupt numbers (RM0090 table 61) */
 #define PIEZO_IRQ_USART1 37u
+#define PIEZO_IRQ_OTG_FS 67u /* the same in usb_board.h */
 #define PIEZO_N_IRQ 82u
 
 /* Priorities (upper 4 bits implemented): the tick preempts everything else. */

@@ -27,9 +27,13 @@ extern piezo_rtu_t piezo_comm_rtu;
  *  and before piezo_ctl_attach_store(). Returns 0 or -1. */
 int piezo_comm_init(void);
 
-/** One pass of the server: received bytes into the framer, a complete
- *  request through the PDU server, its answer queued for the transmit
- *  interrupt. Returns 1 when it did something, 0 when idle. */
+/** The register map as both links serve it (writes masked, comm.c): the
+ *  USB link's (usb_board.h) too. */
+const piezo_mb_regs_t *piezo_comm_regs(void);
+
+/** One pass of the server: the USB link's pending work (piezo_usb_poll),
+ *  then received bytes into the framer, a complete request through the PDU
+ *  server, its answer queued for the transmit interrupt. Returns 1 when it did something, 0 when idle. */
 int piezo_comm_poll(void);
 
 #endif /* PIEZO_CM4_COMM_H */

@@ -73,6 +73,13 @@ uint32_t piezo_f4_flash_rd(uint32_t off);
 void piezo_f4_flash_wr(uint32_t off, uint32_t value);
 uint8_t piezo_f4_mem_rd8(uint32_t addr);
 void piezo_f4_mem_wr32(uint32_t addr, uint32_t value);
+/** While the flash is busy (an erase, programming): on = 1 lets only the
+ *  tick interrupt in (BASEPRI above PIEZO_PRIO_TICK), on = 0 all again. The
+ *  tick and this driver run from RAM (link.ld's .ramfunc); the UART's and
+ *  USB's handlers run from the flash, and a fetch of theirs would stall the
+ *  core until the operation ends, so they wait for it instead (a byte that
+ *  arrives meanwhile overruns; the master waits for the command's answer). */
+void piezo_f4_flash_hold(int on);
 
 /** Erase the sector holding addr (sectors 10 and 11 only). 0 or -1. */
 int piezo_f4_flash_erase_sector(uint32_t sector);

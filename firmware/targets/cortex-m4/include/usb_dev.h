@@ -7,11 +7,12 @@
  * from OUT packets, the answer cut into IN packets, a zero-length packet
  * after an answer that fills its last packet).
  *
- * The OTG FS peripheral driver (not written yet) calls these from its
- * interrupt: on a SETUP packet piezo_usbd_setup(), then piezo_usbd_ep0_in()
- * for each IN packet of the data stage and piezo_usbd_status_done() after the
- * status stage; on a bulk OUT packet piezo_usbd_bulk_out(), then
- * piezo_usbd_bulk_in() for each IN packet of the answer. QEMU models no OTG:
+ * The OTG FS driver (usb_otgfs.c, run from the background loop by
+ * usb_board.c) calls these from its interrupt work: on a SETUP packet
+ * piezo_usbd_setup(), then piezo_usbd_ep0_in() for each IN packet of the
+ * data stage and piezo_usbd_status_done() after the status stage; on a
+ * bulk OUT packet piezo_usbd_bulk_out(), then piezo_usbd_bulk_in() for each
+ * IN packet of the answer. QEMU models no OTG:
  * tests/firmware/test_usb_dev.c drives this layer as a host would.
  *
  * Ids: VID 0x1209 (pid.codes), PID 0x0001 (its test PID), as the host's

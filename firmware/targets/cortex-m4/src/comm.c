@@ -28,6 +28,7 @@
 #include "piezo_interface.h"
 #include "tick.h"
 #include "uart.h"
+#include "usb_board.h"
 
 /* The unlock key this image is provisioned with (docs/protocol.md, "Sessions,
  * unlock and lockout"), set per image by CMakeLists.txt: the PIL image (a
@@ -90,11 +91,18 @@ int piezo_comm_init(void)
     return piezo_rtu_init(&piezo_comm_rtu, (uint8_t)PIEZO_MODBUS_UNIT_ID, PIEZO_MODBUS_BAUD);
 }
 
+const piezo_mb_regs_t *piezo_comm_regs(void)
+{
+    return &regs;
+}
+
 int piezo_comm_poll(void)
 {
     uint8_t b;
     uint32_t stamp;
-    int did = 0;
+    /* the USB link first (usb_board.c): its interrupt's work, a request
+     * through the same register map and masked writes as the line's */
+    int did = piezo_usb_poll();
     while (piezo_uart_get(&b, &stamp)) {
         piezo_rtu_rx_byte(&piezo_comm_rtu, b, stamp * PIEZO_COMM_US_PER_TICK);
         did = 1;

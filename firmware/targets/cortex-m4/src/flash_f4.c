@@ -59,8 +59,10 @@ int piezo_f4_flash_erase_sector(uint32_t sector)
     /* RM0090 3.6.3: SER and SNB (with PSIZE), then STRT, then wait BSY */
     piezo_f4_flash_wr(PIEZO_FLASH_CR, PIEZO_FLASH_CR_PSIZE_X32 | PIEZO_FLASH_CR_SER |
                                           (sector << PIEZO_FLASH_CR_SNB_SHIFT));
+    piezo_f4_flash_hold(1);
     piezo_f4_flash_wr(PIEZO_FLASH_CR, piezo_f4_flash_rd(PIEZO_FLASH_CR) | PIEZO_FLASH_CR_STRT);
     rc = wait_not_busy();
+    piezo_f4_flash_hold(0);
     rc |= take_errors();
     lock();
     return rc != 0 ? -1 : 0;
@@ -78,6 +80,7 @@ int piezo_f4_flash_program(uint32_t addr, const uint8_t *data, uint32_t n)
     }
     /* RM0090 3.6.4: PSIZE x32 and PG, then one word per write, BSY after each */
     piezo_f4_flash_wr(PIEZO_FLASH_CR, PIEZO_FLASH_CR_PSIZE_X32 | PIEZO_FLASH_CR_PG);
+    piezo_f4_flash_hold(1);
     for (uint32_t i = 0; i < n && rc == 0; i += 4u) {
         uint32_t w = 0u;
         for (uint32_t b = 0; b < 4u; b++) {
@@ -90,6 +93,7 @@ int piezo_f4_flash_program(uint32_t addr, const uint8_t *data, uint32_t n)
             rc = take_errors();
         }
     }
+    piezo_f4_flash_hold(0);
     piezo_f4_flash_wr(PIEZO_FLASH_CR, piezo_f4_flash_rd(PIEZO_FLASH_CR) & ~PIEZO_FLASH_CR_PG);
     lock();
     return rc;

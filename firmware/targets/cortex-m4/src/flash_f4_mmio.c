@@ -25,3 +25,10 @@ void piezo_f4_mem_wr32(uint32_t addr, uint32_t value)
     *(volatile uint32_t *)addr = value;
     __asm volatile("dsb" ::: "memory");
 }
+
+/* BASEPRI 0x10: only priority 0x00 (the tick, board.h) preempts. */
+void piezo_f4_flash_hold(int on)
+{
+    uint32_t v = on ? 0x10u : 0u;
+    __asm volatile("msr basepri, %0\n\tisb" ::"r"(v) : "memory");
+}

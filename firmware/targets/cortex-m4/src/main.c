@@ -1,13 +1,14 @@
 /*
  * main.c - the firmware image: board, control loop, Modbus RTU on USART1,
  * then the 10 kHz tick runs the control loop (piezo_control_tick) while the
- * background loop serves the line (comm.c).
+ * background loop serves the line and the USB link (comm.c, usb_board.c).
  */
 #include "board.h"
 #include "comm.h"
 #include "control.h"
 #include "tick.h"
 #include "uart.h"
+#include "usb_board.h"
 
 int main(void)
 {
@@ -21,6 +22,9 @@ int main(void)
     if (piezo_comm_init() != 0) {
         piezo_board_fault("comm init", 0);
     }
+    /* USB on the same register map; without an OTG core (QEMU) init gives
+     * up within its bounded waits and the image runs without USB */
+    (void)piezo_usb_init(piezo_comm_regs());
     /* a stored table that does not load is reported by the status registers;
      * the unit then runs without one */
     (void)piezo_ctl_attach_store(&piezo_axis, piezo_control_storage());

@@ -2,8 +2,14 @@
  * startup.c - vector table and reset handler for the STM32F405.
  *
  * Reset: enable the FPU (CP10, CP11: the hard-float ABI may use its registers
- * anywhere outside the core), copy .data from flash, zero .bss, set the stack
- * canary, run main() and hand its status to piezo_board_exit().
+ * anywhere outside the core), copy .ramfunc and .data from flash, zero .bss,
+ * set the stack canary, copy the vector table to RAM and point VTOR at the
+ * copy, run main() and hand its status to piezo_board_exit().
+ *
+ * Why RAM: while a flash sector erases (1-2 s) or a word programs, every
+ * fetch from the flash stalls (RM0090 section 3). The tick's vector, its handler
+ * and everything it calls (link.ld's .ramfunc, checked by check_image.py
+ * ram) then come from RAM, so the tick keeps running during a table commit.
  */
 #include <stdint.h>
 
@@ -12,6 +18,8 @@
 extern uint32_t piezo_data_start[], piezo_data_end[], piezo_data_load[];
 extern uint32_t piezo_bss_start[], piezo_bss_end[];
 extern uint32_t piezo_stack_top[], piezo_stack_limit[];
+extern uint32_t piezo_ramfunc_start[], piezo_ramfunc_end[], piezo_ramfunc_load[];
+extern uint32_t piezo_ram_vectors[];
 
 int main(void);
 void Reset_Handler(void);
@@ -25,6 +33,8 @@ void SysTick_Handler(void);
 /* PendSV: the PIL image runs the stage model there (pil_stage.c); elsewhere unused. */
 void PendSV_Handler(void) __attribute__((weak, alias("Default_Handler")));
 void USART1_IRQHandler(void);
+/* OTG FS: usb_board.c in the firmware and PIL images; elsewhere unused. */
+void OTG_FS_IRQHandler(void) __attribute__((weak, alias("Default_Handler")));
 
 #define PIEZO_STACK_CANARY 0x5AC4A11Eu
 
@@ -45,6 +55,7 @@ const piezo_vector_t piezo_vector_table[16u + PIEZO_N_IRQ] = {
     [14] = PendSV_Handler,
     [15] = SysTick_Handler,
     [16u + PIEZO_IRQ_USART1] = USART1_IRQHandler,
+    [16u + PIEZO_IRQ_OTG_FS] = OTG_FS_IRQHandler,
 };
 
 void Reset_Handler(void)
@@ -52,6 +63,10 @@ void Reset_Handler(void)
     SCB_CPACR |= 0xFu << 20; /* CP10, CP11 full access */
     __asm volatile("dsb\n\tisb" ::: "memory");
 
+    const uint32_t *code = piezo_ramfunc_load;
+    for (uint32_t *dst = piezo_ramfunc_start; dst < piezo_ramfunc_end; dst++) {
+        *dst = *code++;
+    }
     const uint32_t *src = piezo_data_load;
     for (uint32_t *dst = piezo_data_start; dst < piezo_data_end; dst++) {
         *dst = *src++;
@@ -60,7 +75,12 @@ void Reset_Handler(void)
         *dst = 0u;
     }
     piezo_stack_limit[0] = PIEZO_STACK_CANARY;
-    SCB_VTOR = (uint32_t)(uintptr_t)piezo_vector_table;
+    for (uint32_t i = 0; i < 16u + PIEZO_N_IRQ; i++) {
+        piezo_ram_vectors[i] = (uint32_t)(uintptr_t)piezo_vector_table[i];
+    }
+    __asm volatile("dsb" ::: "memory");
+    SCB_VTOR = (uint32_t)(uintptr_t)piezo_ram_vectors;
+    __asm volatile("dsb\n\tisb" ::: "memory");
 
     piezo_board_exit(main());
 }
