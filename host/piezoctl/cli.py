@@ -20,7 +20,7 @@ import sys
 import traceback
 
 from . import __version__, commands
-from .errors import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_REFUSED, CliError
+from .errors import EXIT_INTERNAL, EXIT_INTERRUPTED, CliError, exit_code
 
 __all__ = ["main", "build_parser", "CliError"]
 
@@ -32,6 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--version", action="version", version=f"piezoctl {__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND")
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):  # shared helpers, not commands
+            continue
         importlib.import_module(f"{commands.__name__}.{info.name}").add_parser(sub)
     return ap
 
@@ -49,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except CliError as exc:
         print(f"piezoctl {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_REFUSED
+        return exit_code(exc)
     except KeyboardInterrupt:
         print(f"piezoctl {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

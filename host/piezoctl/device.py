@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from . import interface
-from .errors import CliError
+from .errors import CliError, ControllerRefused
 from .tables.from_model import Scale
 from .transport import open_port
 from .transport.errors import ModbusExceptionError
@@ -35,8 +35,8 @@ WINDOW = interface.HOLDING_REGISTERS["table_window"][2]      # registers per tab
 REC_WINDOW = interface.HOLDING_REGISTERS["rec_window"][2]
 
 
-class DeviceError(CliError):
-    """The controller refused or reported something the user must act on."""
+class DeviceError(ControllerRefused):
+    """The controller refused or reported something the user must act on (exit 4)."""
 
 
 KEY_ENV = "PIEZOCTL_UNLOCK_KEY"

@@ -378,7 +378,7 @@ def test_unreachable_port_says_cannot_connect_to_host_port(capsys):
     port = s.getsockname()[1]
     s.close()
     rc, _, err = _run(capsys, "status", "--port", f"tcp:127.0.0.1:{port}")
-    assert rc == 2 and err.count("\n") == 1 and f"cannot connect to 127.0.0.1:{port}" in err
+    assert rc == 5 and err.count("\n") == 1 and f"cannot connect to 127.0.0.1:{port}" in err
 
 
 # ------------------------------------------------------------------ item 7: sil_stage --flash

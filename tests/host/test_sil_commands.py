@@ -41,7 +41,7 @@ def test_flash_good_then_refused_keeps_the_active_table(sil, tmp_path, capsys):
     assert status(sil.spec, capsys)["active_table_crc"] == crc
     name, bad, reason = next(x for x in refused_images() if x[2] == "unstable_inverse")
     (tmp_path / "bad.bin").write_bytes(bad)
-    assert cli.main(["flash", "--port", sil.spec, "--quiet", str(tmp_path / "bad.bin")]) == 2
+    assert cli.main(["flash", "--port", sil.spec, "--quiet", str(tmp_path / "bad.bin")]) == 4  # the controller refused
     assert "unstable_inverse" in capsys.readouterr().err
     assert status(sil.spec, capsys)["active_table_crc"] == crc
     # damaged files never reach the controller

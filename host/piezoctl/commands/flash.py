@@ -14,7 +14,7 @@ import time
 import zlib
 
 from ..device import connect
-from ..errors import CliError
+from ..errors import CliError, ControllerRefused
 from ..tables.image import TableImageError, parse_image
 
 
@@ -58,7 +58,7 @@ def flash_image(ctl, img: bytes, *, quiet: bool = False, timeout_s: float = 2.0)
         raise CliError("read-back CRC mismatch: not committed")
     result = ctl.commit_table()
     if result != "ok":
-        raise CliError(f"the controller refused the table: {result} (the previous table keeps running)")
+        raise ControllerRefused(f"the controller refused the table: {result} (the previous table keeps running)")
     deadline = time.monotonic() + timeout_s
     while ctl.status()["active_table_crc"] != t.crc:
         if time.monotonic() > deadline:

@@ -3,7 +3,7 @@ CLI as one line naming the port and what went wrong."""
 
 from __future__ import annotations
 
-from ..errors import CliError
+from ..errors import CliError, ConnectionFailed, ControllerRefused
 
 __all__ = ["TransportError", "PortSpecError", "PortUnreachableError",
            "TransportTimeoutError", "ModbusExceptionError", "ProtocolError",
@@ -31,11 +31,11 @@ class PortSpecError(TransportError):
     """A PORT string that is not tcp:HOST:PORT, rtu:DEVICE[:BAUD] or usb[:VID:PID]."""
 
 
-class PortUnreachableError(TransportError):
+class PortUnreachableError(TransportError, ConnectionFailed):
     """The port cannot be opened: no such device, connection refused, no USB device."""
 
 
-class TransportTimeoutError(TransportError):
+class TransportTimeoutError(TransportError, ConnectionFailed):
     """No (complete, valid) answer within the timeout."""
 
 
@@ -43,7 +43,7 @@ class ProtocolError(TransportError):
     """An answer that does not fit the request (wrong function, length, sequence)."""
 
 
-class ModbusExceptionError(TransportError):
+class ModbusExceptionError(TransportError, ControllerRefused):
     """The controller answered with a Modbus exception response.
 
     ``code`` is the exception code (1 illegal function, 2 illegal data address,
