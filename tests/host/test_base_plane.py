@@ -144,7 +144,7 @@ def test_term_regressors_are_the_linearized_simulation():
     ctx, _, _ = locate(base, recs, recs, ["a.csv"], 0.5, 1.0)
     s = ctx.signals[0]
     y0 = refined.simulate(base, t, u)
-    cases = {"thermal_drift": (15.0, [0.2, 0.01]), "sensor_offset": (None, [0.3]),
+    cases = {"thermal_drift": (15.0, [0.0, 0.2, 0.01]), "sensor_offset": (None, [0.3]),
              "asymmetric_hysteresis": (None, [0.4, -0.2, 0.0]), "rate_dependent_hysteresis": (3.0, [0.2, 0.0]),
              "unmodeled_resonance": ((900.0, 0.02), [0.05, 0.02]), "sensor_nonlinearity": (None, [0.05, 0.02, 0.0])}
     for name, (setting, coef) in cases.items():
@@ -156,3 +156,33 @@ def test_term_regressors_are_the_linearized_simulation():
         d = refined.simulate(par, t, u) - y0
         tol = 1e-9 if name != "sensor_nonlinearity" else 1e-6   # evaluated at the model output vs the measured span
         assert np.max(np.abs(d - X @ coef)) < tol * max(1.0, np.max(np.abs(d))), name
+
+
+def test_thermal_drift_on_the_session_clock_is_its_regressor_and_continues_across_recordings():
+    """With ``session_time_s`` on every recording the drift runs on the session clock from the end of the
+    calibration: a recording that starts 20 s later starts where the drift has got to, and the model with the
+    term minus the model without equals the drift's regressors times its coefficients."""
+    n = int(3 * FS)
+    t = np.arange(n) / FS
+    rng = np.random.default_rng(5)
+    u = 75 + 60 * np.sin(2 * np.pi * 3 * t)
+    base = {"fs_hz": FS, "u_mid": 75.0, "u_half": 75.0, "hysteresis": _plane(rng),
+            "dynamics": {"b": [0.3, 0.2], "a": [1.0, -0.5]}, "terms": {}}
+    y = refined.simulate(base, t, u)
+    cal = [Recording(t=t, u=u, y=y, path="c.csv", meta={"session_time_s": "0"})]
+    recs = [Recording(t=t, u=u, y=y, path=f"r{i}.csv", meta={"session_time_s": f"{10 + 20 * i}"}) for i in (0, 1)]
+    ctx, _, _ = locate(base, cal, recs, ["r0.csv", "r1.csv"], 0.5, 1.0)
+    assert ctx.drift_t0 == pytest.approx(3.0 - 1 / FS) and ctx.drift_span == pytest.approx(30.0)
+    term = TERMS["thermal_drift"]
+    coef = [0.0, 0.0, 0.3, 0.002]
+    par = dict(base, terms={"thermal_drift": term.term(ctx, 15.0, coef)})
+    for s, r in zip(ctx.signals, recs):
+        d = refined.simulate(par, t, u, t_session=float(r.meta["session_time_s"])) - y
+        assert np.max(np.abs(d - term.regressors(ctx, s, 15.0) @ coef)) < 1e-9
+    d0 = refined.simulate(par, t, u, t_session=10.0) - y
+    d1 = refined.simulate(par, t, u, t_session=30.0) - y
+    # the second recording starts where the drift has got to 20 s later, not at zero
+    assert d0[0] == pytest.approx(0.3 * (1 - np.exp(-(10 - ctx.drift_t0) / 15)) + 0.002 * (10 - ctx.drift_t0))
+    assert d1[0] > d0[-1] > d0[0] > 0
+    # the calibration (before the reference) is not drifted
+    assert np.all(refined.simulate(par, t, u, t_session=0.0) == y)

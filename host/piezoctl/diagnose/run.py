@@ -25,7 +25,7 @@ from ..ident import refined
 from ..ident.base import fit_base
 from ..ident.terms import TERMS, VOCABULARY
 from ..io.modelfile import make_provenance, save_model
-from ..io.recording import load_recording
+from ..io.recording import load_recording, session_start
 from . import locate as loc
 from . import significance as sg
 from .discriminate import calibration_band_hz
@@ -120,7 +120,8 @@ def locate(base, cal, recs, names, settle_s, block_s):
               peak_freqs=loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt), y_span=span,
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
               cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
-              cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)))
+              cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
+              **_drift_clock(cal, recs))
     # samples where the drive is (or within OUT_GUARD_S was) outside the calibrated range: the base model
     # extrapolates there. They stay in the selection - saturation or a sensor's curvature may show only there -
     # and are reported on their own, so the user can weigh a finding that rests on them
@@ -140,6 +141,17 @@ def locate(base, cal, recs, names, settle_s, block_s):
                                     "inside); a term found there rests on the base model's extrapolation.")}
     located = loc.locate([_cut(s, v) for s, v in zip(sigs, valid)], [r[v] for r, v in zip(resid, valid)], dt)
     return ctx, located, outside_doc
+
+
+def _drift_clock(cal, recs) -> dict:
+    """``drift_t0`` (the end of the calibration on the session clock [s]) and ``drift_span`` (from it to the end
+    of the last recording [s]) when every recording carries ``session_time_s``; else none (per-recording clock)."""
+    starts = [session_start(r) for r in list(cal) + list(recs)]
+    if not starts or any(s is None for s in starts):
+        return {}
+    ends = [s + float(r.t[-1] - r.t[0]) for s, r in zip(starts, list(cal) + list(recs))]
+    t0 = max(ends[:len(cal)]) if cal else min(starts)
+    return {"drift_t0": t0, "drift_span": max(max(ends) - t0, 0.0)}
 
 
 def _nrmse_pooled(ys, yhats, masks, span):

@@ -19,12 +19,13 @@ import numpy as np
 from ..dsp import filt
 from ..ident import refined
 from ..ident.terms import Term
+from ..io.recording import session_start
 from ..models.hysteresis import hysteresis_groups
 from . import significance as sg
 from .discriminate import discriminate_group, highpassed
 
 __all__ = ["Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
-           "simulate_refined", "hysteresis_nuisance", "best_setting", "train_rows"]
+           "simulate_refined", "hysteresis_nuisance", "dynamics_nuisance", "term_nuisance", "best_setting", "train_rows"]
 
 
 @dataclasses.dataclass
@@ -45,6 +46,7 @@ class Signals:
     yb: np.ndarray         # model output [um]
     ydyn: np.ndarray       # output before the offset and the output-stage terms [um]
     index: int = 0
+    t_session: float | None = None   # the recording's start on the session clock [s] (metadata), when known
 
 
 @dataclasses.dataclass
@@ -76,8 +78,11 @@ class Ctx:
     refit_cache: dict = dataclasses.field(default_factory=dict)
     design_cache: dict = dataclasses.field(default_factory=dict)
     nuisance: np.ndarray | None = None   # hysteresis_nuisance() of this model, computed on first use
+    dyn_nuisance: np.ndarray | None = None   # dynamics_nuisance() of this model, computed on first use
     cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
     cal_u_hi: float = 0.0
+    drift_t0: float | None = None   # the session clock's reference for drift [s] (end of the calibration), when
+    drift_span: float = 0.0         # every recording has session_time_s; the span of the recordings after it [s]
 
 
 @dataclasses.dataclass
@@ -118,9 +123,10 @@ def make_signals(params, recs, names) -> list:
     out = []
     off = float(params["hysteresis"].get("offset", 0.0))
     for i, (r, n) in enumerate(zip(recs, names)):
-        p = refined.simulate_parts(params, r.t, r.u, r.u2)
+        ts = session_start(r)
+        p = refined.simulate_parts(params, r.t, r.u, r.u2, ts)
         out.append(Signals(name=n, t=r.t, u=r.u, y=r.y, u2=r.u2, x2=r.x2, temp=r.temp, dt=r.dt, v=p["v"],
-                           h=p["h"], hyst=p["hyst"], yb=p["y"], ydyn=p["y_dyn"] + off, index=i))
+                           h=p["h"], hyst=p["hyst"], yb=p["y"], ydyn=p["y_dyn"] + off, index=i, t_session=ts))
     return out
 
 
@@ -251,6 +257,34 @@ def hysteresis_nuisance(ctx):
     return ctx.nuisance
 
 
+def dynamics_nuisance(ctx):
+    """The drive-side and resonance terms' extra nuisance (n_settled, 2): the first and second time derivatives
+    of the current model's dynamic output, i.e. free low-order corrections ``c1 s + c2 s^2`` of its dynamics G
+    (unit static gain kept) refitted on the new data. Above the calibration's band G was not identified: a
+    stage's own latency and the phase of its modes there look like a delay of a sample or two, and a
+    drive-side term is credited only with what such a refit of G cannot absorb (round 5 named `delay` on
+    nulls whose fast reveal showed the stage's one-sample latency). Cached on the context."""
+    if ctx.dyn_nuisance is None:
+        cols = []
+        for s, v in zip(ctx.signals, ctx.valid):
+            yd = np.asarray(s.ydyn, float)
+            d1 = np.diff(yd, prepend=yd[0])
+            d2 = np.diff(d1, prepend=d1[0])
+            cols.append(np.column_stack([d1, d2])[v])
+        ctx.dyn_nuisance = np.vstack(cols)
+    return ctx.dyn_nuisance
+
+
+def term_nuisance(ctx, term):
+    """The nested test's nuisance columns for ``term`` (None: not nested)."""
+    parts = []
+    if term.nested:
+        parts.append(hysteresis_nuisance(ctx))
+    if term.nested_dynamics:
+        parts.append(dynamics_nuisance(ctx))
+    return np.hstack(parts) if parts else None
+
+
 def residual(ctx):
     return np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
 
@@ -274,8 +308,8 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
         train, test = fold_all == f, fold_all == 1 - f
         e_before[test] = e[test]
         N = None
-        if term.nested:   # nested against a refit of the current model's own hysteresis on this fold
-            Nall = hysteresis_nuisance(ctx)
+        Nall = term_nuisance(ctx, term)   # nested against a refit of the model's own flexibility on this fold
+        if Nall is not None:
             N = (Nall[train_rows(train, rows)], Nall[test])
         if own or N is not None:  # "before" is the model with the nuisance columns alone refitted here
             Xn = d0.X[:, own] if own else np.zeros((e.size, 0))
@@ -324,7 +358,7 @@ def simulate_refined(params, recs, names):
     out = []
     off = params["terms"].get("sensor_offset")
     for r, n in zip(recs, names):
-        y = refined.simulate(params, r.t, r.u, r.u2)
+        y = refined.simulate(params, r.t, r.u, r.u2, session_start(r))
         if off is not None:
             y = y + off["per_recording"].get(n, off["offset_um"]) - off["offset_um"]
         out.append(y)
@@ -338,14 +372,14 @@ def rebase(ctx, params, recs):
     po = params.get("terms", {}).get("sensor_offset")
     sigs = []
     for s, r in zip(ctx.signals, recs):
-        p = refined.simulate_parts(params, r.t, r.u, r.u2)
+        p = refined.simulate_parts(params, r.t, r.u, r.u2, s.t_session)
         y = p["y"]
         if po is not None:
             y = y + po["per_recording"].get(s.name, po["offset_um"]) - po["offset_um"]
         sigs.append(dataclasses.replace(s, v=p["v"], h=p["h"], hyst=p["hyst"], yb=y, ydyn=p["y_dyn"] + off))
     cal_h = [refined.simulate_parts(params, r.t, r.u, r.u2)["h"] for r in ctx.cal]
     return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={},
-                               nuisance=None)
+                               nuisance=None, dyn_nuisance=None)
 
 
 def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
@@ -381,6 +415,17 @@ def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
         evals[i] = dd[k]
     for c in dd:
         c.discrimination = text
+
+
+def _supersede(evals):
+    """A significant candidate that contains a simpler significant one as its nuisance (``Term.supersedes``: it
+    passed *beyond* the simpler term's fit, e.g. a drift within recordings beyond a constant per recording) goes
+    just before it; reorders ``evals`` in place."""
+    for c in [c for c in evals if c.significant and c.term.supersedes]:
+        i = evals.index(c)
+        simpler = [j for j, o in enumerate(evals[:i]) if o.significant and o.name in c.term.supersedes]
+        if simpler:
+            evals.insert(simpler[0], evals.pop(i))
 
 
 def _first_exact(evals, fctx, fold_all, recs, span, log):
@@ -430,6 +475,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
         evals = sorted((_evaluate(fctx, t, es, fold_all, block_all, rows, p_max) for t in todo),
                        key=lambda c: c.ratio)
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
+        _supersede(evals)
         rounds.append(evals)
         best = _first_exact(evals, fctx, fold_all, recs, span, log)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
@@ -442,8 +488,8 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
         e_all = residual(ctx_all)
         term = best.term
         N = None
-        if term.nested:
-            Nall = hysteresis_nuisance(ctx_all)
+        Nall = term_nuisance(ctx_all, term)
+        if Nall is not None:
             N = (Nall[train_rows(allmask, rows)], Nall[:0])
         st, _, _, _, th = best_setting(ctx_all, term, e_all, allmask, np.zeros(e_all.size, bool), rows, N)
         best.setting_all, best.coef_all = st, th

@@ -68,7 +68,10 @@ Parameters (JSON, physical units where they have one)
       acceleration is taken after a mode filter (the other axis moves through a
       resonance), with and without the ZOH's one-sample delay.
     - ``thermal_drift``: ``amplitude_um``, ``tau_s``, ``slope_um_per_s``:
-      ``A (1 - exp(-(t - t0)/tau)) + slope (t - t0)``.
+      ``A (1 - exp(-(t - t0)/tau)) + slope (t - t0)`` for ``t >= t0`` (0 before).
+      With ``t0_session_s`` the clock is the session's (``t`` = the recording's
+      ``session_time_s`` + its time, ``t0`` = ``t0_session_s``: the drift runs on
+      wall time across recordings); without it, ``t0`` is each recording's start.
     - ``sensor_offset``: ``offset_um`` (used by ``simulate``) and
       ``per_recording`` (the fitted value per recording, for reading).
     - ``sensor_nonlinearity``: ``c2_um``, ``c3_um`` on ``q = (y - mid) / half``
@@ -121,8 +124,11 @@ def _check_rate(params, t) -> float:
     return dt
 
 
-def simulate_parts(params: dict, t, u, u2=None) -> dict:
+def simulate_parts(params: dict, t, u, u2=None, t_session=None) -> dict:
     """Run the model and return its intermediate signals.
+
+    ``t_session`` [s]: the recording's first sample on the session clock (metadata ``session_time_s``), for
+    terms that run on it (thermal drift fitted on session time); None: such a term starts with the recording.
 
     The terms are applied stage by stage in :data:`piezoctl.ident.terms.TERM_ORDER`, each by its own
     :class:`~piezoctl.ident.terms.Term` class (the same code whose linearization the diagnosis tested).
@@ -141,7 +147,7 @@ def simulate_parts(params: dict, t, u, u2=None) -> dict:
         raise IdentError(f"refined: unknown terms {sorted(unknown)}; known: {', '.join(TERM_ORDER)}")
     t = np.asarray(t, float)
     st = SimState(params=params, t=t, dt=_check_rate(params, t), u=np.asarray(u, float),
-                  u2=None if u2 is None else np.asarray(u2, float))
+                  u2=None if u2 is None else np.asarray(u2, float), t_session=t_session)
     order = [n for n in TERM_ORDER if n in terms]
 
     def stage(name):
@@ -165,6 +171,7 @@ def simulate_parts(params: dict, t, u, u2=None) -> dict:
     return {"u_eff": st.ue, "v": st.v, "h": st.h, "hyst": st.hyst, "w": st.w, "y_dyn": y_dyn, "y": st.y}
 
 
-def simulate(params: dict, t, u, u2=None) -> np.ndarray:
-    """Model output y [um] for drive u [V] at times t [s]; ``u2`` [V] feeds a coupling term."""
-    return simulate_parts(params, t, u, u2)["y"]
+def simulate(params: dict, t, u, u2=None, t_session=None) -> np.ndarray:
+    """Model output y [um] for drive u [V] at times t [s]; ``u2`` [V] feeds a coupling term; ``t_session`` [s]
+    the recording's start on the session clock (see :func:`simulate_parts`)."""
+    return simulate_parts(params, t, u, u2, t_session)["y"]

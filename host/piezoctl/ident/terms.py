@@ -61,6 +61,7 @@ class SimState:
     hyst: np.ndarray | None = None
     w: np.ndarray | None = None
     y: np.ndarray | None = None
+    t_session: float | None = None   # the recording's start on the session clock [s], when known
 
 
 def G(params: dict, x) -> np.ndarray:
@@ -78,6 +79,8 @@ class Term:
     group = ""          # terms of one group refit the same part of the base; at most one is accepted
     intercept = False   # a constant column is fitted with the term and added to the model's offset
     nested = True       # tested against free gains on the hysteresis channels refitted on the same fold
+    nested_dynamics = False  # also against low-order corrections of the dynamics (drive-side terms, a mode)
+    supersedes = ()     # names of simpler terms this one contains (as its nuisance): when both pass, it goes first
 
     def applicable(self, ctx) -> bool:
         return True
@@ -174,6 +177,7 @@ def h_of_drive(ctx, ue, u, h_now) -> np.ndarray:
 class _DriveTerm(Term):
     stage = "drive"
     group = "drive_dynamics"
+    nested_dynamics = True
     key = ""          # the model file's parameter
     geometric = False  # the grid is geometric and refined around its best point
 
@@ -453,6 +457,7 @@ class Creep(Term):
 class UnmodeledResonance(Term):
     name = "unmodeled_resonance"
     stage = "dynamics"
+    nested_dynamics = True
     signature = "residual energy in a narrow band above the calibration band, ringing after corners"
     DAMPINGS = (0.005, 0.01, 0.02, 0.05)
 
@@ -551,43 +556,69 @@ class CrossCoupling(Term):
 
 
 class ThermalDrift(Term):
+    """A slow trend with time, independent of the drive, tested *beyond* a constant per recording (the sensor
+    offset's columns are its nuisance): only the drift within recordings is credited to it, so a session offset
+    is not named a drift. Runs on the session clock when every recording carries ``session_time_s`` (a drift
+    follows wall time: each recording then starts where the drift has got to, from the end of the
+    calibration), else on each recording's own clock."""
+
     name = "thermal_drift"
     signature = "slow trend with time (or temperature), independent of the drive"
+    supersedes = ("sensor_offset",)
     TAUS = (5.0, 15.0, 50.0, 150.0, 500.0)
 
     @staticmethod
-    def basis(t, tau) -> np.ndarray:
-        """[1 - exp(-t/tau), t] from the recording's start; tau >= 1e30 (``inf``): the slope alone."""
-        tt = np.asarray(t, float) - float(t[0])
+    def basis(t, tau, t_from: float = 0.0) -> np.ndarray:
+        """[1 - exp(-t'/tau), t'], t' the time since the drift's reference [s] (``t_from``: the recording's first
+        sample on that clock), 0 before it; tau >= 1e30 (``inf``): the slope alone."""
+        tt = np.maximum(np.asarray(t, float) - float(t[0]) + float(t_from), 0.0)
         tau = float(tau)
         return np.column_stack([np.zeros(tt.size) if tau >= 1e30 else 1.0 - np.exp(-tt / tau), tt])
 
+    @staticmethod
+    def _t_from(t0_session, t_session) -> float:
+        return 0.0 if t0_session is None or t_session is None else float(t_session) - float(t0_session)
+
     def settings(self, ctx):
-        # a time constant is offered only when the recordings are at least twice as long: over a shorter span
-        # the exponential and the slope are nearly collinear and fit with cancelling values (12 um "drift" over
-        # the valve's 5 s runs); otherwise the slope alone
-        return [tau for tau in self.TAUS if tau <= 0.5 * ctx.duration] + [np.inf]
+        # a time constant is offered only when the span is at least twice as long: over a shorter span the
+        # exponential and the slope are nearly collinear and fit with cancelling values (12 um "drift" over the
+        # valve's 5 s runs); otherwise the slope alone
+        span = ctx.drift_span if ctx.drift_t0 is not None else ctx.duration
+        return [tau for tau in self.TAUS if tau <= 0.5 * span] + [np.inf]
+
+    def n_nuisance(self, ctx):
+        return ctx.n_rec
 
     def columns(self, ctx, s, tau):
-        return self.basis(s.t, tau)
+        X = np.zeros((s.t.size, ctx.n_rec))
+        X[:, s.index] = 1.0
+        return np.column_stack([X, self.basis(s.t, tau, self._t_from(ctx.drift_t0, s.t_session))])
 
     def model_params(self, ctx, tau, coef):
+        c = np.asarray(coef, float)[self.n_nuisance(ctx):]
         lin = float(tau) >= 1e30
-        return {"amplitude_um": 0.0 if lin else float(coef[0]), "tau_s": 1e300 if lin else float(tau),
-                "slope_um_per_s": float(coef[1])}
+        out = {"amplitude_um": 0.0 if lin else float(c[0]), "tau_s": 1e300 if lin else float(tau),
+               "slope_um_per_s": float(c[1])}
+        if ctx.drift_t0 is not None:
+            out["t0_session_s"] = float(ctx.drift_t0)
+        return out
 
     def apply(self, p, st):
-        st.y = st.y + self.basis(st.t, float(p["tau_s"])) @ [float(p["amplitude_um"]),
-                                                              float(p.get("slope_um_per_s", 0.0))]
+        t_from = self._t_from(p.get("t0_session_s"), st.t_session)
+        st.y = st.y + self.basis(st.t, float(p["tau_s"]), t_from) @ [float(p["amplitude_um"]),
+                                                                     float(p.get("slope_um_per_s", 0.0))]
 
     def describe_own(self, ctx, tau, coef):
+        c = np.asarray(coef, float)[self.n_nuisance(ctx):]
+        clock = (f"with session time since the end of the calibration (t = {ctx.drift_t0:.1f} s)"
+                 if ctx.drift_t0 is not None else "with time since the start of each recording")
         if float(tau) >= 1e30:
-            return ({"slope_um_per_s": float(coef[1])},
-                    f"the residual drifts linearly with time since the start of each recording "
-                    f"({coef[1] * 60:+.3f} um/min), whatever the drive does")
-        return ({"amplitude_um": round(float(coef[0]), 4), "tau_s": tau, "slope_um_per_s": float(coef[1])},
-                f"the residual drifts with time since the start of each recording ({coef[0]:+.3f} um with time "
-                f"constant {tau:g} s, {coef[1] * 60:+.3f} um/min), whatever the drive does")
+            return ({"slope_um_per_s": float(c[1])},
+                    f"beyond a constant per recording, the residual drifts linearly {clock} "
+                    f"({c[1] * 60:+.3f} um/min), whatever the drive does")
+        return ({"amplitude_um": round(float(c[0]), 4), "tau_s": tau, "slope_um_per_s": float(c[1])},
+                f"beyond a constant per recording, the residual drifts {clock} ({c[0]:+.3f} um with time "
+                f"constant {tau:g} s, {c[1] * 60:+.3f} um/min), whatever the drive does")
 
 
 class SensorOffset(Term):

@@ -511,3 +511,15 @@ def save_recording(path: str | os.PathLike, rec: Recording | Mapping[str, np.nda
     order = [c for c in REQUIRED_COLUMNS + OPTIONAL_COLUMNS if c in cols]
     order += [c for c in cols if c not in order]
     write_csv(path, {c: cols[c] for c in order}, meta=meta, precision=precision)
+
+
+def session_start(rec) -> float | None:
+    """The recording's first sample on the session's clock [s] (metadata ``session_time_s``: seconds since the
+    stage was powered or the session began, as the recorder stamps it), or None when the recording has none.
+    Slow effects that run on wall time (thermal drift) are modelled on this clock."""
+    value = getattr(rec, "meta", {}).get("session_time_s")
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return None
+    return x if np.isfinite(x) else None
