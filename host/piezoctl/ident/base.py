@@ -524,11 +524,7 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
     best_bw = (None, (float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95)) * float(np.exp(z[0]))))
     # thresholds the calibration's reversals can resolve: at least two reversal levels per play threshold
     n_rev = reversal_levels(vs, k0s)
-    import os
-    if os.environ.get("PZ_NORULE"):
-        plays = list(PLANE_PLAYS)
-    else:
-        plays = [R for R in PLANE_PLAYS if R == 1 or 2 * R <= n_rev]
+    plays = [R for R in PLANE_PLAYS if R == 1 or 2 * R <= n_rev]
     table, best = [], None
     for bw in (None, best_bw[1]):
         for R in plays:
@@ -634,8 +630,7 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
         # mostly fast (a 20 Hz FORC sweep: only the ramps' middles are slow, over a narrow band of the drive,
         # which cannot size a plane): size on every settled sample
         qs = [np.arange(v.size) >= k0 for v, k0 in zip(vs, k0s)]
-    import os
-    sign = 0.0 if os.environ.get("PZ_FREE") else _output_sign(vs, ys, k0s)
+    sign = _output_sign(vs, ys, k0s)   # every play's function monotone in the output's direction
     layout, ridge, table = _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign)
     r_used = np.array(sorted({r_all[i] for i in layout.index}))
     Ps = [play_states(v, r_used, v_rest) for v in vs]
