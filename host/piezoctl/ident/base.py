@@ -13,7 +13,17 @@ Each ``F_j`` is piecewise linear on knots spread over the range its play's
 output covered during calibration (``K`` knots across the full range for
 ``r = 0``, proportionally fewer for wider plays: the Preisach triangle), and
 continues as a straight line beyond it. The model is linear in the knot values
-once the plays are known, so every fit is a ridge least-squares problem.
+once the plays are known, so every fit is a penalized least-squares problem.
+
+Every ``F_j`` is **monotone** in the direction the output follows the drive
+(non-decreasing when y rises with u): with a relay ``s - r .. s + r`` up exactly
+when ``P_r(v) > s``, ``F_j' = 2 mu(s, r_j)``, so this is a Preisach density of
+one sign, which Preisach, Maxwell-slip, KP and PI laws with positive weights all
+have. It is solved as a non-negative least squares on the knot increments
+(:func:`_plane_solve`). Without it a plane sized on a periodic calibration could
+invent minor loops that run backwards (the micromanipulator's 1 Hz sine with 16
+plays: test run NRMSE 0.46 unconstrained, 0.032 monotone; with the size rule
+below both choose one play, 0.0235).
 
 Fit (``fit_base``):
 
