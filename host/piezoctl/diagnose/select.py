@@ -275,12 +275,14 @@ def dynamics_nuisance(ctx):
     return ctx.dyn_nuisance
 
 
-def term_nuisance(ctx, term):
-    """The nested test's nuisance columns for ``term`` (None: not nested)."""
+def term_nuisance(ctx, term, dynamics: bool = True):
+    """The nested test's nuisance columns for ``term`` (None: not nested); ``dynamics=False`` leaves out the
+    dynamics corrections (the term's setting for the model is chosen without them: they would take part of a
+    delay or a pole and bias the setting)."""
     parts = []
     if term.nested:
         parts.append(hysteresis_nuisance(ctx))
-    if term.nested_dynamics:
+    if term.nested_dynamics and dynamics:
         parts.append(dynamics_nuisance(ctx))
     return np.hstack(parts) if parts else None
 
@@ -317,7 +319,12 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
             e_before[test] = e[test] - pn
         best = best_setting(ctx, term, e, train, test, rows, N)
         pred_after[test] = best[3] - (e[test] - e_before[test])
-        chosen.append(best)
+        if term.nested_dynamics:   # the model's setting and coefficients: without the dynamics corrections
+            Nm = term_nuisance(ctx, term, dynamics=False)
+            Nm = None if Nm is None else (Nm[train_rows(train, rows)], Nm[test])
+            chosen.append(best_setting(ctx, term, e, train, test, rows, Nm))
+        else:
+            chosen.append(best)
         rb = float(np.sqrt(np.mean(e_before[test] ** 2)))
         ra = float(np.sqrt(np.mean((e[test] - best[3]) ** 2)))
         fold_ratios.append(ra / rb if rb > 0 else 1.0)
@@ -488,7 +495,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
         e_all = residual(ctx_all)
         term = best.term
         N = None
-        Nall = term_nuisance(ctx_all, term)
+        Nall = term_nuisance(ctx_all, term, dynamics=False)
         if Nall is not None:
             N = (Nall[train_rows(allmask, rows)], Nall[:0])
         st, _, _, _, th = best_setting(ctx_all, term, e_all, allmask, np.zeros(e_all.size, bool), rows, N)
