@@ -123,6 +123,7 @@ def test_stop_works_alone(sil, capsys):
     (["--kind", "sine", "--amplitude", "1", "--cycles", "-1"], "--cycles must be >= 0"),
     (["--tones", "10:8,20:8"], "outside the controller's range"),
     (["--tones", "10:0"], "must be > 0"),
+    (["--tones", "10:1", "--cycles", "3"], "plays it until stopped"),
     (["--kind", "multisine"], "needs --tones"),
     (["--kind", "sine", "--tones", "10:1"], "makes a multisine"),
     (["--kind", "arbitrary"], "needs --file"),

@@ -344,6 +344,8 @@ def plan_wave(args, tick_hz: float, scale, max_levels: int) -> WaveSpec:
             raise CliError("a multisine needs --tones FREQ:AMPLITUDE[:PHASE_DEG],... (e.g. 10:0.5,37:0.3)")
         if args.amplitude is not None:
             raise CliError("--amplitude does not apply to a multisine: each tone has its own (--tones)")
+        if args.cycles:
+            raise CliError("--cycles does not apply to a multisine: the generator plays it until stopped")
         tones = parse_tones(args.tones, tick_hz)
         total = sum(a for _, a, _ in tones)
         rng.check_inside(off - total, off + total, f"the multisine (offset {off:g} {u} +- the tones' sum {total:g} {u})")
@@ -355,10 +357,10 @@ def plan_wave(args, tick_hz: float, scale, max_levels: int) -> WaveSpec:
                                f"resolution ({rng.half / 32768:.3g} {u})")
             tq.append((aq, f, ph))
         lowest = min(f for f, _, _ in tones)
-        return WaveSpec(kind, offset_q15=rng.q15(off), tones=tq, cycles=args.cycles, period_s=1.0 / lowest,
+        return WaveSpec(kind, offset_q15=rng.q15(off), tones=tq, period_s=1.0 / lowest,
                         summary=f"multisine of {len(tones)} tone(s) "
                                 + ", ".join(f"{f:g} Hz {a:g} {u}" for f, a, _ in tones)
-                                + f" about {off:g} {u}, {cyc}",
+                                + f" about {off:g} {u}, endless",
                         info={"tones": [{"freq_hz": f, "amplitude": a, "phase_deg": math.degrees(p)}
                                         for f, a, p in tones], "offset": off, "unit": u})
 
