@@ -255,3 +255,26 @@ def test_slow_reader_reports_lost_frames_and_keeps_only_good_ones(sil):
     ref_q = np.array([ctl.q15_position(v) for v in cols["ref"]])
     assert np.array_equal(ref_q, triangle_q15(n, freq_word(2.0, TICK), 0, 20000))
     assert ctl.status()["rec_state"] == 0  # the ring was reset afterwards
+
+
+@pytest.mark.parametrize("extra,msg", [
+    (["--plot", "x.png"], "--plot applies to --record"),
+    (["--stream"], "--stream applies to --record"),
+    (["--duration", "2"], "a chirp's length is --duration"),
+    (["--signals", "y"], "--signals applies to --record"),
+])
+def test_capture_options_need_record(sil, capsys, extra, msg):
+    code, _, err = run(capsys, "wave", "--port", sil.spec, "--kind", "sine", "--amplitude", "1", *extra)
+    assert code == 2 and msg in err
+
+
+def test_wave_and_record_import_nothing_heavy():
+    """``piezoctl --help`` imports every command module: these two must not pull numpy or the device."""
+    import subprocess
+    import sys
+
+    code = ("import sys, piezoctl.commands.wave, piezoctl.commands.record; "
+            "print(','.join(m for m in ('numpy', 'matplotlib', 'piezoctl.device', 'piezoctl.interface') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == ""

@@ -19,6 +19,7 @@ file longer than the generator's level table.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 from ..errors import CliError, ControllerRefused
 from ._options import add_output, add_port, emit, progress
@@ -30,6 +31,7 @@ KINDS = ("sine", "triangle", "multisine", "chirp", "steps", "arbitrary")  # devi
 MAX_TONES = 8  # PIEZO_WAVE_MAX_TONES (firmware/core/wave.h), also the wave_tones register count / 5
 
 
+@dataclass
 class WaveSpec:
     """A wave the controller can play, in its own integers, and what it means in units.
 
@@ -57,23 +59,24 @@ class WaveSpec:
         One period or pass [s] (None: not periodic).
     summary : str
         One line describing the wave in units.
+    info : dict
+        What the user asked, in units, for ``--json``.
     """
 
-    def __init__(self, kind: str, **kw):
-        self.kind = kind
-        self.offset_q15 = kw.get("offset_q15", 0)
-        self.amplitude_q15 = kw.get("amplitude_q15", 0)
-        self.f_hz = kw.get("f_hz", 0.0)
-        self.f_end_hz = kw.get("f_end_hz")
-        self.duration_s = kw.get("duration_s")
-        self.cycles = kw.get("cycles", 0)
-        self.tones = kw.get("tones", [])
-        self.levels_q15 = kw.get("levels_q15", [])
-        self.durations_ticks = kw.get("durations_ticks", [])
-        self.hold_ticks = kw.get("hold_ticks", 1)
-        self.period_s = kw.get("period_s")
-        self.summary = kw.get("summary", kind)
-        self.info = kw.get("info", {})
+    kind: str
+    offset_q15: int = 0
+    amplitude_q15: int = 0
+    f_hz: float = 0.0
+    f_end_hz: float | None = None
+    duration_s: float | None = None
+    cycles: int = 0
+    tones: list = field(default_factory=list)
+    levels_q15: list = field(default_factory=list)
+    durations_ticks: list = field(default_factory=list)
+    hold_ticks: int = 1
+    period_s: float | None = None
+    summary: str = ""
+    info: dict = field(default_factory=dict)
 
     def load(self, ctl) -> None:
         """Write the wave to the controller (not started)."""
@@ -431,7 +434,8 @@ _WAVE_OPTIONS = ("kind", "amplitude", "offset", "freq_end", "tones", "file", "ho
 
 
 def run_wave(args) -> int:
-    from ..device import connect, interface
+    from .. import interface
+    from ..device import connect
 
     if args.stop:
         given = [o for o in _WAVE_OPTIONS if getattr(args, o) is not None] + \
@@ -442,8 +446,14 @@ def run_wave(args) -> int:
         ctl.command("stop_wave")
         emit(args, {"port": args.port, "stopped": True}, f"wave stopped on {args.port}")
         return 0
-    if args.record is None and (args.plot or args.stream):
-        raise CliError("--plot and --stream apply to --record")
+    if args.record is None:
+        extra = [o for o, on in (("--plot", args.plot), ("--stream", args.stream),
+                                 ("--decimation", str(args.decimation) != "auto"),
+                                 ("--signals", args.signals != "ref,y,u"),
+                                 ("--duration", args.duration is not None and args.kind != "chirp")) if on]
+        if extra:
+            raise CliError(f"{', '.join(extra)} appl{'ies' if len(extra) == 1 else 'y'} to --record"
+                           + (" (a chirp's length is --duration)" if "--duration" in extra else ""))
     sigs = parse_signals(args.signals)
     check_writable(args.record, "--record")
     check_writable(args.plot, "--plot", PLOT_SUFFIXES)
