@@ -103,6 +103,7 @@ static uint32_t input_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, 
     }
     case PIEZO_IREG_STAGED_BYTES: return c->staged_len;
     case PIEZO_IREG_COUPLING_TABLE_CRC: return piezo_ctl_coupling_crc(c);
+    case PIEZO_IREG_REC_WRITTEN: return piezo_rec_written(&c->rec);
     default: return 0u;
     }
 }
@@ -142,7 +143,9 @@ static int16_t rec_sample(const piezo_ctl_t *c, uint32_t index)
      * (hardware UDIV on the Cortex-M4); the per-register walk it replaces
      * made a full readout quadratic */
     k = index / nch;
-    if (piezo_rec_read(&c->rec, k, frame) != PIEZO_OK) {
+    /* ring mode addresses buffer slots (streaming), else frames oldest first */
+    if ((c->rec.cfg.ring != 0u ? piezo_rec_read_slot(&c->rec, k, frame) : piezo_rec_read(&c->rec, k, frame)) !=
+        PIEZO_OK) {
         return 0;
     }
     return frame[index - k * nch];
@@ -198,6 +201,7 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
     case PIEZO_HREG_REC_TRIGGER: return m->rec_cfg.trigger;
     case PIEZO_HREG_REC_TRIGGER_SIGNAL: return m->rec_cfg.trigger_signal;
     case PIEZO_HREG_REC_TRIGGER_LEVEL_Q15: return (uint16_t)m->rec_cfg.trigger_level_q15;
+    case PIEZO_HREG_REC_RING: return m->rec_cfg.ring;
     case PIEZO_HREG_REC_READ_INDEX: return m->rec_read_index;
     case PIEZO_HREG_REC_WINDOW: return (uint16_t)rec_sample(c, m->rec_read_index + elem);
     case PIEZO_HREG_TABLE_OFFSET: return m->table_offset;
@@ -277,6 +281,7 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     case PIEZO_HREG_REC_TRIGGER_SIGNAL: return v < PIEZO_SIG_N;
     case PIEZO_HREG_REC_DECIMATION: return v >= 1u && v <= 0xFFFFu;
     case PIEZO_HREG_REC_TRIGGER: return v <= PIEZO_REC_FALLING;
+    case PIEZO_HREG_REC_RING: return v <= 1u;
     case PIEZO_HREG_TABLE_OFFSET: return v < PIEZO_TABLE_MAX_BYTES && (v & 1u) == 0u;
     case PIEZO_HREG_TABLE_WINDOW:
         /* this session's upload, or a new one */
@@ -404,6 +409,7 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd)
     case PIEZO_HREG_REC_TRIGGER: m->rec_cfg.trigger = (uint8_t)v; break;
     case PIEZO_HREG_REC_TRIGGER_SIGNAL: m->rec_cfg.trigger_signal = (uint8_t)v; break;
     case PIEZO_HREG_REC_TRIGGER_LEVEL_Q15: m->rec_cfg.trigger_level_q15 = s16(v); break;
+    case PIEZO_HREG_REC_RING: m->rec_cfg.ring = (uint8_t)v; break;
     case PIEZO_HREG_REC_READ_INDEX: m->rec_read_index = v; break;
     case PIEZO_HREG_TABLE_OFFSET: m->table_offset = v; break;
     case PIEZO_HREG_TABLE_WINDOW: {

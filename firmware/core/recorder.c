@@ -18,6 +18,7 @@ int piezo_rec_init(piezo_rec_t *r, int16_t *buf_q15, uint32_t buf_len, uint8_t n
     r->cfg.trigger = PIEZO_REC_IMMEDIATE;
     r->cfg.trigger_signal = 0u;
     r->cfg.trigger_level_q15 = 0;
+    r->cfg.ring = 0u;
     r->buf_len = buf_len;
     r->capacity = buf_len;
     piezo_rec_reset(r);
@@ -28,7 +29,8 @@ int piezo_rec_configure(piezo_rec_t *r, const piezo_rec_cfg_t *cfg)
 {
     uint32_t cap;
     if (cfg == NULL || cfg->n_channels == 0u || cfg->n_channels > PIEZO_REC_MAX_CHANNELS ||
-        cfg->decimation == 0u || cfg->trigger > PIEZO_REC_FALLING ||
+        cfg->decimation == 0u || cfg->trigger > PIEZO_REC_FALLING || cfg->ring > 1u ||
+        (cfg->ring != 0u && cfg->pretrigger != 0u) ||
         cfg->trigger_signal >= r->n_signals) {
         return PIEZO_EINVAL;
     }
@@ -61,6 +63,7 @@ void piezo_rec_reset(piezo_rec_t *r)
     r->write = 0u;
     r->filled = 0u;
     r->post_left = 0u;
+    r->written = 0u;
     r->decim_count = 0u;
     r->have_last = 0u;
 }
@@ -84,6 +87,14 @@ void piezo_rec_trigger(piezo_rec_t *r)
         r->filled = r->cfg.pretrigger;
     }
     r->post_left = r->capacity - r->filled;
+    if (r->cfg.ring != 0u) {
+        /* the ring starts over at slot 0 with the next tick: frame n lands in
+         * slot n mod capacity and was taken n * decimation ticks after the trigger */
+        r->write = 0u;
+        r->filled = 0u;
+        r->decim_count = 0u;
+    }
+    r->written = 0u;
     r->state = PIEZO_REC_TRIGGERED;
 }
 
@@ -128,8 +139,11 @@ void piezo_rec_process(piezo_rec_t *r, const int16_t *signals_q15)
         r->have_last = 1u;
     }
     store(r, signals_q15);
-    if (r->state == PIEZO_REC_TRIGGERED && --r->post_left == 0u) {
-        r->state = PIEZO_REC_DONE;
+    if (r->state == PIEZO_REC_TRIGGERED) {
+        r->written++; /* after the store: a reader never sees a counted frame half written */
+        if (r->cfg.ring == 0u && --r->post_left == 0u) {
+            r->state = PIEZO_REC_DONE;
+        }
     }
 }
 
@@ -149,6 +163,22 @@ int piezo_rec_read(const piezo_rec_t *r, uint32_t k, int16_t *out_q15)
     slot += k;
     if (slot >= r->capacity) {
         slot -= r->capacity;
+    }
+    for (uint8_t i = 0; i < r->cfg.n_channels; i++) {
+        out_q15[i] = r->buf_q15[(size_t)slot * r->cfg.n_channels + i];
+    }
+    return PIEZO_OK;
+}
+
+uint32_t piezo_rec_written(const piezo_rec_t *r)
+{
+    return r->written;
+}
+
+int piezo_rec_read_slot(const piezo_rec_t *r, uint32_t slot, int16_t *out_q15)
+{
+    if (out_q15 == NULL || slot >= r->filled) {
+        return PIEZO_ERANGE; /* the ring fills slots 0, 1, ... in order */
     }
     for (uint8_t i = 0; i < r->cfg.n_channels; i++) {
         out_q15[i] = r->buf_q15[(size_t)slot * r->cfg.n_channels + i];

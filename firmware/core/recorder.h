@@ -11,6 +11,18 @@
  * pretrigger frames had been seen), then stops. Frames are read back in
  * time order, frame 0 the oldest.
  *
+ * Ring mode (cfg.ring = 1, for captures longer than the buffer): after the
+ * trigger the recorder never stops; it keeps overwriting its oldest frame
+ * until reset, and `written` counts the frames stored since the trigger.
+ * The trigger restarts the ring at slot 0 and the decimation count, so frame
+ * n (taken n * decimation ticks after the trigger's tick: 0 = the first tick
+ * processed after it) sits in slot n mod capacity until frame n + capacity
+ * replaces it; a reader between ticks streams the capture with
+ * piezo_rec_read_slot() and knows from `written` which slots still hold
+ * the frames it wants (written - n < capacity). Ring mode keeps no
+ * pretrigger frames (pretrigger must be 0). `written` wraps at 2^32
+ * (about 5 days at 10 kHz).
+ *
  * Triggers: IMMEDIATE (on arm), SOFTWARE (piezo_rec_trigger(), e.g. the wave
  * generator's start), RISING / FALLING (the trigger signal crosses
  * trigger_level_q15 upward / downward between two decimated samples).
@@ -36,6 +48,7 @@ typedef struct {
     uint8_t trigger;                           /* enum piezo_rec_trigger */
     uint8_t trigger_signal;                    /* signal id for RISING / FALLING */
     int16_t trigger_level_q15;
+    uint8_t ring;                              /* 1: keep recording after the trigger (ring mode) */
 } piezo_rec_cfg_t;
 
 typedef struct {
@@ -48,6 +61,7 @@ typedef struct {
     uint32_t write;            /* next frame slot */
     uint32_t filled;           /* frames held, <= capacity */
     uint32_t post_left;        /* frames still to record after the trigger */
+    uint32_t written;          /* frames stored since the trigger (wraps at 2^32) */
     uint16_t decim_count;
     int16_t last_trigger_q15;
     uint8_t have_last;
@@ -70,5 +84,10 @@ void piezo_rec_process(piezo_rec_t *r, const int16_t *signals_q15);
 uint32_t piezo_rec_frames(const piezo_rec_t *r);
 /** Copy frame k (0 = oldest) to out (n_channels values). Returns a piezo_err code. */
 int piezo_rec_read(const piezo_rec_t *r, uint32_t k, int16_t *out_q15);
+/** Frames stored since the trigger (ring mode: the streaming position). */
+uint32_t piezo_rec_written(const piezo_rec_t *r);
+/** Copy buffer slot `slot` (ring mode: frame n is in slot n mod capacity) to
+ *  out (n_channels values). PIEZO_ERANGE for a slot not yet written. */
+int piezo_rec_read_slot(const piezo_rec_t *r, uint32_t slot, int16_t *out_q15);
 
 #endif /* PIEZO_RECORDER_H */

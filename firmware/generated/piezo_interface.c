@@ -38,6 +38,7 @@ const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N] = {
     {0x0120u, 1u, 0u, 1u, PIEZO_IREG_ACTIVE_TABLE_KIND},
     {0x0121u, 2u, 0u, 1u, PIEZO_IREG_STAGED_BYTES},
     {0x0123u, 2u, 0u, 1u, PIEZO_IREG_COUPLING_TABLE_CRC},
+    {0x0125u, 2u, 0u, 1u, PIEZO_IREG_REC_WRITTEN},
 };
 
 const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
@@ -69,6 +70,7 @@ const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
     {0x160Cu, 1u, 0u, 1u, PIEZO_HREG_REC_TRIGGER},
     {0x160Du, 1u, 0u, 1u, PIEZO_HREG_REC_TRIGGER_SIGNAL},
     {0x160Eu, 1u, PIEZO_REG_SIGNED, 1u, PIEZO_HREG_REC_TRIGGER_LEVEL_Q15},
+    {0x160Fu, 1u, 0u, 1u, PIEZO_HREG_REC_RING},
     {0x1700u, 2u, 0u, 1u, PIEZO_HREG_REC_READ_INDEX},
     {0x1702u, 1u, PIEZO_REG_SIGNED | PIEZO_REG_READONLY, 121u, PIEZO_HREG_REC_WINDOW},
     {0x2000u, 2u, 0u, 1u, PIEZO_HREG_TABLE_OFFSET},

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0x5F4E61C5u
+#define PIEZO_INTERFACE_CRC32 0xDC586994u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -174,6 +174,7 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_INPUT_ACTIVE_TABLE_KIND 0x0120u  /* uint16 */
 #define PIEZO_INPUT_STAGED_BYTES 0x0121u  /* uint32 */
 #define PIEZO_INPUT_COUPLING_TABLE_CRC 0x0123u  /* uint32 */
+#define PIEZO_INPUT_REC_WRITTEN 0x0125u  /* uint32 */
 #define PIEZO_HOLDING_UNLOCK 0x1000u  /* uint16 */
 #define PIEZO_HOLDING_MODE 0x1001u  /* uint16 */
 #define PIEZO_HOLDING_ARM 0x1002u  /* uint16 */
@@ -206,6 +207,7 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_HOLDING_REC_TRIGGER 0x160Cu  /* uint16 */
 #define PIEZO_HOLDING_REC_TRIGGER_SIGNAL 0x160Du  /* uint16 */
 #define PIEZO_HOLDING_REC_TRIGGER_LEVEL_Q15 0x160Eu  /* int16 */
+#define PIEZO_HOLDING_REC_RING 0x160Fu  /* uint16 */
 #define PIEZO_HOLDING_REC_READ_INDEX 0x1700u  /* uint32 */
 #define PIEZO_HOLDING_REC_WINDOW 0x1702u  /* int16 x121 */
 #define PIEZO_HOLDING_REC_WINDOW_COUNT 121u
@@ -285,6 +287,7 @@ enum piezo_input_reg_id {
     PIEZO_IREG_ACTIVE_TABLE_KIND,
     PIEZO_IREG_STAGED_BYTES,
     PIEZO_IREG_COUPLING_TABLE_CRC,
+    PIEZO_IREG_REC_WRITTEN,
     PIEZO_IREG_N
 };
 extern const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N];
@@ -317,6 +320,7 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_REC_TRIGGER,
     PIEZO_HREG_REC_TRIGGER_SIGNAL,
     PIEZO_HREG_REC_TRIGGER_LEVEL_Q15,
+    PIEZO_HREG_REC_RING,
     PIEZO_HREG_REC_READ_INDEX,
     PIEZO_HREG_REC_WINDOW,
     PIEZO_HREG_TABLE_OFFSET,

@@ -298,12 +298,20 @@ class Controller:
 
     # ------------------------------------------------------------ recorder
     def configure_recorder(self, signals: list[str], *, decimation: int = 1, pretrigger: int = 0,
-                           trigger: str = "software", trigger_signal: str = "ref", level_q15: int = 0) -> None:
+                           trigger: str = "software", trigger_signal: str = "ref", level_q15: int = 0,
+                           ring: bool = False) -> None:
+        """Configure the recorder (applied when it is armed).
+
+        ``ring``: ring mode, the recorder keeps recording after the trigger
+        until reset (for :meth:`stream`); needs ``pretrigger`` 0.
+        """
         if not 1 <= len(signals) <= 8:
             raise DeviceError("the recorder keeps 1 to 8 signals")
         sig = [SIGNALS[s] for s in signals] + [0] * (8 - len(signals))
+        # rec_n_channels .. rec_ring are contiguous: one request
         regs = [len(signals)] + sig + [decimation, pretrigger >> 16, pretrigger & 0xFFFF,
-                                       REC_TRIGGERS[trigger], SIGNALS[trigger_signal], _u16(level_q15)]
+                                       REC_TRIGGERS[trigger], SIGNALS[trigger_signal], _u16(level_q15),
+                                       1 if ring else 0]
         self.client.write_holding(self._h("rec_n_channels"), regs)
         self.rec_channels = len(signals)
 
@@ -371,6 +379,113 @@ class Controller:
         for i, sname in enumerate(signals):
             cols[sname] = self.to_physical(sname, data[:, i])
         return cols
+
+    def rec_frames_capacity(self, n_signals: int) -> int:
+        """Frames of ``n_signals`` signals the recorder holds (``rec_capacity`` / signals)."""
+        return self.identity.rec_capacity // n_signals
+
+    def read_rec_written(self) -> int:
+        """Frames recorded since the trigger (input register ``rec_written``, wraps at 2^32)."""
+        hi, lo = self.client.read_input(interface.INPUT_REGISTERS["rec_written"][0], 2)
+        return (hi << 16) | lo
+
+    def stream(self, signals: list[str], frames: int, *, decimation: int = 1, trigger: str = "immediate",
+               start_wave: bool = False, progress: Callable[[int, int], None] | None = None,
+               stall_s: float = 3.0) -> tuple[dict, int]:
+        """Record ``frames`` frames of ``signals``, reading the recorder while it runs (ring mode).
+
+        The recorder runs as a ring (``rec_ring``): frame n (0 the first after
+        the trigger) sits in buffer slot n mod capacity until frame n +
+        capacity replaces it, and ``rec_written`` counts the frames. This
+        reads the slots behind the writer, so a capture of any length works
+        as long as the link keeps up on average; a frame the writer replaced
+        before it was read (or possibly while it was being read) is lost.
+
+        Parameters
+        ----------
+        signals : list of str
+            Recorder signals (keys of :data:`SIGNALS`), 1 to 8.
+        frames : int
+            Frames to capture, >= 1 (no upper limit).
+        decimation : int
+            Keep every n-th tick, 1..65535.
+        trigger : str
+            ``immediate`` or ``software`` (fired by the wave start when ``start_wave``).
+        start_wave : bool
+            Start the loaded wave after arming the recorder.
+        progress : callable, optional
+            ``progress(frames_done, frames)`` after each batch.
+        stall_s : float
+            Give up [s] when the recorder stores no frame for this long.
+
+        Returns
+        -------
+        cols : dict of ndarray
+            ``t`` [s] of each frame received (a lost frame leaves a gap) and
+            each signal in physical units (:meth:`to_physical`).
+        lost : int
+            Frames lost (overwritten before they were read).
+        """
+        nch = len(signals)
+        cap = self.rec_frames_capacity(nch)
+        per_req = REC_WINDOW // nch          # whole frames per FC 23 request
+        batch = max(per_req, cap // 8)       # frames read between two checks of rec_written
+        tick = self.identity.tick_hz
+        data = np.zeros((frames, nch), dtype=np.int64)
+        got = np.zeros(frames, dtype=bool)
+        idx = self._h("rec_read_index")
+        win = self._h("rec_window")
+        self.configure_recorder(signals, decimation=decimation, trigger=trigger, ring=True)
+        self.command("arm_recorder")
+        try:
+            if start_wave:
+                self.command("start_wave")
+            written, raw_prev = 0, 0          # written: rec_written unwrapped past 2^32
+            nxt = 0                           # next frame to read
+            unchecked = (0, 0)                # frames [a, b) read since the last rec_written
+            last_change = time.monotonic()
+            while True:
+                raw = self.read_rec_written()
+                step = (raw - raw_prev) & 0xFFFFFFFF
+                raw_prev, written = raw, written + step
+                if step:
+                    last_change = time.monotonic()
+                # a frame read before this count is good if the writer had not
+                # yet replaced its slot: written - n < capacity
+                a, b = unchecked
+                if b > a:
+                    n = np.arange(a, b)
+                    got[a:b] = written - n < cap
+                if nxt >= frames:
+                    break
+                if written - nxt >= cap:      # the writer lapped us: skip what it overwrote
+                    nxt = written - cap + 1
+                end = min(written, frames, nxt + batch)
+                if end <= nxt:
+                    if time.monotonic() - last_change > stall_s:
+                        raise DeviceError(f"the recorder stopped after {written} frames "
+                                          "(is the controller ticking?)")
+                    time.sleep(0.002)
+                    continue
+                n = nxt
+                while n < end:
+                    slot = n % cap
+                    m = min(per_req, end - n, cap - slot)
+                    start = slot * nch
+                    words = self.client.read_write(win, m * nch, idx, [start >> 16, start & 0xFFFF])
+                    data[n:n + m] = np.asarray(words, dtype=np.int64).reshape(m, nch)
+                    n += m
+                unchecked = (nxt, end)
+                nxt = end
+                if progress:
+                    progress(int(np.count_nonzero(got[:nxt])), frames)
+        finally:
+            self.command("reset_recorder")  # a ring records until reset
+        data = np.where(data >= 32768, data - 65536, data)[got]
+        cols = {"t": np.flatnonzero(got) * decimation / tick}
+        for i, sname in enumerate(signals):
+            cols[sname] = self.to_physical(sname, data[:, i])
+        return cols, int(frames - np.count_nonzero(got))
 
     # ------------------------------------------------------------ tables
     def upload_table(self, img: bytes, progress: Callable[[int, int], None] | None = None) -> None:

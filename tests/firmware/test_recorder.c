@@ -98,6 +98,88 @@ static void test_bad_configuration_is_refused(void **state)
     assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_EINVAL);
 }
 
+/* Ring mode: after the trigger the recorder never stops; frame n sits in slot
+ * n mod capacity and `written` counts the frames, so a reader streams it. */
+static void test_ring_keeps_recording_over_the_oldest_frames(void **state)
+{
+    (void)state;
+    int16_t buf[8];
+    piezo_rec_t r;
+    piezo_rec_cfg_t c = {.n_channels = 2, .signal = {0, 2}, .decimation = 2,
+                         .trigger = PIEZO_REC_SOFTWARE, .ring = 1};
+    assert_int_equal(piezo_rec_init(&r, buf, 8, NSIG), PIEZO_OK);
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_OK);
+    assert_int_equal(r.capacity, 4);
+    piezo_rec_arm(&r);
+    for (int16_t k = 0; k < 5; k++) {
+        feed(&r, k, 0); /* before the trigger: not counted, not kept */
+    }
+    assert_int_equal(piezo_rec_written(&r), 0);
+    piezo_rec_trigger(&r);
+    int16_t f[2];
+    assert_int_equal(piezo_rec_read_slot(&r, 0, f), PIEZO_ERANGE); /* nothing yet */
+    /* 30 ticks at decimation 2: frames 0..14 hold ticks 100, 102, ..., 128 */
+    for (int16_t k = 0; k < 30; k++) {
+        feed(&r, (int16_t)(100 + k), 0);
+        /* a frame is counted once whole: slot (written - 1) mod 4 holds the newest */
+        uint32_t w = piezo_rec_written(&r);
+        if (w > 0u) {
+            assert_int_equal(piezo_rec_read_slot(&r, (w - 1u) % 4u, f), PIEZO_OK);
+            assert_int_equal(f[0], 100 + 2 * (int)(w - 1u));
+        }
+    }
+    assert_int_equal(r.state, PIEZO_REC_TRIGGERED); /* still recording */
+    assert_int_equal(piezo_rec_written(&r), 15);
+    assert_int_equal(piezo_rec_frames(&r), 4);
+    /* frames 11..14 are still held, each in slot n mod 4 */
+    for (uint32_t n = 11; n < 15; n++) {
+        assert_int_equal(piezo_rec_read_slot(&r, n % 4u, f), PIEZO_OK);
+        assert_int_equal(f[0], 100 + 2 * (int)n);
+        assert_int_equal(f[1], -(100 + 2 * (int)n));
+    }
+    assert_int_equal(piezo_rec_read_slot(&r, 4, f), PIEZO_ERANGE); /* past the buffer */
+    /* the time-ordered readout still works on the ring: oldest first */
+    assert_int_equal(piezo_rec_read(&r, 0, f), PIEZO_OK);
+    assert_int_equal(f[0], 100 + 2 * 11);
+    /* reset ends the ring */
+    piezo_rec_reset(&r);
+    assert_int_equal(piezo_rec_written(&r), 0);
+    feed(&r, 1, 0);
+    assert_int_equal(piezo_rec_written(&r), 0);
+}
+
+static void test_ring_refuses_pretrigger(void **state)
+{
+    (void)state;
+    int16_t buf[8];
+    piezo_rec_t r;
+    piezo_rec_cfg_t c = {.n_channels = 1, .signal = {0}, .decimation = 1, .pretrigger = 2, .ring = 1};
+    assert_int_equal(piezo_rec_init(&r, buf, 8, NSIG), PIEZO_OK);
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_EINVAL);
+    c.pretrigger = 0;
+    c.ring = 2;
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_EINVAL);
+    c.ring = 1;
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_OK);
+}
+
+/* Without ring mode `written` counts the frames after the trigger and stops. */
+static void test_written_counts_a_plain_capture(void **state)
+{
+    (void)state;
+    int16_t buf[4];
+    piezo_rec_t r;
+    piezo_rec_cfg_t c = {.n_channels = 1, .signal = {0}, .decimation = 1, .trigger = PIEZO_REC_IMMEDIATE};
+    assert_int_equal(piezo_rec_init(&r, buf, 4, NSIG), PIEZO_OK);
+    assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_OK);
+    piezo_rec_arm(&r);
+    for (int16_t k = 0; k < 10; k++) {
+        feed(&r, k, 0);
+    }
+    assert_int_equal(r.state, PIEZO_REC_DONE);
+    assert_int_equal(piezo_rec_written(&r), 4);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -105,6 +187,9 @@ int main(void)
         cmocka_unit_test(test_rising_trigger_keeps_pretrigger_frames),
         cmocka_unit_test(test_decimation_and_software_trigger),
         cmocka_unit_test(test_bad_configuration_is_refused),
+        cmocka_unit_test(test_ring_keeps_recording_over_the_oldest_frames),
+        cmocka_unit_test(test_ring_refuses_pretrigger),
+        cmocka_unit_test(test_written_counts_a_plain_capture),
     };
     return cmocka_run_group_tests_name("recorder", tests, NULL, NULL);
 }

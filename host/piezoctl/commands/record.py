@@ -1,113 +1,260 @@
-"""``piezoctl record`` and ``piezoctl wave``: drive the wave generator, read the recorder.
+"""``piezoctl record``: read the controller's recorder into a recording CSV.
 
-``wave`` loads and starts the wave generator (amplitudes in drive volts for
-open-loop excitation without a table, or in micrometres of position); with
-``--record OUT.csv`` it also records the run. ``record`` records what the
-controller does now for a duration. Recordings are written in the project's
-recording format (``docs/recordings.md``): ``t`` [s], ``u`` drive [V], ``y``
-position [um], and ``reference`` [um], ``u2`` [V], ``x2`` [um] when recorded,
-so ``piezoctl identify`` reads them directly.
+``record`` records what the controller does now for ``--duration`` seconds.
+The decimation is chosen from the duration and the recorder's capacity
+(``rec_capacity`` samples shared by the channels) unless given; ``--stream``
+reads the recorder while it runs, as a ring, so a capture of any length works
+(frames the link could not keep up with are reported as lost). Recordings are
+written in the project's recording format (``docs/recordings.md``): ``t``
+[s], ``u`` drive [V], ``y`` position [um], and ``reference`` [um], ``u2``
+[V], ``x2`` [um] when recorded, so ``piezoctl identify`` reads them directly.
+``--plot FILE.png`` also draws it. Contract: ``docs/wave-record.md``.
+
+The capture helpers here are shared with ``piezoctl wave --record``
+(:mod:`piezoctl.commands.wave`). numpy, matplotlib and the device module are
+imported inside the functions that need them: ``piezoctl --help`` stays fast.
 """
 
 from __future__ import annotations
 
-import sys
-import time
+import math
+import os
 
-import numpy as np
-
-from ..device import MODES, SIGNALS, WAVE_KINDS, connect
 from ..errors import CliError
-from ..io.recording import write_csv
+from ._options import Progress, add_output, add_port, emit, progress
+
+__all__ = ["COLUMNS", "SIGNAL_NAMES", "MAX_DECIMATION", "add_capture_options", "parse_signals",
+           "choose_decimation", "check_writable", "record", "write_recording", "plot_recording"]
 
 # recorder signal -> recording column (docs/recordings.md)
 COLUMNS = {"u": "u", "y": "y", "ref": "reference", "u2": "u2", "y2": "x2", "err": "err", "ff": "ff", "fb": "fb"}
+SIGNAL_NAMES = ("ref", "y", "u", "err", "ff", "fb", "y2", "u2")  # device.SIGNALS, without importing it
+MAX_DECIMATION = 65535  # rec_decimation is a uint16 >= 1
+PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 
 
-def capture(ctl, signals: list[str], duration_s: float, *, decimation: int = 1, start_wave: bool = False) -> dict:
-    """Record ``signals`` for ``duration_s`` [s]; columns named as in a recording CSV."""
-    frames = int(round(duration_s * ctl.identity.tick_hz / decimation))
-    cols = ctl.capture(signals, frames, decimation=decimation,
-                       trigger="software" if start_wave else "immediate", start_wave=start_wave)
-    return {"t": cols["t"], **{COLUMNS[s]: cols[s] for s in signals}}
+def add_capture_options(p, *, duration_required: bool) -> None:
+    """``--signals``, ``--duration``, ``--decimation``, ``--stream``, ``--plot``."""
+    p.add_argument("--signals", default="ref,y,u",
+                   help="comma-separated: ref,y,u,err,ff,fb,y2,u2 (default ref,y,u)")
+    p.add_argument("--duration", type=float, required=duration_required, metavar="S",
+                   help="how long to record [s]")
+    p.add_argument("--decimation", default="auto", metavar="N|auto",
+                   help="keep every N-th tick; auto (default): 1 if the duration fits the recorder, "
+                        "else the smallest N that fits it (1 with --stream)")
+    p.add_argument("--stream", action="store_true",
+                   help="read the recorder while it runs (ring), for captures longer than it holds; "
+                        "lost frames are reported")
+    p.add_argument("--plot", metavar="FILE.png", help="also draw the recording (png, svg or pdf)")
 
 
-def write_recording(path: str, cols: dict, ctl) -> None:
+def parse_signals(text: str) -> list[str]:
+    """``"ref,y,u"`` -> ``["ref", "y", "u"]``; refuses unknown, repeated or too many signals."""
+    sigs = [s.strip() for s in text.split(",") if s.strip()]
+    bad = [s for s in sigs if s not in SIGNAL_NAMES]
+    if bad:
+        raise CliError(f"unknown signal(s) {', '.join(bad)}; known: {', '.join(SIGNAL_NAMES)}")
+    if not sigs:
+        raise CliError("--signals names no signal")
+    if len(set(sigs)) != len(sigs):
+        raise CliError(f"--signals names a signal twice: {text}")
+    if len(sigs) > 8:
+        raise CliError("the recorder keeps at most 8 signals")
+    return sigs
+
+
+def choose_decimation(duration_s: float, n_signals: int, tick_hz: float, capacity_samples: int,
+                      requested: str | int = "auto", stream: bool = False) -> tuple[int, int, str]:
+    """Decimation and frame count for a capture of ``duration_s`` [s].
+
+    Parameters
+    ----------
+    duration_s : float
+        Capture length [s], > 0.
+    n_signals : int
+        Recorded signals (channels), 1..8.
+    tick_hz : float
+        Control-loop rate [Hz].
+    capacity_samples : int
+        The recorder's buffer (``rec_capacity``) [samples of all channels].
+    requested : ``"auto"`` or int
+        ``auto``: 1 when the capture fits the buffer at full rate (or with
+        ``stream``), else the smallest decimation whose frames fit it.
+    stream : bool
+        The capture is streamed (any number of frames).
+
+    Returns
+    -------
+    decimation : int
+        Ticks per recorded frame, 1..65535.
+    frames : int
+        Frames to record: ``round(duration_s * tick_hz / decimation)``, >= 1.
+    why : str
+        One line saying what was chosen and why.
+    """
+    if not (math.isfinite(duration_s) and duration_s > 0):
+        raise CliError(f"--duration must be a positive number of seconds (got {duration_s:g})")
+    cap = capacity_samples // n_signals
+    ticks = duration_s * tick_hz
+    auto = str(requested) == "auto"
+    if auto:
+        dec = 1 if stream else max(1, math.ceil(ticks / cap))
+        while not stream and round(ticks / dec) > cap:
+            dec += 1
+    else:
+        try:
+            dec = int(requested)
+        except ValueError:
+            raise CliError(f"--decimation must be auto or a whole number 1..{MAX_DECIMATION} "
+                           f"(got {requested!r})") from None
+        if not 1 <= dec <= MAX_DECIMATION:
+            raise CliError(f"--decimation must be 1..{MAX_DECIMATION} (got {dec})")
+    if dec > MAX_DECIMATION:
+        raise CliError(f"{duration_s:g} s does not fit the recorder even at decimation {MAX_DECIMATION}: "
+                       "use --stream")
+    frames = int(round(ticks / dec))
+    if frames < 1:
+        raise CliError(f"{duration_s:g} s is shorter than one sample at decimation {dec} "
+                       f"({dec / tick_hz:g} s per sample)")
+    if not stream and frames > cap:
+        need = max(1, math.ceil(ticks / cap))
+        raise CliError(f"{duration_s:g} s at decimation {dec} is {frames} frames of {n_signals} signal(s); "
+                       f"the recorder holds {cap} ({capacity_samples} samples): use --decimation {need} "
+                       "or more, a shorter --duration, or --stream")
+    rate = tick_hz / dec
+    how = "chosen" if auto else "given"
+    why = (f"decimation {dec} ({how}): {frames} frames at {rate:g} Hz of {n_signals} signal(s)"
+           + (", streamed" if stream else f", the recorder holds {cap}"))
+    return dec, frames, why
+
+
+def check_writable(path: str | None, what: str, suffixes: tuple[str, ...] | None = None) -> None:
+    """Refuse an output path before anything is done: missing folder, wrong suffix, a folder."""
+    if path is None:
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise CliError(f"{what} {path}: folder {folder} does not exist")
+    if os.path.isdir(path):
+        raise CliError(f"{what} {path} is a folder")
+    if suffixes and os.path.splitext(path)[1].lower() not in suffixes:
+        raise CliError(f"{what} {path}: want a {', '.join(suffixes)} file")
+
+
+def record(args, ctl, signals: list[str], duration_s: float, out: str, *, start_wave: bool = False) -> dict:
+    """Capture ``signals`` for ``duration_s`` [s] as ``args`` ask; write ``out`` and ``args.plot``.
+
+    The recorder is armed here; with ``start_wave`` the loaded wave is
+    started and fires its (software) trigger, so ``t = 0`` is the wave's
+    first sample. Returns the result fields of ``--json``.
+    """
+    dec, frames, why = choose_decimation(duration_s, len(signals), ctl.identity.tick_hz,
+                                         ctl.identity.rec_capacity, args.decimation, args.stream)
+    progress(args, why)
+    trigger = "software" if start_wave else "immediate"
+    lost = 0
+    with Progress(args, f"record {duration_s:g} s"):
+        if args.stream:
+            last = [0.0]
+
+            def report(done: int, total: int) -> None:
+                if done - last[0] >= 0.1 * total:  # every tenth of the capture
+                    last[0] = done
+                    progress(args, f"{done}/{total} frames")
+
+            raw, lost = ctl.stream(signals, frames, decimation=dec, trigger=trigger,
+                                   start_wave=start_wave, progress=report)
+        else:
+            raw = ctl.capture(signals, frames, decimation=dec, trigger=trigger, start_wave=start_wave)
+    cols = {"t": raw["t"], **{COLUMNS[s]: raw[s] for s in signals}}
+    write_recording(out, cols, ctl.identity.tick_hz / dec)
+    if args.plot:
+        with Progress(args, f"plot {args.plot}"):
+            plot_recording(args.plot, cols, title=f"{os.path.basename(out)}: {duration_s:g} s, "
+                                                  f"{ctl.identity.tick_hz / dec:g} Hz")
+    return {"out": out, "signals": signals, "columns": list(cols), "frames": int(len(cols["t"])),
+            "frames_wanted": frames, "lost_frames": lost, "decimation": dec,
+            "decimation_chosen": str(args.decimation) == "auto",
+            "sample_rate_hz": ctl.identity.tick_hz / dec, "duration_s": duration_s,
+            "stream": bool(args.stream), "plot": args.plot}
+
+
+def write_recording(path: str, cols: dict, rate_hz: float) -> None:
+    """Write ``cols`` (``t`` and recording columns) as a recording CSV at ``rate_hz`` [Hz]."""
+    from ..io.recording import write_csv
+
     names = ["t"] + [c for c in ("u", "y", "reference", "u2", "x2", "err", "ff", "fb") if c in cols]
-    rate = 1.0 / (cols["t"][1] - cols["t"][0]) if len(cols["t"]) > 1 else float(ctl.identity.tick_hz)
-    meta = {"sample_rate_hz": f"{rate:g}", "source": "piezoctl record"}
+    meta = {"sample_rate_hz": f"{rate_hz:g}", "source": "piezoctl record"}
     write_csv(path, {n: cols[n] for n in names}, meta=meta)
 
 
-def add_parser(sub) -> None:
-    r = sub.add_parser("record", help="record controller signals for a duration into a recording CSV")
-    r.add_argument("--port", required=True)
-    r.add_argument("--signals", default="ref,y,u", help="comma-separated: ref,y,u,err,ff,fb,y2,u2 (default ref,y,u)")
-    r.add_argument("--duration", type=float, required=True, help="[s]")
-    r.add_argument("--decimation", type=int, default=1)
-    r.add_argument("--out", required=True, metavar="REC.csv")
-    r.set_defaults(func=run_record)
+# column -> (panel, unit): positions, drives and the error each get a panel
+_PANELS = {"reference": ("position", "um"), "y": ("position", "um"), "x2": ("position", "um"),
+           "u": ("drive", "V"), "u2": ("drive", "V"), "ff": ("drive", "V"), "fb": ("drive", "V"),
+           "err": ("error", "um")}
 
-    w = sub.add_parser("wave", help="load and start the wave generator (optionally recording the run)")
-    w.add_argument("--port", required=True)
-    w.add_argument("--kind", choices=[k for k in WAVE_KINDS if k != "off"], required=True)
-    unit = w.add_mutually_exclusive_group()
-    unit.add_argument("--volts", action="store_true", help="amplitude and offset are drive [V] (open loop, no table)")
-    w.add_argument("--amplitude", type=float, default=0.0, help="peak [um, or V with --volts]")
-    w.add_argument("--offset", type=float, default=None, help="centre [um, or V] (default: mid-range)")
-    w.add_argument("--freq", type=float, default=1.0, help="[Hz]; chirp start")
-    w.add_argument("--freq-end", type=float, help="chirp end [Hz]")
-    w.add_argument("--cycles", type=int, default=0, help="periods to play, 0 = endless")
-    w.add_argument("--duration", type=float, help="chirp duration; with --record, how long to record [s]")
-    w.add_argument("--mode", choices=list(MODES), help="set the control mode first (disarms and re-arms)")
-    w.add_argument("--record", metavar="OUT.csv", help="record ref,y,u during the run")
-    w.add_argument("--stop", action="store_true", help="stop the wave generator and exit")
-    w.set_defaults(func=run_wave)
+
+def plot_recording(path: str, cols: dict, title: str = "") -> None:
+    """Draw a recording: one panel per unit (position [um], drive [V], error [um]) against t [s]."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels: dict[str, list[str]] = {}
+    for name in cols:
+        if name in _PANELS:
+            panels.setdefault(_PANELS[name][0], []).append(name)
+    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(9, 2.4 * len(panels) + 0.6), squeeze=False)
+    for ax, (panel, names) in zip(axes[:, 0], panels.items()):
+        for name in names:
+            ax.plot(cols["t"], cols[name], lw=0.8, label=name)
+        ax.set_ylabel(f"{panel} [{_PANELS[names[0]][1]}]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("t [s]")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def add_parser(sub) -> None:
+    r = sub.add_parser("record", help="record controller signals for a duration into a recording CSV",
+                       description="Record what the controller does now. The decimation is chosen from "
+                                   "the duration and the recorder's capacity unless given; --stream reads "
+                                   "the recorder while it runs for captures longer than it holds.")
+    add_port(r)
+    add_capture_options(r, duration_required=True)
+    r.add_argument("--out", required=True, metavar="REC.csv", help="the recording (docs/recordings.md)")
+    add_output(r)
+    r.set_defaults(func=run_record)
 
 
 def run_record(args) -> int:
-    sigs = [s.strip() for s in args.signals.split(",") if s.strip()]
-    bad = [s for s in sigs if s not in SIGNALS]
-    if bad:
-        raise CliError(f"unknown signal(s) {', '.join(bad)}; known: {', '.join(SIGNALS)}")
+    from ..device import connect
+
+    sigs = parse_signals(args.signals)
+    check_writable(args.out, "--out")
+    check_writable(args.plot, "--plot", PLOT_SUFFIXES)
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise CliError(f"--duration must be a positive number of seconds (got {args.duration:g})")
     ctl = connect(args.port)
-    cols = capture(ctl, sigs, args.duration, decimation=args.decimation)
-    write_recording(args.out, cols, ctl)
-    print(f"{args.out}: {len(cols['t'])} samples of {', '.join(sigs)}")
+    res = record(args, ctl, sigs, args.duration, args.out)
+    res["port"] = args.port
+    emit(args, res, _record_lines(res))
     return 0
 
 
-def run_wave(args) -> int:
-    ctl = connect(args.port)
-    if args.stop:
-        ctl.command("stop_wave")
-        return 0
-    sc = ctl.scale
-    if args.volts:
-        off = args.offset if args.offset is not None else 0.5 * (sc.drive_min_v + sc.drive_max_v)
-        amp_q = int(round(args.amplitude / (0.5 * (sc.drive_max_v - sc.drive_min_v)) * 32768))
-        off_q = ctl.q15_drive(off)
-    else:
-        off = args.offset if args.offset is not None else sc.p_mid
-        amp_q = int(round(args.amplitude / sc.p_half * 32768))
-        off_q = ctl.q15_position(off)
-    if not 0 <= amp_q <= 32767:
-        raise CliError("the amplitude exceeds the controller's range")
-    if args.kind == "chirp" and (args.freq_end is None or args.duration is None):
-        raise CliError("a chirp needs --freq-end and --duration")
-    if args.mode:
-        ctl.arm(False)
-        ctl.set_mode(args.mode)
-        ctl.arm(True)
-    ctl.configure_wave(args.kind, offset_q15=off_q, amplitude_q15=amp_q, f_hz=args.freq,
-                       f_end_hz=args.freq_end, duration_s=args.duration, cycles=args.cycles,
-                       tones=[(amp_q, args.freq, 0.0)] if args.kind == "multisine" else None)
-    if args.record:
-        dur = args.duration or (args.cycles / args.freq if args.cycles else 1.0)
-        cols = capture(ctl, ["ref", "y", "u"], dur, start_wave=True)
-        write_recording(args.record, cols, ctl)
-        print(f"{args.record}: {len(cols['t'])} samples")
-    else:
-        ctl.command("start_wave")
-        print(f"wave {args.kind} running on {args.port}", file=sys.stderr)
-    return 0
+def _record_lines(res: dict) -> list[str]:
+    lines = [f"{res['out']}: {res['frames']} samples of {', '.join(res['signals'])} at "
+             f"{res['sample_rate_hz']:g} Hz (decimation {res['decimation']}"
+             f"{', chosen' if res['decimation_chosen'] else ''})"]
+    if res["stream"]:
+        lines.append(f"lost frames: {res['lost_frames']} of {res['frames_wanted']}"
+                     + (" (the link did not keep up: a larger --decimation or fewer --signals)"
+                        if res["lost_frames"] else ""))
+    if res["plot"]:
+        lines.append(f"plot: {res['plot']}")
+    return lines
