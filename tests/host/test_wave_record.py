@@ -213,10 +213,15 @@ def test_record_chooses_decimation_and_plots(sil, capsys, tmp_path):
     assert (res["decimation"], res["frames"], res["decimation_chosen"]) == (4, 6250, True)
     rec = load_recording(out)
     assert rec.meta["sample_rate_hz"] == "2500" and len(rec.t) == 6250
+    # stamped on the controller's clock: a second capture starts later on it by at least the first's length
+    t_first = float(rec.meta["session_time_s"])
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     code, _, err = run(capsys, "record", "--port", sil.spec, "--duration", "2.5", "--signals", "ref,y,u,err,ff,fb,y2,u2",
                        "--decimation", "2", "--out", str(out))
     assert code == 2 and "use --decimation 4 or more" in err
+    code, _, err = run(capsys, "record", "--port", sil.spec, "--duration", "0.5", "--out", str(out))
+    assert code == 0, err
+    assert float(load_recording(out).meta["session_time_s"]) >= t_first + 2.5
 
 
 def test_stream_longer_than_the_recorder(sil, capsys, tmp_path):

@@ -153,6 +153,9 @@ def record(args, ctl, signals: list[str], duration_s: float, out: str, *, start_
     progress(args, why)
     trigger = "software" if start_wave else "immediate"
     lost = 0
+    # the controller's tick counter stamps the recording on the session clock (docs/recordings.md:
+    # session_time_s; the diagnosis runs thermal drift on it across recordings)
+    session_s = ctl.status()["tick_count"] / float(ctl.identity.tick_hz)
     with Progress(args, f"record {duration_s:g} s"):
         if args.stream:
             last = [0.0]
@@ -167,7 +170,7 @@ def record(args, ctl, signals: list[str], duration_s: float, out: str, *, start_
         else:
             raw = ctl.capture(signals, frames, decimation=dec, trigger=trigger, start_wave=start_wave)
     cols = {"t": raw["t"], **{COLUMNS[s]: raw[s] for s in signals}}
-    write_recording(out, cols, ctl.identity.tick_hz / dec)
+    write_recording(out, cols, ctl.identity.tick_hz / dec, session_s)
     if args.plot:
         with Progress(args, f"plot {args.plot}"):
             plot_recording(args.plot, cols, title=f"{os.path.basename(out)}: {duration_s:g} s, "
@@ -179,12 +182,15 @@ def record(args, ctl, signals: list[str], duration_s: float, out: str, *, start_
             "stream": bool(args.stream), "plot": args.plot}
 
 
-def write_recording(path: str, cols: dict, rate_hz: float) -> None:
-    """Write ``cols`` (``t`` and recording columns) as a recording CSV at ``rate_hz`` [Hz]."""
+def write_recording(path: str, cols: dict, rate_hz: float, session_s: float | None = None) -> None:
+    """Write ``cols`` (``t`` and recording columns) as a recording CSV at ``rate_hz`` [Hz]; ``session_s`` [s]:
+    the controller's time since start when the capture began (metadata ``session_time_s``)."""
     from ..io.recording import write_csv
 
     names = ["t"] + [c for c in ("u", "y", "reference", "u2", "x2", "err", "ff", "fb") if c in cols]
     meta = {"sample_rate_hz": f"{rate_hz:g}", "source": "piezoctl record"}
+    if session_s is not None:
+        meta["session_time_s"] = f"{session_s:.4f}"
     write_csv(path, {n: cols[n] for n in names}, meta=meta)
 
 
