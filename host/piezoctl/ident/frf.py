@@ -172,11 +172,17 @@ def sample_rate(t, rel_tol: float = TIME_GRID_TOL) -> float:
     k = int(np.argmax(np.abs(dev)))
     if abs(dev[k]) > rel_tol * period:
         step = np.diff(t)
-        raise ValueError(
-            f"t: not uniformly sampled: sample {k} (t = {t[k]:.9g} s) is {dev[k] / period:+.3g} periods "
-            f"off the uniform grid of period {period:.6g} s through the first and last samples "
-            f"(accepted: {rel_tol:g} period); steps range {step.min():.6g}..{step.max():.6g} s: "
-            f"a gap, a pause or a changed rate; resample the recording to one rate or cut it at the break")
+        med = float(np.median(step))
+        jump = np.flatnonzero(np.abs(step - med) > 2 * rel_tol * med)
+        if jump.size:  # a break: name the first one
+            j = int(jump[0])
+            raise ValueError(f"t: not uniformly sampled: from sample {j} to {j + 1} (t = {t[j]:.9g} -> "
+                             f"{t[j + 1]:.9g} s) the step is {step[j]:.6g} s, the median step {med:.6g} s "
+                             f"({jump.size} such steps): a gap, a pause or a changed rate; resample the "
+                             f"recording to one rate or cut it at the break")
+        raise ValueError(f"t: not uniformly sampled: sample {k} (t = {t[k]:.9g} s) is {dev[k] / period:+.3g} "
+                         f"periods off the uniform grid through the first and last samples (accepted: "
+                         f"{rel_tol:g} period): the rate drifts; resample the recording to one rate")
     return 1.0 / period
 
 

@@ -57,7 +57,6 @@ ZOH simulation). :class:`FRF` and :func:`frf_from_time` live in
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
