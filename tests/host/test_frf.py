@@ -247,3 +247,22 @@ def test_fit_tf_data_finds_the_sil_stage_970_hz_mode(sil, tmp_path, capsys):  # 
     assert abs(d["resonance_hz"] - 970.0) < 0.05 * 970.0
     (mode,) = [r for r in d["resonances"] if r["f_hz"] == d["resonance_hz"]]
     assert 0 < mode["damping"] < 0.05 and mode["supported"]
+
+
+def test_outputs_are_all_or_nothing(tmp_path, capsys, monkeypatch):
+    rec = tmp_path / "rec.csv"
+    _noise_record(rec, n=4000)
+    out = tmp_path / "tf.json"
+    rc, _, err = _run(capsys, "fit-tf", "--data", rec, "--order", "2", "--out", out,
+                      "--plot", tmp_path / "no" / "b.png")
+    assert rc == 2 and "folder" in err and "does not exist" in err and err.count("\n") == 1 and not out.exists()
+    # a plot that fails after TF.json and FRF.csv were written takes them away again
+    import piezoctl.plots as plots
+
+    def broken(path, *a, **k):
+        raise plots.CliError(f"{path}: cannot write the plot: disk full")
+    monkeypatch.setattr(plots, "bode", broken)
+    frf_out = tmp_path / "frf.csv"
+    rc, _, err = _run(capsys, "fit-tf", "--data", rec, "--order", "2", "--out", out, "--frf-out", frf_out,
+                      "--plot", tmp_path / "b.png", "--quiet")
+    assert rc == 2 and "disk full" in err and not out.exists() and not frf_out.exists()

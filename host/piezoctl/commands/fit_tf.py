@@ -25,6 +25,7 @@ import math
 
 from ..errors import CliError
 from ._options import Progress, add_output, emit
+from ._outputs import Outputs, check_output_paths
 from .frf import ESTIMATE_OPTIONS, add_estimate_options, estimate_from_args, write_frf_csv
 
 FRF_COLUMNS = ("f_hz", "mag", "phase_deg")
@@ -136,6 +137,7 @@ def run(args) -> int:
         opts = [f"--{n.replace('_', '-')}" for n in given] + (["--frf-out"] if args.frf_out else [])
         raise CliError(f"{', '.join(opts)} appl{'ies' if len(opts) == 1 else 'y'} to --data "
                        f"(an FRF estimated from a recording), not to --frf")
+    check_output_paths(args.out, args.plot, args.frf_out)
     if args.order < 1:
         raise CliError(f"--order must be >= 1 (got {args.order})")
     if args.num_order is not None and not 0 <= args.num_order <= args.order:
@@ -185,19 +187,25 @@ def run(args) -> int:
     out["source"] = {"data": args.data} if args.data else {"frf": args.frf}
     if args.data:
         out["source"].update({k: v for k, v in est.summary().items() if k not in ("gaps",)})
-    if args.frf_out:
-        write_frf_csv(args.frf_out, est, args.data)
-    try:
-        with open(args.out, "w", encoding="utf-8") as fh:
-            json.dump(out, fh, indent=2)
-            fh.write("\n")
-    except OSError as exc:
-        raise CliError(f"{args.out}: cannot write: {exc.strerror or exc}") from None
-    if args.plot:
-        from ..plots import bode
-        with Progress(args, "plot"):
-            bode(args.plot, frf, fit=(res.num, res.den), gaps=gaps, resonances=resonances,
-                 title=f"{source}: {args.method} order {args.order}, te {res.te:.3g}")
+
+    def write_json(path):
+        try:
+            with open(path, "w", encoding="utf-8") as fh:
+                json.dump(out, fh, indent=2)
+                fh.write("\n")
+        except OSError as exc:
+            raise CliError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+    with Outputs() as files:
+        if args.frf_out:
+            files.write(args.frf_out, lambda p: write_frf_csv(p, est, args.data))
+        files.write(args.out, write_json)
+        if args.plot:
+            from ..plots import bode
+            with Progress(args, "plot"):
+                files.write(args.plot, lambda p: bode(
+                    p, frf, fit=(res.num, res.den), gaps=gaps, resonances=resonances,
+                    title=f"{source}: {args.method} order {args.order}, te {res.te:.3g}"))
     rz = out["resonance_hz"]
     lines = [f"fit-tf: {args.method} order {args.order}: te = {res.te:.4g}, "
              f"{'stable' if res.stable else 'UNSTABLE'}, written to {args.out}",

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from ..errors import CliError
 from ._options import Progress, add_output, emit
+from ._outputs import Outputs, check_output_paths
 
 __all__ = ["add_parser", "run", "add_estimate_options", "estimate_from_args", "write_frf_csv",
            "ESTIMATE_OPTIONS"]
@@ -120,12 +121,14 @@ def summary_lines(est, path: str) -> list[str]:
 
 
 def run(args) -> int:
+    check_output_paths(args.out, args.plot)
     est = estimate_from_args(args, args.data)  # well under 2 s: no progress line
-    write_frf_csv(args.out, est, args.data)
-    if args.plot:
-        from ..plots import bode
-        with Progress(args, "plot"):
-            bode(args.plot, est.frf(), gaps=est.gaps(), title=f"{args.data}: H1 estimate")
+    with Outputs() as out:
+        out.write(args.out, lambda p: write_frf_csv(p, est, args.data))
+        if args.plot:
+            from ..plots import bode
+            with Progress(args, "plot"):
+                out.write(args.plot, lambda p: bode(p, est.frf(), gaps=est.gaps(), title=f"{args.data}: H1 estimate"))
     warnings = est.warnings()
     result = {"data": args.data, "out": args.out, "plot": args.plot, **est.summary(), "warnings": warnings}
     lines = summary_lines(est, args.data) + [f"written to {args.out}" + (f", plot {args.plot}" if args.plot else "")]

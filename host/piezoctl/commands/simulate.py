@@ -34,6 +34,7 @@ import sys
 
 from ..errors import CliError
 from ._options import Progress, add_output, emit
+from ._outputs import Outputs, check_output_paths
 
 __all__ = ["add_parser", "run", "simulate_model", "score", "STAGE_SIMULATOR", "MAX_WORK_VALUES"]
 
@@ -199,6 +200,7 @@ def run(args) -> int:
     import numpy as np
 
     _bind_recording_helpers()
+    check_output_paths(args.out, args.plot)
     rec = load_recording(args.input, require=("t", "u"), drop_outliers=getattr(args, "drop_outliers", False))
     if rec.dropped:
         print(describe_dropped(rec), file=sys.stderr)
@@ -224,7 +226,12 @@ def run(args) -> int:
             y = simulate_model(model, rec.t, rec.u, rec.u2, rec.x2)
         what = f"{model.path} (kind {model.kind})"
     check_finite(y, what, rec)
-    write_csv(args.out, {"t": rec.t, "y": y})
+    with Outputs() as files:
+        files.write(args.out, lambda p: write_csv(p, {"t": rec.t, "y": y}))
+        if args.plot:
+            from ..plots import overlay
+            with Progress(args, "plot"):
+                files.write(args.plot, lambda p: overlay(p, rec.t, rec.y, y, title=f"{args.input}: {what}"))
     result = {"out": args.out, "samples": len(rec), "plot": args.plot}
     lines = [f"{args.out}: {len(rec)} samples simulated by {what}"]
     if rec.y is not None:
@@ -234,9 +241,5 @@ def run(args) -> int:
         fit = "undefined" if sc["fit_percent"] is None else f"{sc['fit_percent']:.2f} %"
         lines.append(f"against y of {args.input}: nrmse {nr}, fit {fit}, rmse {sc['rmse_um']:.4g} um, "
                      f"max |error| {sc['max_abs_um']:.4g} um")
-    if args.plot:
-        from ..plots import overlay
-        with Progress(args, "plot"):
-            overlay(args.plot, rec.t, rec.y, y, title=f"{args.input}: {what}")
     emit(args, result, lines)
     return 0

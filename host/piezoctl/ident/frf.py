@@ -274,9 +274,8 @@ class FRFEstimate:
                        f"noise, nonlinearity, or leakage at a sharp resonance (a larger --nperseg resolves it); "
                        f"the magnitude there is biased low")
         if self.segments < MIN_SEGMENTS:
-            out.append(f"only {self.segments} Welch average(s) (nperseg {self.nperseg} of "
-                       f"{self.nperseg + (self.segments - 1) * (self.nperseg - self.nperseg // 2)} samples): "
-                       f"the coherence is biased towards 1 and the estimate is noisy; use a smaller --nperseg")
+            out.append(f"only {self.segments} Welch average(s) of {self.nperseg} samples: the coherence is "
+                       f"biased towards 1 and the estimate is noisy; use a smaller --nperseg")
         return out
 
 
