@@ -49,18 +49,21 @@ PSO-WCLS (stable models)
     ``inertia[1]``; the search stops at :math:`T_e \\le T_e^*` or after the last
     generation. The random generator is seeded, so a fit is reproducible.
 
-Also here: :func:`frf_from_time` (FRF estimate from time-domain records),
-:func:`freqresp`, :func:`discretize` and :func:`simulate_tf` (FOH or ZOH simulation).
+Also here: :func:`pole_report` and :func:`resonance_hz` (poles in Hz with their
+damping), :func:`freqresp`, :func:`discretize` and :func:`simulate_tf` (FOH or
+ZOH simulation). :class:`FRF` and :func:`frf_from_time` live in
+:mod:`piezoctl.ident.frf` and are re-exported here.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import signal
+
+from .frf import FRF, frf_from_time  # re-exported: tf.FRF, tf.frf_from_time
 
 __all__ = [
     "TFResult",
@@ -75,6 +78,8 @@ __all__ = [
     "simulate_tf",
     "poles_of",
     "is_stable",
+    "pole_report",
+    "resonance_hz",
 ]
 
 
@@ -114,50 +119,21 @@ class TFResult:
         return is_stable(self.den)
 
     def to_dict(self) -> dict:
-        """JSON-serializable form: ``num``, ``den``, ``poles`` ([[re, im], ...]), ``te``."""
+        """JSON-serializable form: ``num``, ``den``, ``poles`` ([[re, im], ...]), ``te``,
+        ``poles_hz`` (:func:`pole_report`) and ``resonance_hz`` (:func:`resonance_hz`)."""
         p = self.poles
         return {
             "num": [float(v) for v in self.num],
             "den": [float(v) for v in self.den],
             "poles": [[float(z.real), float(z.imag)] for z in p],
+            "poles_hz": pole_report(p),
+            "resonance_hz": resonance_hz(p),
             "te": float(self.te),
             "method": self.method,
             "stable": bool(self.stable),
             "info": {k: (float(v) if isinstance(v, (np.floating, float)) else v)
                      for k, v in self.info.items()},
         }
-
-
-@dataclass
-class FRF:
-    """A frequency response estimate.
-
-    Attributes
-    ----------
-    f_hz : ndarray
-        Frequencies [Hz], strictly increasing, > 0.
-    mag : ndarray
-        Magnitude [output unit / input unit].
-    phase_deg : ndarray
-        Phase [deg], unwrapped.
-    coherence : ndarray or None
-        Magnitude-squared coherence [0, 1] (time-domain estimates only).
-    """
-
-    f_hz: np.ndarray
-    mag: np.ndarray
-    phase_deg: np.ndarray
-    coherence: np.ndarray | None = None
-
-    @property
-    def w(self) -> np.ndarray:
-        """Angular frequencies [rad/s]."""
-        return 2.0 * np.pi * self.f_hz
-
-    @property
-    def h(self) -> np.ndarray:
-        """Complex response :math:`A e^{j\\alpha}`."""
-        return self.mag * np.exp(1j * np.deg2rad(self.phase_deg))
 
 
 def freqresp(num, den, w) -> np.ndarray:
@@ -193,6 +169,46 @@ def is_stable(den) -> bool:
     """True if every root of ``den`` has a strictly negative real part."""
     p = poles_of(den)
     return bool(np.all(p.real < 0.0))
+
+
+def pole_report(poles) -> list[dict]:
+    """Poles in Hz with their damping, one entry per real pole or complex pair.
+
+    For a pole ``p`` [rad/s]: natural frequency ``f_hz = |p| / 2 pi`` [Hz] and
+    damping ratio ``damping = -Re p / |p|`` [1] (1 for a stable real pole, -1 for
+    an unstable one, below 0 for a growing oscillation). A complex pair is listed
+    once (``pair: true``).
+
+    Parameters
+    ----------
+    poles : array_like of complex
+        Poles [rad/s].
+
+    Returns
+    -------
+    list of dict
+        ``f_hz``, ``damping``, ``pair``, sorted by ``f_hz``.
+    """
+    out = []
+    for p in np.asarray(poles, dtype=complex):
+        if p.imag < 0:
+            continue  # the conjugate of a listed pair
+        mag = abs(p)
+        out.append({"f_hz": float(mag / (2 * np.pi)),
+                    "damping": float(-p.real / mag) if mag > 0 else 1.0,
+                    "pair": bool(p.imag > 0)})
+    return sorted(out, key=lambda r: r["f_hz"])
+
+
+def resonance_hz(poles) -> float | None:
+    """Natural frequency [Hz] of the least damped complex pole pair (the dominant mode).
+
+    None when the model has no complex pair (no resonance).
+    """
+    pairs = [r for r in pole_report(poles) if r["pair"]]
+    if not pairs:
+        return None
+    return min(pairs, key=lambda r: r["damping"])["f_hz"]
 
 
 def _check_frf(w, h) -> tuple[np.ndarray, np.ndarray]:
@@ -449,76 +465,6 @@ def fit_tf(frf: FRF, order: int, method: str = "pso-wcls", n_num: int | None = N
     if method == "pso-wcls":
         return pso_wcls(frf.w, frf.h, order, n_num, **pso_options)
     raise ValueError(f"unknown method {method!r} (wcls, pso-wcls)")
-
-
-def frf_from_time(t, u, y, *, nperseg: int | None = None, fmin: float | None = None,
-                  fmax: float | None = None, coherence_min: float = 0.0,
-                  power_min: float = 1e-4, detrend: str = "constant") -> FRF:
-    """Estimate the frequency response from input ``u`` to output ``y`` (Welch H1).
-
-    :math:`H_1(f) = P_{uy}(f)/P_{uu}(f)` with Hann-windowed, 50 % overlapping
-    segments (``scipy.signal.csd``/``welch``). Suited to broadband excitation:
-    multisine, chirp, noise. Frequencies are kept where ``fmin <= f <= fmax``, the
-    input power is at least ``power_min`` times its in-band maximum (excited lines
-    only) and the coherence is at least ``coherence_min``.
-
-    Parameters
-    ----------
-    t : array_like
-        Sample times [s], uniformly spaced (within 1 % of the period).
-    u : array_like
-        Input (e.g. hysteresis output [um] or drive [V]).
-    y : array_like
-        Output [um].
-    nperseg : int, optional
-        Segment length [samples]; default ``min(len(u), 8 * fs / fmin)`` rounded to a
-        power of two when ``fmin`` is given, else ``len(u) // 8``.
-    fmin, fmax : float, optional
-        Band kept [Hz]; default (0, Nyquist].
-    coherence_min : float
-        Minimum magnitude-squared coherence [0, 1].
-    power_min : float
-        Minimum relative input power [1].
-    detrend : str
-        Passed to scipy (``"constant"`` removes each segment's mean).
-
-    Returns
-    -------
-    FRF
-        With unwrapped phase and coherence.
-    """
-    t = np.asarray(t, dtype=float)
-    u = np.asarray(u, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if not (t.shape == u.shape == y.shape) or t.ndim != 1 or t.size < 16:
-        raise ValueError("t, u, y must be 1-D of equal length >= 16")
-    dt = np.diff(t)
-    # uniform within 1 % of the period: recorders print timestamps with a few
-    # digits (the valve exports jitter by 2e-4 of the period)
-    if np.any(dt <= 0) or np.ptp(dt) > 0.01 * np.mean(dt):
-        raise ValueError("sample times must be uniformly spaced (within 1 % of the period) and increasing")
-    fs = 1.0 / float(np.mean(dt))
-    if nperseg is None:
-        if fmin:
-            nperseg = 2 ** int(math.ceil(math.log2(8.0 * fs / fmin)))
-        else:
-            nperseg = max(16, u.size // 8)
-    nperseg = int(min(nperseg, u.size))
-    f, puu = signal.welch(u, fs, nperseg=nperseg, detrend=detrend)
-    _, pyy = signal.welch(y, fs, nperseg=nperseg, detrend=detrend)
-    _, puy = signal.csd(u, y, fs, nperseg=nperseg, detrend=detrend)
-    band = (f > 0) & (f >= (fmin or 0.0)) & (f <= (fmax or fs / 2))
-    if not np.any(band):
-        raise ValueError("no frequency line in the requested band")
-    keep = band & (puu >= power_min * puu[band].max())
-    with np.errstate(divide="ignore", invalid="ignore"):
-        h = puy / puu
-        coh = np.abs(puy) ** 2 / (puu * pyy)
-    keep &= np.isfinite(h) & (coh >= coherence_min) & (np.abs(h) > 0)
-    if np.count_nonzero(keep) < 2:
-        raise ValueError("fewer than 2 usable frequency lines (excitation too weak or incoherent)")
-    h = h[keep]
-    return FRF(f[keep], np.abs(h), np.rad2deg(np.unwrap(np.angle(h))), coh[keep])
 
 
 def discretize(num, den, dt: float, method: str = "foh"):

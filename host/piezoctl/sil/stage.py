@@ -32,6 +32,7 @@ from ..errors import CliError
 __all__ = [
     "StageLibraryError",
     "StageParamsError",
+    "StageInputError",
     "default_stage_path",
     "find_library",
     "simulate_stage",
@@ -54,6 +55,10 @@ class StageLibraryError(CliError, RuntimeError):
 
 class StageParamsError(CliError, ValueError):
     """The stage parameter file is missing or wrong (the C reader's message)."""
+
+
+class StageInputError(CliError, ValueError):
+    """The drive or its time column cannot be simulated (one line saying what is wrong)."""
 
 
 def default_stage_path(name: str = "default") -> Path:
@@ -124,9 +129,9 @@ def stage_info(params_path) -> tuple[int, float]:
 def _as_input(name: str, x, n: int) -> np.ndarray:
     a = np.ascontiguousarray(x, dtype=np.float64)
     if a.ndim != 1 or a.size != n:
-        raise ValueError(f"{name}: expected {n} samples (one per t), got shape {a.shape}")
+        raise StageInputError(f"{name}: expected {n} samples (one per t), got shape {a.shape}")
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: contains NaN or infinite values")
+        raise StageInputError(f"{name}: contains NaN or infinite values")
     return a
 
 
@@ -138,7 +143,9 @@ def simulate_stage(params_path, t, u, u2=None, seed: int = 1, sample_rate_hz: fl
     params_path : str or Path
         Stage parameter file (JSON, docs/stage-model.md), read by the C code.
     t : array_like, shape (n,)
-        Sample times [s], uniformly spaced. Their rate is the simulation's;
+        Sample times [s], uniformly spaced to 1e-6 of a step (a recording's
+        printed times are not: ``piezoctl simulate`` puts them on the uniform
+        grid of :func:`piezoctl.ident.frf.sample_rate` first). Their rate is the simulation's;
         when it agrees with the file's ``sample_rate_hz`` to 1e-6, the file's
         exact value is used (so the samples equal the SIL build's).
     u : array_like, shape (n,)
@@ -161,18 +168,21 @@ def simulate_stage(params_path, t, u, u2=None, seed: int = 1, sample_rate_hz: fl
     ------
     StageParamsError
         The file is missing or wrong (message with file, line and key).
+    StageInputError
+        ``t``, ``u`` or ``u2`` cannot be simulated (not uniform, wrong length,
+        not finite, ``u2`` for a one-axis stage).
     StageLibraryError
         ``libpiezo_stage.so`` is not built.
     """
     t = np.ascontiguousarray(t, dtype=np.float64)
     if t.ndim != 1:
-        raise ValueError("t: expected a 1-D array of sample times")
+        raise StageInputError("t: expected a 1-D array of sample times")
     n = t.size
     u = _as_input("u", u, n)
     axes, fs_file = stage_info(params_path)
     if u2 is not None:
         if axes != 2:
-            raise ValueError(f"{params_path}: a one-axis stage; u2 is for two-axis stages")
+            raise StageInputError(f"{params_path}: a one-axis stage; u2 is for two-axis stages")
         u2 = _as_input("u2", u2, n)
     fs = 0.0
     if sample_rate_hz is not None:
@@ -180,11 +190,15 @@ def simulate_stage(params_path, t, u, u2=None, seed: int = 1, sample_rate_hz: fl
     elif n >= 2:
         dt = np.diff(t)
         if not np.all(dt > 0) or np.ptp(dt) > 1e-6 * float(np.mean(dt)) + 1e-12:
-            raise ValueError("t: sample times must be uniformly spaced")
+            # the model has one rate; a printed time column (a few digits) is not exact:
+            # the caller decides the grid (piezoctl simulate: piezoctl.ident.frf.sample_rate)
+            raise StageInputError(
+                f"t: sample times are not uniformly spaced to 1e-6 of a step (steps {dt.min():.9g}..{dt.max():.9g} s); "
+                f"the stage model runs at one rate: pass sample_rate_hz or times on a uniform grid")
         fs_t = (n - 1) / (t[-1] - t[0])
         fs = 0.0 if abs(fs_t / fs_file - 1.0) < 1e-6 else fs_t
     if fs < 0 or not np.isfinite(fs):
-        raise ValueError(f"sample rate {fs}: must be > 0")
+        raise StageInputError(f"sample rate {fs}: must be > 0")
     y = np.zeros(n)
     y2 = np.zeros(n) if axes == 2 else None
     dp = ctypes.POINTER(ctypes.c_double)
