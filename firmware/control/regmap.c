@@ -131,6 +131,8 @@ static uint32_t input_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, 
     }
     case PIEZO_IREG_STAGED_BYTES: return c->staged_len;
     case PIEZO_IREG_COUPLING_TABLE_CRC: return piezo_ctl_coupling_crc(c);
+    case PIEZO_IREG_PREVIOUS_TABLE_VERSION: return c->previous >= 0 ? c->set[c->previous].version : 0u;
+    case PIEZO_IREG_PREVIOUS_TABLE_KIND: return c->previous >= 0 ? c->set[c->previous].kind : 0u;
     case PIEZO_IREG_PARAMS_RESULT: return m->params_result;
     case PIEZO_IREG_PARAMS_SOURCE: return m->params_source;
     case PIEZO_IREG_PARAMS_SEQ: return m->have_pstore ? piezo_pstore_seq(&m->pstore) : 0u;

@@ -42,6 +42,8 @@ const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N] = {
     {0x0126u, 1u, 0u, 1u, PIEZO_IREG_PARAMS_SOURCE},
     {0x0127u, 2u, 0u, 1u, PIEZO_IREG_PARAMS_SEQ},
     {0x0129u, 1u, 0u, 1u, PIEZO_IREG_PARAMS_IGNORED},
+    {0x012Au, 2u, 0u, 1u, PIEZO_IREG_PREVIOUS_TABLE_VERSION},
+    {0x012Cu, 1u, 0u, 1u, PIEZO_IREG_PREVIOUS_TABLE_KIND},
 };
 
 const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {

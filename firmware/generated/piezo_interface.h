@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0xCE578608u
+#define PIEZO_INTERFACE_CRC32 0x12DC418Au
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -178,6 +178,8 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_INPUT_PARAMS_SOURCE 0x0126u  /* uint16 */
 #define PIEZO_INPUT_PARAMS_SEQ 0x0127u  /* uint32 */
 #define PIEZO_INPUT_PARAMS_IGNORED 0x0129u  /* uint16 */
+#define PIEZO_INPUT_PREVIOUS_TABLE_VERSION 0x012Au  /* uint32 */
+#define PIEZO_INPUT_PREVIOUS_TABLE_KIND 0x012Cu  /* uint16 */
 #define PIEZO_HOLDING_UNLOCK 0x1000u  /* uint16 */
 #define PIEZO_HOLDING_MODE 0x1001u  /* uint16 */
 #define PIEZO_HOLDING_ARM 0x1002u  /* uint16 */
@@ -294,6 +296,8 @@ enum piezo_input_reg_id {
     PIEZO_IREG_PARAMS_SOURCE,
     PIEZO_IREG_PARAMS_SEQ,
     PIEZO_IREG_PARAMS_IGNORED,
+    PIEZO_IREG_PREVIOUS_TABLE_VERSION,
+    PIEZO_IREG_PREVIOUS_TABLE_KIND,
     PIEZO_IREG_N
 };
 extern const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N];

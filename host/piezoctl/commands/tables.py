@@ -1,4 +1,11 @@
-"""``piezoctl tables build --model MODEL.json --out TABLE.bin``: a coefficient table.
+"""``piezoctl tables build|list|rollback``: coefficient tables.
+
+``tables build --model MODEL.json --out TABLE.bin`` quantizes a model into a
+table image. ``tables list --port PORT`` shows the tables a controller holds
+(active, previous, staged, coupling: kind, CRC, version, stage identity);
+``tables rollback --port PORT`` returns to the previous table and shows the
+controller's reason when it refuses.
+
 
 The table is in the controller's q15 units, so the tool needs the
 controller's drive and position ranges: from ``--port`` (read from the
@@ -10,6 +17,7 @@ The image is checked as the firmware will check it before it is written.
 from __future__ import annotations
 
 from ..errors import CliError
+from ._options import add_output, add_port, emit
 from ..io.modelfile import load_model
 from ..tables.from_model import SUPPORTED_KINDS, Scale, table_from_model
 from ..tables.image import TableImageError, check_image
@@ -31,6 +39,61 @@ def add_parser(sub) -> None:
                    help="controller axis the table is for (default: the --port controller's, else 0)")
     b.add_argument("--table-version", type=int, help="version stamped in the header (default: Unix time)")
     b.set_defaults(func=run_build)
+    ls = tsub.add_parser("list", help="the tables a controller holds: active, previous, staged, coupling",
+                         description="The tables a controller holds: kind, CRC, version and stage identity "
+                                     "of the active table, the previous one (the rollback target), an upload "
+                                     "staged but not committed, and the cross-coupling table.")
+    add_port(ls)
+    add_output(ls)
+    ls.set_defaults(func=run_list)
+    rb = tsub.add_parser("rollback", help="back to the previous table (the controller's reason if it refuses)",
+                         description="Make the previous table active again (flash and RAM); the controller "
+                                     "refuses with its reason (no_previous, busy, storage_failed, ...) and "
+                                     "the running table keeps running.")
+    add_port(rb)
+    add_output(rb)
+    rb.set_defaults(func=run_rollback)
+
+
+ROLES = ("active", "previous", "staged", "coupling")
+
+
+def _table_line(role: str, t: dict | None) -> str:
+    if t is None:
+        return f"  {role:9s} none"
+    if t.get("kind") is None:
+        return f"  {role:9s} {t['bytes']} bytes uploaded (no complete header)"
+    sg = t["stage"]
+    ver = "-" if t["version"] is None else str(t["version"])
+    extra = f", {t['bytes']} bytes, not committed" if role == "staged" else ""
+    return (f"  {role:9s} {t['kind']:14s} crc {t['crc']:#010x} version {ver:>10s}  stage: axis {sg['axis']}, "
+            f"drive {sg['drive_min_v']:g}..{sg['drive_max_v']:g} V, position {sg['position_min_um']:g}.."
+            f"{sg['position_max_um']:g} um{extra}")
+
+
+def run_list(args) -> int:
+    from ..device import connect
+    ctl = connect(args.port)
+    tabs = ctl.tables()
+    emit(args, {"port": args.port, **tabs},
+         [f"tables on {args.port}:"] + [_table_line(r, tabs[r]) for r in ROLES])
+    return 0
+
+
+def run_rollback(args) -> int:
+    from ..device import TABLE_REASON_HELP, connect
+    from ..errors import ControllerRefused
+    ctl = connect(args.port)
+    before = ctl.tables()
+    reason = ctl.rollback_table()
+    if reason != "ok":
+        raise ControllerRefused(f"the controller refused the rollback: {reason} "
+                                f"({TABLE_REASON_HELP.get(reason, 'see docs/protocol.md')}); "
+                                "the running table keeps running")
+    after = ctl.tables()
+    emit(args, {"port": args.port, "result": reason, "before": before, "after": after},
+         [f"rolled back on {args.port}: the running table is now"] + [_table_line("active", after["active"])])
+    return 0
 
 
 def scale_for(args, model) -> Scale:
