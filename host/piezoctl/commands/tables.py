@@ -18,19 +18,16 @@ from __future__ import annotations
 
 from ..errors import CliError
 from ._options import add_output, add_port, emit
-from ..io.modelfile import load_model
-from ..tables.from_model import SUPPORTED_KINDS, Scale, table_from_model
-from ..tables.image import TableImageError, check_image
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("tables", help="build coefficient tables from identified models")
+    p = sub.add_parser("tables", help="coefficient tables: build from a model, list a controller's, roll back")
     tsub = p.add_subparsers(dest="tables_command", metavar="SUBCOMMAND", required=True)
     b = tsub.add_parser("build", help="quantize a model file into a table image (TABLE.bin)",
                         description=__doc__.splitlines()[0])
     b.add_argument("--model", required=True, metavar="MODEL.json")
     b.add_argument("--out", required=True, metavar="TABLE.bin")
-    b.add_argument("--port", help="read the controller's ranges from it (tcp:HOST:PORT, rtu:DEV[:BAUD], usb[:VID:PID])")
+    add_port(b, required=False, help="read the controller's ranges (and axis) from it")
     b.add_argument("--drive-range", nargs=2, type=float, metavar=("V_MIN", "V_MAX"),
                    help="drive of q15 -1 and +1 [V]")
     b.add_argument("--position-range", nargs=2, type=float, metavar=("UM_MIN", "UM_MAX"),
@@ -38,6 +35,7 @@ def add_parser(sub) -> None:
     b.add_argument("--axis", type=int, default=None,
                    help="controller axis the table is for (default: the --port controller's, else 0)")
     b.add_argument("--table-version", type=int, help="version stamped in the header (default: Unix time)")
+    add_output(b)
     b.set_defaults(func=run_build)
     ls = tsub.add_parser("list", help="the tables a controller holds: active, previous, staged, coupling",
                          description="The tables a controller holds: kind, CRC, version and stage identity "
@@ -96,7 +94,9 @@ def run_rollback(args) -> int:
     return 0
 
 
-def scale_for(args, model) -> Scale:
+def scale_for(args, model):
+    """The controller's ranges (a :class:`piezoctl.tables.from_model.Scale`) for a table build."""
+    from ..tables.from_model import Scale
     if args.port:
         from ..device import connect
         ctl = connect(args.port)
@@ -118,6 +118,10 @@ def scale_for(args, model) -> Scale:
 
 
 def run_build(args) -> int:
+    # heavy imports here, not at the top: piezoctl --help stays fast
+    from ..io.modelfile import load_model
+    from ..tables.from_model import SUPPORTED_KINDS, table_from_model
+    from ..tables.image import TableImageError, check_image
     model = load_model(args.model)
     if model.kind not in SUPPORTED_KINDS:
         raise CliError(f"{args.model}: model kind {model.kind!r} has no firmware table "
@@ -130,6 +134,8 @@ def run_build(args) -> int:
         raise CliError(f"table refused: {exc}") from None
     with open(args.out, "wb") as fh:
         fh.write(img)
-    print(f"{args.out}: {SUPPORTED_KINDS[model.kind]} table, {len(img)} bytes, version {t.header['table_version']}, "
-          f"crc {t.crc:#010x}")
+    emit(args, {"out": args.out, "kind": SUPPORTED_KINDS[model.kind], "bytes": len(img),
+                "version": t.header["table_version"], "crc": t.crc, "axis": t.header["axis"]},
+         f"{args.out}: {SUPPORTED_KINDS[model.kind]} table, {len(img)} bytes, version {t.header['table_version']}, "
+         f"crc {t.crc:#010x}")
     return 0
