@@ -635,8 +635,8 @@ class Controller:
         if unknown:
             raise CliError(f"unknown parameter(s): {', '.join(unknown)}")
         if self.status()["armed"]:
-            raise DeviceError("parameters change only while disarmed: piezoctl servo off does not disarm; "
-                              "disarm first (the drive then ramps to its safe value)")
+            raise DeviceError("parameters change only while disarmed: run piezoctl servo off --disarm first "
+                              "(the drive then ramps to its safe value)")
         cur = self.read_params()
         cur.update(values)
         self.unlock()

@@ -197,6 +197,9 @@ def test_params_bad_input_changes_nothing(sil, capsys):
     assert rc == 4 and "disarmed" in err
     rc, _out, err = run(capsys, "params", "save", "--port", sil.spec)
     assert rc == 4 and "armed" in err
+    rc, res = run_json(capsys, "servo", "off", "--disarm", "--port", sil.spec)
+    assert rc == 0 and not res["armed"]
+    assert run(capsys, "params", "set", "--port", sil.spec, "pid_kp=0.01")[0] == 0
 
 
 def test_params_round_trip_through_a_file(sil, capsys, tmp_path):

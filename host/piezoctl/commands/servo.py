@@ -12,6 +12,9 @@ the drive of the moment (mode ``direct``, setpoint = that drive); the stage
 then creeps and drifts as a piezo does without feedback. It does not disarm
 (disarming ramps the drive to its safe value). On a disarmed controller the
 servo is off already: nothing changes.
+
+``off --disarm``: disarm as well (the drive ramps to its safe value at the
+slew limit; the stage moves with it). Parameters change only disarmed.
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("servo", help="closed loop on (at the present position) or off (hold the drive)",
                        description=__doc__.splitlines()[0])
     p.add_argument("state", choices=["on", "off"], help="on: closed loop; off: open loop holding the drive")
+    p.add_argument("--disarm", action="store_true",
+                   help="with off: disarm too (the drive ramps to its safe value; needed to change parameters)")
     add_port(p)
     add_output(p)
     p.set_defaults(func=run)
@@ -34,7 +39,14 @@ def run(args) -> int:
     ctl = connect(args.port)
     st = ctl.status()
     on = args.state == "on"
-    if not on and not st["armed"]:
+    if args.disarm and on:
+        raise CliError("--disarm goes with servo off")
+    if args.disarm:
+        if st["armed"]:
+            ctl.arm(False)
+            st = ctl.status()
+        note = "disarmed: the drive ramps to its safe value"
+    elif not on and not st["armed"]:
         note = "the controller is disarmed: the servo is off already (the drive rests at its safe value)"
     else:
         if on:
