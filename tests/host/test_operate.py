@@ -86,14 +86,15 @@ def test_servo_on_move_wait_position_follow_servo_off(sil, capsys):
     lines = [json.loads(x) for x in out.splitlines()]
     assert rc == 0 and len(lines) == 3
     assert all(abs(r["position_um"] - 12) < 0.1 and r["mode"] == "feedback" for r in lines)
-    # servo off: the drive of the moment is held, open loop
+    # servo off: the drive of the moment is held, open loop (the jump-free
+    # switch itself is checked tick by tick in tests/firmware/params_store.c)
     ctl = connect(sil.spec)
-    u_before = ctl.status()["drive_q15"]
     rc, res = run_json(capsys, "servo", "off", "--port", sil.spec)
     assert rc == 0 and res["mode"] == "direct" and res["armed"]
-    st = ctl.status()
-    assert abs(st["drive_q15"] - u_before) <= 40                 # held (the loop moved it by noise only)
-    assert ctl.client.read_holding(interface.HOLDING_REGISTERS["setpoint_q15"][0], 1)[0] == st["drive_q15"] & 0xFFFF
+    held = {ctl.status()["drive_q15"] for _ in range(20)}
+    assert len(held) == 1                                         # constant while the position drifts
+    setpoint = ctl.client.read_holding(interface.HOLDING_REGISTERS["setpoint_q15"][0], 1)[0]
+    assert setpoint == held.pop() & 0xFFFF
     rc, _out, err = run(capsys, "move", "--port", sil.spec, "--position", "11")
     assert rc == 2 and "servo is off" in err
     # servo on again from the held drive: closed loop at the present position
