@@ -61,6 +61,32 @@ def check_registers(name: str, regs: list[dict]) -> None:
             used[a] = r["name"]
 
 
+def check_enums(d: dict) -> None:
+    """Every enumeration numbers its values 0..n-1 in order; every register's
+    ``enum`` names one."""
+    for name, e in d["enums"].items():
+        if [v[1] for v in e["values"]] != list(range(len(e["values"]))):
+            raise SystemExit(f"gen-interface: enum {name}: values must be 0..n-1 in order")
+    for space in ("input", "holding"):
+        for r in d["modbus"][space]:
+            if "enum" in r and r["enum"] not in d["enums"]:
+                raise SystemExit(f"gen-interface: {space} register {r['name']}: no enum {r['enum']!r}")
+
+
+def param_block(d: dict) -> tuple[int, int, list[dict]]:
+    """The configuration registers (access "c"): first address, words, the
+    registers in address order. They must be one contiguous block, each with a unit."""
+    regs = sorted((r for r in d["modbus"]["holding"] if r.get("access") == "c"), key=lambda r: r["address"])
+    addr = regs[0]["address"]
+    for r in regs:
+        if r["address"] != addr:
+            raise SystemExit(f"gen-interface: configuration register {r['name']} leaves a gap before it")
+        if "unit" not in r:
+            raise SystemExit(f"gen-interface: configuration register {r['name']} has no unit")
+        addr += REGS[r["type"]] * r.get("count", 1)
+    return regs[0]["address"], addr - regs[0]["address"], regs
+
+
 def field_bytes(f: dict) -> int:
     return SIZES[f["type"]] * f.get("count", 1)
 
@@ -207,6 +233,26 @@ def gen_c(d: dict, crc: int) -> tuple[str, str]:
             h.append(f"    PIEZO_{short}_{r['name'].upper()},")
         h += [f"    PIEZO_{short}_N", "};",
               f"extern const piezo_reg_desc_t piezo_{space}_regs[PIEZO_{short}_N];"]
+    h += ["", "/* Enumerations: the values of the registers that name a choice */"]
+    for name, e in d["enums"].items():
+        h.append(f"/* {e['doc']} */")
+        h.append(f"enum piezo_enum_{name} {{")
+        for vname, v, vdoc in e["values"]:
+            h.append(f"    {e['c_prefix']}_{vname.upper()} = {v},  /* {vdoc} */")
+        h += [f"    {e['c_prefix']}_N = {len(e['values'])}", "};"]
+    pr = d["params"]
+    first, words, _regs = param_block(d)
+    h += ["", f"/* Controller parameters in flash: {pr['doc']} */",
+          f"#define PIEZO_PARAMS_MAGIC 0x{pr['magic']:08X}u",
+          f"#define PIEZO_PARAMS_SLOT_BYTES {pr['slot_bytes']}u",
+          f"#define PIEZO_PARAMS_FIRST 0x{first:04X}u  /* the configuration block */",
+          f"#define PIEZO_PARAMS_WORDS {words}u"]
+    reasons = sorted(pr["reasons"].items(), key=lambda kv: kv[1])
+    if [v for _k, v in reasons] != list(range(len(reasons))):
+        raise SystemExit("gen-interface: params reasons must be 0..n-1")
+    for k, v in reasons:
+        h.append(f"#define PIEZO_PARAMS_REASON_{k.upper()} {v}u")
+    h.append(f"#define PIEZO_PARAMS_REASON_N {len(reasons)}u")
     h.append("")
     for k, v in d["faults"].items():
         h.append(f"#define PIEZO_FAULT_{k.upper()} (1u << {v})")
@@ -296,6 +342,21 @@ def gen_py(d: dict, crc: int) -> str:
     lines.append("# holding registers that are read-only (r) or configuration (c)")
     lines.append(f"HOLDING_ACCESS = {acc!r}")
     lines.append(f"FAULT_BITS = {json.dumps(d['faults'])}")
+    lines.append("# enumeration -> {value name: number}")
+    lines.append(f"ENUMS = {({k: {v[0]: v[1] for v in e['values']} for k, e in d['enums'].items()})!r}")
+    lines.append("# enumeration -> {value name: description}")
+    lines.append(f"ENUM_DOCS = {({k: {v[0]: v[2] for v in e['values']} for k, e in d['enums'].items()})!r}")
+    lines.append("# register name -> enumeration it holds")
+    lines.append(f"REGISTER_ENUMS = {({r['name']: r['enum'] for sp in ('input', 'holding') for r in d['modbus'][sp] if 'enum' in r})!r}")
+    pr = d["params"]
+    first, words, regs = param_block(d)
+    lines.append(f"PARAMS_MAGIC = 0x{pr['magic']:08X}")
+    lines.append(f"PARAMS_SLOT_BYTES = {pr['slot_bytes']}")
+    lines.append(f"PARAMS_FIRST = 0x{first:04X}")
+    lines.append(f"PARAMS_WORDS = {words}")
+    lines.append(f"PARAMS_REASONS = {json.dumps(pr['reasons'])}")
+    lines.append("# the controller parameters: (name, address, type, count, unit, doc), in address order")
+    lines.append(f"PARAMS = {[(r['name'], r['address'], r['type'], r.get('count', 1), r['unit'], r.get('doc', '')) for r in regs]!r}")
     lines.append("")
     return "\n".join(lines)
 
@@ -308,6 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         d = tomllib.load(fh)
     for space in ("input", "holding"):
         check_registers(space, d["modbus"][space])
+    check_enums(d)
     ids = [v["id"] for v in d["table"]["sections"].values()]
     if len(set(ids)) != len(ids):
         raise SystemExit("gen-interface: duplicate table section id")

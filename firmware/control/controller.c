@@ -170,6 +170,53 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
     return y;
 }
 
+/* Fill the preview line and the shaper history with r: a reference that has
+ * been r forever (no step out of the delay lines). */
+static void fill_reference(piezo_ctl_t *c, int16_t r)
+{
+    for (uint8_t i = 0; i < PIEZO_CTL_MAX_PREVIEW; i++) {
+        c->ref_fifo[i] = r;
+    }
+    for (uint8_t i = 0; i < 2u * PIEZO_CTL_MAX_SHAPER + 1u; i++) {
+        c->shaper_hist[i] = r;
+    }
+}
+
+/* The servo switch, at a tick boundary (piezo_ctl_servo). u_now is the
+ * drive the limit applied at the last tick. Off: hold it open loop (DIRECT
+ * with the setpoint = that drive). On: FEEDBACK at the last position, the
+ * integrator (q39) and the notch history preloaded so that e = 0 gives u_now. */
+static void servo_switch(piezo_ctl_t *c, uint8_t req)
+{
+    int16_t u_now = c->limit.prev_q15;
+    c->wave.running = 0u;
+    c->ref_source = PIEZO_REF_SETPOINT;
+    if (req == 1u) {
+        if (!c->st.armed) {
+            return;
+        }
+        c->setpoint_q15 = u_now;
+        fill_reference(c, u_now);
+        c->mode = PIEZO_MODE_DIRECT;
+        return;
+    }
+    {
+        const piezo_pid_coef_t *k = &c->cfg.pid;
+        int16_t u = u_now < k->out_min_q15 ? k->out_min_q15 : (u_now > k->out_max_q15 ? k->out_max_q15 : u_now);
+        c->setpoint_q15 = c->sig[PIEZO_SIG_Y];
+        fill_reference(c, c->setpoint_q15);
+        piezo_pid_reset(&c->pid);
+        c->pid.integ_q39 = (int64_t)u * ((int64_t)1 << 24);
+        c->pid.out_q15 = u;
+        piezo_biquad_reset(&c->notch);
+        c->notch.x1_q15 = u;
+        c->notch.x2_q15 = u;
+        c->notch.y1_q31 = (int32_t)u * 65536;
+        c->notch.y2_q31 = (int32_t)u * 65536;
+        c->mode = PIEZO_MODE_FEEDBACK;
+    }
+}
+
 void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 {
     const piezo_ctl_cfg_t *g = &c->cfg;
@@ -188,6 +235,11 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     if (pend >= 0) {
         c->xc_active = pend;
         c->xc_pending = -1;
+    }
+    if (c->servo_req != 0u) {
+        servo_switch(c, c->servo_req);
+        c->servo_req = 0u;
+        mode = c->mode;
     }
 
     /* 2-3. sensor */
@@ -298,6 +350,30 @@ int piezo_ctl_arm(piezo_ctl_t *c, uint8_t on)
         return PIEZO_EORDER; /* clear the faults first */
     }
     reset_loop_state(c);
+    c->st.armed = 1u;
+    return PIEZO_OK;
+}
+
+int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on)
+{
+    if (!on) {
+        if (!c->st.armed) {
+            return PIEZO_EORDER; /* disarmed: the drive rests at u_safe already */
+        }
+        c->servo_req = 1u;
+        return PIEZO_OK;
+    }
+    if (c->st.armed) {
+        c->servo_req = 2u;
+        return PIEZO_OK;
+    }
+    if (c->st.faults != 0u) {
+        return PIEZO_EORDER; /* clear the faults first */
+    }
+    /* the request before the arm: the tick that first runs armed has done it
+     * (a tick in between runs it disarmed, which only sets state up) */
+    reset_loop_state(c);
+    c->servo_req = 2u;
     c->st.armed = 1u;
     return PIEZO_OK;
 }

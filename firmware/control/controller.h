@@ -3,7 +3,9 @@
  * commands the protocol layer issues between ticks.
  *
  * The tick, in this fixed order (controller.c):
- *   1. swap in a committed coefficient set (only here: a tick boundary)
+ *   1. swap in a committed coefficient set (only here: a tick boundary);
+ *      a servo off/on request (piezo_ctl_servo) switches mode and
+ *      reference here too, so no tick sees half of it
  *   2. read the ADC code and check it (plausibility: inside the sensor's
  *      valid code range, and no jump larger than max_jump per tick; bad_limit
  *      consecutive bad samples raise the sensor fault)
@@ -55,29 +57,10 @@
 #include "store.h"
 #include "wave.h"
 
-enum piezo_mode {
-    PIEZO_MODE_IDLE = 0,
-    PIEZO_MODE_OPEN_LOOP = 1,
-    PIEZO_MODE_FEEDFORWARD = 2,
-    PIEZO_MODE_FF_FEEDBACK = 3,
-    PIEZO_MODE_FEEDBACK = 4,
-    PIEZO_MODE_DIRECT = 5    /* the reference is the drive (q15): excitation for identification */
-};
-
-enum piezo_ref_source { PIEZO_REF_SETPOINT = 0, PIEZO_REF_WAVE = 1 };
-
-/* Signal ids: what the recorder can keep (all q15). */
-enum piezo_signal {
-    PIEZO_SIG_REF = 0,   /* reference r */
-    PIEZO_SIG_Y = 1,     /* scaled sensor y */
-    PIEZO_SIG_U = 2,     /* drive after clamp and slew limit */
-    PIEZO_SIG_ERR = 3,   /* r - y */
-    PIEZO_SIG_FF = 4,    /* feedforward output */
-    PIEZO_SIG_FB = 5,    /* feedback output */
-    PIEZO_SIG_Y2 = 6,    /* the other axis' sensor (second ADC channel) */
-    PIEZO_SIG_U2 = 7,    /* the other axis' drive as commanded by the host */
-    PIEZO_SIG_N = 8
-};
+/* The mode (enum piezo_enum_mode: PIEZO_MODE_*), the reference source (enum
+ * piezo_enum_ref_source: PIEZO_REF_*) and the recorder's signal ids (enum
+ * piezo_enum_rec_signals: PIEZO_SIG_*, all q15) are the interface's enumerations
+ * (common/interface.toml [enums], generated into piezo_interface.h). */
 
 /* Sizes a target may override (-D): the host's defaults fill a 10 kHz run of
  * 6.5 s on one channel; a 128 KiB microcontroller takes fewer. */
@@ -159,6 +142,7 @@ typedef struct {
     volatile int8_t active;    /* index into set[], -1 = no table */
     volatile int8_t pending;   /* committed set waiting for the tick, -1 = none */
     int8_t previous;           /* rollback target, -1 = none */
+    volatile uint8_t servo_req; /* 0 none, 1 servo off, 2 servo on: done by the tick (step 1) */
 
     /* cross-coupling table: slots of its own, committed, swapped at the tick
      * boundary and rolled back like the feedforward sets; RAM only (the flash
@@ -226,6 +210,18 @@ void piezo_ctl_overrun(piezo_ctl_t *c);
 int piezo_ctl_set_mode(piezo_ctl_t *c, uint8_t mode);
 int piezo_ctl_arm(piezo_ctl_t *c, uint8_t on);
 void piezo_ctl_clear_faults(piezo_ctl_t *c);
+/** Servo off (on = 0): open loop holding the drive applied now. The setpoint
+ *  becomes that drive, the reference source the setpoint, the mode DIRECT,
+ *  the wave stops, the preview line and shaper history are filled with it:
+ *  the next ticks apply the same drive (no jump). Only while armed
+ *  (PIEZO_EORDER otherwise: disarmed, the drive is u_safe already).
+ *  Servo on (on = 1): closed loop at the present position. The setpoint
+ *  becomes the position y, the reference source the setpoint, the mode
+ *  FEEDBACK; the PID integrator is preloaded with the drive applied now
+ *  (clamped to the PID's output range) and the notch's history with its
+ *  steady state, so the first feedback output equals that drive (no jump).
+ *  A disarmed unit is armed (PIEZO_EORDER with faults). */
+int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on);
 int piezo_ctl_start_wave(piezo_ctl_t *c);  /* from wave_cfg; triggers a SOFTWARE recorder */
 void piezo_ctl_stop_wave(piezo_ctl_t *c);
 

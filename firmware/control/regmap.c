@@ -5,8 +5,32 @@
 
 #include "piezo_err.h"
 #include "piezo_interface.h"
+#include "table_image.h"
 
 #define FW_VERSION ((0u << 16) | (1u << 8) | 0u)
+
+/* The interface's enumerations are the wire values; the core kernels keep
+ * their own enums (they do not depend on the interface): they must agree.
+ * (C99: a negative array size fails the build; int casts: the enums differ.) */
+typedef char piezo_wave_kinds_agree[((int)PIEZO_WAVE_KIND_SINE == (int)PIEZO_WAVE_SINE &&
+                                     (int)PIEZO_WAVE_KIND_TRIANGLE == (int)PIEZO_WAVE_TRIANGLE &&
+                                     (int)PIEZO_WAVE_KIND_MULTISINE == (int)PIEZO_WAVE_MULTISINE &&
+                                     (int)PIEZO_WAVE_KIND_CHIRP == (int)PIEZO_WAVE_CHIRP &&
+                                     (int)PIEZO_WAVE_KIND_STEPS == (int)PIEZO_WAVE_STEPS &&
+                                     (int)PIEZO_WAVE_KIND_ARBITRARY == (int)PIEZO_WAVE_ARBITRARY &&
+                                     (int)PIEZO_WAVE_KIND_N == (int)PIEZO_WAVE_ARBITRARY + 1)
+                                        ? 1
+                                        : -1];
+typedef char piezo_rec_triggers_agree[((int)PIEZO_REC_TRIGGER_IMMEDIATE == (int)PIEZO_REC_IMMEDIATE &&
+                                       (int)PIEZO_REC_TRIGGER_SOFTWARE == (int)PIEZO_REC_SOFTWARE &&
+                                       (int)PIEZO_REC_TRIGGER_RISING == (int)PIEZO_REC_RISING &&
+                                       (int)PIEZO_REC_TRIGGER_FALLING == (int)PIEZO_REC_FALLING &&
+                                       (int)PIEZO_REC_TRIGGER_N == (int)PIEZO_REC_FALLING + 1 &&
+                                       (int)PIEZO_REC_STATE_DONE == (int)PIEZO_REC_DONE &&
+                                       (int)PIEZO_REC_STATE_TRIGGERED == (int)PIEZO_REC_TRIGGERED &&
+                                       (int)PIEZO_REC_STATE_ARMED == (int)PIEZO_REC_ARMED)
+                                          ? 1
+                                          : -1];
 
 void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl)
 {
@@ -16,6 +40,10 @@ void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl)
     m->tick_hz = 10000u;
     m->fw_version = FW_VERSION;
     m->rec_cfg = ctl->rec.cfg;
+    m->params_defaults = ctl->cfg;
+    m->params_source = PIEZO_PARAMS_SRC_DEFAULTS;
+    m->params_result = PIEZO_PARAMS_REASON_NONE_STORED;
+    m->params_ignored = PIEZO_PARAMS_REASON_OK;
 }
 
 void piezo_regmap_provision(piezo_regmap_t *m, uint32_t key)
@@ -103,6 +131,12 @@ static uint32_t input_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, 
     }
     case PIEZO_IREG_STAGED_BYTES: return c->staged_len;
     case PIEZO_IREG_COUPLING_TABLE_CRC: return piezo_ctl_coupling_crc(c);
+    case PIEZO_IREG_PREVIOUS_TABLE_VERSION: return c->previous >= 0 ? c->set[c->previous].version : 0u;
+    case PIEZO_IREG_PREVIOUS_TABLE_KIND: return c->previous >= 0 ? c->set[c->previous].kind : 0u;
+    case PIEZO_IREG_PARAMS_RESULT: return m->params_result;
+    case PIEZO_IREG_PARAMS_SOURCE: return m->params_source;
+    case PIEZO_IREG_PARAMS_SEQ: return m->have_pstore ? piezo_pstore_seq(&m->pstore) : 0u;
+    case PIEZO_IREG_PARAMS_IGNORED: return m->params_ignored;
     case PIEZO_IREG_REC_WRITTEN: return piezo_rec_written(&c->rec);
     default: return 0u;
     }
@@ -212,6 +246,7 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
         return lo | (hi << 8);
     }
     case PIEZO_HREG_TABLE_COMMAND: return 0u;
+    case PIEZO_HREG_PARAMS_COMMAND: return 0u;
     case PIEZO_HREG_PID_KP_Q24: return u32_of_i(g->pid.kp_q24);
     case PIEZO_HREG_PID_KI_Q24: return u32_of_i(g->pid.ki_q24);
     case PIEZO_HREG_PID_KD_Q24: return u32_of_i(g->pid.kd_q24);
@@ -262,32 +297,40 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     uint32_t v = p->value;
     switch (p->d->id) {
     case PIEZO_HREG_UNLOCK: return v == 0u;
-    case PIEZO_HREG_MODE: return v <= PIEZO_MODE_DIRECT && !c->st.armed;
+    case PIEZO_HREG_MODE: return v < PIEZO_MODE_N && !c->st.armed;
     case PIEZO_HREG_ARM: return v <= 1u && (v == 0u || c->st.faults == 0u);
     case PIEZO_HREG_COMMAND:
-        if (v == 4u) {
+        if (v == PIEZO_CMD_SERVO_OFF) {
+            return c->st.armed; /* disarmed, the drive rests at u_safe already */
+        }
+        if (v == PIEZO_CMD_SERVO_ON) {
+            return c->st.armed || c->st.faults == 0u;
+        }
+        if (v == PIEZO_CMD_ARM_RECORDER) {
             /* arming applies the recorder configuration: it must fit */
             piezo_rec_t trial = c->rec;
             trial.state = PIEZO_REC_IDLE;
             return piezo_rec_configure(&trial, &m->rec_cfg) == PIEZO_OK;
         }
-        return v >= 1u && v <= 6u;
-    case PIEZO_HREG_REF_SOURCE: return v <= PIEZO_REF_WAVE;
-    case PIEZO_HREG_WAVE_KIND: return v <= PIEZO_WAVE_ARBITRARY;
+        return v > PIEZO_CMD_NONE && v < PIEZO_CMD_N;
+    case PIEZO_HREG_REF_SOURCE: return v < PIEZO_REF_N;
+    case PIEZO_HREG_WAVE_KIND: return v < PIEZO_WAVE_KIND_N;
     case PIEZO_HREG_WAVE_N_TONES: return v <= PIEZO_WAVE_MAX_TONES;
     case PIEZO_HREG_WAVE_N_LEVELS: return v <= PIEZO_CTL_WAVE_MAX_LEVELS;
     case PIEZO_HREG_REC_N_CHANNELS: return v >= 1u && v <= PIEZO_REC_MAX_CHANNELS;
     case PIEZO_HREG_REC_SIGNALS:
     case PIEZO_HREG_REC_TRIGGER_SIGNAL: return v < PIEZO_SIG_N;
     case PIEZO_HREG_REC_DECIMATION: return v >= 1u && v <= 0xFFFFu;
-    case PIEZO_HREG_REC_TRIGGER: return v <= PIEZO_REC_FALLING;
+    case PIEZO_HREG_REC_TRIGGER: return v < PIEZO_REC_TRIGGER_N;
     case PIEZO_HREG_REC_RING: return v <= 1u;
     case PIEZO_HREG_TABLE_OFFSET: return v < PIEZO_TABLE_MAX_BYTES && (v & 1u) == 0u;
     case PIEZO_HREG_TABLE_WINDOW:
         /* this session's upload, or a new one */
         return piezo_ctl_is_unlocked(c, m->session) &&
                (c->staged_len == 0u || c->staged_owner < 0 || c->staged_owner == (int8_t)m->session);
-    case PIEZO_HREG_TABLE_COMMAND: return v >= 1u && v <= 3u && piezo_ctl_is_unlocked(c, m->session);
+    case PIEZO_HREG_TABLE_COMMAND:
+        return v > PIEZO_TABLE_CMD_NONE && v < PIEZO_TABLE_CMD_N && piezo_ctl_is_unlocked(c, m->session);
+    case PIEZO_HREG_PARAMS_COMMAND: return v > PIEZO_PARAMS_CMD_NONE && v < PIEZO_PARAMS_CMD_N; /* refusals: params_result */
     case PIEZO_HREG_BAD_LIMIT: return v >= 1u;
     case PIEZO_HREG_PREVIEW_TICKS: return v <= PIEZO_CTL_MAX_PREVIEW;
     case PIEZO_HREG_SHAPER_TICKS: return v <= PIEZO_CTL_MAX_SHAPER;
@@ -340,7 +383,7 @@ static int config_ok(const piezo_ctl_cfg_t *g)
 }
 
 /* Stores a checked value; runs its action. */
-static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd)
+static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd, uint16_t *params_cmd)
 {
     piezo_ctl_t *c = m->ctl;
     piezo_wave_cfg_t *w = &c->wave_cfg;
@@ -356,15 +399,17 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd)
     case PIEZO_HREG_SETPOINT_Q15: c->setpoint_q15 = s16(v); break;
     case PIEZO_HREG_COMMAND:
         switch (v) {
-        case 1: piezo_ctl_clear_faults(c); break;
-        case 2: (void)piezo_ctl_start_wave(c); break;
-        case 3: piezo_ctl_stop_wave(c); break;
-        case 4:
+        case PIEZO_CMD_CLEAR_FAULTS: piezo_ctl_clear_faults(c); break;
+        case PIEZO_CMD_START_WAVE: (void)piezo_ctl_start_wave(c); break;
+        case PIEZO_CMD_STOP_WAVE: piezo_ctl_stop_wave(c); break;
+        case PIEZO_CMD_ARM_RECORDER:
             piezo_rec_reset(&c->rec);
             (void)piezo_rec_configure(&c->rec, &m->rec_cfg); /* checked in legal() */
             piezo_rec_arm(&c->rec);
             break;
-        case 5: piezo_rec_trigger(&c->rec); break;
+        case PIEZO_CMD_TRIGGER_RECORDER: piezo_rec_trigger(&c->rec); break;
+        case PIEZO_CMD_SERVO_OFF: (void)piezo_ctl_servo(c, 0u); break; /* checked in legal() */
+        case PIEZO_CMD_SERVO_ON: (void)piezo_ctl_servo(c, 1u); break;
         default: piezo_rec_reset(&c->rec); break;
         }
         break;
@@ -418,8 +463,165 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd)
         break;
     }
     case PIEZO_HREG_TABLE_COMMAND: *table_cmd = (uint16_t)v; break;
+    case PIEZO_HREG_PARAMS_COMMAND: *params_cmd = (uint16_t)v; break;
     default: break;
     }
+}
+
+/* Checked configuration into the running controller: re-binding resets the
+ * filter, the integrator and the preview line (the unit is disarmed). */
+static void rebind(piezo_ctl_t *c)
+{
+    c->fifo_pos = 0u;
+    c->shaper_pos = 0u;
+    (void)piezo_pid_init(&c->pid, &c->cfg.pid);
+    (void)piezo_biquad_init(&c->notch, &c->cfg.notch);
+    (void)piezo_limit_init(&c->limit, &c->cfg.limit, c->limit.prev_q15);
+}
+
+/* ---------------------------------------------------------------- parameters
+ * The payload of a parameter record (param_store.h), little-endian:
+ *   0 interface CRC (uint32): a record of another register map is refused
+ *   4 word count (uint16) = PIEZO_PARAMS_WORDS, 6 reserved (0)
+ *   8 the configuration block's register words, PIEZO_PARAMS_FIRST on */
+#define PARAMS_PAYLOAD_BYTES (8u + 2u * PIEZO_PARAMS_WORDS)
+
+/* The configuration block's words, as a read of the registers gives them. */
+static void params_words(const piezo_regmap_t *m, uint16_t *words)
+{
+    (void)read_space(m, piezo_holding_regs, PIEZO_HREG_N, holding_value, PIEZO_PARAMS_FIRST,
+                     (uint16_t)PIEZO_PARAMS_WORDS, words);
+}
+
+/* The configuration the words give, checked as a register write checks it
+ * (each value legal, the whole accepted by the modules). 0 or -1. */
+static int params_config(const piezo_regmap_t *m, const uint16_t *words, piezo_ctl_cfg_t *out)
+{
+    piezo_ctl_cfg_t trial = m->ctl->cfg;
+    pending_t p = {NULL, 0u, 0u};
+    for (uint16_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
+        uint32_t w;
+        const piezo_reg_desc_t *d = find(piezo_holding_regs, PIEZO_HREG_N, (uint16_t)(PIEZO_PARAMS_FIRST + i), &w);
+        if (d == NULL || (d->flags & PIEZO_REG_CONFIG) == 0u) {
+            return -1;
+        }
+        p.d = d;
+        p.elem = d->words == 2u ? w >> 1 : w;
+        if (d->words == 1u) {
+            p.value = words[i];
+        } else if ((w & 1u) == 0u) {
+            p.value = (uint32_t)words[i] << 16;
+            continue; /* the low word completes it */
+        } else {
+            p.value |= words[i];
+        }
+        if (!legal(m, &p)) {
+            return -1;
+        }
+        (void)apply_config(&trial, &p);
+    }
+    if (!config_ok(&trial)) {
+        return -1;
+    }
+    *out = trial;
+    return 0;
+}
+
+/* Load the active record into the controller (boot, params load). */
+static uint16_t params_load(piezo_regmap_t *m)
+{
+    uint8_t buf[PIEZO_PSTORE_MAX_PAYLOAD];
+    uint16_t words[PIEZO_PARAMS_WORDS];
+    piezo_ctl_cfg_t cfg;
+    uint32_t len;
+    if (!m->have_pstore) {
+        return PIEZO_PARAMS_REASON_STORAGE_FAILED;
+    }
+    len = piezo_pstore_load(&m->pstore, buf, sizeof buf);
+    if (len == 0u) {
+        return m->pstore.active < 0 ? PIEZO_PARAMS_REASON_NONE_STORED : PIEZO_PARAMS_REASON_STORAGE_FAILED;
+    }
+    if (len < 8u || piezo_le32(buf) != PIEZO_INTERFACE_CRC32) {
+        return PIEZO_PARAMS_REASON_BAD_LAYOUT;
+    }
+    if (len != PARAMS_PAYLOAD_BYTES || ((uint32_t)buf[4] | (uint32_t)buf[5] << 8) != PIEZO_PARAMS_WORDS) {
+        return PIEZO_PARAMS_REASON_BAD_LENGTH;
+    }
+    for (uint32_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
+        words[i] = (uint16_t)(buf[8u + 2u * i] | (uint16_t)(buf[9u + 2u * i] << 8));
+    }
+    if (params_config(m, words, &cfg) != 0) {
+        return PIEZO_PARAMS_REASON_OUT_OF_RANGE;
+    }
+    m->ctl->cfg = cfg;
+    rebind(m->ctl);
+    m->params_source = PIEZO_PARAMS_SRC_FLASH;
+    return PIEZO_PARAMS_REASON_OK;
+}
+
+static uint16_t params_save(piezo_regmap_t *m)
+{
+    uint8_t buf[PARAMS_PAYLOAD_BYTES];
+    uint16_t words[PIEZO_PARAMS_WORDS];
+    uint16_t r;
+    if (!m->have_pstore) {
+        return PIEZO_PARAMS_REASON_STORAGE_FAILED;
+    }
+    params_words(m, words);
+    for (uint32_t i = 0; i < 4u; i++) {
+        buf[i] = (uint8_t)(PIEZO_INTERFACE_CRC32 >> (8u * i));
+    }
+    buf[4] = (uint8_t)PIEZO_PARAMS_WORDS;
+    buf[5] = (uint8_t)(PIEZO_PARAMS_WORDS >> 8);
+    buf[6] = 0u;
+    buf[7] = 0u;
+    for (uint32_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
+        buf[8u + 2u * i] = (uint8_t)words[i];
+        buf[9u + 2u * i] = (uint8_t)(words[i] >> 8);
+    }
+    r = piezo_pstore_save(&m->pstore, buf, sizeof buf);
+    if (r == PIEZO_PARAMS_REASON_OK) {
+        m->params_source = PIEZO_PARAMS_SRC_FLASH;
+    }
+    return r;
+}
+
+/* params_command: save, load or defaults, by an unlocked session on a disarmed unit. */
+static void params_command(piezo_regmap_t *m, uint16_t cmd)
+{
+    piezo_ctl_t *c = m->ctl;
+    uint16_t r;
+    if (!piezo_ctl_is_unlocked(c, m->session)) {
+        r = PIEZO_PARAMS_REASON_LOCKED;
+    } else if (c->st.armed) {
+        r = PIEZO_PARAMS_REASON_ARMED;
+    } else if (cmd == PIEZO_PARAMS_CMD_SAVE) {
+        r = params_save(m);
+    } else if (cmd == PIEZO_PARAMS_CMD_LOAD) {
+        r = params_load(m);
+    } else {
+        c->cfg = m->params_defaults;
+        rebind(c);
+        m->params_source = PIEZO_PARAMS_SRC_DEFAULTS;
+        r = PIEZO_PARAMS_REASON_OK;
+    }
+    m->params_result = r;
+}
+
+uint16_t piezo_regmap_attach_params(piezo_regmap_t *m, const piezo_storage_t *io)
+{
+    if (piezo_pstore_open(&m->pstore, io) != PIEZO_OK) {
+        m->have_pstore = 0u;
+        m->params_result = PIEZO_PARAMS_REASON_STORAGE_FAILED;
+        return m->params_result;
+    }
+    m->have_pstore = 1u;
+    m->params_ignored = piezo_pstore_ignored(&m->pstore);
+    m->params_result = params_load(m);
+    if (m->params_result != PIEZO_PARAMS_REASON_OK && m->params_result != PIEZO_PARAMS_REASON_NONE_STORED) {
+        m->params_ignored = m->params_result; /* the active record itself: the defaults run */
+    }
+    return m->params_result;
 }
 
 static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uint16_t *values)
@@ -428,7 +630,7 @@ static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uin
     piezo_ctl_t *c = m->ctl;
     pending_t p[MAX_PENDING];
     unsigned n = 0u;
-    uint16_t table_cmd = 0u;
+    uint16_t table_cmd = 0u, params_cmd = 0u;
     int config = 0;
     uint32_t offset = m->table_offset;
     if (count > MAX_PENDING) {
@@ -501,21 +703,20 @@ static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uin
     }
     /* 3. store and act, in address order */
     for (unsigned i = 0; i < n; i++) {
-        apply(m, &p[i], &table_cmd);
+        apply(m, &p[i], &table_cmd, &params_cmd);
     }
     if (config) {
-        /* checked above; re-binding resets filter, integrator and preview line (disarmed) */
-        c->fifo_pos = 0u;
-        c->shaper_pos = 0u;
-        (void)piezo_pid_init(&c->pid, &c->cfg.pid);
-        (void)piezo_biquad_init(&c->notch, &c->cfg.notch);
-        (void)piezo_limit_init(&c->limit, &c->cfg.limit, c->limit.prev_q15);
+        rebind(c);
+        m->params_source = PIEZO_PARAMS_SRC_CHANGED;
     }
     switch (table_cmd) {
-    case 1: (void)piezo_ctl_commit(c, m->session, 0u); break;
-    case 2: (void)piezo_ctl_rollback(c, m->session); break;
-    case 3: (void)piezo_ctl_clear_staged(c, m->session); break;
+    case PIEZO_TABLE_CMD_COMMIT: (void)piezo_ctl_commit(c, m->session, 0u); break;
+    case PIEZO_TABLE_CMD_ROLLBACK: (void)piezo_ctl_rollback(c, m->session); break;
+    case PIEZO_TABLE_CMD_CLEAR_STAGED: (void)piezo_ctl_clear_staged(c, m->session); break;
     default: break;
+    }
+    if (params_cmd != PIEZO_PARAMS_CMD_NONE) {
+        params_command(m, params_cmd);
     }
     return 0u;
 }

@@ -16,6 +16,10 @@
  * request: a wrong key is ILLEGAL DATA VALUE, an unlock during the backoff or
  * lockout SERVER DEVICE BUSY (both counted in bad_unlocks).
  *
+ * Parameters: params_command save writes the configuration registers to
+ * the parameter store (param_store.h), load reads them back, defaults
+ * restores the target's own; the reason in params_result.
+ *
  * Table upload: table_offset and table_window are adjacent, so one FC 16
  * request writes a chunk at its offset, and one FC 23 request reads a chunk
  * back. Recorder readout: rec_read_index and rec_window likewise, with FC 23.
@@ -27,6 +31,7 @@
 
 #include "controller.h"
 #include "modbus_pdu.h"
+#include "param_store.h"
 
 typedef struct {
     piezo_ctl_t *ctl;
@@ -42,6 +47,13 @@ typedef struct {
     uint32_t rec_read_index;
     piezo_rec_cfg_t rec_cfg;                  /* applied when the recorder is armed */
     uint8_t session;                          /* whose request runs (PIEZO_MB_SESSION_*) */
+    /* controller parameters = the configuration registers (docs/operate.md) */
+    piezo_ctl_cfg_t params_defaults;          /* the target's built-in ones (the cfg at init) */
+    piezo_pstore_t pstore;
+    uint8_t have_pstore;
+    uint8_t params_source;                    /* enum piezo_enum_params_source */
+    uint16_t params_result;                   /* PIEZO_PARAMS_REASON_* of the last command or boot */
+    uint16_t params_ignored;                  /* why a stored record was ignored at boot */
 } piezo_regmap_t;
 
 /** Bind a map to a controller; identity fields are set by the caller after. */
@@ -51,6 +63,15 @@ void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl);
  *  (set them first) and the unlock key (>= 32 bits, 0 = unlock disabled).
  *  Call before piezo_ctl_attach_store(), so a stored table is checked too. */
 void piezo_regmap_provision(piezo_regmap_t *m, uint32_t key);
+
+/** Attach the parameter storage (two slots of PIEZO_PARAMS_SLOT_BYTES or
+ *  more) and load the active record, at boot, after provisioning. A record
+ *  is used only if its CRC holds, it was written by this interface
+ *  definition (its interface CRC) and every value passes the checks a
+ *  register write makes; else the defaults run and the reason is reported
+ *  (params_result; a corrupt slot beside a good one: params_ignored).
+ *  Returns the reason (PIEZO_PARAMS_REASON_OK: parameters from flash). */
+uint16_t piezo_regmap_attach_params(piezo_regmap_t *m, const piezo_storage_t *io);
 
 /** The callbacks for piezo_mb_pdu_process() and the transports. */
 piezo_mb_regs_t piezo_regmap_regs(piezo_regmap_t *m);

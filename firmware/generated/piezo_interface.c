@@ -38,7 +38,13 @@ const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N] = {
     {0x0120u, 1u, 0u, 1u, PIEZO_IREG_ACTIVE_TABLE_KIND},
     {0x0121u, 2u, 0u, 1u, PIEZO_IREG_STAGED_BYTES},
     {0x0123u, 2u, 0u, 1u, PIEZO_IREG_COUPLING_TABLE_CRC},
-    {0x0125u, 2u, 0u, 1u, PIEZO_IREG_REC_WRITTEN},
+    {0x0125u, 1u, 0u, 1u, PIEZO_IREG_PARAMS_RESULT},
+    {0x0126u, 1u, 0u, 1u, PIEZO_IREG_PARAMS_SOURCE},
+    {0x0127u, 2u, 0u, 1u, PIEZO_IREG_PARAMS_SEQ},
+    {0x0129u, 1u, 0u, 1u, PIEZO_IREG_PARAMS_IGNORED},
+    {0x012Au, 2u, 0u, 1u, PIEZO_IREG_PREVIOUS_TABLE_VERSION},
+    {0x012Cu, 1u, 0u, 1u, PIEZO_IREG_PREVIOUS_TABLE_KIND},
+    {0x012Du, 2u, 0u, 1u, PIEZO_IREG_REC_WRITTEN},
 };
 
 const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
@@ -76,6 +82,7 @@ const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
     {0x2000u, 2u, 0u, 1u, PIEZO_HREG_TABLE_OFFSET},
     {0x2002u, 1u, 0u, 121u, PIEZO_HREG_TABLE_WINDOW},
     {0x2080u, 1u, 0u, 1u, PIEZO_HREG_TABLE_COMMAND},
+    {0x2100u, 1u, 0u, 1u, PIEZO_HREG_PARAMS_COMMAND},
     {0x3000u, 2u, PIEZO_REG_SIGNED | PIEZO_REG_CONFIG, 1u, PIEZO_HREG_PID_KP_Q24},
     {0x3002u, 2u, PIEZO_REG_SIGNED | PIEZO_REG_CONFIG, 1u, PIEZO_HREG_PID_KI_Q24},
     {0x3004u, 2u, PIEZO_REG_SIGNED | PIEZO_REG_CONFIG, 1u, PIEZO_HREG_PID_KD_Q24},

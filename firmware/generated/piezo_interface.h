@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0xDC586994u
+#define PIEZO_INTERFACE_CRC32 0x8A5C37BEu
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -174,7 +174,13 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_INPUT_ACTIVE_TABLE_KIND 0x0120u  /* uint16 */
 #define PIEZO_INPUT_STAGED_BYTES 0x0121u  /* uint32 */
 #define PIEZO_INPUT_COUPLING_TABLE_CRC 0x0123u  /* uint32 */
-#define PIEZO_INPUT_REC_WRITTEN 0x0125u  /* uint32 */
+#define PIEZO_INPUT_PARAMS_RESULT 0x0125u  /* uint16 */
+#define PIEZO_INPUT_PARAMS_SOURCE 0x0126u  /* uint16 */
+#define PIEZO_INPUT_PARAMS_SEQ 0x0127u  /* uint32 */
+#define PIEZO_INPUT_PARAMS_IGNORED 0x0129u  /* uint16 */
+#define PIEZO_INPUT_PREVIOUS_TABLE_VERSION 0x012Au  /* uint32 */
+#define PIEZO_INPUT_PREVIOUS_TABLE_KIND 0x012Cu  /* uint16 */
+#define PIEZO_INPUT_REC_WRITTEN 0x012Du  /* uint32 */
 #define PIEZO_HOLDING_UNLOCK 0x1000u  /* uint16 */
 #define PIEZO_HOLDING_MODE 0x1001u  /* uint16 */
 #define PIEZO_HOLDING_ARM 0x1002u  /* uint16 */
@@ -215,6 +221,7 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_HOLDING_TABLE_WINDOW 0x2002u  /* uint16 x121 */
 #define PIEZO_HOLDING_TABLE_WINDOW_COUNT 121u
 #define PIEZO_HOLDING_TABLE_COMMAND 0x2080u  /* uint16 */
+#define PIEZO_HOLDING_PARAMS_COMMAND 0x2100u  /* uint16 */
 #define PIEZO_HOLDING_PID_KP_Q24 0x3000u  /* int32 */
 #define PIEZO_HOLDING_PID_KI_Q24 0x3002u  /* int32 */
 #define PIEZO_HOLDING_PID_KD_Q24 0x3004u  /* int32 */
@@ -287,6 +294,12 @@ enum piezo_input_reg_id {
     PIEZO_IREG_ACTIVE_TABLE_KIND,
     PIEZO_IREG_STAGED_BYTES,
     PIEZO_IREG_COUPLING_TABLE_CRC,
+    PIEZO_IREG_PARAMS_RESULT,
+    PIEZO_IREG_PARAMS_SOURCE,
+    PIEZO_IREG_PARAMS_SEQ,
+    PIEZO_IREG_PARAMS_IGNORED,
+    PIEZO_IREG_PREVIOUS_TABLE_VERSION,
+    PIEZO_IREG_PREVIOUS_TABLE_KIND,
     PIEZO_IREG_REC_WRITTEN,
     PIEZO_IREG_N
 };
@@ -326,6 +339,7 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_TABLE_OFFSET,
     PIEZO_HREG_TABLE_WINDOW,
     PIEZO_HREG_TABLE_COMMAND,
+    PIEZO_HREG_PARAMS_COMMAND,
     PIEZO_HREG_PID_KP_Q24,
     PIEZO_HREG_PID_KI_Q24,
     PIEZO_HREG_PID_KD_Q24,
@@ -350,6 +364,116 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_N
 };
 extern const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N];
+
+/* Enumerations: the values of the registers that name a choice */
+/* control mode; changed only while disarmed */
+enum piezo_enum_mode {
+    PIEZO_MODE_IDLE = 0,  /* no control: the drive rests at u_safe even when armed */
+    PIEZO_MODE_OPEN_LOOP = 1,  /* the active table's straight line u = r g + o (no table: the reference is the drive) */
+    PIEZO_MODE_FEEDFORWARD = 2,  /* the active table's inverse (DCC or EUPI) of the reference */
+    PIEZO_MODE_FF_FEEDBACK = 3,  /* feedforward plus PID (and notch) on the position error */
+    PIEZO_MODE_FEEDBACK = 4,  /* PID (and notch) on the position error alone: the closed loop */
+    PIEZO_MODE_DIRECT = 5,  /* the reference is the drive (q15): excitation for identification */
+    PIEZO_MODE_N = 6
+};
+/* one-shot actions (holding register command) */
+enum piezo_enum_command {
+    PIEZO_CMD_NONE = 0,  /* reads 0; writing it is refused */
+    PIEZO_CMD_CLEAR_FAULTS = 1,  /* clear the latched faults */
+    PIEZO_CMD_START_WAVE = 2,  /* start the wave generator (and reference source wave) */
+    PIEZO_CMD_STOP_WAVE = 3,  /* stop the wave generator */
+    PIEZO_CMD_ARM_RECORDER = 4,  /* apply the recorder configuration and arm it */
+    PIEZO_CMD_TRIGGER_RECORDER = 5,  /* trigger an armed recorder */
+    PIEZO_CMD_RESET_RECORDER = 6,  /* reset the recorder */
+    PIEZO_CMD_SERVO_OFF = 7,  /* open loop holding the drive applied now: setpoint := that drive, mode direct, reference source setpoint, wave stopped; armed only */
+    PIEZO_CMD_SERVO_ON = 8,  /* closed loop at the present position: setpoint := position, mode feedback, the integrator preloaded with the applied drive (no jump); arms a disarmed unit without faults */
+    PIEZO_CMD_N = 9
+};
+/* table actions (holding register table_command); they need the unlock */
+enum piezo_enum_table_command {
+    PIEZO_TABLE_CMD_NONE = 0,  /* reads 0; writing it is refused */
+    PIEZO_TABLE_CMD_COMMIT = 1,  /* check and commit the staged image (a cross_coupling image to the coupling slot, any other kind to the feedforward slot) */
+    PIEZO_TABLE_CMD_ROLLBACK = 2,  /* back to the previous table (of the slot the last commit went to) */
+    PIEZO_TABLE_CMD_CLEAR_STAGED = 3,  /* discard the staged upload */
+    PIEZO_TABLE_CMD_N = 4
+};
+/* parameter actions (holding register params_command); they need the unlock and a disarmed unit */
+enum piezo_enum_params_command {
+    PIEZO_PARAMS_CMD_NONE = 0,  /* reads 0; writing it is refused */
+    PIEZO_PARAMS_CMD_SAVE = 1,  /* write the running parameters to the inactive flash slot, then make it the active one */
+    PIEZO_PARAMS_CMD_LOAD = 2,  /* replace the running parameters by the active flash record */
+    PIEZO_PARAMS_CMD_DEFAULTS = 3,  /* replace the running parameters by the target's built-in defaults (flash unchanged) */
+    PIEZO_PARAMS_CMD_N = 4
+};
+/* where the running parameters came from (input register params_source) */
+enum piezo_enum_params_source {
+    PIEZO_PARAMS_SRC_DEFAULTS = 0,  /* the target's built-in defaults (nothing valid stored, or the defaults command) */
+    PIEZO_PARAMS_SRC_FLASH = 1,  /* the flash record params_seq, unchanged since */
+    PIEZO_PARAMS_SRC_CHANGED = 2,  /* written over the register map since the last load or save: not saved */
+    PIEZO_PARAMS_SRC_N = 3
+};
+/* wave generator waveform (firmware/core/wave.h) */
+enum piezo_enum_wave_kind {
+    PIEZO_WAVE_KIND_OFF = 0,  /* no output */
+    PIEZO_WAVE_KIND_SINE = 1,  /* offset + amplitude sin */
+    PIEZO_WAVE_KIND_TRIANGLE = 2,  /* symmetric triangle */
+    PIEZO_WAVE_KIND_MULTISINE = 3,  /* sum of up to 8 tones */
+    PIEZO_WAVE_KIND_CHIRP = 4,  /* linear frequency sweep */
+    PIEZO_WAVE_KIND_STEPS = 5,  /* levels held for their durations */
+    PIEZO_WAVE_KIND_ARBITRARY = 6,  /* levels played back, hold_ticks each */
+    PIEZO_WAVE_KIND_N = 7
+};
+/* signals the recorder keeps (all q15) */
+enum piezo_enum_rec_signals {
+    PIEZO_SIG_REF = 0,  /* reference r [position] */
+    PIEZO_SIG_Y = 1,  /* scaled sensor y [position] */
+    PIEZO_SIG_U = 2,  /* drive after clamp and slew limit [drive] */
+    PIEZO_SIG_ERR = 3,  /* r - y [position] */
+    PIEZO_SIG_FF = 4,  /* feedforward output [drive] */
+    PIEZO_SIG_FB = 5,  /* feedback output [drive] */
+    PIEZO_SIG_Y2 = 6,  /* the other axis' sensor [position] */
+    PIEZO_SIG_U2 = 7,  /* the other axis' drive as commanded by the host [drive] */
+    PIEZO_SIG_N = 8
+};
+/* recorder trigger (firmware/core/recorder.h) */
+enum piezo_enum_rec_trigger {
+    PIEZO_REC_TRIGGER_IMMEDIATE = 0,  /* record from the arm */
+    PIEZO_REC_TRIGGER_SOFTWARE = 1,  /* the wave start or the trigger command */
+    PIEZO_REC_TRIGGER_RISING = 2,  /* trigger signal crosses the level upwards */
+    PIEZO_REC_TRIGGER_FALLING = 3,  /* trigger signal crosses the level downwards */
+    PIEZO_REC_TRIGGER_N = 4
+};
+/* recorder state (input register rec_state) */
+enum piezo_enum_rec_state {
+    PIEZO_REC_STATE_IDLE = 0,  /* not armed */
+    PIEZO_REC_STATE_ARMED = 1,  /* waiting for the trigger */
+    PIEZO_REC_STATE_TRIGGERED = 2,  /* recording */
+    PIEZO_REC_STATE_DONE = 3,  /* buffer full */
+    PIEZO_REC_STATE_N = 4
+};
+/* where the reference comes from */
+enum piezo_enum_ref_source {
+    PIEZO_REF_SETPOINT = 0,  /* the host's setpoint_q15 */
+    PIEZO_REF_WAVE = 1,  /* the wave generator */
+    PIEZO_REF_N = 2
+};
+
+/* Controller parameters in flash: record: magic, seq, payload bytes, CRC-32 over seq, length and payload; payload: interface CRC, word count, the block's words */
+#define PIEZO_PARAMS_MAGIC 0x5250505Au
+#define PIEZO_PARAMS_SLOT_BYTES 256u
+#define PIEZO_PARAMS_FIRST 0x3000u  /* the configuration block */
+#define PIEZO_PARAMS_WORDS 31u
+#define PIEZO_PARAMS_REASON_OK 0u
+#define PIEZO_PARAMS_REASON_NONE_STORED 1u
+#define PIEZO_PARAMS_REASON_BAD_MAGIC 2u
+#define PIEZO_PARAMS_REASON_BAD_LENGTH 3u
+#define PIEZO_PARAMS_REASON_BAD_CRC 4u
+#define PIEZO_PARAMS_REASON_BAD_LAYOUT 5u
+#define PIEZO_PARAMS_REASON_OUT_OF_RANGE 6u
+#define PIEZO_PARAMS_REASON_STORAGE_FAILED 7u
+#define PIEZO_PARAMS_REASON_LOCKED 8u
+#define PIEZO_PARAMS_REASON_ARMED 9u
+#define PIEZO_PARAMS_REASON_N 10u
 
 #define PIEZO_FAULT_SENSOR_IMPLAUSIBLE (1u << 0)
 #define PIEZO_FAULT_OVERRUN (1u << 1)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import struct
 import time
+import zlib
 from dataclasses import dataclass
 from typing import Callable
 
@@ -22,14 +23,23 @@ from .tables.from_model import Scale
 from .transport import open_port
 from .transport.errors import ModbusExceptionError
 
-__all__ = ["Controller", "DeviceError", "MODES", "SIGNALS", "WAVE_KINDS", "REC_TRIGGERS",
-           "REASON_NAMES", "freq_word", "connect"]
+__all__ = ["Controller", "DeviceError", "MODES", "SIGNALS", "WAVE_KINDS", "REC_TRIGGERS", "COMMANDS",
+           "TABLE_COMMANDS", "PARAMS_COMMANDS", "REASON_NAMES", "PARAMS_REASON_NAMES", "KIND_NAMES",
+           "freq_word", "connect"]
 
-MODES = {"idle": 0, "open_loop": 1, "feedforward": 2, "ff_feedback": 3, "feedback": 4, "direct": 5}
-SIGNALS = {"ref": 0, "y": 1, "u": 2, "err": 3, "ff": 4, "fb": 5, "y2": 6, "u2": 7}
-WAVE_KINDS = {"off": 0, "sine": 1, "triangle": 2, "multisine": 3, "chirp": 4, "steps": 5, "arbitrary": 6}
-REC_TRIGGERS = {"immediate": 0, "software": 1, "rising": 2, "falling": 3}
+# The enumerations of common/interface.toml ([enums], generated): name -> number.
+MODES = interface.ENUMS["mode"]
+SIGNALS = interface.ENUMS["rec_signals"]
+WAVE_KINDS = interface.ENUMS["wave_kind"]
+REC_TRIGGERS = interface.ENUMS["rec_trigger"]
+COMMANDS = interface.ENUMS["command"]
+TABLE_COMMANDS = interface.ENUMS["table_command"]
+PARAMS_COMMANDS = interface.ENUMS["params_command"]
+MODE_NAMES = {v: k for k, v in MODES.items()}
 REASON_NAMES = {v: k for k, v in interface.TABLE_REASONS.items()}
+PARAMS_REASON_NAMES = {v: k for k, v in interface.PARAMS_REASONS.items()}
+PARAMS_SOURCE_NAMES = {v: k for k, v in interface.ENUMS["params_source"].items()}
+KIND_NAMES = {v: k for k, v in interface.TABLE_KINDS.items()}
 FAULT_NAMES = {1 << v: k for k, v in interface.FAULT_BITS.items()}
 WINDOW = interface.HOLDING_REGISTERS["table_window"][2]      # registers per table chunk
 REC_WINDOW = interface.HOLDING_REGISTERS["rec_window"][2]
@@ -94,6 +104,58 @@ def _block(regs: dict, lo: int, hi: int) -> dict:
 
 def _u16(v: int) -> int:
     return int(v) & 0xFFFF
+
+
+# name -> (address, type, count, unit, doc) of every controller parameter
+PARAM_SPECS = {name: (addr, typ, count, unit, doc) for name, addr, typ, count, unit, doc in interface.PARAMS}
+
+# What a table reason means for the user (refusals of commit and rollback).
+TABLE_REASON_HELP = {
+    "no_previous": "there is no previous table to go back to",
+    "locked": "this session is not unlocked",
+    "busy": "a table change is still waiting for the tick",
+    "storage_failed": "the flash did not take it; the running table is unchanged",
+    "wrong_stage": "the table was built for another stage's ranges",
+    "wrong_axis": "the table was built for another axis",
+    "not_owner": "another session's upload is in the staged bank",
+    "nothing_staged": "nothing was uploaded",
+    "bad_interface_crc": "built by a tool of another interface definition",
+}
+
+
+def _params_from_words(words: list[int]) -> dict:
+    """Decode the configuration block's words (32-bit values high word first)."""
+    out, i = {}, 0
+    for name, (_addr, typ, count, _unit, _doc) in PARAM_SPECS.items():
+        vals = []
+        for _ in range(count):
+            if typ.endswith("32"):
+                v = (words[i] << 16) | words[i + 1]
+                i += 2
+                if typ == "int32" and v >= 2**31:
+                    v -= 2**32
+            else:
+                v = words[i]
+                i += 1
+                if typ == "int16" and v >= 2**15:
+                    v -= 2**16
+            vals.append(v)
+        out[name] = vals if count > 1 else vals[0]
+    return out
+
+
+def _params_to_words(values: dict) -> list[int]:
+    """The configuration block's words for raw values by name (every parameter)."""
+    words = []
+    for name, (_addr, typ, count, _unit, _doc) in PARAM_SPECS.items():
+        vals = values[name] if count > 1 else [values[name]]
+        for v in vals:
+            if typ.endswith("32"):
+                v = int(v) & 0xFFFFFFFF
+                words += [v >> 16, v & 0xFFFF]
+            else:
+                words.append(_u16(v))
+    return words
 
 
 @dataclass
@@ -211,9 +273,8 @@ class Controller:
             raise DeviceError("the controller did not arm (clear its faults first)")
 
     def command(self, name: str) -> None:
-        codes = {"clear_faults": 1, "start_wave": 2, "stop_wave": 3, "arm_recorder": 4,
-                 "trigger_recorder": 5, "reset_recorder": 6}
-        self.write("command", codes[name])
+        """Issue a one-shot command (``interface.ENUMS["command"]``)."""
+        self.write("command", COMMANDS[name])
 
     def set_setpoint_um(self, y_um: float) -> None:
         self.write("setpoint_q15", self.q15_position(y_um))
@@ -491,7 +552,7 @@ class Controller:
     def upload_table(self, img: bytes, progress: Callable[[int, int], None] | None = None) -> None:
         """Write an image to the staged bank: offset and data in one request per chunk."""
         self.unlock()
-        self.write("table_command", 3)  # clear staged
+        self.write("table_command", TABLE_COMMANDS["clear_staged"])
         chunk = 2 * WINDOW
         for off in range(0, len(img), chunk):
             part = img[off:off + chunk]
@@ -518,13 +579,206 @@ class Controller:
 
     def commit_table(self) -> str:
         """Commit the staged image; returns the reason name ('ok' when it runs)."""
-        self.write("table_command", 1)
+        self.write("table_command", TABLE_COMMANDS["commit"])
         return REASON_NAMES.get(self.status()["table_result"], "unknown")
 
     def rollback_table(self) -> str:
+        """Back to the previous table; returns the controller's reason name ('ok' when done)."""
         self.unlock()
-        self.write("table_command", 2)
+        self.write("table_command", TABLE_COMMANDS["rollback"])
         return REASON_NAMES.get(self.status()["table_result"], "unknown")
+
+    def flash(self, img: bytes, *, progress: Callable[[str, int, int], None] | None = None,
+              timeout_s: float = 2.0) -> dict:
+        """Put a table image into service: upload, verify, commit, confirm.
+
+        The one way a table reaches a controller (``piezoctl flash``,
+        ``piezoctl calibrate``). The image's framing is checked locally first
+        (:func:`piezoctl.tables.image.parse_image`: magic, lengths, CRC; the
+        controller checks the rest and says why it refuses); then it is written to
+        the staged bank, read back and compared byte for byte and by CRC,
+        committed, and the controller is polled until it reports the image's
+        CRC as running (``active_table_crc``, or ``coupling_table_crc`` for a
+        ``cross_coupling`` table). A refusal leaves the running table running.
+
+        Parameters
+        ----------
+        img : bytes
+            The table image (``piezoctl tables build``).
+        progress : callable, optional
+            ``progress(step, done, total)`` with step ``"upload"`` or
+            ``"verify"`` and byte counts.
+        timeout_s : float
+            How long to wait for the committed table to run [s].
+
+        Returns
+        -------
+        dict
+            ``crc``, ``version``, ``kind`` (name) and ``bytes`` of the image.
+
+        Raises
+        ------
+        CliError
+            The image is not one the firmware would accept (nothing sent).
+        ControllerRefused
+            The read-back differs (not committed), the controller refused
+            the commit (its reason in the message), or it does not report
+            the table running in time.
+        """
+        from .tables.image import TableImageError, parse_image
+        try:
+            t = parse_image(img)
+        except TableImageError as exc:
+            raise CliError(f"not a valid table image: {exc}") from None
+        kind = KIND_NAMES.get(t.header["kind"], str(t.header["kind"]))
+        step = (lambda name: (lambda done, total: progress(name, done, total))) if progress else (lambda name: None)
+        self.upload_table(img, step("upload"))
+        back = self.read_staged(len(img), step("verify"))
+        if back != img:
+            bad = next((i for i, (a, b) in enumerate(zip(back, img)) if a != b), len(back))
+            raise DeviceError(f"the staged bank differs from the image at byte {bad}: not committed")
+        if zlib.crc32(back[:-4]) & 0xFFFFFFFF != t.crc:
+            raise DeviceError("the staged bank's CRC does not match: not committed")
+        result = self.commit_table()
+        if result != "ok":
+            raise DeviceError(f"the controller refused the table: {result} ({TABLE_REASON_HELP.get(result, '')}); "
+                              "the table that was running keeps running")
+        reg = "coupling_table_crc" if kind == "cross_coupling" else "active_table_crc"
+        deadline = time.monotonic() + timeout_s
+        while self.status()[reg] != t.crc:
+            if time.monotonic() > deadline:
+                raise DeviceError("the controller accepted the table but does not report it running")
+            time.sleep(0.01)
+        return {"crc": t.crc, "version": t.header["table_version"], "kind": kind, "bytes": len(img)}
+
+    def tables(self) -> dict:
+        """The tables the controller holds: ``active``, ``previous`` (the
+        rollback target), ``staged`` (an upload not committed) and
+        ``coupling``; each ``None`` or a dict of ``kind``, ``crc``,
+        ``version`` and ``stage`` (axis and ranges). A committed table
+        always matches the controller's own stage (the commit checks it), so
+        active and previous carry the controller's identity; a staged
+        image's header is read back from the staged bank."""
+        st = self.status()
+        sc, axis = self.scale.to_dict(), self.identity.axis
+        own = {"axis": axis, **sc}
+        out = {"active": None, "previous": None, "staged": None, "coupling": None}
+        if st["active_table_crc"]:
+            out["active"] = {"kind": KIND_NAMES.get(st["active_table_kind"], str(st["active_table_kind"])),
+                             "crc": st["active_table_crc"], "version": st["active_table_version"], "stage": own}
+        if st["previous_table_crc"]:
+            out["previous"] = {"kind": KIND_NAMES.get(st["previous_table_kind"], str(st["previous_table_kind"])),
+                               "crc": st["previous_table_crc"], "version": st["previous_table_version"],
+                               "stage": own}
+        if st["coupling_table_crc"]:
+            out["coupling"] = {"kind": "cross_coupling", "crc": st["coupling_table_crc"], "version": None,
+                               "stage": own}
+        n = st["staged_bytes"]
+        if n >= interface.TABLE_HEADER_BYTES + 4:
+            head = self.read_staged(interface.TABLE_HEADER_BYTES)
+            tail = self._read_staged_at(n - 4, 4)
+            h = {name: struct.unpack_from({"uint16": "<H", "uint32": "<I", "int32": "<i"}[typ], head, off)[0]
+                 for name, typ, off, _count in interface.TABLE_HEADER if typ != "bytes"}
+            out["staged"] = {"kind": KIND_NAMES.get(h["kind"], str(h["kind"])),
+                             "crc": struct.unpack("<I", tail)[0], "version": h["table_version"], "bytes": n,
+                             "stage": {"axis": h["axis"], "drive_min_v": h["drive_min_mv"] / 1e3,
+                                       "drive_max_v": h["drive_max_mv"] / 1e3,
+                                       "position_min_um": h["position_min_nm"] / 1e3,
+                                       "position_max_um": h["position_max_nm"] / 1e3}}
+        elif n:
+            out["staged"] = {"kind": None, "crc": None, "version": None, "bytes": n, "stage": None}
+        return out
+
+    def _read_staged_at(self, off: int, n: int) -> bytes:
+        """n bytes of the staged bank from offset off (even), one FC 23 request."""
+        start = off & ~1
+        words = self.client.read_write(self._h("table_window"), (off - start + n + 1) // 2,
+                                       self._h("table_offset"), [start >> 16, start & 0xFFFF])
+        return struct.pack(f"<{len(words)}H", *words)[off - start:off - start + n]
+
+    # ------------------------------------------------------------ operating
+    def servo(self, on: bool, timeout_s: float = 1.0) -> dict:
+        """Servo on (closed loop at the present position, arming a disarmed
+        unit) or off (open loop holding the drive applied now); the
+        controller switches at a tick boundary without a drive jump
+        (docs/operate.md). Waits until the mode says it happened.
+
+        Raises
+        ------
+        DeviceError
+            The controller refused (faults for on; disarmed for off) or did
+            not switch in time.
+        """
+        try:
+            self.command("servo_on" if on else "servo_off")
+        except ModbusExceptionError as exc:
+            if exc.code != 3:
+                raise
+            st = self.status()
+            why = (f"faults: {', '.join(st['faults_names'])} (clear them: piezoctl status shows them)"
+                   if on else "the unit is disarmed")
+            raise DeviceError(f"the controller refused servo {'on' if on else 'off'}: {why}") from None
+        want = MODES["feedback"] if on else MODES["direct"]
+        deadline = time.monotonic() + timeout_s
+        while True:
+            st = self.status()
+            if st["mode"] == want and st["armed"]:
+                return st
+            if time.monotonic() > deadline:
+                raise DeviceError(f"servo {'on' if on else 'off'} not done within {timeout_s} s "
+                                  f"(mode {MODE_NAMES.get(st['mode'], st['mode'])}, armed {st['armed']})")
+            time.sleep(0.005)
+
+    # ------------------------------------------------------------ parameters
+    def read_params(self) -> dict:
+        """The controller parameters (the configuration registers) as raw
+        register values by name: int, or a list for an array."""
+        words = self.client.read_holding(interface.PARAMS_FIRST, interface.PARAMS_WORDS)
+        return _params_from_words(words)
+
+    def write_params(self, values: dict) -> None:
+        """Write raw parameter values (name -> int or list) in one request:
+        the controller checks the whole block and applies all or nothing.
+        Needs a disarmed unit; unlocks this session.
+
+        Raises
+        ------
+        DeviceError
+            The unit is armed, or the controller refused a value.
+        """
+        unknown = [k for k in values if k not in PARAM_SPECS]
+        if unknown:
+            raise CliError(f"unknown parameter(s): {', '.join(unknown)}")
+        if self.status()["armed"]:
+            raise DeviceError("parameters change only while disarmed: run piezoctl servo off --disarm first "
+                              "(the drive then ramps to its safe value)")
+        cur = self.read_params()
+        cur.update(values)
+        self.unlock()
+        try:
+            self.client.write_holding(interface.PARAMS_FIRST, _params_to_words(cur))
+        except ModbusExceptionError as exc:
+            if exc.code == 3:
+                raise DeviceError("the controller refused the parameters (a value outside what it accepts: "
+                                  "an unstable notch, min above max, bad_limit 0, ...); nothing changed") from None
+            raise
+
+    def params_command(self, name: str) -> str:
+        """``save``, ``load`` or ``defaults`` (``interface.ENUMS["params_command"]``);
+        returns the controller's reason name (``ok`` when done)."""
+        self.unlock()
+        self.write("params_command", PARAMS_COMMANDS[name])
+        return PARAMS_REASON_NAMES.get(self.status()["params_result"], "unknown")
+
+    def params_state(self) -> dict:
+        """Where the running parameters came from: ``source`` (defaults,
+        flash, changed), ``seq`` of the flash record, ``result`` of the last
+        params command or boot, ``ignored`` (why a stored record was not used)."""
+        st = self.status()
+        return {"source": PARAMS_SOURCE_NAMES.get(st["params_source"], str(st["params_source"])),
+                "seq": st["params_seq"],
+                "result": PARAMS_REASON_NAMES.get(st["params_result"], str(st["params_result"])),
+                "ignored": PARAMS_REASON_NAMES.get(st["params_ignored"], str(st["params_ignored"]))}
 
 
 def connect(port: str, *, unit: int = interface.MODBUS_UNIT_ID, timeout: float = 1.0,

@@ -5,3 +5,5 @@ piezo_add_cmocka_test(test_pid SOURCES test_pid.c LIBS piezo_core m)
 # The controller: tick pipeline, table commit/rollback/persistence, safety.
 piezo_add_cmocka_test(test_controller SOURCES test_controller.c nor_flash.c LIBS piezo_control GOLDEN ctl)
 piezo_add_cmocka_test(test_regmap SOURCES test_regmap.c LIBS piezo_control GOLDEN ctl)
+# Controller parameters in flash (A/B, CRC) through the register map; the servo switch.
+piezo_add_cmocka_test(params_store SOURCES params_store.c nor_flash.c LIBS piezo_control)

@@ -89,9 +89,10 @@ void piezo_f4_flash_wr(uint32_t off, uint32_t value)
     f4_model.cr = value & ~PIEZO_FLASH_CR_STRT;
     if ((value & PIEZO_FLASH_CR_STRT) != 0u && (value & PIEZO_FLASH_CR_SER) != 0u) {
         uint32_t snb = (value & PIEZO_FLASH_CR_SNB_MASK) >> PIEZO_FLASH_CR_SNB_SHIFT;
-        if (snb == 10u || snb == 11u) {
-            memset(f4_model.mem[snb - 10u], 0xFF, F4_MODEL_BYTES);
-            f4_model.erases[snb - 10u]++;
+        if (snb >= 8u && snb <= 11u) {
+            uint32_t i = snb >= 10u ? snb - 10u : snb - 8u + 2u;
+            memset(f4_model.mem[i], 0xFF, F4_MODEL_BYTES);
+            f4_model.erases[i]++;
         }
         start_busy();
     }
@@ -99,12 +100,12 @@ void piezo_f4_flash_wr(uint32_t off, uint32_t value)
 
 static uint8_t *cell(uint32_t addr)
 {
-    uint32_t off = addr - PIEZO_FLASH_SLOT_A_ADDR;
+    uint32_t off = addr - PIEZO_FLASH_PARAMS_A_ADDR; /* sectors 8..11, 128 KiB each */
     uint32_t s = off / PIEZO_FLASH_SLOT_BYTES, o = off % PIEZO_FLASH_SLOT_BYTES;
-    if (addr < PIEZO_FLASH_SLOT_A_ADDR || s > 1u || o >= F4_MODEL_BYTES) {
+    if (addr < PIEZO_FLASH_PARAMS_A_ADDR || s > 3u || o >= F4_MODEL_BYTES) {
         return 0;
     }
-    return &f4_model.mem[s][o];
+    return &f4_model.mem[s >= 2u ? s - 2u : s + 2u][o];
 }
 
 uint8_t piezo_f4_mem_rd8(uint32_t addr)

@@ -6,7 +6,8 @@
  * chip flags: a CR write while locked, programming without PG or with
  * another PSIZE (PGSERR, PGPERR), an unaligned word (PGAERR), a wrong key
  * (CR locked until reset), an operation started while BSY. Sectors 10 and 11
- * are modelled over their first F4_MODEL_BYTES (the rest reads 0xFF).
+ * (tables: index 0, 1) and 8 and 9 (parameters: index 2, 3) are modelled
+ * over their first F4_MODEL_BYTES (the rest reads 0xFF).
  */
 #ifndef F4_FLASH_MODEL_H
 #define F4_FLASH_MODEL_H
@@ -25,8 +26,8 @@ typedef struct {
     uint32_t inject_sr;     /* error flags the next operation raises */
     /* rule breaches the chip would flag or hang on */
     uint32_t writes_while_locked, ops_while_busy, wrong_keys, key_writes;
-    uint32_t erases[2], words_programmed;
-    uint8_t mem[2][F4_MODEL_BYTES];
+    uint32_t erases[4], words_programmed;
+    uint8_t mem[4][F4_MODEL_BYTES];
 } f4_flash_model_t;
 
 extern f4_flash_model_t f4_model;
@@ -35,7 +36,7 @@ extern f4_flash_model_t f4_model;
 extern int f4_model_hold_depth;
 extern unsigned f4_model_busy_polls_unheld;
 
-/** Reset: CR locked, SR clear, both sectors erased (0xFF). */
+/** Reset: CR locked, SR clear, all four sectors erased (0xFF). */
 void f4_model_reset(uint32_t busy_len);
 
 #endif /* F4_FLASH_MODEL_H */

@@ -6,6 +6,7 @@
 #include "piezo_test.h"
 #include "f4_flash_model.h"
 #include "flash_f4.h"
+#include "param_store.h"
 #include "store.h"
 #include "table_image.h"
 #include "tables_vectors.h"
@@ -45,12 +46,15 @@ static void test_erase_refuses_the_code_sectors(void **state)
 {
     (void)state;
     f4_model_reset(5u);
-    for (uint32_t s = 0; s < 10u; s++) {
+    for (uint32_t s = 0; s < 8u; s++) {
         assert_int_equal(piezo_f4_flash_erase_sector(s), -1);
     }
     assert_int_equal(piezo_f4_flash_erase_sector(12u), -1);
     assert_int_equal(f4_model.key_writes, 0);
-    assert_int_equal(f4_model.erases[0] + f4_model.erases[1], 0);
+    assert_int_equal(f4_model.erases[0] + f4_model.erases[1] + f4_model.erases[2] + f4_model.erases[3], 0);
+    /* nor programming below the parameter sectors (the code) */
+    assert_int_equal(piezo_f4_flash_program(PIEZO_FLASH_PARAMS_A_ADDR - 4u, golden_table, 4u), -1);
+    assert_int_equal(f4_model.words_programmed, 0);
 }
 
 static void test_program_words_with_psize_x32_pads_the_tail(void **state)
@@ -155,6 +159,39 @@ static void test_store_on_the_flash_driver(void **state)
     assert_clean_and_locked();
 }
 
+/* The parameter store (firmware/tables/param_store.c) on sectors 8 and 9:
+ * save, reboot, save again (the other sector), reboot; the table sectors and
+ * the code are never touched. */
+static void test_params_on_the_flash_driver(void **state)
+{
+    (void)state;
+    uint8_t payload[40], back[PIEZO_PSTORE_MAX_PAYLOAD];
+    piezo_pstore_t ps;
+    f4_model_reset(4u);
+    piezo_storage_t io = piezo_f4_params_storage();
+    for (uint32_t i = 0; i < sizeof payload; i++) {
+        payload[i] = (uint8_t)(3u * i + 1u);
+    }
+    assert_int_equal(piezo_pstore_open(&ps, &io), 0);
+    assert_int_equal(ps.active, -1);
+    assert_int_equal(piezo_pstore_save(&ps, payload, sizeof payload), PIEZO_PARAMS_REASON_OK);
+    assert_clean_and_locked();
+    assert_int_equal(f4_model.erases[2], 1); /* sector 8 */
+    assert_int_equal(piezo_pstore_open(&ps, &io), 0);
+    assert_int_equal(piezo_pstore_load(&ps, back, sizeof back), sizeof payload);
+    assert_memory_equal(back, payload, sizeof payload);
+    payload[0] ^= 0xFFu;
+    assert_int_equal(piezo_pstore_save(&ps, payload, sizeof payload), PIEZO_PARAMS_REASON_OK);
+    assert_int_equal(f4_model.erases[3], 1); /* sector 9: the inactive one */
+    assert_int_equal(piezo_pstore_open(&ps, &io), 0);
+    assert_int_equal(piezo_pstore_seq(&ps), 2);
+    assert_int_equal(piezo_pstore_load(&ps, back, sizeof back), sizeof payload);
+    assert_memory_equal(back, payload, sizeof payload);
+    assert_int_equal(f4_model.erases[0] + f4_model.erases[1], 0); /* the tables' sectors */
+    assert_int_equal(f4_model.mem[0][0], 0xFF);
+    assert_int_equal(f4_model.mem[1][0], 0xFF);
+}
+
 /* The RAM storage of the PIL image: NOR semantics and the same store. */
 static uint8_t ram[2u * (PIEZO_STORE_RECORD_BYTES + PIEZO_TABLE_MAX_BYTES)];
 
@@ -188,6 +225,7 @@ int main(void)
         cmocka_unit_test(test_unlock_once_even_when_already_unlocked),
         cmocka_unit_test(test_store_on_the_flash_driver),
         cmocka_unit_test(test_store_on_ram),
+        cmocka_unit_test(test_params_on_the_flash_driver),
     };
     return cmocka_run_group_tests_name("flash_f4", tests, NULL, NULL);
 }

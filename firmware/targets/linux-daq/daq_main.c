@@ -7,7 +7,8 @@
  *   daq-controller --config FILE --modbus-tcp HOST:PORT
  *
  * Axis i is served on TCP port PORT + i (PORT 0: a free port for axis 0).
- * Tables persist in the configuration's flash file (axis 1: FILE.axis2).
+ * Tables persist in the configuration's flash file (axis 1: FILE.axis2), the
+ * controller parameters beside it in FILE.params (FILE.axis2.params).
  * One line on stdout says when it is ready; on exit it prints the tick
  * statistics. Exit status: 0 after a signal, 1 when the device, the network
  * or the flash file fail (an I/O error while running included), 2 for a bad
@@ -71,6 +72,8 @@ int main(int argc, char **argv)
     piezo_tcp_server_t tcp[PIEZO_DAQ_MAX_AXES];
     piezo_flash_file_t flash[PIEZO_DAQ_MAX_AXES];
     piezo_storage_t store[PIEZO_DAQ_MAX_AXES];
+    piezo_flash_file_t pflash[PIEZO_DAQ_MAX_AXES];
+    piezo_storage_t pstore[PIEZO_DAQ_MAX_AXES];
     piezo_scale_t scale[PIEZO_DAQ_MAX_AXES];
     piezo_daq_loop_t loop;
     piezo_rt_result_t rt;
@@ -125,7 +128,7 @@ int main(int argc, char **argv)
         return 1;
     }
     for (int i = 0; i < g_daq.n_axes && status == 0; i++) {
-        char path[PIEZO_DAQ_PATH_MAX + 8];
+        char path[PIEZO_DAQ_PATH_MAX + 16];
         const uint32_t slot = PIEZO_STORE_RECORD_BYTES + PIEZO_TABLE_MAX_BYTES;
         piezo_regmap_init(&map[i], &g_ctl[i]);
         map[i].axis = (uint16_t)i;
@@ -151,11 +154,29 @@ int main(int argc, char **argv)
                 fprintf(stderr, "daq-controller: stored table of axis %d not loaded (reason %u)\n", i, r);
             }
         }
+        /* the controller parameters beside the tables: FILE.params (param_store.h) */
+        snprintf(path, sizeof path, "%s%s.params", cfg.flash, i == 0 ? "" : ".axis2");
+        if (piezo_flash_file_open_magic(&pflash[i], path, 2u * PIEZO_PARAMS_SLOT_BYTES, PIEZO_PARAMS_MAGIC) != 0) {
+            fprintf(stderr, "daq-controller: cannot open parameter file %s: %s\n", path,
+                    pflash[i].why[0] ? pflash[i].why : strerror(errno));
+            piezo_flash_file_close(&flash[i]);
+            status = 1;
+            break;
+        }
+        pstore[i] = piezo_flash_file_storage(&pflash[i], PIEZO_PARAMS_SLOT_BYTES);
+        {
+            uint16_t r = piezo_regmap_attach_params(&map[i], &pstore[i]);
+            if (r != PIEZO_PARAMS_REASON_OK && r != PIEZO_PARAMS_REASON_NONE_STORED) {
+                fprintf(stderr, "daq-controller: stored parameters of axis %d not loaded (reason %u): defaults\n", i,
+                        r);
+            }
+        }
         if (piezo_tcp_server_open(&tcp[i], host, port == 0 ? 0 : (uint16_t)(port + i), (uint8_t)(i + 1), &regs[i]) !=
             0) {
             fprintf(stderr, "daq-controller: cannot listen on %s:%ld: %s\n", host, port == 0 ? 0 : port + i,
                     strerror(errno));
             piezo_flash_file_close(&flash[i]);
+            piezo_flash_file_close(&pflash[i]);
             status = 1;
             break;
         }
@@ -165,6 +186,7 @@ int main(int argc, char **argv)
         for (int i = 0; i < n_open; i++) {
             piezo_tcp_server_close(&tcp[i]);
             piezo_flash_file_close(&flash[i]);
+            piezo_flash_file_close(&pflash[i]);
         }
         piezo_daq_close(&g_daq);
         return status;
@@ -241,6 +263,7 @@ int main(int argc, char **argv)
     for (int i = 0; i < g_daq.n_axes; i++) {
         piezo_tcp_server_close(&tcp[i]);
         piezo_flash_file_close(&flash[i]);
+        piezo_flash_file_close(&pflash[i]);
     }
     piezo_daq_close(&g_daq);
     return status;

@@ -68,11 +68,11 @@ static uint32_t le32(const uint8_t *b)
     return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
 }
 
-/* What a slot record's first word says: 1 erased, 2 committed (store magic), 0 neither. */
-static int record_kind(const uint8_t *rec)
+/* What a slot record's first word says: 1 erased, 2 committed (the store's magic), 0 neither. */
+static int record_kind(const uint8_t *rec, uint32_t magic)
 {
     uint32_t w = le32(rec);
-    return w == 0xFFFFFFFFu ? 1 : w == PIEZO_STORE_MAGIC ? 2 : 0;
+    return w == 0xFFFFFFFFu ? 1 : w == magic ? 2 : 0;
 }
 
 static int refuse(piezo_flash_file_t *f, const char *fmt, unsigned long long a, unsigned long long b,
@@ -93,6 +93,11 @@ static int refuse(piezo_flash_file_t *f, const char *fmt, unsigned long long a, 
 }
 
 int piezo_flash_file_open(piezo_flash_file_t *f, const char *path, uint32_t size)
+{
+    return piezo_flash_file_open_magic(f, path, size, PIEZO_STORE_MAGIC);
+}
+
+int piezo_flash_file_open_magic(piezo_flash_file_t *f, const char *path, uint32_t size, uint32_t magic)
 {
     struct stat st;
     uint32_t slot = size / 2u;
@@ -132,11 +137,11 @@ int piezo_flash_file_open(piezo_flash_file_t *f, const char *path, uint32_t size
     int k0 = -1, k1 = -1;
     if ((uint64_t)st.st_size >= PIEZO_STORE_RECORD_BYTES &&
         pread(f->fd, rec[0], sizeof rec[0], 0) == (ssize_t)sizeof rec[0]) {
-        k0 = record_kind(rec[0]);
+        k0 = record_kind(rec[0], magic);
     }
     if ((uint64_t)st.st_size >= (uint64_t)slot + PIEZO_STORE_RECORD_BYTES &&
         pread(f->fd, rec[1], sizeof rec[1], (off_t)slot) == (ssize_t)sizeof rec[1]) {
-        k1 = record_kind(rec[1]);
+        k1 = record_kind(rec[1], magic);
     }
     if ((uint64_t)st.st_size == size) {
         if (k0 > 0 && k1 > 0) {

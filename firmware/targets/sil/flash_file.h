@@ -29,6 +29,9 @@ typedef struct {
  * (EINVAL for a refused file) and f->why saying what was found.
  */
 int piezo_flash_file_open(piezo_flash_file_t *f, const char *path, uint32_t size);
+/** The same for a store whose records start with another magic (the
+ *  parameter store: PIEZO_PARAMS_MAGIC, param_store.h). */
+int piezo_flash_file_open_magic(piezo_flash_file_t *f, const char *path, uint32_t size, uint32_t magic);
 void piezo_flash_file_close(piezo_flash_file_t *f);
 /** Storage callbacks over the file, two slots of slot_bytes. */
 piezo_storage_t piezo_flash_file_storage(piezo_flash_file_t *f, uint32_t slot_bytes);

@@ -12,7 +12,8 @@
  * emulation; default $TMPDIR/piezoctl-sil-<port>.flash; a missing or empty FILE is created
  * erased, an existing one is used only if it is a flash image of this build's layout, and
  * anything else, a truncated image included, is refused with exit status 1 and left untouched:
- * flash_file.h). One line on stdout
+ * flash_file.h). The controller parameters persist beside it in FILE.params (two slots of
+ * PIEZO_PARAMS_SLOT_BYTES, param_store.h), loaded at start. One line on stdout
  * says when it is ready and where; on exit it prints the tick statistics, as
  * a sentence and as a `sil-stage: stats key=value ...` line.
  *
@@ -105,6 +106,8 @@ int main(int argc, char **argv)
     piezo_rtu_t rtu[STAGE_MAX_AXES];
     piezo_flash_file_t flash[STAGE_MAX_AXES];
     piezo_storage_t store[STAGE_MAX_AXES];
+    piezo_flash_file_t pflash[STAGE_MAX_AXES];
+    piezo_storage_t pstore[STAGE_MAX_AXES];
     int pty = -1, pty_slave = -1, cli;
 
     cli = piezo_cli_parse(argc, argv, "sil-stage", opts, sizeof opts / sizeof opts[0], usage);
@@ -183,6 +186,20 @@ int main(int argc, char **argv)
             if (r != PIEZO_TABLE_REASON_OK) {
                 fprintf(stderr, "sil-stage: stored table of axis %d not loaded (reason %u)\n", i + 1, r);
             }
+            /* the controller parameters beside it: FILE.params */
+            snprintf(path, sizeof path, "%s%s.params", flash_path ? flash_path : flash_default,
+                     i == 0 ? "" : ".axis2");
+            if (piezo_flash_file_open_magic(&pflash[i], path, 2u * PIEZO_PARAMS_SLOT_BYTES, PIEZO_PARAMS_MAGIC) != 0) {
+                fprintf(stderr, "sil-stage: cannot open parameter file %s: %s\n", path,
+                        pflash[i].why[0] ? pflash[i].why : strerror(errno));
+                return 1;
+            }
+            pstore[i] = piezo_flash_file_storage(&pflash[i], PIEZO_PARAMS_SLOT_BYTES);
+            r = piezo_regmap_attach_params(&map[i], &pstore[i]);
+            if (r != PIEZO_PARAMS_REASON_OK && r != PIEZO_PARAMS_REASON_NONE_STORED) {
+                fprintf(stderr, "sil-stage: stored parameters of axis %d not loaded (reason %u): defaults\n", i + 1,
+                        r);
+            }
         }
     }
     if (pty_link != NULL && (pty = open_pty(pty_link, &pty_slave)) < 0) {
@@ -248,6 +265,7 @@ int main(int argc, char **argv)
     for (int i = 0; i < g_sil.n_axes; i++) {
         piezo_tcp_server_close(&tcp[i]);
         piezo_flash_file_close(&flash[i]);
+        piezo_flash_file_close(&pflash[i]);
     }
     if (pty >= 0) {
         close(pty);

@@ -37,6 +37,10 @@ int piezo_control_init(void);
  *  and 11; the PIL image: RAM). */
 const piezo_storage_t *piezo_control_storage(void);
 
+/** The parameter storage the image attaches at boot (weak: the flash sectors
+ *  8 and 9; the PIL image: RAM). */
+const piezo_storage_t *piezo_control_params_storage(void);
+
 /** ADC codes of this axis' sensor and the other axis' (weak default: zero codes). */
 void piezo_adc_read(int32_t adc[2]);
 

@@ -62,6 +62,13 @@
 #define PIEZO_FLASH_SLOT_A_ADDR 0x080C0000u
 #define PIEZO_FLASH_SLOT_BYTES (128u * 1024u)
 
+/* The controller parameters (param_store.h): two slots of one sector each,
+ * sectors 8 (0x08080000) and 9 (0x080A0000), 128 KiB each (RM0090 table 5);
+ * a record uses the first PIEZO_PARAMS_SLOT_BYTES of its sector. The image
+ * must end below 0x08080000 (link.ld asserts it). */
+#define PIEZO_FLASH_PARAMS_A_SECTOR 8u
+#define PIEZO_FLASH_PARAMS_A_ADDR 0x08080000u
+
 /* BSY polls before an operation is reported failed (a sector erase takes up
  * to 2 s at x32, RM0090 / datasheet tERASE128KB; one poll is a few cycles). */
 #ifndef PIEZO_FLASH_BSY_POLLS
@@ -81,7 +88,7 @@ void piezo_f4_mem_wr32(uint32_t addr, uint32_t value);
  *  arrives meanwhile overruns; the master waits for the command's answer). */
 void piezo_f4_flash_hold(int on);
 
-/** Erase the sector holding addr (sectors 10 and 11 only). 0 or -1. */
+/** Erase a sector (8 and 9: parameters, 10 and 11: tables; never the code's). 0 or -1. */
 int piezo_f4_flash_erase_sector(uint32_t sector);
 
 /** Program n bytes at addr (word-aligned addr; a tail is padded with 0xFF,
@@ -91,8 +98,18 @@ int piezo_f4_flash_program(uint32_t addr, const uint8_t *data, uint32_t n);
 /** The two slots on sectors 10 and 11 as table storage (store.h). */
 piezo_storage_t piezo_f4_flash_storage(void);
 
+/** The two slots on sectors 8 and 9 as parameter storage (param_store.h). */
+piezo_storage_t piezo_f4_params_storage(void);
+
 /** Table storage in RAM (QEMU, where the flash interface is not modelled):
  *  NOR semantics (program clears bits, erase sets 0xFF), lost at reset. */
 piezo_storage_t piezo_ram_storage(uint8_t *mem, uint32_t slot_bytes);
+
+/** The same over a caller-owned context (a second store beside the tables'). */
+typedef struct {
+    uint8_t *mem;
+    uint32_t size;
+} piezo_ram_store_t;
+piezo_storage_t piezo_ram_storage_in(piezo_ram_store_t *r, uint8_t *mem, uint32_t slot_bytes);
 
 #endif /* PIEZO_FLASH_F4_H */

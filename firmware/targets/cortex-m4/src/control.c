@@ -95,3 +95,12 @@ __attribute__((weak)) const piezo_storage_t *piezo_control_storage(void)
     io = piezo_f4_flash_storage();
     return &io;
 }
+
+/* The controller parameters in sectors 8 and 9 (flash_f4.h); the PIL image:
+ * RAM. */
+__attribute__((weak)) const piezo_storage_t *piezo_control_params_storage(void)
+{
+    static piezo_storage_t io;
+    io = piezo_f4_params_storage();
+    return &io;
+}

@@ -50,8 +50,8 @@ static int begin(void)
 int piezo_f4_flash_erase_sector(uint32_t sector)
 {
     int rc;
-    if (sector != PIEZO_FLASH_SLOT_A_SECTOR && sector != PIEZO_FLASH_SLOT_A_SECTOR + 1u) {
-        return -1; /* never the code's sectors */
+    if (sector < PIEZO_FLASH_PARAMS_A_SECTOR || sector > PIEZO_FLASH_SLOT_A_SECTOR + 1u) {
+        return -1; /* never the code's sectors (0-7) */
     }
     if (begin() != 0) {
         return -1;
@@ -71,7 +71,8 @@ int piezo_f4_flash_erase_sector(uint32_t sector)
 int piezo_f4_flash_program(uint32_t addr, const uint8_t *data, uint32_t n)
 {
     int rc = 0;
-    if ((addr & 3u) != 0u || addr < PIEZO_FLASH_SLOT_A_ADDR ||
+    /* sectors 8-11 are contiguous: the parameters' and the tables' slots */
+    if ((addr & 3u) != 0u || addr < PIEZO_FLASH_PARAMS_A_ADDR ||
         addr + n > PIEZO_FLASH_SLOT_A_ADDR + 2u * PIEZO_FLASH_SLOT_BYTES || addr + n < addr) {
         return -1;
     }
@@ -99,33 +100,45 @@ int piezo_f4_flash_program(uint32_t addr, const uint8_t *data, uint32_t n)
     return rc;
 }
 
-/* store.h callbacks: addresses are offsets into the two slots */
+/* store.h callbacks: addresses are offsets into two slots of one sector
+ * each; ctx is the region (the tables' sectors 10/11 or the parameters' 8/9). */
+typedef struct {
+    uint32_t base;         /* address of slot A */
+    uint32_t first_sector; /* slot A's sector; slot B is the next one */
+} f4_region_t;
+
+static f4_region_t tables_region = {PIEZO_FLASH_SLOT_A_ADDR, PIEZO_FLASH_SLOT_A_SECTOR};
+static f4_region_t params_region = {PIEZO_FLASH_PARAMS_A_ADDR, PIEZO_FLASH_PARAMS_A_SECTOR};
+
 static int st_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
 {
-    (void)ctx;
+    const f4_region_t *r = ctx;
     if (addr + len > 2u * PIEZO_FLASH_SLOT_BYTES || addr + len < addr) {
         return -1;
     }
     for (uint32_t i = 0; i < len; i++) {
-        buf[i] = piezo_f4_mem_rd8(PIEZO_FLASH_SLOT_A_ADDR + addr + i);
+        buf[i] = piezo_f4_mem_rd8(r->base + addr + i);
     }
     return 0;
 }
 
 static int st_program(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
 {
-    (void)ctx;
+    const f4_region_t *r = ctx;
     if ((addr & 3u) != 0u) {
-        /* store.c programs at record and image offsets, both multiples of 4;
+        /* the stores program at record and image offsets, all multiples of 4;
          * an unaligned start would need a read-modify-write of a word */
         return -1;
     }
-    return piezo_f4_flash_program(PIEZO_FLASH_SLOT_A_ADDR + addr, buf, len);
+    if (addr + len > 2u * PIEZO_FLASH_SLOT_BYTES || addr + len < addr) {
+        return -1;
+    }
+    return piezo_f4_flash_program(r->base + addr, buf, len);
 }
 
 static int st_erase(void *ctx, uint32_t addr, uint32_t len)
 {
-    (void)ctx;
+    const f4_region_t *r = ctx;
     if (len == 0u) {
         return 0;
     }
@@ -135,7 +148,7 @@ static int st_erase(void *ctx, uint32_t addr, uint32_t len)
     uint32_t first = addr >= PIEZO_FLASH_SLOT_BYTES ? 1u : 0u;
     uint32_t last = addr + len - 1u >= PIEZO_FLASH_SLOT_BYTES ? 1u : 0u;
     for (uint32_t s = first; s <= last; s++) {
-        if (piezo_f4_flash_erase_sector(PIEZO_FLASH_SLOT_A_SECTOR + s) != 0) {
+        if (piezo_f4_flash_erase_sector(r->first_sector + s) != 0) {
             return -1;
         }
     }
@@ -144,16 +157,19 @@ static int st_erase(void *ctx, uint32_t addr, uint32_t len)
 
 piezo_storage_t piezo_f4_flash_storage(void)
 {
-    piezo_storage_t s = {st_read, st_program, st_erase, NULL, PIEZO_FLASH_SLOT_BYTES};
+    piezo_storage_t s = {st_read, st_program, st_erase, &tables_region, PIEZO_FLASH_SLOT_BYTES};
+    return s;
+}
+
+piezo_storage_t piezo_f4_params_storage(void)
+{
+    piezo_storage_t s = {st_read, st_program, st_erase, &params_region, PIEZO_FLASH_SLOT_BYTES};
     return s;
 }
 
 /* RAM storage: ctx is the buffer of 2 x slot_bytes; slot_bytes is in the
  * storage itself, so the callbacks find the size through a small header. */
-typedef struct {
-    uint8_t *mem;
-    uint32_t size;
-} ram_store_t;
+typedef piezo_ram_store_t ram_store_t;
 
 static ram_store_t ram_store;
 
@@ -193,13 +209,18 @@ static int ram_erase(void *ctx, uint32_t addr, uint32_t len)
     return 0;
 }
 
-piezo_storage_t piezo_ram_storage(uint8_t *mem, uint32_t slot_bytes)
+piezo_storage_t piezo_ram_storage_in(piezo_ram_store_t *r, uint8_t *mem, uint32_t slot_bytes)
 {
-    ram_store.mem = mem;
-    ram_store.size = 2u * slot_bytes;
-    for (uint32_t i = 0; i < ram_store.size; i++) {
+    r->mem = mem;
+    r->size = 2u * slot_bytes;
+    for (uint32_t i = 0; i < r->size; i++) {
         mem[i] = 0xFFu; /* erased */
     }
-    piezo_storage_t s = {ram_read, ram_program, ram_erase, &ram_store, slot_bytes};
+    piezo_storage_t s = {ram_read, ram_program, ram_erase, r, slot_bytes};
     return s;
+}
+
+piezo_storage_t piezo_ram_storage(uint8_t *mem, uint32_t slot_bytes)
+{
+    return piezo_ram_storage_in(&ram_store, mem, slot_bytes);
 }

@@ -28,6 +28,10 @@ int main(void)
     /* a stored table that does not load is reported by the status registers;
      * the unit then runs without one */
     (void)piezo_ctl_attach_store(&piezo_axis, piezo_control_storage());
+    /* the controller parameters saved with params_command (sectors 8/9);
+     * a record that does not load is reported (params_result,
+     * params_ignored) and the board's defaults run */
+    (void)piezo_regmap_attach_params(&piezo_comm_map, piezo_control_params_storage());
     piezo_tick_start(PIEZO_TICK_RELOAD);
     piezo_irq_enable();
     for (;;) {
