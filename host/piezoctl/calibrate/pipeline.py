@@ -275,7 +275,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         tracking = {}
         compensated = "ff_feedback"
         for mode in ("open_loop", compensated):
-            steps.say(f"{'uncompensated' if mode == 'open_loop' else 'compensated'} ({mode}) ...")
+            label = "uncompensated" if mode == "open_loop" else f"compensated ({mode})"
             _park(ctl, ctl.q15_position(y_lo))
             if mode == "open_loop":
                 ctl.configure_shaper()
@@ -289,7 +289,10 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                 raise CliError(f"the controller reports faults: {', '.join(st['faults_names'])}")
             ctl.arm(True)
             for f in FREQS:
+                if f < 10:   # the long one (3 s at 1 Hz): said on its own so the step is never silent long
+                    steps.say(f"{label}: {f:g} Hz triangle ...")
                 runs[(mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=2 if f < 10 else 5)
+            steps.say(f"{label}: multitone ...")
             runs[(mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
         _park(ctl, ctl.q15_position(y_lo))
         for key in list(FREQS) + ["multitone"]:
