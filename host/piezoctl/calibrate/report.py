@@ -17,7 +17,8 @@ __all__ = ["write_report", "figure_html", "append_coupling_html", "tracking_figu
 def figure_html(fig) -> str:
     """A matplotlib figure as an inline <img>."""
     buf = io.BytesIO()
-    fig.tight_layout()  # subplot titles otherwise overlap the axes above
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()  # subplot titles otherwise overlap the axes above
     fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
     import matplotlib.pyplot as plt
     plt.close(fig)
@@ -58,25 +59,24 @@ def tracking_figure(runs: dict, compensated: str):
     """Reference and position [um] above, the error reference - position [nm] on its own axis below,
     for every acceptance reference, uncompensated (left) and compensated (right)."""
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(2 * len(KEYS), 2, figsize=(11, 3.3 * len(KEYS)),
-                           gridspec_kw={"height_ratios": [2, 1] * len(KEYS)}, sharex="row")
-    for i, k in enumerate(KEYS):
+    fig = plt.figure(figsize=(11, 3.4 * len(KEYS)), layout="constrained")
+    for k, sub in zip(KEYS, fig.subfigures(len(KEYS), 1)):
+        ax = sub.subplots(2, 2, sharex="col", gridspec_kw={"height_ratios": [2, 1]})
         for j, mode in enumerate(("open_loop", compensated)):
             r = runs[(mode, k)]
-            a, b = ax[2 * i, j], ax[2 * i + 1, j]
+            a, b = ax[0, j], ax[1, j]
             a.plot(r["t"], r["ref"], "k", lw=0.9, label="reference")
             a.plot(r["t"], r["y"], "C0", lw=0.8, label="measured position")
             a.set_ylabel("position [um]")
             a.set_title(f"{_ref_name(k)}, {'uncompensated' if j == 0 else 'compensated'}", fontsize=9)
+            a.tick_params(labelbottom=False)
             e = (r["ref"] - r["y"]) * NM_PER_UM
             b.plot(r["t"], e, "C3", lw=0.7)
             b.axhline(0.0, color="0.6", lw=0.5)
             b.set_ylabel("error [nm]")
             b.set_xlabel("time [s]")
-            b.text(0.99, 0.95, f"RMS {np.sqrt(np.mean(e ** 2)):.1f} nm", transform=b.transAxes, ha="right",
-                   va="top", fontsize=7)
-            a.tick_params(labelbottom=False)
-        ax[2 * i, 0].legend(fontsize=7, loc="upper right")
+            b.set_title(f"error, RMS {np.sqrt(np.mean(e ** 2)):.1f} nm", fontsize=8, loc="right")
+        ax[0, 0].legend(fontsize=7, loc="upper right")
     return fig
 
 

@@ -30,7 +30,6 @@ import tempfile
 from pathlib import Path
 
 from ..errors import CliError
-from ..io.recording import describe_dropped, load_recording, save_recording
 from ._options import add_output, emit, progress
 
 __all__ = ["add_parser", "run", "check_inputs", "result_of", "MIN_SETTLED_SAMPLES", "RATE_TOLERANCE"]
@@ -72,6 +71,7 @@ def check_inputs(paths: list[str], settle_s: float, drop_outliers: bool = False)
         A recording the loader refuses, a sample rate differing from the
         first file's (naming both files), or too few samples after settling.
     """
+    from ..io.recording import describe_dropped, load_recording
     recs = [load_recording(p, drop_outliers=drop_outliers) for p in paths]
     ref = recs[0]
     for r in recs:
@@ -89,6 +89,7 @@ def check_inputs(paths: list[str], settle_s: float, drop_outliers: bool = False)
 
 def _cleaned_copies(recs, paths, where: Path) -> list[str]:
     """Paths to pass on: the original file, or a cleaned copy in ``where`` when rows were dropped."""
+    from ..io.recording import save_recording
     out = []
     for i, (r, p) in enumerate(zip(recs, paths)):
         if not r.dropped:
