@@ -113,3 +113,26 @@ def test_tone_error_is_the_error_amplitude_at_each_tone():
     y = ref - 0.012 * np.sin(2 * np.pi * 7.0 * t + 0.3) - 0.002 * np.cos(2 * np.pi * 23.0 * t)
     e = tone_error_nm({"t": t, "ref": ref, "y": y})
     assert e == pytest.approx([0.0, 12.0, 2.0], abs=1e-6)
+
+
+def test_fit_model_is_what_identify_writes(tmp_path):
+    """The library call calibrate makes gives the identify command's model, parameters and options."""
+    from piezoctl.calibrate.pipeline import fit_model
+    from piezoctl.io.recording import load_recording, save_recording
+    t = np.arange(4000) / 2000.0
+    files = []
+    for k, top in enumerate((1.0, 0.6)):
+        u = 150.0 * top * (1 - np.abs(((t * 1.0) % 1) * 2 - 1))
+        y = 0.1 * u + 0.6 * np.sin(2 * np.pi * t - 0.4) * top + 0.01 * np.cos(7 * t)
+        files.append(str(tmp_path / f"s{k}.csv"))
+        save_recording(files[-1], {"t": t, "u": u, "y": y})
+    scale = types.SimpleNamespace(drive_min_v=0.0, drive_max_v=150.0)
+    for kind in ("kp", "eupi"):
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert cli.main(["identify", "--model", kind, "--data", *files, "--out", str(tmp_path / "cli.json"),
+                             "--u-range", "0", "150"]) == 0
+        fit_model(kind, [load_recording(f) for f in files], files, tmp_path / "lib.json", scale)
+        a, b = load_model(tmp_path / "cli.json"), load_model(tmp_path / "lib.json")
+        assert a.params == b.params
+        assert a.provenance["options"] == b.provenance["options"]
+        assert [d["nrmse"] for d in a.provenance["data"]] == [d["nrmse"] for d in b.provenance["data"]]

@@ -83,6 +83,8 @@ def _kind_options(kind: str, scale) -> Options:
     mod.add_options(p)
     opts = Options(vars(p.parse_args([])))
     opts["u_range"] = [float(scale.drive_min_v), float(scale.drive_max_v)]
+    # what identify applies to the data itself, here nothing (kept for the same provenance)
+    opts.update(delay_s=0.0, skip_s=0.0, drop_outliers=False)
     return opts
 
 
