@@ -236,10 +236,12 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                           f"{f_fit:.0f} Hz)")
 
     with steps.step(4, "checks before upload, feedback design") as row:
+        steps.say("compile the model for the controller ...")
         try:
             comp = compile_model(model, sc)
         except TableImageError as exc:
             raise CliError(f"check refused the model: {exc}") from None
+        steps.say("fixed-point inverse against float, forward(inverse) against identity ...")
         r_fs = 0.8 * np.sin(2 * np.pi * np.arange(20000) / 20000.0) * ((y_hi - y_lo) / (2 * sc.p_half))
         r_fs += (0.5 * (y_lo + y_hi) - sc.p_mid) / sc.p_half
         r_q15 = np.floor(r_fs * 32768 + 0.5).astype(np.int64)
@@ -252,6 +254,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         if identity_err > 0.05:
             raise CliError(f"forward-then-inverse differs from identity by {identity_err:.1%} of the range: "
                            "not uploading")
+        steps.say("feedback design ...")
         fb = design_feedback(frf, comp.line[0], idn.tick_hz, f_res=f_res)
         info = ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in comp.info.items())
         steps.result(row, f"{info}; forward(inverse) within {identity_err:.2%} of the range, fixed-point "

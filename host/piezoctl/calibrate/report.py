@@ -197,10 +197,11 @@ def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
                   "Reference and measured position; below each, the error reference - position in nm on its "
                   "own axis (the compensated error is up to 200 times smaller, so each panel has its own scale).",
                   figure_html(tracking_figure(runs, compensated))))
-    say("figures: loops and error against frequency ...")
+    say("figure: hysteresis loops before and after ...")
     parts.append(("Hysteresis loops before and after compensation",
                   "Measured position against the reference: uncompensated, the stage's hysteresis loop; "
                   "compensated, what is left of it.", figure_html(loops_figure(runs, compensated))))
+    say("figure: tracking error against frequency ...")
     parts.append(("Tracking error against frequency", "", figure_html(error_frequency_figure(summary, runs,
                                                                                             compensated))))
     track = _table(["reference", "frequency [Hz]", "RMS error uncompensated [nm]", "RMS error compensated [nm]",
