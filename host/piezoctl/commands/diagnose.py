@@ -192,7 +192,7 @@ def result_of(doc: dict, out: Path) -> dict:
     """The ``--json`` object: the verdict, the fit figures, the discontinuities and the files written."""
     return {"named": doc["named"], "fit": {k: doc["fit"][k] for k in ("base", "refined", "heldout")},
             "effects": [{"name": x["name"], "significant": x["significant"], "evidence": x["evidence"]}
-                        for x in doc["effects"]],
+                        for x in doc.get("effects", [])],
             "drive_discontinuities": doc.get("drive_discontinuities", []), "time_s": doc["time_s"],
             "diagnosis": str(out / "diagnosis.json"), "report": str(out / "report.html"),
             "base_model": str(out / "base_model.json"), "refined_model": str(out / "refined_model.json")}
