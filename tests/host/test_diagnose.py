@@ -166,3 +166,55 @@ def test_dynamics_plausibility_rejects_gain_beyond_the_calibration_band():
     # the ARX a 20 Hz calibration produced (|G| = 27 at Nyquist): rejected; a static G always accepted
     assert not plausible((np.array([-10.1278, 21.4652, -11.336]), np.array([1.0, -0.7907, -0.208])), 0.002)
     assert plausible((np.array([1.0]), np.array([1.0])), 0.002)
+
+
+def test_drive_discontinuities_flag_jumps_not_smooth_drives():
+    from piezoctl.diagnose.locate import drive_discontinuities
+    fs = 10_000.0
+    t = np.arange(20001) / fs
+    # the valve's inverse runs: a 50 Hz sine, then the last sample back at the start (-95 -> -1.78 V)
+    u = -48.4 - 46.6 * np.cos(2 * np.pi * 50 * t)          # ends at -95 V
+    u[-1] = -1.78
+    j = drive_discontinuities(t, u)
+    assert len(j) == 1
+    assert j[0]["sample"] == u.size - 1 and j[0]["where"] == "last sample"
+    assert j[0]["u_after_v"] == -1.78 and j[0]["jump_v"] == pytest.approx(-1.78 - u[-2])
+    # smooth drives, however fast, have none: a 1 kHz sine, a triangle, a chirp
+    tri = 2 * np.abs(((t * 5) % 1) - 0.5) * 100
+    chirp = 50 * np.sin(2 * np.pi * (5 * t + 0.5 * (1000 - 5) / 2 * t ** 2))
+    for smooth in (50 * np.sin(2 * np.pi * 1000 * t), tri, chirp):
+        assert drive_discontinuities(t, smooth) == []
+    # steps are jumps (each one), a small one below 5 % of the span is not
+    steps = np.repeat([0.0, 80.0, 20.0, 22.0, 100.0], 4000)
+    ts = np.arange(steps.size) / fs
+    assert [x["sample"] for x in drive_discontinuities(ts, steps)] == [4000, 8000, 16000]
+
+
+def test_residual_autocorrelation_band_holds_white_noise_and_not_a_sine():
+    from piezoctl.diagnose.locate import residual_autocorrelation
+    rng = np.random.default_rng(0)
+    dt = 1e-4
+    lag, ac, bound = residual_autocorrelation(rng.normal(size=100_000), dt)
+    assert ac[0] == pytest.approx(1.0) and lag[1] == pytest.approx(1e-3)   # decimated to 1 kHz
+    assert bound == pytest.approx(2.58 / np.sqrt(10_000))
+    assert np.mean(np.abs(ac[1:]) > bound) <= 0.08
+    t = np.arange(100_000) * dt
+    _, ac_s, b_s = residual_autocorrelation(np.sin(2 * np.pi * 7 * t), dt)
+    assert np.mean(np.abs(ac_s[1:]) > b_s) > 0.9
+
+
+def test_where_and_discontinuities_read_as_table_rows():
+    from piezoctl.diagnose.report import discontinuity_rows, where_rows
+    where = {"recordings": [{"recording": "rec1.csv", "share": 0.41}],
+             "time_windows": [{"t0_s": 0.5, "t1_s": 1.25, "rms_um": 0.012, "x_median": 3.1, "recording": "rec1.csv"}],
+             "frequency_bands": [{"f_lo_hz": 0.0, "f_hi_hz": 1.0, "share": 0.7}],
+             "amplitude_v": [10.0, 40.0], "rate_v_per_s": [0.0, 120.0]}
+    rows = dict(where_rows(where))
+    assert rows["recordings (share of the term's energy)"] == "rec1.csv 41 %"
+    assert rows["time window [s] in rec1.csv"] == "0.50 - 1.25 (12.0 nm RMS, 3.1 x the median window)"
+    assert rows["drive where it acts most [V]"] == "10.0 - 40.0"
+    dd = [{"file": "/x/valve.csv", "role": "recording", "count": 1,
+           "jumps": [{"sample": 20000, "t_s": 2.0, "u_before_v": -95.05, "u_after_v": -1.78, "jump_v": 93.27,
+                      "where": "last sample"}]}]
+    assert discontinuity_rows(dd) == [["valve.csv", "recording", "1", "20000", "2.0000", "-95.05 -> -1.78",
+                                       "+93.27", "last sample"]]

@@ -18,10 +18,11 @@ __all__ = ["forc_sweeps", "chirp", "chirp_frf", "triangle_run", "multitone_run"]
 
 
 def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: int = 2,
-                decimation: int = 4) -> list[dict]:
+                decimation: int = 4, say=None) -> list[dict]:
     """Triangles from the drive's bottom to ``tops`` (fractions of the range), in DIRECT mode.
 
-    Returns one dict per top with ``t`` [s], ``u`` [V], ``y`` [um].
+    Returns one dict per top with ``t`` [s], ``u`` [V], ``y`` [um]. ``say``, if given, is called
+    with a line of progress before each sweep (each takes ``periods / f_hz`` plus the trigger's wait).
     """
     out = []
     tick = ctl.identity.tick_hz
@@ -30,7 +31,9 @@ def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: i
     cap = ctl.identity.rec_capacity // 2
     decimation = max(decimation, int(np.ceil(periods / f_hz * tick / cap)))
     frames = int(round(periods / f_hz * tick / decimation))
-    for top in tops:
+    for k, top in enumerate(tops):
+        if say is not None:
+            say(f"sweep {k + 1} of {len(tops)}: up to {top:.0%} of the drive range ...")
         amp = int(np.floor(top * 32767.0))
         offset = -32768 + amp
         level = -32768 + int(0.02 * 2 * amp)

@@ -79,7 +79,8 @@ def notch(f0: float, fs: float, q: float = 0.7) -> tuple[float, float, float, fl
     return (1 / a0, -2 * np.cos(w0) / a0, 1 / a0, -2 * np.cos(w0) / a0, (1 - alpha) / a0)
 
 
-def design_feedback(frf, line_gain: float, tick_hz: float, *, fc_max: float = 120.0) -> dict:
+def design_feedback(frf, line_gain: float, tick_hz: float, *, fc_max: float = 120.0,
+                    f_res: float | None = None) -> dict:
     """Preview, PI gains and notch for a stage.
 
     Parameters
@@ -90,8 +91,14 @@ def design_feedback(frf, line_gain: float, tick_hz: float, *, fc_max: float = 12
         Drive per position of the uncompensated line [FS/FS]: 1 / static gain.
     tick_hz : float
         Control rate [Hz].
+    fc_max : float
+        Largest crossover [Hz].
+    f_res : float, optional
+        The identified resonance [Hz] (default :func:`resonance_hz` of ``frf``): passed by the
+        calibration so that the notch, the shaper and the report use one value.
     """
-    f_res = resonance_hz(frf)
+    if f_res is None:
+        f_res = resonance_hz(frf)
     zeta = damping(frf, f_res)
     fc = min(fc_max, f_res / 8.0)
     ts = 1.0 / tick_hz

@@ -5,27 +5,148 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
 
 import numpy as np
 
 from ..ident import get_kind
 
-__all__ = ["write_report", "figure_html", "append_coupling_html"]
+__all__ = ["write_report", "figure_html", "append_coupling_html", "tracking_figure", "loops_figure",
+           "error_frequency_figure", "tone_error_nm"]
 
 
 def figure_html(fig) -> str:
     """A matplotlib figure as an inline <img>."""
     buf = io.BytesIO()
-    fig.tight_layout()  # subplot titles otherwise overlap the axes above
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()  # subplot titles otherwise overlap the axes above
+        fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    else:  # laid out already (constrained): a tight bounding box would draw it all a second time
+        fig.savefig(buf, format="png", dpi=90)
     import matplotlib.pyplot as plt
     plt.close(fig)
     return f'<img src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}">'
 
 
+NM_PER_UM = 1000.0
+KEYS = (1.0, 10.0, 50.0, "multitone")
+MULTITONE_HZ = (1.0, 7.0, 23.0)   # excitation.multitone_run's default tones
+
+
+def _ref_name(k) -> str:
+    return f"{k:g} Hz triangle" if k != "multitone" else "multitone " + " + ".join(f"{f:g}" for f in MULTITONE_HZ) + " Hz"
+
+
+def _table(head: list[str], rows: list[list], cls: str = "") -> str:
+    """An HTML table; cells are escaped text (already formatted)."""
+    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table class='{cls}'><tr>{th}</tr>{body}</table>"
+
+
+def tone_error_nm(run: dict, freqs=MULTITONE_HZ) -> list[float]:
+    """Amplitude [nm] of the tracking error (reference - position) at each tone of a multitone run.
+
+    The run holds whole periods of the lowest tone, so each tone falls on a DFT line (the
+    nearest line is taken: the capture may be a sample short).
+    """
+    t, e = np.asarray(run["t"]), np.asarray(run["ref"] - run["y"]) * NM_PER_UM
+    n = e.size
+    dt = float(np.mean(np.diff(t)))
+    spec = np.fft.rfft(e - e.mean())
+    f = np.fft.rfftfreq(n, dt)
+    return [float(2.0 * np.abs(spec[int(np.argmin(np.abs(f - fk)))]) / n) for fk in freqs]
+
+
+def tracking_figure(runs: dict, compensated: str):
+    """Reference and position [um] above, the error reference - position [nm] on its own axis below,
+    for every acceptance reference, uncompensated (left) and compensated (right)."""
+    import matplotlib.pyplot as plt
+    fig = plt.figure(figsize=(11, 3.4 * len(KEYS)), layout="constrained")
+    for k, sub in zip(KEYS, fig.subfigures(len(KEYS), 1)):
+        ax = sub.subplots(2, 2, sharex="col", gridspec_kw={"height_ratios": [2, 1]})
+        for j, mode in enumerate(("open_loop", compensated)):
+            r = runs[(mode, k)]
+            a, b = ax[0, j], ax[1, j]
+            st = max(1, r["t"].size // 2500)   # the position lines: 2500 points are plenty at this width
+            a.plot(r["t"][::st], r["ref"][::st], "k", lw=0.9, label="reference")
+            a.plot(r["t"][::st], r["y"][::st], "C0", lw=0.8, label="measured position")
+            a.set_ylabel("position [um]")
+            a.set_title(f"{_ref_name(k)}, {'uncompensated' if j == 0 else 'compensated'}", fontsize=9)
+            a.tick_params(labelbottom=False)
+            e = (r["ref"] - r["y"]) * NM_PER_UM
+            b.plot(r["t"], e, "C3", lw=0.7)
+            b.axhline(0.0, color="0.6", lw=0.5)
+            b.set_ylabel("error [nm]")
+            b.set_xlabel("time [s]")
+            b.set_title(f"error, RMS {np.sqrt(np.mean(e ** 2)):.1f} nm", fontsize=8, loc="right")
+        ax[0, 0].legend(fontsize=7, loc="upper right")
+    return fig
+
+
+def loops_figure(runs: dict, compensated: str):
+    """Measured position against the reference [um] for each triangle, uncompensated and compensated:
+    the hysteresis loop before compensation and what is left of it after."""
+    import matplotlib.pyplot as plt
+    tri = [k for k in KEYS if k != "multitone"]
+    fig, ax = plt.subplots(1, len(tri), figsize=(11, 3.8), squeeze=False)
+    for a, k in zip(ax[0], tri):
+        lo = min(float(np.min(runs[(m, k)]["ref"])) for m in ("open_loop", compensated))
+        hi = max(float(np.max(runs[(m, k)]["ref"])) for m in ("open_loop", compensated))
+        a.plot([lo, hi], [lo, hi], color="0.6", lw=0.6, ls=":", label="ideal (position = reference)")
+        for mode, colour, name in (("open_loop", "C1", "uncompensated"), (compensated, "C0", "compensated")):
+            r = runs[(mode, k)]
+            a.plot(r["ref"], r["y"], colour, lw=0.8, label=name)
+        a.set(xlabel="reference [um]", ylabel="measured position [um]", title=f"{k:g} Hz triangle")
+        a.set_aspect("equal", adjustable="datalim")
+    ax[0, 0].legend(fontsize=7, loc="upper left")
+    return fig
+
+
+def error_frequency_figure(summary: dict, runs: dict, compensated: str):
+    """Tracking error against frequency: RMS over the triangles [nm], and the multitone's error at each tone."""
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
+    tri = [k for k in KEYS if k != "multitone"]
+    for key, colour, name in (("rmse_uncompensated_um", "C1", "uncompensated"),
+                              ("rmse_compensated_um", "C0", "compensated")):
+        ax[0].loglog(tri, [summary["tracking"][f"{k:g}"][key] * NM_PER_UM for k in tri], "o-", color=colour,
+                     label=name)
+    ax[0].set(xlabel="triangle frequency [Hz]", ylabel="RMS tracking error [nm]",
+              title="triangles over 80 % of the stroke")
+    for mode, colour, name in (("open_loop", "C1", "uncompensated"), (compensated, "C0", "compensated")):
+        ax[1].loglog(MULTITONE_HZ, tone_error_nm(runs[(mode, "multitone")]), "s-", color=colour, label=name)
+    ax[1].set(xlabel="tone frequency [Hz]", ylabel="error amplitude at the tone [nm]",
+              title="multitone " + " + ".join(f"{f:g}" for f in MULTITONE_HZ) + " Hz")
+    for a in ax:
+        a.grid(True, which="both", lw=0.3)
+        a.legend(fontsize=8)
+    return fig
+
+
 def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
-                 compensated: str = "feedforward") -> None:
+                 compensated: str = "feedforward", steps: list[dict] | None = None, say=None) -> None:
+    """Write ``report.html``: summary, tracking table, steps, plots and the table's provenance.
+
+    Parameters
+    ----------
+    summary : dict
+        The calibration summary (``summary.json``'s content).
+    forc : list of dict
+        The excitation sweeps (``t`` [s], ``u`` [V], ``y`` [um], ``top``).
+    model : Model
+        The flashed model.
+    frf, tf
+        The measured frequency response and its second-order fit.
+    runs : dict
+        Acceptance runs keyed (mode, 1.0 | 10.0 | 50.0 | "multitone"): ``t`` [s], ``ref``, ``y`` [um].
+    img : bytes
+        The table image.
+    steps : list of dict, optional
+        ``step``, ``name``, ``seconds``, ``result`` per step (``summary["steps"]``).
+    say : callable, optional
+        Called with a line of progress before each figure (a few seconds each on a busy machine).
+    """
+    say = say or (lambda text: None)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -33,61 +154,104 @@ def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
 
     parts = []
     kind = get_kind(model.kind)
+    dyn = summary["dynamics"]
+    f_res = dyn["resonance_hz"]
     # hysteresis loops, measured and model
+    say("figure: excitation sweeps and the model ...")
     fig, ax = plt.subplots(1, 2, figsize=(11, 4))
     for r in forc:
         yhat = kind.simulate(model.params, r["t"], r["u"])
         ax[0].plot(r["u"], r["y"], lw=0.8, label=f"top {r['top']:.0%}")
         ax[0].plot(r["u"], yhat, "k--", lw=0.6)
-        ax[1].plot(r["t"], r["y"] - yhat, lw=0.7)
-    ax[0].set(xlabel="drive [V]", ylabel="position [um]", title=f"hysteresis loops (dashed: {model.kind} model)")
+        ax[1].plot(r["t"], (r["y"] - yhat) * NM_PER_UM, lw=0.7, label=f"top {r['top']:.0%}")
+    ax[0].set(xlabel="drive [V]", ylabel="position [um]", title=f"excitation sweeps (dashed: {model.kind} model)")
     ax[0].legend(fontsize=7)
-    ax[1].set(xlabel="time [s]", ylabel="residual [um]", title="model residual per sweep")
-    parts.append(("Hysteresis loops and residuals", figure_html(fig)))
+    ax[1].set(xlabel="time [s]", ylabel="measured - model [nm]", title="model residual per sweep")
+    ax[1].legend(fontsize=7)
+    parts.append(("Identification: hysteresis loops and the model's residual", "", figure_html(fig)))
     # frequency response and fit
-    fig, ax = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    say("figure: frequency response ...")
+    fig, ax = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
     w = 2 * np.pi * frf.f_hz
-    h = tfid.tf_response(tf.num, tf.den, w) if hasattr(tfid, "tf_response") else np.polyval(tf.num, 1j * w) / np.polyval(tf.den, 1j * w)
+    h = tfid.freqresp(tf.num, tf.den, w)
     ax[0].loglog(frf.f_hz, frf.mag, ".", ms=2, label="measured (chirp)")
-    ax[0].loglog(frf.f_hz, np.abs(h), "r", label="fit")
+    ax[0].loglog(frf.f_hz, np.abs(h), "r", lw=1, label=f"2nd-order fit (poles at {dyn['fit_natural_hz']:.0f} Hz)")
     ax[1].semilogx(frf.f_hz, frf.phase_deg, ".", ms=2)
-    ax[1].semilogx(frf.f_hz, np.degrees(np.unwrap(np.angle(h))), "r")
-    ax[0].set(ylabel="|G| [um/V]", title=f"frequency response, resonance {summary['dynamics']['resonance_hz']:.0f} Hz")
+    ax[1].semilogx(frf.f_hz, np.degrees(np.unwrap(np.angle(h))), "r", lw=1)
+    for a in ax:
+        a.axvline(f_res, color="k", ls=":", lw=0.8, label=f"resonance {f_res:.0f} Hz (measured peak)")
+        a.grid(True, which="both", lw=0.3)
+    ax[0].set(ylabel="|G| [um/V]", title=f"frequency response (drive -> position), resonance {f_res:.0f} Hz")
     ax[1].set(xlabel="frequency [Hz]", ylabel="phase [deg]")
-    ax[0].legend()
-    parts.append(("Frequency response and fit", figure_html(fig)))
-    # tracking before/after
-    keys = [k for k in (1.0, 10.0, 50.0, "multitone")]
-    fig, ax = plt.subplots(len(keys), 2, figsize=(11, 2.6 * len(keys)))
-    for i, k in enumerate(keys):
-        for j, mode in enumerate(("open_loop", compensated)):
-            r = runs[(mode, k)]
-            ax[i, j].plot(r["t"], r["ref"], "k", lw=0.8, label="reference")
-            ax[i, j].plot(r["t"], r["y"], lw=0.8, label="position")
-            ax[i, j].plot(r["t"], r["y"] - r["ref"] + r["ref"].mean(), lw=0.6, label="error (offset)")
-            name = f"{k:g} Hz triangle" if k != "multitone" else "multitone"
-            ax[i, j].set_title(f"{name}, {'uncompensated' if j == 0 else 'compensated'}", fontsize=9)
-        ax[i, 0].legend(fontsize=6)
-    parts.append(("Tracking before and after", figure_html(fig)))
-    rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v['rmse_uncompensated_um']:.4f}</td>"
-                   f"<td>{v['rmse_compensated_um']:.4f}</td><td>{v['reduction']:.1f}x</td></tr>"
-                   for k, v in summary["tracking"].items())
-    table = ("<table><tr><th>reference</th><th>RMS error uncompensated [um]</th>"
-             f"<th>compensated [um]</th><th>reduction</th></tr>{rows}</table>")
-    prov = {"table_crc": summary["table_crc_hex"], "table_kind": summary["table_kind"], "model": model.kind,
-            "heldout_nrmse": summary["heldout_nrmse"], "data": model.provenance.get("data"),
-            "tool_version": model.provenance.get("tool_version"), "created": model.provenance.get("created"),
-            "checks": summary["checks"], "image_bytes": len(img)}
-    body = [f"<h1>piezoctl calibration</h1><p>model <b>{model.kind}</b> -> table <b>{summary['table_kind']}</b>, "
-            f"crc {summary['table_crc_hex']}, stroke {summary['stroke_um']:.2f} um, "
-            f"{summary['duration_s']:.0f} s{', <b>rolled back</b>' if summary['rolled_back'] else ''}.</p>",
-            "<h2>Tracking</h2>", table]
-    for title, fig_html in parts:
-        body += [f"<h2>{html.escape(title)}</h2>", fig_html]
-    body += ["<h2>Table provenance</h2>", f"<pre>{html.escape(json.dumps(prov, indent=2, default=str))}</pre>"]
+    ax[0].legend(fontsize=8)
+    res_note = (f"The resonance, {f_res:.1f} Hz, is the frequency of the largest measured magnitude (the chirp's "
+                f"frequency response, lines {np.median(np.diff(frf.f_hz)):.2f} Hz apart); the notch and the input "
+                f"shaper are placed there (damping {dyn.get('damping', float('nan')):.3f} from the half-power "
+                f"width). The red curve is a second-order fit (PSO-WCLS, relative error {dyn['te']:.2f}); its "
+                f"poles are at {dyn['fit_natural_hz']:.1f} Hz: two poles cannot also hold the amplifier's "
+                "bandwidth and the tick's delay, so the fit trades the narrow peak for the broad band. The fit "
+                "is kept in summary.json (dynamics.num, den) and is not used by the controller.")
+    parts.append(("Frequency response and fit", res_note, figure_html(fig)))
+    say("figure: tracking ...")
+    parts.append(("Tracking before and after compensation",
+                  "Reference and measured position; below each, the error reference - position in nm on its "
+                  "own axis (the compensated error is up to 200 times smaller, so each panel has its own scale).",
+                  figure_html(tracking_figure(runs, compensated))))
+    say("figure: hysteresis loops before and after ...")
+    parts.append(("Hysteresis loops before and after compensation",
+                  "Measured position against the reference: uncompensated, the stage's hysteresis loop; "
+                  "compensated, what is left of it.", figure_html(loops_figure(runs, compensated))))
+    say("figure: tracking error against frequency ...")
+    parts.append(("Tracking error against frequency", "", figure_html(error_frequency_figure(summary, runs,
+                                                                                            compensated))))
+    track = _table(["reference", "frequency [Hz]", "RMS error uncompensated [nm]", "RMS error compensated [nm]",
+                    "reduction"],
+                   [[_ref_name(float(k) if k != "multitone" else k),
+                     k if k != "multitone" else " + ".join(f"{f:g}" for f in MULTITONE_HZ),
+                     f"{v['rmse_uncompensated_um'] * NM_PER_UM:.1f}", f"{v['rmse_compensated_um'] * NM_PER_UM:.1f}",
+                     f"{v['reduction']:.1f}x"] for k, v in summary["tracking"].items()])
+    step_table = _table(["step", "what", "time [s]", "result"],
+                        [[f"{r['step']}/7", r["name"], "-" if r.get("seconds") is None else f"{r['seconds']:.1f}",
+                          r.get("result", "")] for r in (steps or [])], cls="left")
+    comp = summary["compensation"]
+    comp_table = _table(["setting", "value"], [
+        ["mode", comp["mode"]], ["resonance, notch and shaper [Hz]", f"{comp['notch_hz']:.1f}"],
+        ["damping", f"{comp['damping']:.4f}"], ["crossover [Hz]", f"{comp['crossover_hz']:.0f}"],
+        ["kp", f"{comp['kp']:.4g}"], ["ki per tick", f"{comp['ki_per_tick']:.4g}"],
+        ["shaper spacing [ticks]", comp["shaper_ticks"]], ["shaper taps (q15)", ", ".join(map(str, comp["shaper_q15"]))],
+        ["preview [ticks]", comp["preview_ticks"]]], cls="left")
+    checks = summary["checks"]
+    prov_rows = [["table CRC", summary["table_crc_hex"]], ["table kind", summary["table_kind"]],
+                 ["image size [bytes]", len(img)], ["model", model.kind],
+                 ["held-out NRMSE", f"{summary['heldout_nrmse']:.4f}"],
+                 ["held-out NRMSE per candidate", ", ".join(f"{k} {v:.4f}" for k, v in
+                                                            summary["heldout_nrmse_by_model"].items())],
+                 ["tool version", model.provenance.get("tool_version")], ["model created", model.provenance.get("created")],
+                 ["forward(inverse) max error [fraction of range]", f"{checks['forward_inverse_max_error_fraction']:.2e}"],
+                 ["fixed point vs float inverse [LSB]", f"{checks['quantization_max_lsb']:.2f}"]]
+    prov_rows += [[k, f"{v:.4g}" if isinstance(v, float) else v] for k, v in checks.items()
+                  if k not in ("forward_inverse_max_error_fraction", "quantization_max_lsb")]
+    target = summary.get("target") or {}
+    prov_rows += [[f"target {k}", v] for k, v in target.items()]
+    data_rows = [[d.get("path"), d.get("rows"), "-" if d.get("nrmse") is None else f"{d['nrmse']:.4f}",
+                  d.get("sha256", "")] for d in model.provenance.get("data", [])]
+    body = [f"<h1>piezoctl calibration</h1><p>Model <b>{html.escape(model.kind)}</b> &rarr; table "
+            f"<b>{html.escape(summary['table_kind'])}</b>, CRC {summary['table_crc_hex']}, stroke "
+            f"{summary['stroke_um']:.2f} um, resonance {f_res:.0f} Hz, {summary['duration_s']:.0f} s"
+            f"{', <b>rolled back</b>' if summary['rolled_back'] else ''}.</p>",
+            "<h2>Tracking</h2><p>RMS of reference minus measured position over whole periods after one settling "
+            "period; uncompensated: the best straight line, no preview, shaper or feedback.</p>", track,
+            "<h2>Steps</h2>", step_table]
+    for title, note, fig_html in parts:
+        body += [f"<h2>{html.escape(title)}</h2>"] + ([f"<p>{html.escape(note)}</p>"] if note else []) + [fig_html]
+    body += ["<h2>Compensation</h2>", comp_table,
+             "<h2>Table provenance</h2>", _table(["item", "value"], prov_rows, cls="left"),
+             "<h3>Recordings the model was fitted on</h3>",
+             _table(["file", "samples", "fit NRMSE", "sha256"], data_rows, cls="left")]
     page = ("<!doctype html><html><head><meta charset='utf-8'><title>piezoctl calibration</title>"
-            "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse}"
-            "td,th{border:1px solid #aaa;padding:4px 8px;text-align:right}</style></head><body>"
+            "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;"
+            "margin:0.5em 0}td,th{border:1px solid #aaa;padding:4px 8px;text-align:right}"
+            "table.left td,table.left th{text-align:left}img{max-width:100%}</style></head><body>"
             + "\n".join(body) + "</body></html>")
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(page)
@@ -98,14 +262,14 @@ def append_coupling_html(path, coupling: dict) -> None:
     rows = []
     for axis, c in sorted(coupling.items()):
         for f, v in c["by_frequency"].items():
-            rows.append(f"<tr><td>{html.escape(axis)}</td><td>{c['from_axis']}</td><td>{html.escape(f)} Hz sine</td>"
+            rows.append(f"<tr><td>{html.escape(axis)}</td><td>{c['from_axis']}</td><td>{html.escape(f)}</td>"
                         f"<td>{v['rmse_uncompensated_um'] * 1e3:.2f}</td><td>{v['rmse_compensated_um'] * 1e3:.2f}</td>"
                         f"<td>{v['reduction']:.1f}x</td></tr>")
     tables = ", ".join(f"axis {a}: {html.escape(c['table_crc_hex'])}" for a, c in sorted(coupling.items()))
     section = ("<h2>Cross-axis coupling</h2><p>Error of an axis holding mid stroke while the other axis "
                "tracks a sine over 60 % of its stroke, with the cross-coupling compensation bypassed and "
                f"applied (coupling tables {tables}).</p><table><tr><th>axis</th><th>from axis</th>"
-               "<th>other axis</th><th>RMS error uncompensated [nm]</th><th>compensated [nm]</th>"
+               "<th>other axis sine [Hz]</th><th>RMS error uncompensated [nm]</th><th>compensated [nm]</th>"
                "<th>reduction</th></tr>" + "".join(rows) + "</table>")
     with open(path, encoding="utf-8") as fh:
         page = fh.read()

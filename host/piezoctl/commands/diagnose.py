@@ -12,6 +12,12 @@ names the file that differs) and be long enough (:data:`MIN_SETTLED_SAMPLES`
 samples after ``--settle-s``). The diagnosis writes into a sibling temporary
 directory that becomes ``DIR`` only when it succeeds: a failed run leaves no
 partial output (and an existing ``DIR`` as it was).
+
+Output: progress on stderr (the notation is explained in docs/diagnose.md,
+"Console output"), then the result on stdout: the named effects, the NRMSE
+before and after, the drive's discontinuities and where the files are; with
+``--json`` the same as one JSON object (:func:`result_of`); ``--quiet`` drops
+the progress.
 """
 
 from __future__ import annotations
@@ -24,9 +30,9 @@ import tempfile
 from pathlib import Path
 
 from ..errors import CliError
-from ..io.recording import describe_dropped, load_recording, save_recording
+from ._options import add_output, emit, progress
 
-__all__ = ["add_parser", "run", "check_inputs", "MIN_SETTLED_SAMPLES", "RATE_TOLERANCE"]
+__all__ = ["add_parser", "run", "check_inputs", "result_of", "MIN_SETTLED_SAMPLES", "RATE_TOLERANCE"]
 
 # Samples each recording needs after --settle-s: the diagnosis splits every
 # recording into at least 6 cross-validation blocks and fits filters per block.
@@ -51,7 +57,8 @@ def add_parser(sub) -> None:
                         "refusing the file; the cleaned copies are kept in DIR/cleaned/")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     p.add_argument("--png", action="store_true", help="also write the report's figures as DIR/plots/*.png")
-    p.add_argument("--quiet", action="store_true", help="print only the result")
+    add_output(p, json_help="print the result (named effects, NRMSE, drive discontinuities, files) as one JSON "
+                            "object on stdout")
     p.set_defaults(func=run)
 
 
@@ -64,6 +71,7 @@ def check_inputs(paths: list[str], settle_s: float, drop_outliers: bool = False)
         A recording the loader refuses, a sample rate differing from the
         first file's (naming both files), or too few samples after settling.
     """
+    from ..io.recording import describe_dropped, load_recording
     recs = [load_recording(p, drop_outliers=drop_outliers) for p in paths]
     ref = recs[0]
     for r in recs:
@@ -81,6 +89,7 @@ def check_inputs(paths: list[str], settle_s: float, drop_outliers: bool = False)
 
 def _cleaned_copies(recs, paths, where: Path) -> list[str]:
     """Paths to pass on: the original file, or a cleaned copy in ``where`` when rows were dropped."""
+    from ..io.recording import save_recording
     out = []
     for i, (r, p) in enumerate(zip(recs, paths)):
         if not r.dropped:
@@ -142,17 +151,48 @@ def run(args) -> int:
         used = _cleaned_copies(recs, paths, tmp / "cleaned")
         ncal = len(args.calibration)
         doc = diagnose(used[:ncal], used[ncal:], str(tmp), settle_s=args.settle_s, max_terms=args.max_terms,
-                       report=not args.no_report, png=args.png,
-                       log=(lambda *a, **k: None) if args.quiet else print)
+                       report=not args.no_report, png=args.png, log=lambda text: progress(args, text))
         _publish(tmp, out)
         if any(r.dropped for r in recs):
             _repoint(out, tmp)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    # the documents name the files as given (not the cleaned copies' temporary paths)
+    for f, p in zip(doc.get("drive_discontinuities", []), _given_paths(doc, paths, used)):
+        f["file"] = p
     fit = doc["fit"]
-    print(f"named: {', '.join(doc['named'])}")
-    print(f"NRMSE base {fit['base']['nrmse']:.4f} -> refined {fit['refined']['nrmse']:.4f} "
-          f"(held-out {fit['heldout']['base_nrmse']:.4f} -> {fit['heldout']['refined_nrmse']:.4f})")
-    print(f"written: {args.out}/diagnosis.json ({doc['time_s']:.1f} s)")
+    lines = [f"named: {', '.join(doc['named'])}",
+             f"NRMSE base {fit['base']['nrmse']:.4f} -> refined {fit['refined']['nrmse']:.4f} "
+             f"(held-out {fit['heldout']['base_nrmse']:.4f} -> {fit['heldout']['refined_nrmse']:.4f})"]
+    lines += discontinuity_lines(doc.get("drive_discontinuities", []))
+    lines.append(f"written: {args.out}/diagnosis.json ({doc['time_s']:.1f} s)")
+    emit(args, result_of(doc, out), lines)
     return 0
+
+
+def _given_paths(doc, paths, used):
+    """For each entry of ``drive_discontinuities``, the path the user gave for that file."""
+    given = dict(zip(used, paths))
+    return [given.get(f["file"], f["file"]) for f in doc.get("drive_discontinuities", [])]
+
+
+def discontinuity_lines(dd: list) -> list[str]:
+    """One line per file with drive discontinuities: how many, and the largest."""
+    out = []
+    for f in dd:
+        j = max(f["jumps"], key=lambda j: abs(j["jump_v"]))
+        out.append(f"drive discontinuities: {os.path.basename(f['file'])} ({f['role']}): {f['count']}, largest "
+                   f"{j['u_before_v']:.2f} -> {j['u_after_v']:.2f} V at sample {j['sample']} (t {j['t_s']:.4f} s, "
+                   f"{j['where']})")
+    return out
+
+
+def result_of(doc: dict, out: Path) -> dict:
+    """The ``--json`` object: the verdict, the fit figures, the discontinuities and the files written."""
+    return {"named": doc["named"], "fit": {k: doc["fit"][k] for k in ("base", "refined", "heldout")},
+            "effects": [{"name": x["name"], "significant": x["significant"], "evidence": x["evidence"]}
+                        for x in doc.get("effects", [])],
+            "drive_discontinuities": doc.get("drive_discontinuities", []), "time_s": doc["time_s"],
+            "diagnosis": str(out / "diagnosis.json"), "report": str(out / "report.html"),
+            "base_model": str(out / "base_model.json"), "refined_model": str(out / "refined_model.json")}

@@ -10,7 +10,17 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal as sig
 
-__all__ = ["locate", "where_of", "peak_frequencies", "binned_rms"]
+__all__ = ["locate", "where_of", "peak_frequencies", "binned_rms", "residual_autocorrelation",
+           "drive_discontinuities", "discontinuities_doc", "JUMP_NEIGHBOURS", "JUMP_FACTOR", "JUMP_SPAN_FRACTION"]
+
+# A drive discontinuity (drive_discontinuities): a sample-to-sample change at least JUMP_FACTOR times the
+# largest change among the JUMP_NEIGHBOURS changes on either side, and at least JUMP_SPAN_FRACTION of the
+# recording's drive span. A sampled sine or triangle changes by similar amounts from sample to sample; a
+# step, a recorder's reset or a chattering output does not.
+JUMP_NEIGHBOURS = 5
+JUMP_FACTOR = 4.0
+JUMP_SPAN_FRACTION = 0.05
+JUMPS_LISTED = 10       # per file, the largest, in time order
 
 
 def binned_rms(x: np.ndarray, e: np.ndarray, n_bins: int = 8) -> dict:
@@ -96,6 +106,90 @@ def where_of(sigs, contribs, dt) -> dict:
             "rate_v_per_s": [rate["edges"][kr], rate["edges"][kr + 1]]}
 
 
+def residual_autocorrelation(r: np.ndarray, dt: float, max_lag: int = 25, max_n: int = 20000):
+    """Normalized autocorrelation of a residual decimated to at most 1 kHz, and its 99 % band.
+
+    Parameters
+    ----------
+    r : ndarray
+        Residual [um] at sample period ``dt`` [s].
+    max_lag : int
+        Lags 0..max_lag of the decimated residual.
+    max_n : int
+        At most this many decimated samples enter the correlation.
+
+    Returns
+    -------
+    (lag_s, ac, bound) or None
+        Lags [s], autocorrelation at those lags (``ac[0] = 1``), and the 99 % band ``2.58 / sqrt(n)`` of a
+        white residual of ``n`` decimated samples; None when fewer than 64 remain.
+    """
+    step = max(1, int(round(1e-3 / dt)))
+    rd = np.asarray(r)[::step]
+    n = rd.size
+    if n < 64:
+        return None
+    m = min(n, max_n)
+    rr = rd - rd.mean()
+    ac = np.correlate(rr[:m], rr[:m], "full")
+    ac = ac[m - 1: m + max_lag] / (ac[m - 1] or 1.0)
+    return np.arange(ac.size) * step * dt, ac, 2.58 / np.sqrt(n)
+
+
+def drive_discontinuities(t: np.ndarray, u: np.ndarray) -> list[dict]:
+    """Jumps of the drive: changes much larger than the changes around them (see ``JUMP_FACTOR``).
+
+    Parameters
+    ----------
+    t, u : ndarray
+        Sample times [s] and drive [V] of one recording.
+
+    Returns
+    -------
+    list of dict
+        One per jump, in time order: ``sample`` (index of the sample after the jump), ``t_s``,
+        ``u_before_v``, ``u_after_v``, ``jump_v`` and ``where`` ("first sample", "last sample" or
+        "inside").
+    """
+    u = np.asarray(u, dtype=float)
+    if u.size < 3:
+        return []
+    d = np.diff(u)
+    a = np.abs(d)
+    w = JUMP_NEIGHBOURS
+    pad = np.concatenate([np.zeros(w), a, np.zeros(w)])
+    win = np.lib.stride_tricks.sliding_window_view(pad, 2 * w + 1).copy()
+    win[:, w] = 0.0                       # the change itself is not its own neighbour
+    local = win.max(axis=1)
+    span = float(np.ptp(u))
+    hit = np.nonzero((a >= JUMP_FACTOR * local) & (a >= JUMP_SPAN_FRACTION * span) & (a > 0))[0]
+    n = u.size
+    return [{"sample": int(k + 1), "t_s": float(t[k + 1]), "u_before_v": float(u[k]), "u_after_v": float(u[k + 1]),
+             "jump_v": float(d[k]),
+             "where": "first sample" if k == 0 else "last sample" if k + 1 == n - 1 else "inside"} for k in hit]
+
+
+def discontinuities_doc(calibration, cal, recordings, recs) -> list[dict]:
+    """diagnosis.json's ``drive_discontinuities``: per file with jumps, its role, count and largest jumps.
+
+    Parameters
+    ----------
+    calibration, recordings : list of str
+        The file paths.
+    cal, recs : list of Recording
+        The loaded recordings, in the same order.
+    """
+    out = []
+    for role, paths, rs in (("calibration", calibration, cal), ("recording", recordings, recs)):
+        for p, r in zip(paths, rs):
+            jumps = drive_discontinuities(r.t, r.u)
+            if not jumps:
+                continue
+            keep = sorted(sorted(jumps, key=lambda j: -abs(j["jump_v"]))[:JUMPS_LISTED], key=lambda j: j["sample"])
+            out.append({"file": str(p), "role": role, "count": len(jumps), "jumps": keep})
+    return out
+
+
 def _xcorr_max(a, b, max_lag):
     a = (a - a.mean()) / (a.std() or 1.0)
     b = (b - b.mean()) / (b.std() or 1.0)
@@ -149,15 +243,11 @@ def locate(sigs, residuals, dt) -> dict:
     step = max(1, int(round(1e-3 / dt)))
     tests = {"whiteness_outside_99": [], "xcorr_u": [], "xcorr_rate": [], "xcorr_u2": [], "bound_99": []}
     for s, r in zip(sigs, residuals):
-        rd = r[::step]
-        n = rd.size
-        if n < 64:
+        acr = residual_autocorrelation(r, dt)
+        if acr is None:
             continue
-        rr = rd - rd.mean()
-        ac = np.correlate(rr[: min(n, 20000)], rr[: min(n, 20000)], "full")
-        m = min(n, 20000)
-        ac = ac[m - 1: m + 25] / (ac[m - 1] or 1.0)
-        bound = 2.58 / np.sqrt(n)
+        _, ac, bound = acr
+        rd = r[::step]
         tests["whiteness_outside_99"].append(float(np.mean(np.abs(ac[1:]) > bound)))
         tests["xcorr_u"].append(_xcorr_max(rd, s.u[::step], 25))
         tests["xcorr_rate"].append(_xcorr_max(rd, np.abs(np.gradient(s.u, dt))[::step], 25))

@@ -1,8 +1,11 @@
 """report.html: the diagnosis in words and plots (self-contained: PNGs embedded as base64).
 
 Plots: residual against time per recording (base and refined), residual spectrum,
-residual RMS against drive amplitude, drive rate and other-axis motion, and
-measured / base / refined overlays in the window where the first effect acts most.
+residual RMS against drive amplitude, drive rate and other-axis motion, the residual's
+autocorrelation with its 99 % band (whiteness), and measured / base / refined overlays in
+the window where the first effect acts most. Tables: effects, each named effect's
+parameters and where it acts, the base model's failure per recording, and the drive's
+discontinuities.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import os
 
 import numpy as np
 
-__all__ = ["write_report"]
+__all__ = ["write_report", "figures", "whiteness_figure", "where_rows", "discontinuity_rows"]
 
 
 def _png(fig) -> str:
@@ -118,12 +121,101 @@ def figures(doc, sigs, valid, yr_all) -> dict:
     axs[1].set_xlabel(f"t [s] ({s.name})")
     fig.tight_layout()
     figs["overlay"] = _png(fig)
+    figs["whiteness"] = _png(whiteness_figure(sigs, valid, yr_all))
     return figs
+
+
+def whiteness_figure(sigs, valid, yr_all):
+    """Autocorrelation of the base and refined residuals per recording (decimated to at most 1 kHz, as
+    the whiteness test of ``locate.py``), with the 99 % band of a white residual."""
+    import matplotlib.pyplot as plt
+    from .locate import residual_autocorrelation
+    n = len(sigs)
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig, axs = plt.subplots(rows, cols, figsize=(9, 2.6 * rows + 0.4), squeeze=False)
+    for ax in axs.flat[n:]:
+        ax.set_visible(False)
+    for ax, s, v, yr in zip(axs.flat, sigs, valid, yr_all):
+        bound = None
+        for e, name, mk in (((s.y - s.yb)[v], "base", "o"), ((s.y - yr)[v], "refined", "s")):
+            acr = residual_autocorrelation(e, s.dt)
+            if acr is None:
+                continue
+            lag, ac, bound = acr
+            ax.plot(lag[1:] * 1e3, ac[1:], mk + "-", ms=2.5, lw=0.7, label=name)
+        if bound is not None:
+            ax.axhspan(-bound, bound, color="0.85", zorder=0, label="99 % band (white)")
+        ax.axhline(0.0, color="0.5", lw=0.5)
+        ax.set_title(s.name, fontsize=9)
+        ax.set_xlabel("lag [ms]")
+        ax.set_ylabel("autocorrelation")
+    axs[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_fmt(x) for x in v)
+    if isinstance(v, dict):
+        return "; ".join(f"{k} {_fmt(x)}" for k, x in v.items())
+    return str(v)
+
+
+def _table(head, rows) -> str:
+    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+    return ("<table><tr>" + th + "</tr>" + "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r)
+                                                   + "</tr>" for r in rows) + "</table>")
+
+
+def where_rows(where: dict) -> list[list[str]]:
+    """``where`` of an effect (diagnosis.json) as (aspect, value) rows, units in the aspect."""
+    rows = []
+    if where.get("recordings"):
+        rows.append(["recordings (share of the term's energy)",
+                     ", ".join(f"{r['recording']} {100 * r['share']:.0f} %" for r in where["recordings"])])
+    for w in where.get("time_windows", []):
+        rows.append([f"time window [s] in {w.get('recording', '')}",
+                     f"{w['t0_s']:.2f} - {w['t1_s']:.2f} ({w['rms_um'] * 1e3:.1f} nm RMS, "
+                     f"{w['x_median']:.1f} x the median window)"])
+    if where.get("frequency_bands"):
+        rows.append(["frequency bands [Hz] (share of the term's power)",
+                     ", ".join(f"{b['f_lo_hz']:g} - {b['f_hi_hz']:g}: {100 * b['share']:.0f} %"
+                               for b in where["frequency_bands"])])
+    if where.get("amplitude_v"):
+        rows.append(["drive where it acts most [V]", f"{where['amplitude_v'][0]:.1f} - {where['amplitude_v'][1]:.1f}"])
+    if where.get("rate_v_per_s"):
+        rows.append(["drive rate where it acts most [V/s]",
+                     f"{where['rate_v_per_s'][0]:.3g} - {where['rate_v_per_s'][1]:.3g}"])
+    o = where.get("outside_calibrated_range")
+    if o:
+        rows.append(["outside the calibrated drive range",
+                     f"{100 * o['fraction_of_samples']:.1f} % of the samples (calibrated "
+                     f"{o['calibrated_drive_v'][0]:.1f} - {o['calibrated_drive_v'][1]:.1f} V)"])
+    for k, v in where.items():
+        if k not in ("recordings", "time_windows", "frequency_bands", "amplitude_v", "rate_v_per_s",
+                     "outside_calibrated_range"):
+            rows.append([k, _fmt(v)])
+    return rows
+
+
+def discontinuity_rows(dd: list) -> list[list[str]]:
+    """diagnosis.json's ``drive_discontinuities`` as table rows (file, role, count, jumps)."""
+    rows = []
+    for f in dd:
+        for j in f["jumps"]:
+            rows.append([os.path.basename(f["file"]), f["role"], str(f["count"]), str(j["sample"]),
+                         f"{j['t_s']:.4f}", f"{j['u_before_v']:.2f} -> {j['u_after_v']:.2f}", f"{j['jump_v']:+.2f}",
+                         j["where"]])
+    return rows
 
 
 def write_report(path, doc, sigs, valid, yr_all, held_pred=None, png_dir=None) -> None:
     """Write report.html for a diagnosis document and its signals; with ``png_dir``, each figure also as
-    ``png_dir/<name>.png`` (residual_time, residual_frequency, residual_amplitude_rate, overlay)."""
+    ``png_dir/<name>.png`` (residual_time, residual_frequency, residual_amplitude_rate, whiteness, overlay)."""
     figs = figures(doc, sigs, valid, yr_all)
     if png_dir is not None:
         os.makedirs(png_dir, exist_ok=True)
@@ -150,8 +242,11 @@ def write_report(path, doc, sigs, valid, yr_all, held_pred=None, png_dir=None) -
     parts.append("</table>")
     for x in doc["effects"]:
         if x["significant"]:
-            parts.append(f"<h3>{html.escape(x['name'])}</h3><p>Parameters: <code>{html.escape(str(x['params']))}"
-                         f"</code></p><p>Where: <code>{html.escape(str(x['where']))}</code></p>")
+            parts.append(f"<h3>{html.escape(x['name'])}</h3>")
+            parts.append(_table(["parameter (unit in the name)", "value"], [[k, _fmt(v)] for k, v in x["params"].items()]))
+            parts.append("<p>Where it acts:</p>" + _table(["aspect", "where"], where_rows(x["where"])))
+        elif x["name"] == "none" and x.get("where"):
+            parts.append("<h3>none</h3>" + _table(["aspect", "where"], where_rows(x["where"])))
     parts.append("<h2>Where the base model fails</h2><table><tr><th>recording</th><th>NRMSE</th><th>mean [um]"
                  "</th><th>rising / falling mean [um]</th><th>worst windows</th></tr>")
     for r in doc["located"]["per_recording"]:
@@ -159,11 +254,32 @@ def write_report(path, doc, sigs, valid, yr_all, held_pred=None, png_dir=None) -
         parts.append(f"<tr><td>{html.escape(r['recording'])}</td><td>{r['nrmse']:.4f}</td><td>{r['mean_um']:+.4f}"
                      f"</td><td>{r['mean_rising_um']:+.4f} / {r['mean_falling_um']:+.4f}</td><td>{wins}</td></tr>")
     parts.append("</table>")
-    titles = {"residual_time": "Residual against time", "residual_frequency": "Residual spectrum",
-              "residual_amplitude_rate": "Residual against drive amplitude, rate and other-axis motion",
-              "overlay": "Before / after: measured, base and refined"}
-    for k, title in titles.items():
-        parts.append(f"<h2>{title}</h2><img src='data:image/png;base64,{figs[k]}'>")
+    dd = doc.get("drive_discontinuities") or []
+    parts.append("<h2>Discontinuities in the drive</h2>")
+    if dd:
+        from .locate import JUMP_FACTOR, JUMP_NEIGHBOURS, JUMP_SPAN_FRACTION, JUMPS_LISTED
+        parts.append(f"<p>Samples where the drive jumps by at least {JUMP_FACTOR:g} times the largest change among "
+                     f"the {JUMP_NEIGHBOURS} samples on either side and by at least {100 * JUMP_SPAN_FRACTION:g} % of "
+                     "the recording's drive span (docs/diagnose.md). A jump at "
+                     "the last sample is usually the recorder resetting the drive, which the stage never followed; "
+                     "inside a recording it is a step or a chattering drive. They are flagged, not removed: the "
+                     f"models see them as they are. Per file the {JUMPS_LISTED} largest are listed.</p>")
+        parts.append(_table(["file", "role", "jumps in the file", "sample", "t [s]", "drive [V]", "jump [V]", "where"],
+                            discontinuity_rows(dd)))
+    else:
+        parts.append("<p>None: no sample-to-sample change of the drive stands out from its neighbours.</p>")
+    titles = {"residual_time": ("Residual against time", ""),
+              "residual_frequency": ("Residual spectrum", ""),
+              "residual_amplitude_rate": ("Residual against drive amplitude, rate and other-axis motion", ""),
+              "whiteness": ("Whiteness: autocorrelation of the residual",
+                            "Residual (measured - simulated) decimated to at most 1 kHz, autocorrelation at lags "
+                            "1-25 samples. A white residual (noise only) stays inside the grey 99 % band; points "
+                            "outside mean structure the model has not captured (diagnosis.json: "
+                            "located.tests.whiteness_outside_99 is the fraction outside, for the base model)."),
+              "overlay": ("Before / after: measured, base and refined", "")}
+    for k, (title, note) in titles.items():
+        parts.append(f"<h2>{title}</h2>" + (f"<p>{html.escape(note)}</p>" if note else "")
+                     + f"<img src='data:image/png;base64,{figs[k]}'>")
     parts.append("</body></html>")
     with open(path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(parts))

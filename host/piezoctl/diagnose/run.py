@@ -330,6 +330,8 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
     log(f"selection done ({time.perf_counter() - t_start:.1f} s): {[a.name for a in accepted] or ['none']}")
     fit, yr_all, held_pred = refine(ctx, ctx_all, fctx, recs, names, calibration, recordings, cal, settle_s, out)
     doc = document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibration, recordings)
+    # flagged, not acted on: a jump the stage could not follow (a recorder's reset) or a step drive
+    doc["drive_discontinuities"] = loc.discontinuities_doc(calibration, cal, recordings, recs)
     write_outputs(doc, out, ctx, yr_all, held_pred, report, png, t_start)
     return doc
 
