@@ -81,6 +81,23 @@ struct piezo_dcc_coeffs {
     int32_t g_q24;         /* gain g = 1 / sum(w), >= 1 */
 };
 
+/* Runs kept per direction: rows (falling) or columns (rising) of the band
+ * whose moving operators are tracked as one (docs/kernels-kp.md). */
+#define PIEZO_DCC_RUNS 4u
+
+/* A run: the operators of one row (falling, index order) or one column
+ * (rising, order-array positions) that moved in the current monotone run of
+ * the input. All of them hold the same value lvl = r(v_prev - thr): falling
+ * the first k of the row, rising the last k of the column. */
+struct piezo_dcc_run {
+    int64_t csum;      /* sum of c_j over the k operators */
+    int32_t lvl;       /* their common psi */
+    int16_t thr;       /* the row's n1 / the column's n2 */
+    uint16_t first;    /* falling: the row's first index; rising: the column's first position */
+    uint16_t end;      /* one past the row's last index / the column's last position */
+    uint16_t k;        /* operators in the run */
+};
+
 /* Caller-owned instance; the coefficients may be shared, the state may not. */
 struct piezo_dcc {
     const struct piezo_dcc_coeffs *coeffs;
@@ -95,6 +112,11 @@ struct piezo_dcc {
     uint8_t const_w;     /* 1: c_q24 constant, sums kept incrementally */
     uint8_t n1_sorted;   /* n1 non-decreasing: the falling band is an index range */
     uint8_t n2_banded;   /* every n2 > nmin - xsat: the rising band may skip saturated ones */
+    uint8_t lex_sorted;  /* (n1, n2) non-decreasing in index order: rows are index ranges
+                          * with n2 ascending, the runs apply (with const_w) */
+    uint8_t n_run;       /* runs of the current direction, in run[cur] by ascending thr */
+    uint8_t cur;         /* which of the two run buffers is current */
+    struct piezo_dcc_run run[2][PIEZO_DCC_RUNS];
 };
 
 /**

@@ -85,8 +85,12 @@ static void eupi_tick(uint32_t k)
     piezo_bench_sink = piezo_eupi_process(&eupi, piezo_bench_u[k]);
 }
 
-static piezo_coefset_t inv_set;
-static piezo_ff_state_t inv_ff;
+/* the reference case's set and state (bench_reference.c), reloaded here:
+ * the image has no RAM for a second pair */
+extern piezo_coefset_t bench_inv_set;
+extern piezo_ff_state_t bench_inv_ff;
+#define inv_set bench_inv_set
+#define inv_ff bench_inv_ff
 static void eupi_inv_tick(uint32_t k)
 {
     piezo_bench_sink = piezo_eupi_inv_process(&inv_ff.inv, u_small[k]);
