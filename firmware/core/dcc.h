@@ -29,6 +29,10 @@
  * (C = sum_j c_j) is kept incrementally when the caller declares the weights
  * constant (piezo_dcc_const_weights(), e.g. a kp_dcc table); otherwise (the
  * RKP density changes every tick) the sum is formed in full every tick.
+ * With constant weights on a grid in (n1, n2) order the moving operators of
+ * a row (falling) or column (rising) hold one value and move as one run,
+ * (r' - r) * csum (docs/kernels-kp.md, "DCC: runs"); every psi is still
+ * written.
  *
  * Control law, one sample per tick (the operators see the previous drive, which
  * avoids an algebraic loop):
@@ -65,6 +69,9 @@
  * Incremental form: |C| <= 2^43 and |v| <= 2^15, so |v C| <= 2^58;
  * |sum psi_j c_j| < 2^15 * 2^31 * 2^12 = 2^58; their difference is the sum
  * above (exact in int64). The candidates v - r stay within +-2^17 in int32.
+ * Runs: a run's csum is a sum of at most 2^12 weights, |csum| < 2^43, and
+ * |(r' - r) * csum| < 2^15 * 2^43 = 2^58; the tick's change of the kept sum
+ * is the exact difference of two sums below 2^58 (int64).
  */
 #ifndef PIEZO_DCC_H
 #define PIEZO_DCC_H
