@@ -66,10 +66,15 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
     dcc->csum = 0;
     dcc->n1_sorted = 1u;
     dcc->n2_banded = 1u;
+    dcc->lex_sorted = 1u;
     for (uint16_t j = 0; j < g->n_ops; j++) {
         order[j] = order_entry(g->n2_q15[j], j);
         if (j > 0u && g->n1_q15[j] < g->n1_q15[j - 1u]) {
             dcc->n1_sorted = 0u;
+        }
+        if (j > 0u && (g->n1_q15[j] < g->n1_q15[j - 1u] ||
+                       (g->n1_q15[j] == g->n1_q15[j - 1u] && g->n2_q15[j] < g->n2_q15[j - 1u]))) {
+            dcc->lex_sorted = 0u;
         }
         if ((int32_t)g->n2_q15[j] <= (int32_t)g->nmin_q15 - g->xsat_q15) {
             dcc->n2_banded = 0u;
@@ -91,6 +96,7 @@ void piezo_dcc_const_weights(struct piezo_dcc *dcc)
     dcc->csum = csum;
     dcc->kacc = kacc;
     dcc->const_w = 1u;
+    dcc->n_run = 0u;
 }
 
 void piezo_dcc_reset(struct piezo_dcc *dcc)
@@ -104,6 +110,8 @@ void piezo_dcc_reset(struct piezo_dcc *dcc)
     dcc->v_prev_q15 = g->nmin_q15;
     dcc->u_last_q15 = g->nmin_q15;
     dcc->dir = -1;
+    dcc->n_run = 0u;
+    dcc->cur = 0u;
 }
 
 /* First index in [lo, n) of a non-decreasing key whose key exceeds t. */
@@ -133,6 +141,159 @@ static uint16_t first_n2_above(const int32_t *order, uint16_t n, int32_t t)
         }
     }
     return lo;
+}
+
+/*
+ * Falling to v with runs (const_w, lex_sorted; docs/kernels-kp.md, "DCC:
+ * runs"). In a row (one n1, index order = n2 order) psi is non-increasing
+ * in n2, so the operators that move, psi > r(v - n1), are a prefix of the
+ * row, and after the update they all hold r: a run. Next tick the run moves
+ * as one, (r' - r) * csum, and the operators after it join while psi > r'.
+ * Every psi is still written (one store per operator of the run), so
+ * readers and the other direction see the state as it is.
+ */
+static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
+{
+    const struct piezo_kp_grid *g = &dcc->coeffs->grid;
+    const int32_t *c = dcc->coeffs->c_q24;
+    const int16_t *th = g->n1_q15;
+    int32_t *psi = dcc->psi_q15;
+    const int32_t n = g->n_ops;
+    const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
+    const struct piezo_dcc_run *old = dcc->run[dcc->cur];
+    const struct piezo_dcc_run *old_end = old + dcc->n_run;
+    struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
+    struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
+    int64_t dk = 0;
+    int32_t j = first_n1_above(th, (uint16_t)n, v - xsat);
+    while (j < n) {
+        const int32_t n1 = th[j];
+        const int32_t x = v - n1;
+        if (x <= dv) {
+            break; /* n1 >= v_prev: psi = 0 by (A) */
+        }
+        const int32_t r = x >= xsat ? rmax : x <= 0 ? 0 : (x * slope + 32768) >> 16;
+        while (old < old_end && old->thr < n1) {
+            old++;
+        }
+        int32_t p = j, end;
+        int64_t csum = 0;
+        if (old < old_end && old->thr == n1) {
+            /* the run moves as one, then its row's next operators join */
+            end = old->end;
+            csum = old->csum;
+            const int32_t run_end = j + old->k;
+            if (r != old->lvl) {
+                dk += (int64_t)(r - old->lvl) * csum;
+                for (; p < run_end; p++) {
+                    psi[p] = r;
+                }
+            }
+            p = run_end;
+            old++;
+            for (; p < end && psi[p] > r; p++) {
+                dk += (int64_t)(r - psi[p]) * c[p];
+                csum += c[p];
+                psi[p] = r;
+            }
+        } else {
+            for (; p < n && th[p] == n1 && psi[p] > r; p++) {
+                dk += (int64_t)(r - psi[p]) * c[p];
+                csum += c[p];
+                psi[p] = r;
+            }
+            for (end = p; end < n && th[end] == n1; end++) {
+            }
+        }
+        if (p > j && o < out_end) {
+            *o++ = (struct piezo_dcc_run){csum, r, (int16_t)n1, (uint16_t)j, (uint16_t)end,
+                                          (uint16_t)(p - j)};
+        }
+        j = end;
+    }
+    dcc->cur ^= 1u;
+    dcc->n_run = (uint8_t)(o - out);
+    return dk;
+}
+
+/*
+ * Rising to v with runs: in a column (one n2; its order positions by index,
+ * i.e. by n1) psi is non-increasing in n1, so the operators that move,
+ * psi < r(v - n2), are the last ones of the column: a run, as falling. A
+ * column without a run is scanned forward: past the first operator that
+ * moves, all the others move too.
+ */
+static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
+{
+    const struct piezo_kp_grid *g = &dcc->coeffs->grid;
+    const int32_t *c = dcc->coeffs->c_q24;
+    const int32_t *ord = dcc->order;
+    int32_t *psi = dcc->psi_q15;
+    const int32_t n = g->n_ops;
+    const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
+    const struct piezo_dcc_run *old = dcc->run[dcc->cur];
+    const struct piezo_dcc_run *old_end = old + dcc->n_run;
+    struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
+    struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
+    int64_t dk = 0;
+    int32_t pos = dcc->n2_banded ? first_n2_above(ord, (uint16_t)n, dcc->v_prev_q15 - xsat) : 0;
+    while (pos < n) {
+        const int32_t n2 = ord[pos] >> 16;
+        const int32_t x = v - n2;
+        if (x <= 0) {
+            break; /* n2 >= v from here on: r = 0 */
+        }
+        const int32_t r = x >= xsat ? rmax : (x * slope + 32768) >> 16;
+        while (old < old_end && old->thr < n2) {
+            old++;
+        }
+        int32_t end, q;
+        int64_t csum = 0;
+        if (old < old_end && old->thr == n2) {
+            end = old->end;
+            csum = old->csum;
+            q = end - old->k; /* the run: positions q .. end-1 */
+            if (r != old->lvl) {
+                dk += (int64_t)(r - old->lvl) * csum;
+                for (int32_t i = q; i < end; i++) {
+                    psi[(uint16_t)ord[i]] = r;
+                }
+            }
+            old++;
+            while (q > pos) { /* the column's operators before the run join */
+                const int32_t jj = (uint16_t)ord[q - 1];
+                const int32_t p0 = psi[jj];
+                if (p0 >= r) {
+                    break;
+                }
+                dk += (int64_t)(r - p0) * c[jj];
+                csum += c[jj];
+                psi[jj] = r;
+                q--;
+            }
+        } else {
+            int32_t e = pos;
+            /* operators that do not move, then (a suffix) all that do */
+            for (; e < n && (ord[e] >> 16) == n2 && psi[(uint16_t)ord[e]] >= r; e++) {
+            }
+            q = e;
+            for (; e < n && (ord[e] >> 16) == n2; e++) {
+                const int32_t jj = (uint16_t)ord[e];
+                dk += (int64_t)(r - psi[jj]) * c[jj];
+                csum += c[jj];
+                psi[jj] = r;
+            }
+            end = e;
+        }
+        if (q < end && o < out_end) {
+            *o++ = (struct piezo_dcc_run){csum, r, (int16_t)n2, (uint16_t)pos, (uint16_t)end,
+                                          (uint16_t)(end - q)};
+        }
+        pos = end;
+    }
+    dcc->cur ^= 1u;
+    dcc->n_run = (uint8_t)(o - out);
+    return dk;
 }
 
 /*
@@ -168,6 +329,12 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
     if (dir != dcc->dir) { /* reversal: where it happened (kept for the record) */
         dcc->xi_q15 = dcc->v_prev_q15;
         dcc->dir = dir;
+        dcc->n_run = 0u; /* the runs are the other direction's */
+    }
+    if (dcc->const_w && dcc->lex_sorted) {
+        dk = dir > 0 ? dcc_rise_runs(dcc, v) : dcc_fall_runs(dcc, v, dv);
+        dcc->v_prev_q15 = v_q15;
+        return dk;
     }
     /* Operators with the same threshold share x and the ridge r: r is
      * computed once per threshold, each operator then costs a compare (and

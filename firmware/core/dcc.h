@@ -29,6 +29,10 @@
  * (C = sum_j c_j) is kept incrementally when the caller declares the weights
  * constant (piezo_dcc_const_weights(), e.g. a kp_dcc table); otherwise (the
  * RKP density changes every tick) the sum is formed in full every tick.
+ * With constant weights on a grid in (n1, n2) order the moving operators of
+ * a row (falling) or column (rising) hold one value and move as one run,
+ * (r' - r) * csum (docs/kernels-kp.md, "DCC: runs"); every psi is still
+ * written.
  *
  * Control law, one sample per tick (the operators see the previous drive, which
  * avoids an algebraic loop):
@@ -65,6 +69,9 @@
  * Incremental form: |C| <= 2^43 and |v| <= 2^15, so |v C| <= 2^58;
  * |sum psi_j c_j| < 2^15 * 2^31 * 2^12 = 2^58; their difference is the sum
  * above (exact in int64). The candidates v - r stay within +-2^17 in int32.
+ * Runs: a run's csum is a sum of at most 2^12 weights, |csum| < 2^43, and
+ * |(r' - r) * csum| < 2^15 * 2^43 = 2^58; the tick's change of the kept sum
+ * is the exact difference of two sums below 2^58 (int64).
  */
 #ifndef PIEZO_DCC_H
 #define PIEZO_DCC_H
@@ -81,6 +88,23 @@ struct piezo_dcc_coeffs {
     int32_t g_q24;         /* gain g = 1 / sum(w), >= 1 */
 };
 
+/* Runs kept per direction: rows (falling) or columns (rising) of the band
+ * whose moving operators are tracked as one (docs/kernels-kp.md). */
+#define PIEZO_DCC_RUNS 4u
+
+/* A run: the operators of one row (falling, index order) or one column
+ * (rising, order-array positions) that moved in the current monotone run of
+ * the input. All of them hold the same value lvl = r(v_prev - thr): falling
+ * the first k of the row, rising the last k of the column. */
+struct piezo_dcc_run {
+    int64_t csum;      /* sum of c_j over the k operators */
+    int32_t lvl;       /* their common psi */
+    int16_t thr;       /* the row's n1 / the column's n2 */
+    uint16_t first;    /* falling: the row's first index; rising: the column's first position */
+    uint16_t end;      /* one past the row's last index / the column's last position */
+    uint16_t k;        /* operators in the run */
+};
+
 /* Caller-owned instance; the coefficients may be shared, the state may not. */
 struct piezo_dcc {
     const struct piezo_dcc_coeffs *coeffs;
@@ -95,6 +119,11 @@ struct piezo_dcc {
     uint8_t const_w;     /* 1: c_q24 constant, sums kept incrementally */
     uint8_t n1_sorted;   /* n1 non-decreasing: the falling band is an index range */
     uint8_t n2_banded;   /* every n2 > nmin - xsat: the rising band may skip saturated ones */
+    uint8_t lex_sorted;  /* (n1, n2) non-decreasing in index order: rows are index ranges
+                          * with n2 ascending, the runs apply (with const_w) */
+    uint8_t n_run;       /* runs of the current direction, in run[cur] by ascending thr */
+    uint8_t cur;         /* which of the two run buffers is current */
+    struct piezo_dcc_run run[2][PIEZO_DCC_RUNS];
 };
 
 /**

@@ -72,15 +72,19 @@ static void test_golden_cases(void **state)
     }
 }
 
-/* psi_j + Psi_j == v exactly, every operator, every sample, from reset. */
+/* psi_j + Psi_j == v exactly, every operator, every sample, from reset;
+ * const_w: with the weights declared constant (the kernel's runs, dcc.c). */
 static void check_identity(const struct piezo_dcc_coeffs *dc, const int16_t *v, size_t n,
-                           const char *name)
+                           const char *name, int const_w)
 {
     const struct piezo_kp_coeffs kc = {.grid = dc->grid, .w_q24 = dc->c_q24};
     struct piezo_kp kp;
     struct piezo_dcc d;
     assert_int_equal(piezo_kp_init(&kp, &kc, psi_k, PIEZO_KP_MAX_OPS), PIEZO_OK);
     assert_int_equal(piezo_dcc_init(&d, dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    if (const_w) {
+        piezo_dcc_const_weights(&d);
+    }
     for (uint16_t j = 0; j < dc->grid.n_ops; j++) {
         assert_int_equal(psi_k[j] + piezo_dcc_cpsi(&d, j), dc->grid.nmin_q15);
     }
@@ -104,11 +108,13 @@ static void test_psi_plus_compensation_is_input(void **state)
     (void)state;
     const struct piezo_dcc_coeffs *sets[] = {&dcc_std, &dcc_half, &dcc_edge};
     for (size_t s = 0; s < N_OF(sets); s++) {
-        check_identity(sets[s], dcc_ops_random_v, N_OF(dcc_ops_random_v), "random");
-        check_identity(sets[s], dcc_ops_alternating_v, N_OF(dcc_ops_alternating_v), "alternating");
-        check_identity(sets[s], dcc_ops_steps_v, N_OF(dcc_ops_steps_v), "steps");
-        check_identity(sets[s], dcc_ops_edges_v, N_OF(dcc_ops_edges_v), "edges");
-        check_identity(sets[s], dcc_ops_realistic_v, N_OF(dcc_ops_realistic_v), "realistic");
+        for (int cw = 0; cw <= 1; cw++) {
+            check_identity(sets[s], dcc_ops_random_v, N_OF(dcc_ops_random_v), "random", cw);
+            check_identity(sets[s], dcc_ops_alternating_v, N_OF(dcc_ops_alternating_v), "alternating", cw);
+            check_identity(sets[s], dcc_ops_steps_v, N_OF(dcc_ops_steps_v), "steps", cw);
+            check_identity(sets[s], dcc_ops_edges_v, N_OF(dcc_ops_edges_v), "edges", cw);
+            check_identity(sets[s], dcc_ops_realistic_v, N_OF(dcc_ops_realistic_v), "realistic", cw);
+        }
     }
 }
 
@@ -123,6 +129,14 @@ static void test_split_run_and_shared_coeffs(void **state)
     assert_int_equal(piezo_dcc_init(&a, &dcc_std, cpsi_a, zo_a, dcc_std_NOPS), PIEZO_OK);
     assert_int_equal(piezo_dcc_init(&b, &dcc_std, cpsi_b, zo_b, dcc_std_NOPS), PIEZO_OK);
     const size_t split = c->n / 4u + 1u;
+    run_block(&a, c, 0, split);
+    run_block(&b, other, 0, other->n);
+    run_block(&a, c, split, c->n);
+    /* the same with constant weights: the runs are per instance */
+    assert_int_equal(piezo_dcc_init(&a, &dcc_std, cpsi_a, zo_a, dcc_std_NOPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_init(&b, &dcc_std, cpsi_b, zo_b, dcc_std_NOPS), PIEZO_OK);
+    piezo_dcc_const_weights(&a);
+    piezo_dcc_const_weights(&b);
     run_block(&a, c, 0, split);
     run_block(&b, other, 0, other->n);
     run_block(&a, c, split, c->n);

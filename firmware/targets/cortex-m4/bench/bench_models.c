@@ -2,7 +2,7 @@
  * bench_models.c - each hysteresis model of the reference configuration
  * alone, one call per tick: RKP, the DCC law, the CPI and UPI play banks,
  * the EUPI model and its inverse. Coefficients from bench_tables.h (the host
- * golden models' reference sizes: KP plane L = 10, 10 CPI, 10 x 3 UPI,
+ * golden models' reference sizes: KP planes L = 10, 20, 30, 10 CPI, 10 x 3 UPI,
  * u^2..u^4, RKP with 13 Gaussians).
  */
 #include <stddef.h>
@@ -38,19 +38,22 @@ static void rkp_tick(uint32_t k)
     piezo_bench_sink = piezo_rkp_process(&rkp, piezo_bench_u[k]);
 }
 
-/* --- DCC law, L = 10 --- */
-static const struct piezo_dcc_coeffs dcc_coeffs = {.grid = GRID_OF(bench_dcc), .c_q24 = bench_dcc_c,
-                                                   .g_q24 = bench_dcc_G};
+/* --- DCC law on the KP planes L = 10, 20, 30 (55, 210, 465 operators) --- */
+static const struct piezo_dcc_coeffs dcc_coeffs[3] = {
+    {.grid = GRID_OF(bench_dcc10), .c_q24 = bench_dcc10_c, .g_q24 = bench_dcc10_G},
+    {.grid = GRID_OF(bench_dcc20), .c_q24 = bench_dcc20_c, .g_q24 = bench_dcc20_G},
+    {.grid = GRID_OF(bench_dcc30), .c_q24 = bench_dcc30_c, .g_q24 = bench_dcc30_G},
+};
 static struct piezo_dcc dcc;
-static int32_t dcc_cpsi[bench_dcc_NOPS], dcc_zo[bench_dcc_NOPS];
+static int32_t dcc_cpsi[bench_dcc30_NOPS], dcc_zo[bench_dcc30_NOPS];
 static void dcc_tick(uint32_t k)
 {
     piezo_bench_sink = piezo_dcc_process(&dcc, piezo_bench_u[k]);
 }
 
-static enum piezo_err dcc_init_const(void)
+static enum piezo_err dcc_init_const(size_t i)
 {
-    const enum piezo_err rc = piezo_dcc_init(&dcc, &dcc_coeffs, dcc_cpsi, dcc_zo, bench_dcc_NOPS);
+    const enum piezo_err rc = piezo_dcc_init(&dcc, &dcc_coeffs[i], dcc_cpsi, dcc_zo, bench_dcc30_NOPS);
     if (rc == PIEZO_OK) {
         piezo_dcc_const_weights(&dcc);
     }
@@ -82,8 +85,12 @@ static void eupi_tick(uint32_t k)
     piezo_bench_sink = piezo_eupi_process(&eupi, piezo_bench_u[k]);
 }
 
-static piezo_coefset_t inv_set;
-static piezo_ff_state_t inv_ff;
+/* the reference case's set and state (bench_reference.c), reloaded here:
+ * the image has no RAM for a second pair */
+extern piezo_coefset_t bench_inv_set;
+extern piezo_ff_state_t bench_inv_ff;
+#define inv_set bench_inv_set
+#define inv_ff bench_inv_ff
 static void eupi_inv_tick(uint32_t k)
 {
     piezo_bench_sink = piezo_eupi_inv_process(&inv_ff.inv, u_small[k]);
@@ -106,10 +113,13 @@ void piezo_bench_models(void)
     }
     run_or_fail("rkp_L10", piezo_rkp_init(&rkp, &rkp_coeffs, rkp_psi, rkp_w, bench_rkp_NOPS) == PIEZO_OK,
                 rkp_tick);
-    /* constant weights (a kp_dcc table), then as bound to a rate-dependent density */
-    run_or_fail("dcc_L10", dcc_init_const() == PIEZO_OK, dcc_tick);
+    /* constant weights (a kp_dcc table) on the three planes: cost against L */
+    static const char *const dcc_names[3] = {"dcc_L10", "dcc_L20", "dcc_L30"};
+    for (size_t i = 0; i < 3u; i++) {
+        run_or_fail(dcc_names[i], dcc_init_const(i) == PIEZO_OK, dcc_tick);
+    }
     run_or_fail("dcc_L10_varying_w",
-                piezo_dcc_init(&dcc, &dcc_coeffs, dcc_cpsi, dcc_zo, bench_dcc_NOPS) == PIEZO_OK, dcc_tick);
+                piezo_dcc_init(&dcc, &dcc_coeffs[0], dcc_cpsi, dcc_zo, bench_dcc30_NOPS) == PIEZO_OK, dcc_tick);
     run_or_fail("play_cpi10", piezo_play_init(&play, &cpi_coef, play_f, BENCH_EUPI_NCPI, NULL, 0u) == PIEZO_OK,
                 play_tick);
     run_or_fail("play_upi10x3",

@@ -11,7 +11,7 @@
  *
  *   1. piezo_control_tick(), the function SysTick_Handler calls (control.c):
  *      the ADC seam, piezo_ctl_tick() on the firmware's own instance with a
- *      committed kp_dcc table (KP plane L = 10, 55 operators) in FF_FEEDBACK
+ *      committed kp_dcc table (KP plane L = 20, 210 operators) in FF_FEEDBACK
  *      mode: wave generator (sine) as reference, the DCC law, PI feedback
  *      (kd = 0) with the notch, clamp and slew limit, the DAC code, the
  *      recorder on (4 channels every tick, triggered at the start), the DAC

@@ -6,13 +6,15 @@ the host builds them (the golden models quantize, ``piezoctl.tables.build``
 makes the sections, ``piezoctl.tables.image`` the image with its CRC), so that
 the benchmark commits them through the controller exactly as an upload would:
 
-- ``bench_dcc_img``: kind ``kp_dcc``, the KP reference plane L = 10
-  (55 operators), its demo density, g = 1 / sum(w);
+- ``bench_dcc_img``: kind ``kp_dcc``, the KP plane L = 20 (210 operators,
+  the reference law of issue 15), its demo density, g = 1 / sum(w);
 - ``bench_eupi_inv_img``: kind ``eupi_inverse``, the EUPI reference model
   (10 CPI, 10 x 3 UPI, u^2..u^4) with k_ex from the small-gain margin 0.2;
 - ``bench_eupi_*``: the EUPI reference model itself (forward, no k_ex);
 - ``bench_rkp_*``: the RKP reference model (L = 10, 13 Gaussians);
-- ``bench_dcc_*``: the DCC coefficients of the image, for the kernel alone.
+- ``bench_dcc<L>_*``, L = 10, 20, 30: DCC coefficients on the KP plane of
+  L intervals (L (L + 1) / 2 operators, demo density), for the kernel alone;
+  L = 20 is the image's.
 
 Usage: gen_bench_tables.py OUT.h (run with the project's venv Python).
 """
@@ -26,6 +28,7 @@ from piezoctl.golden import eupi_inv as ginv
 from piezoctl.golden import kp as gkp
 from piezoctl.golden import rkp as grkp
 from piezoctl.golden.export import CHeader
+from piezoctl.models import kp as fkp
 from piezoctl.tables.build import ctl_section, eupi_inverse_sections, kp_dcc_sections
 from piezoctl.tables.image import build_image
 
@@ -34,14 +37,16 @@ def main(out: str) -> None:
     h = CHeader("bench")
     h.comment("Benchmark tables (firmware/targets/cortex-m4/bench/gen_bench_tables.py).")
 
-    grid, w = gdcc.std_model()
-    d = gdcc.quantize(grid, w)
-    img = build_image("kp_dcc", [ctl_section(1.0)] + kp_dcc_sections(d), table_version=1)
-    h.array("bench_dcc_img", "uint8_t", np.frombuffer(img, np.uint8))
-    h.define("BENCH_DCC_IMG_LEN", len(img))
-    gkp.emit_grid(h, "bench_dcc", d.grid)
-    h.define("bench_dcc_G", d.g)
-    h.array("bench_dcc_c", "int32_t", d.c)
+    for L in (10, 20, 30):
+        grid = fkp.kp_grid(L)
+        d = gdcc.quantize(grid, gkp.demo_density(grid))
+        gkp.emit_grid(h, f"bench_dcc{L}", d.grid)
+        h.define(f"bench_dcc{L}_G", d.g)
+        h.array(f"bench_dcc{L}_c", "int32_t", d.c)
+        if L == 20:
+            img = build_image("kp_dcc", [ctl_section(1.0)] + kp_dcc_sections(d), table_version=1)
+            h.array("bench_dcc_img", "uint8_t", np.frombuffer(img, np.uint8))
+            h.define("BENCH_DCC_IMG_LEN", len(img))
 
     params = ginv.reference_inverse_params()
     q = ginv.quantize_eupi_inv(params)
