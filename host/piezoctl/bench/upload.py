@@ -5,7 +5,7 @@ table against the virtual controller (``tools/bench-upload``,
 The reference table is KP L = 10 + EUPI; the controller runs one feedforward
 kind per image, so both images are measured -- ``kp_dcc`` (KP grid L = 10,
 55 cells, DCC weights) and ``eupi_inverse`` (10 CPI + 10 x 3 UPI + 3 poly),
-built by :mod:`piezoctl.golden.ctl` from the golden quantizers and
+built by :mod:`piezoctl.fixtures.ctl` from the golden quantizers and
 :mod:`piezoctl.tables.build` -- and their sum. One measurement of an image:
 
 upload   ``Controller.upload_table`` (unlock, clear staged, one FC 16 per chunk)
@@ -60,7 +60,7 @@ from dataclasses import dataclass, field
 
 from .. import interface
 from ..device import WINDOW, Controller, REASON_NAMES
-from ..golden.ctl import dcc_image, eupi_image
+from ..fixtures.ctl import dcc_image, eupi_image
 from ..transport import open_port
 from ..transport.client import RegisterClient
 from ..transport.errors import ModbusExceptionError, ProtocolError
