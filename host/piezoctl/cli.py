@@ -21,12 +21,14 @@ input refused, 3 internal error, 4 the controller refused, 5 no connection,
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import os
 import pkgutil
 import sys
 import traceback
+import warnings
 
 from . import __version__, commands
 from .errors import (EXIT_CONNECTION, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_REFUSED, CliError,
@@ -135,16 +137,29 @@ def build_parser(argv: list[str] | None = None) -> CommandParser:
     return ap
 
 
-def _quiet_libraries() -> None:
-    """Keep library log lines and warnings out of the output (a command reports in its own words).
+@contextlib.contextmanager
+def _quiet_libraries():
+    """Keep library log lines and warnings out of the output while a command runs
+    (a command reports in its own words); the logging and warnings state is
+    restored afterwards.
 
     A NullHandler on the root logger stops logging's last-resort handler from
     printing the WARNING lines of pymodbus, matplotlib and the like; warnings
-    (numpy's RuntimeWarning, ...) are routed to logging and so dropped too.
+    (numpy's RuntimeWarning, ...) are ignored.
     """
-    logging.getLogger().addHandler(logging.NullHandler())
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL + 1)
-    logging.captureWarnings(True)
+    root = logging.getLogger()
+    null = logging.NullHandler()
+    root.addHandler(null)
+    pymodbus = logging.getLogger("pymodbus")
+    level = pymodbus.level
+    pymodbus.setLevel(logging.CRITICAL + 1)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        pymodbus.setLevel(level)
+        root.removeHandler(null)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -156,10 +171,10 @@ def main(argv: list[str] | None = None) -> int:
         ap.print_help()
         return 0
     os.environ.setdefault("MPLBACKEND", "Agg")  # no display: plots go to files
-    if not os.environ.get("PIEZOCTL_DEBUG"):
-        _quiet_libraries()
+    quiet = contextlib.nullcontext() if os.environ.get("PIEZOCTL_DEBUG") else _quiet_libraries()
     try:
-        return int(args.func(args) or 0)
+        with quiet:
+            return int(args.func(args) or 0)
     except CliError as exc:
         print(f"piezoctl {args.command}: error: {exc}", file=sys.stderr)
         return exit_code(exc)
