@@ -10,7 +10,7 @@ the file, or with ``--json`` ``{"out", "samples", "axes", "stage", "seed"}``.
 from __future__ import annotations
 
 from ..errors import CliError
-from ._options import add_output, emit
+from ._options import Progress, add_output, emit
 
 
 def add_parser(sub) -> None:
@@ -52,7 +52,8 @@ def run(args) -> int:
     if axes == 1 and "u2" in cols:
         raise CliError(f"{args.input}: column u2 given, but {args.stage} is a one-axis stage")
     try:
-        out = sil_stage.simulate_stage(args.stage, cols["t"], cols["u"], u2, seed=args.seed)
+        with Progress(args, f"simulating {cols['t'].size} samples"):
+            out = sil_stage.simulate_stage(args.stage, cols["t"], cols["u"], u2, seed=args.seed)
     except ValueError as exc:
         if isinstance(exc, CliError):
             raise
