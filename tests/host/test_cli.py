@@ -7,6 +7,8 @@ check what makes it fast (which modules a command line imports)."""
 
 from __future__ import annotations
 
+import argparse
+import importlib
 import json
 import os
 import socket
@@ -69,6 +71,15 @@ def test_top_level_help_lists_commands_without_importing_them():
     assert lazy == full
     sub = next(a for a in cli.build_parser()._actions if a.dest == "command")
     assert sorted(sub.choices) == sorted(cli.COMMANDS)   # every command module is in the table
+
+
+@pytest.mark.parametrize("name", sorted(cli.COMMANDS))
+def test_table_names_the_module_of_each_command(name):
+    """``piezoctl NAME`` imports the module the table names: that module registers NAME."""
+    module, _ = cli.COMMANDS[name]
+    sub = argparse.ArgumentParser().add_subparsers()
+    importlib.import_module(f"piezoctl.commands.{module}").add_parser(sub)
+    assert name in sub.choices
 
 
 def _leaf_parsers():
