@@ -63,29 +63,27 @@ class CommandParser(argparse.ArgumentParser):
 
     - A usage error is one line on stderr, ``PROG: error: MESSAGE (see PROG
       --help)``, and exit status 2 (argparse prints the whole usage).
-    - :meth:`defer` registers work (e.g. options that need heavy imports) to
-      run only when this parser parses or prints its help, not when the
-      top-level parser is built.
+    - :meth:`before_parse` registers work (e.g. options that need heavy
+      imports, or depend on other options) to run each time this parser
+      parses or prints its help, not when the top-level parser is built.
     - ``explain_unknown(extras) -> str | None`` (an attribute a command may
       set) turns unrecognized arguments into a clearer message.
     """
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self._deferred: list = []
+        self._before: list = []
         self.explain_unknown = None
 
-    def defer(self, fn) -> None:
-        """Call ``fn(self, args)`` before this parser first parses (``args``: what it
-        parses) or formats its help (``args`` None)."""
-        self._deferred.append(fn)
-
-    def _run_deferred(self, args) -> None:
-        while self._deferred:
-            self._deferred.pop(0)(self, args)
+    def before_parse(self, fn) -> None:
+        """Call ``fn(self, args)`` before each parse (``args``: what it parses)
+        and before formatting the help (``args`` None)."""
+        self._before.append(fn)
 
     def parse_known_args(self, args=None, namespace=None):
-        self._run_deferred(sys.argv[1:] if args is None else args)
+        args = sys.argv[1:] if args is None else list(args)
+        for fn in self._before:
+            fn(self, args)
         ns, extras = super().parse_known_args(args, namespace)
         if extras and self.explain_unknown is not None:
             msg = self.explain_unknown(extras)
@@ -94,7 +92,8 @@ class CommandParser(argparse.ArgumentParser):
         return ns, extras
 
     def format_help(self) -> str:
-        self._run_deferred(None)
+        for fn in self._before:
+            fn(self, None)
         return super().format_help()
 
     def error(self, message: str):

@@ -101,7 +101,7 @@ def _leaf_parsers():
 @pytest.mark.parametrize("command", CONVERTED)
 def test_json_and_quiet(command):
     p = _leaf_parsers()[command]
-    p.format_help()   # registers deferred options
+    p.format_help()   # runs the before-parse hooks (identify: none without --model)
     flags = {s for a in p._actions for s in a.option_strings}
     assert {"--json", "--quiet"} <= flags
 

@@ -92,8 +92,8 @@ def add_parser(sub) -> None:
                              "instead of refusing the file")
     _KIND_DESTS.clear()
     _KIND_BROKEN.clear()
-    if hasattr(p, "defer"):   # piezoctl's CommandParser: the kind's options when it parses
-        p.defer(_add_kind_options)
+    if hasattr(p, "before_parse"):   # piezoctl's CommandParser: the kind's options when it parses
+        p.before_parse(_add_kind_options)
     else:                     # a plain argparse parser: every kind's options now
         for kind in MODEL_KINDS:
             _register_kind(p, kind)
@@ -114,7 +114,9 @@ def _model_in(argv) -> str | None:
 def _add_kind_options(p, argv) -> None:
     """Register the options of the kind named by ``--model`` in ``argv`` (none if it names none)."""
     kind = _model_in(argv)
-    if kind in MODEL_KINDS:
+    registered = p.__dict__.setdefault("_piezoctl_kinds", set())   # a parser may parse twice
+    if kind in MODEL_KINDS and kind not in registered:
+        registered.add(kind)
         _register_kind(p, kind)
     p.explain_unknown = lambda extras: _explain_unknown(extras, kind if kind in MODEL_KINDS else None)
 
