@@ -4,13 +4,15 @@
 find_package(PkgConfig REQUIRED)
 
 # piezo_add_cmocka_test(NAME SOURCES src... [LIBS lib...] [GOLDEN kernel...]
-#                       [DEPENDS target...] [ENV VAR=value...])
+#                       [FIXTURES name...] [DEPENDS target...] [ENV VAR=value...])
 # GOLDEN kernel: generate golden/<kernel>_vectors.h from the host golden model
 # (python -m piezoctl.golden.export <kernel>) and put it on the include path.
+# FIXTURES name: the same for fixtures/<name>_vectors.h from a fixture generator
+# (python -m piezoctl.fixtures.export <name>: SIL tables, test images).
 # DEPENDS: targets the export needs built first (e.g. a library it loads);
 # ENV: environment of the export command (may use generator expressions).
 function(piezo_add_cmocka_test name)
-  cmake_parse_arguments(T "" "" "SOURCES;LIBS;GOLDEN;DEPENDS;ENV" ${ARGN})
+  cmake_parse_arguments(T "" "" "SOURCES;LIBS;GOLDEN;FIXTURES;DEPENDS;ENV" ${ARGN})
   if(CMAKE_CROSSCOMPILING)
     # A library that is neither a target of this build nor the toolchain's
     # own (PIEZO_TARGET_SYSTEM_LIBS) is host-only: skip the test, visibly.
@@ -34,7 +36,11 @@ function(piezo_add_cmocka_test name)
     piezo_golden_header(${kernel} header DEPENDS ${T_DEPENDS} ENV ${T_ENV})
     target_sources(${name} PRIVATE ${header})
   endforeach()
-  target_include_directories(${name} PRIVATE ${CMAKE_BINARY_DIR}/golden)
+  foreach(fixture IN LISTS T_FIXTURES)
+    piezo_fixture_header(${fixture} header DEPENDS ${T_DEPENDS} ENV ${T_ENV})
+    target_sources(${name} PRIVATE ${header})
+  endforeach()
+  target_include_directories(${name} PRIVATE ${CMAKE_BINARY_DIR}/golden ${CMAKE_BINARY_DIR}/fixtures)
   add_test(NAME ${name} COMMAND ${name})
   set_tests_properties(${name} PROPERTIES ENVIRONMENT "CMOCKA_MESSAGE_OUTPUT=stdout")
   if(COMMAND piezo_target_test_image)
@@ -42,20 +48,43 @@ function(piezo_add_cmocka_test name)
   endif()
 endfunction()
 
+# piezo_golden_header(kernel outvar [DEPENDS file...] [ENV VAR=value...])
+# golden/<kernel>_vectors.h from the bit-exact twin piezoctl.golden.<kernel>;
+# target golden_<kernel>.
 function(piezo_golden_header kernel outvar)
+  _piezo_host_header(golden ${kernel} out "Golden vectors for ${kernel} from the host golden model" ${ARGN})
+  set(${outvar} ${out} PARENT_SCOPE)
+endfunction()
+
+# piezo_fixture_header(name outvar [DEPENDS file...] [ENV VAR=value...])
+# fixtures/<name>_vectors.h from the fixture generator piezoctl.fixtures.<name>
+# (tables designed for the SIL stage, test images); target fixture_<name>.
+function(piezo_fixture_header name outvar)
+  _piezo_host_header(fixtures ${name} out "Test fixture ${name} from piezoctl.fixtures" ${ARGN})
+  set(${outvar} ${out} PARENT_SCOPE)
+endfunction()
+
+# python -m piezoctl.<package>.export <name> -o ${CMAKE_BINARY_DIR}/<package>/<name>_vectors.h,
+# once per build tree (target golden_<name> or fixture_<name>).
+function(_piezo_host_header package name outvar comment)
   cmake_parse_arguments(G "" "" "DEPENDS;ENV" ${ARGN})
-  set(out ${CMAKE_BINARY_DIR}/golden/${kernel}_vectors.h)
-  if(NOT TARGET golden_${kernel})
+  set(out ${CMAKE_BINARY_DIR}/${package}/${name}_vectors.h)
+  if(package STREQUAL "golden")
+    set(tgt golden_${name})
+  else()
+    set(tgt fixture_${name})
+  endif()
+  if(NOT TARGET ${tgt})
     file(GLOB_RECURSE host_sources CONFIGURE_DEPENDS
          ${PROJECT_SOURCE_DIR}/host/piezoctl/*.py)
     add_custom_command(
       OUTPUT ${out}
-      COMMAND ${CMAKE_COMMAND} -E make_directory ${CMAKE_BINARY_DIR}/golden
-      COMMAND ${CMAKE_COMMAND} -E env ${G_ENV} ${PIEZOCTL_PYTHON} -m piezoctl.golden.export ${kernel} -o ${out}
+      COMMAND ${CMAKE_COMMAND} -E make_directory ${CMAKE_BINARY_DIR}/${package}
+      COMMAND ${CMAKE_COMMAND} -E env ${G_ENV} ${PIEZOCTL_PYTHON} -m piezoctl.${package}.export ${name} -o ${out}
       DEPENDS ${host_sources} ${G_DEPENDS}
-      COMMENT "Golden vectors for ${kernel} from the host golden model"
+      COMMENT "${comment}"
       VERBATIM)
-    add_custom_target(golden_${kernel} DEPENDS ${out})
+    add_custom_target(${tgt} DEPENDS ${out})
   endif()
   set(${outvar} ${out} PARENT_SCOPE)
 endfunction()

@@ -3,7 +3,7 @@ piezo_add_cmocka_test(test_wave SOURCES test_wave.c LIBS piezo_core m)
 piezo_add_cmocka_test(test_recorder SOURCES test_recorder.c LIBS piezo_core)
 piezo_add_cmocka_test(test_pid SOURCES test_pid.c LIBS piezo_core m)
 # The controller: tick pipeline, table commit/rollback/persistence, safety.
-piezo_add_cmocka_test(test_controller SOURCES test_controller.c nor_flash.c LIBS piezo_control GOLDEN ctl)
-piezo_add_cmocka_test(test_regmap SOURCES test_regmap.c LIBS piezo_control GOLDEN ctl)
+piezo_add_cmocka_test(test_controller SOURCES test_controller.c nor_flash.c LIBS piezo_control FIXTURES ctl)
+piezo_add_cmocka_test(test_regmap SOURCES test_regmap.c LIBS piezo_control FIXTURES ctl)
 # Controller parameters in flash (A/B, CRC) through the register map; the servo switch.
 piezo_add_cmocka_test(params_store SOURCES params_store.c nor_flash.c LIBS piezo_control)

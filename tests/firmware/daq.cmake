@@ -27,20 +27,20 @@ if(TARGET piezo_daq_io AND TARGET piezo_stage AND TARGET PkgConfig::COMEDILIB)
       LIBS piezo_target_common)
   endif()
 
-  # The closed loop uses the SIL target's tables (golden sil_tables); its
+  # The closed loop uses the SIL target's tables (fixture sil_tables); its
   # export target is defined by the SIL part of the build, which CMake reads
   # after this file: register at the end of this directory.
   function(piezo_daq_closed_loop_test)
-    if(NOT TARGET piezo_sil OR NOT TARGET golden_sil_tables)
+    if(NOT TARGET piezo_sil OR NOT TARGET fixture_sil_tables)
       message(STATUS "test_daq_closed_loop: needs the SIL target and its tables; not built")
       return()
     endif()
     piezo_add_cmocka_test(test_daq_closed_loop
       SOURCES ${CMAKE_CURRENT_LIST_DIR}/test_daq_closed_loop.c ${CMAKE_CURRENT_LIST_DIR}/fake_comedi.c
       LIBS piezo_daq_io piezo_sil PkgConfig::COMEDILIB m
-      GOLDEN sil_tables)
+      FIXTURES sil_tables)
     target_link_options(test_daq_closed_loop PRIVATE ${piezo_daq_wrap_opts})
-    add_dependencies(test_daq_closed_loop golden_sil_tables) # the export may live in another directory
+    add_dependencies(test_daq_closed_loop fixture_sil_tables) # the export may live in another directory
     target_compile_definitions(test_daq_closed_loop PRIVATE
       STAGE_FILE="${PROJECT_SOURCE_DIR}/firmware/targets/sil/stages/default.json")
     set_tests_properties(test_daq_closed_loop PROPERTIES LABELS sil TIMEOUT 300)

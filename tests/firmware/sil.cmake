@@ -1,5 +1,5 @@
 # Closed-loop compensation on the default SIL stage (test_sil_closed_loop).
-# Its header comes from the golden module piezoctl.golden.sil_tables, which
+# Its header comes from the fixture generator piezoctl.fixtures.sil_tables, which
 # calibrates the C stage model from Python at build time: the export needs the
 # stage's shared library built first and named in PIEZOCTL_STAGE_LIB. The
 # export target is defined in firmware/targets/sil/CMakeLists.txt (with a
@@ -14,11 +14,11 @@ if(TARGET piezo_sil AND TARGET piezo_stage_shared)
   piezo_add_cmocka_test(test_sil_closed_loop
     SOURCES ${CMAKE_CURRENT_LIST_DIR}/test_sil_closed_loop.c
     LIBS piezo_sil m
-    GOLDEN sil_tables
+    FIXTURES sil_tables
     DEPENDS ${sil_stage_lib}
     ENV PIEZOCTL_STAGE_LIB=$<TARGET_FILE:${sil_stage_lib}>)
   # the header's rule lives in the SIL target's directory: order the builds
-  add_dependencies(test_sil_closed_loop golden_sil_tables)
+  add_dependencies(test_sil_closed_loop fixture_sil_tables)
   target_compile_definitions(test_sil_closed_loop PRIVATE
     STAGE_FILE="${CMAKE_CURRENT_LIST_DIR}/../../firmware/targets/sil/stages/default.json")
   set_tests_properties(test_sil_closed_loop PROPERTIES LABELS sil TIMEOUT 300)
@@ -49,8 +49,8 @@ if(TARGET piezo_sil AND TARGET piezo_stage_shared)
   piezo_add_cmocka_test(test_commit_checks
     SOURCES ${CMAKE_CURRENT_LIST_DIR}/test_commit_checks.c
     LIBS piezo_control
-    GOLDEN sil_tables
+    FIXTURES sil_tables
     DEPENDS ${sil_stage_lib}
     ENV PIEZOCTL_STAGE_LIB=$<TARGET_FILE:${sil_stage_lib}>)
-  add_dependencies(test_commit_checks golden_sil_tables)
+  add_dependencies(test_commit_checks fixture_sil_tables)
 endif()

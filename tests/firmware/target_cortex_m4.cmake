@@ -3,7 +3,7 @@
 # against models of their peripherals: the STM32F405 flash interface.
 set(PIEZO_CM4_DIR ${PROJECT_SOURCE_DIR}/firmware/targets/cortex-m4)
 piezo_add_cmocka_test(test_flash_f4 SOURCES test_flash_f4.c f4_flash_model.c ${PIEZO_CM4_DIR}/src/flash_f4.c
-                      LIBS piezo_tables GOLDEN tables)
+                      LIBS piezo_tables FIXTURES tables)
 if(TARGET test_flash_f4)
   target_include_directories(test_flash_f4 PRIVATE ${PIEZO_CM4_DIR}/include)
   # a few polls, not the chip's 2 s: the model's busy time is counted in polls

@@ -2,7 +2,7 @@
 piezo_add_cmocka_test(test_xcouple SOURCES test_xcouple.c LIBS piezo_core GOLDEN xcouple)
 
 # Closed loop on the two-axis SIL stage with the coupling table the host
-# identifies from the C stage model (piezoctl.golden.xcouple_sil, at build time;
+# identifies from the C stage model (piezoctl.fixtures.xcouple_sil, at build time;
 # the export loads the stage's shared library, so DEPENDS and ENV as in sil.cmake).
 if(TARGET piezo_sil AND TARGET piezo_stage_shared)
   if(TARGET piezo_stage_plain)
@@ -13,7 +13,7 @@ if(TARGET piezo_sil AND TARGET piezo_stage_shared)
   piezo_add_cmocka_test(test_xcouple_sil
     SOURCES ${CMAKE_CURRENT_LIST_DIR}/test_xcouple_sil.c
     LIBS piezo_sil m
-    GOLDEN xcouple_sil
+    FIXTURES xcouple_sil
     DEPENDS ${xc_stage_lib}
     ENV PIEZOCTL_STAGE_LIB=$<TARGET_FILE:${xc_stage_lib}>)
   target_compile_definitions(test_xcouple_sil PRIVATE

@@ -9,7 +9,7 @@ import os
 import struct
 import sys
 
-from piezoctl.golden.ctl import dcc_image, eupi_image
+from piezoctl.fixtures.ctl import dcc_image, eupi_image
 
 
 def seed(img: bytes, refs=(0, 16000, -16000, 8000, 0)) -> bytes:

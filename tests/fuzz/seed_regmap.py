@@ -9,7 +9,7 @@ import os
 import struct
 import sys
 
-from piezoctl.golden.ctl import dcc_image, eupi_image
+from piezoctl.fixtures.ctl import dcc_image, eupi_image
 
 WINDOW = 121
 RAW, TICKS, UNLOCK, CHUNK, SEAL, COMMIT, ROLLBACK, CLEAR, READBACK = range(9)

@@ -1,48 +1,43 @@
-"""Start and stop the virtual controller (build/sil/sil_stage) for host tests."""
+"""Start and stop the virtual controller for host tests (through :mod:`piezoctl.sil.launch`)."""
 
 from __future__ import annotations
 
-import os
 import pathlib
-import re
-import signal
-import subprocess
-import time
 
 import pytest
+
+from piezoctl.sil.launch import VirtualController, sil_binary as _built_binary
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
 def sil_binary() -> pathlib.Path:
-    build = pathlib.Path(os.environ.get("PIEZOCTL_BUILD", ROOT / "build" / "sil"))
-    exe = build / "sil_stage"
+    """The built sil_stage; the test is skipped when it is not built (tests do not build)."""
+    exe = _built_binary(build=False)
     if not exe.exists():
         pytest.skip(f"{exe} not built (run tools/test or cmake --build --preset sil)")
     return exe
 
 
 class SilStage:
-    """A running sil_stage process; ``port`` is its Modbus TCP port."""
+    """A running sil_stage with TCP on a free port and RTU on a pty in ``tmp``.
+
+    ``port`` is its Modbus TCP port (an int), ``spec`` the PORT string
+    (``tcp:127.0.0.1:N``), ``pty`` the RTU link, ``flash`` the flash file,
+    ``proc`` the process; ``args`` are further sil_stage options.
+    """
 
     def __init__(self, tmp: pathlib.Path, *args: str, flash: pathlib.Path | None = None):
         self.pty = tmp / "ttyPIEZO"
         self.flash = flash or tmp / "sil.flash"
-        cmd = [str(sil_binary()), "--modbus-tcp", "127.0.0.1:0", "--modbus-rtu-pty", str(self.pty),
-               "--flash", str(self.flash), *args]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = self.proc.stdout.readline()
-        m = re.search(r"tcp=127\.0\.0\.1:(\d+)", line)
-        if not m:
-            self.proc.kill()
-            raise RuntimeError(f"sil_stage did not start: {line!r} {self.proc.stderr.read()}")
-        self.port = int(m.group(1))
-        self.spec = f"tcp:127.0.0.1:{self.port}"
+        self.vc = VirtualController(flash=self.flash, rtu_pty=self.pty, args=args, exe=sil_binary()).start()
+        self.proc = self.vc.proc
+        self.port = self.vc.tcp_port
+        self.spec = self.vc.port
 
     def stop(self) -> tuple[int, str]:
-        self.proc.send_signal(signal.SIGTERM)
-        out, _err = self.proc.communicate(timeout=10)
-        return self.proc.returncode, out
+        """SIGTERM; (exit status, the rest of its stdout)."""
+        return self.vc.stop()
 
 
 @pytest.fixture

@@ -15,7 +15,7 @@ import pytest
 from piezoctl import interface
 from piezoctl.bench import upload as bench
 from piezoctl.device import WINDOW, Controller
-from piezoctl.golden.ctl import dcc_image
+from piezoctl.fixtures.ctl import dcc_image
 from piezoctl.transport import ModbusExceptionError, open_port
 from piezoctl.transport.client import RegisterClient
 from sil_fixture import ROOT, SilStage, sil  # noqa: F401  (fixture)
@@ -115,7 +115,7 @@ def test_generated_usb_script_replays_upload_and_fc23(sil, tmp_path):  # noqa: F
     script.write_text(bench.usb_script(rec.exchanges))
     prog = ("from piezoctl.transport import open_port\n"
             "from piezoctl.device import Controller\n"
-            "from piezoctl.golden.ctl import dcc_image\n"
+            "from piezoctl.fixtures.ctl import dcc_image\n"
             "img, _ = dcc_image()\n"
             "c = Controller(open_port('usb:1209:0001', timeout=0.5))\n"
             "c.upload_table(img)\n"

@@ -12,7 +12,7 @@ from piezoctl import interface
 from piezoctl.device import DeviceError, connect, unlock_key
 from piezoctl.errors import CliError
 from piezoctl.transport.errors import ModbusExceptionError
-from piezoctl.golden.ctl import dcc_image, eupi_image
+from piezoctl.fixtures.ctl import dcc_image, eupi_image
 from piezoctl.tables.image import build_image, check_image
 from piezoctl.tables.build import ctl_section
 from sil_fixture import SilStage, sil  # noqa: F401  (fixture)
@@ -75,7 +75,7 @@ def test_image_for_another_stage_is_refused(sil):
     t = check_image(img)
     assert (t.header["drive_min_mv"], t.header["drive_max_mv"]) == (0, 150000)
     from piezoctl.tables.build import kp_dcc_sections
-    from piezoctl.golden.ctl import DCC_LINE
+    from piezoctl.fixtures.ctl import DCC_LINE
     valve = build_image("kp_dcc", [ctl_section(*DCC_LINE)] + kp_dcc_sections(d),
                         drive_range_v=(-90.0, 90.0), position_range_um=(-6.0, 4.0))
     ctl.upload_table(valve)

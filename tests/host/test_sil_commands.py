@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from piezoctl import cli
-from piezoctl.golden.ctl import dcc_image, eupi_image, refused_images
+from piezoctl.fixtures.ctl import dcc_image, eupi_image, refused_images
 from piezoctl.io.recording import load_recording
 from sil_fixture import SilStage, sil  # noqa: F401  (fixture)
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from piezoctl import interface
-from piezoctl.golden.tables import bad_images, valid_image
+from piezoctl.fixtures.tables import bad_images, valid_image
 from piezoctl.tables.image import Section, TableImageError, build_image, parse_image
 
 

@@ -21,7 +21,7 @@ from ..commands.flash import flash_image
 from ..errors import CliError
 from ..device import connect
 from ..calibrate.feedback import notch
-from ..golden.ctl import dcc_image, eupi_image
+from ..fixtures.ctl import dcc_image, eupi_image
 
 __all__ = ["busy_tick"]
 

@@ -5,7 +5,7 @@ table against the virtual controller (``tools/bench-upload``,
 The reference table is KP L = 10 + EUPI; the controller runs one feedforward
 kind per image, so both images are measured -- ``kp_dcc`` (KP grid L = 10,
 55 cells, DCC weights) and ``eupi_inverse`` (10 CPI + 10 x 3 UPI + 3 poly),
-built by :mod:`piezoctl.golden.ctl` from the golden quantizers and
+built by :mod:`piezoctl.fixtures.ctl` from the golden quantizers and
 :mod:`piezoctl.tables.build` -- and their sum. One measurement of an image:
 
 upload   ``Controller.upload_table`` (unlock, clear staged, one FC 16 per chunk)
@@ -43,10 +43,8 @@ import argparse
 import json
 import os
 import pathlib
-import re
 import select
 import shutil
-import signal
 import socket
 import struct
 import subprocess
@@ -60,7 +58,8 @@ from dataclasses import dataclass, field
 
 from .. import interface
 from ..device import WINDOW, Controller, REASON_NAMES
-from ..golden.ctl import dcc_image, eupi_image
+from ..fixtures.ctl import dcc_image, eupi_image
+from ..sil.launch import VirtualController, sil_binary
 from ..transport import open_port
 from ..transport.client import RegisterClient
 from ..transport.errors import ModbusExceptionError, ProtocolError
@@ -159,26 +158,17 @@ def flash_once(ctl: Controller, img: bytes, counter: RequestCounter | None = Non
 
 # ---------------------------------------------------------------- the virtual controller
 class Sil:
-    """sil-stage with TCP on a free port and RTU on a pty, in a temporary directory."""
+    """sil-stage with TCP on a free port and RTU on a pty, in a temporary directory
+    (started by :class:`piezoctl.sil.launch.VirtualController`)."""
 
     def __init__(self, exe: pathlib.Path, tmp: pathlib.Path):
         self.pty = tmp / "ttyPIEZO"
-        self.proc = subprocess.Popen(
-            [str(exe), "--modbus-tcp", "127.0.0.1:0", "--modbus-rtu-pty", str(self.pty),
-             "--flash", str(tmp / "sil.flash")],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = self.proc.stdout.readline()
-        m = re.search(r"tcp=127\.0\.0\.1:(\d+)", line)
-        if not m:
-            self.proc.kill()
-            raise RuntimeError(f"sil-stage did not start: {line!r} {self.proc.stderr.read()}")
-        self.port = int(m.group(1))
+        self.vc = VirtualController(exe=exe, flash=tmp / "sil.flash", rtu_pty=self.pty).start()
+        self.proc = self.vc.proc
+        self.port = self.vc.tcp_port
 
     def stop(self) -> str:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-        out, _ = self.proc.communicate(timeout=10)
-        return out
+        return self.vc.stop()[1]
 
 
 # ---------------------------------------------------------------- RTU pacing
@@ -522,7 +512,7 @@ def format_table(res: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="bench-upload", description=__doc__.splitlines()[0])
-    ap.add_argument("--sil", type=pathlib.Path, default=ROOT / "build" / "sil" / "sil_stage",
+    ap.add_argument("--sil", type=pathlib.Path, default=sil_binary(build=False),
                     help="the sil-stage executable")
     ap.add_argument("--reps", type=int, default=5, help="runs per image (RTU: at most 3)")
     ap.add_argument("--baud", type=int, default=115200)

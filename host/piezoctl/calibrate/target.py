@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import pathlib
 import re
-import signal
 import subprocess
 import tempfile
 
@@ -56,17 +55,10 @@ class SilTarget:
         self.port = None
 
     def __enter__(self) -> "SilTarget":
-        cmd = [str(sil_binary()), "--modbus-tcp", "127.0.0.1:0", "--flash", self.flash, "--seed", str(self.seed)]
-        if self.stage:
-            cmd += ["--stage", self.stage]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = self.proc.stdout.readline()
-        m = re.search(r"tcp=([\d.]+):(\d+)", line)
-        if not m:
-            err = self.proc.stderr.read()
-            self.proc.kill()
-            raise CliError(f"the virtual controller did not start: {(err or line).strip()}")
-        self.port = f"tcp:{m.group(1)}:{m.group(2)}"
+        from ..sil.launch import VirtualController  # the one launcher of sil_stage
+        self._vc = VirtualController(stage=self.stage, flash=self.flash, seed=self.seed,
+                                     exe=sil_binary()).start()
+        self.proc, self.port = self._vc.proc, self._vc.port
         return self
 
     def stats(self) -> str:
@@ -74,13 +66,9 @@ class SilTarget:
 
     def __exit__(self, *exc) -> None:
         self._stats = ""
-        if self.proc and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                out, _ = self.proc.communicate(timeout=10)
-                self._stats = out.strip().splitlines()[-1] if out.strip() else ""
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
+        if self.proc:
+            self._vc.stop()
+            self._stats = self._vc.stats
         self._tmp.cleanup()
 
 

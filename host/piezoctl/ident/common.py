@@ -13,7 +13,6 @@ from __future__ import annotations
 from typing import Any, Callable, Sequence
 
 import numpy as np
-from scipy import linalg, optimize
 
 from ..errors import CliError
 
@@ -218,6 +217,7 @@ class Gram:
         Gs = G / d[:, None] / d[None, :]
         bs = b / d
         jitter = 1e-12 * float(np.trace(Gs)) / Gs.shape[0]
+        from scipy import linalg, optimize  # here: importing ident.common stays light (piezoctl --help)
         R = linalg.cholesky(Gs + jitter * np.eye(Gs.shape[0]), lower=False)
         z = linalg.solve_triangular(R, bs, trans="T")
         lo = np.concatenate([np.broadcast_to(np.asarray(lower, dtype=float), (p,)),

@@ -39,8 +39,9 @@ class TransportTimeoutError(TransportError, ConnectionFailed):
     """No (complete, valid) answer within the timeout."""
 
 
-class ProtocolError(TransportError):
-    """An answer that does not fit the request (wrong function, length, sequence)."""
+class ProtocolError(TransportError, ConnectionFailed):
+    """An answer that does not fit the request (wrong function, length, sequence):
+    the link or what answers on it cannot be trusted (exit 5, like no answer)."""
 
 
 class ModbusExceptionError(TransportError, ControllerRefused):
