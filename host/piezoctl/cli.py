@@ -41,16 +41,22 @@ __all__ = ["main", "build_parser", "CliError", "CommandParser", "COMMANDS"]
 COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("calibrate", "calibrate a stage end to end (identify, flash, accept, report)"),
     "diagnose": ("diagnose", "locate a model/data mismatch, name the missing physics, model it"),
-    "fit-tf": ("fit_tf", "fit a transfer function (WCLS / PSO-WCLS) to a frequency response CSV"),
-    "flash": ("flash", "upload a table image, verify, commit"),
+    "fit-tf": ("fit_tf", "fit a transfer function (WCLS / PSO-WCLS) to a frequency response (FRF.csv, or "
+                         "estimated from a recording)"),
+    "flash": ("flash", "upload a table image, verify, commit, confirm"),
+    "frf": ("frf", "estimate the frequency response of a recording (H1, coherence) into FRF.csv"),
     "golden-error": ("golden_error", "float-versus-fixed error table of the core kernels"),
     "identify": ("identify", "fit a hysteresis model to recordings and write MODEL.json"),
+    "move": ("move", "move the stage to a position [um] (--wait: until settled)"),
+    "params": ("params", "controller parameters: get, set, save to flash, load, defaults"),
+    "position": ("position", "the stage's position (once, or --follow until Ctrl-C)"),
     "record": ("record", "record controller signals for a duration into a recording CSV"),
+    "servo": ("servo", "closed loop on (at the present position) or off (hold the drive)"),
     "simulate": ("simulate", "run a model on a recording's drive and write t,y"),
     "stage": ("stage", "the simulated stage (C stage model of the SIL build)"),
     "status": ("status", "identity and status of a controller"),
-    "tables": ("tables", "build coefficient tables from identified models"),
-    "wave": ("record", "load and start the wave generator (optionally recording the run)"),
+    "tables": ("tables", "coefficient tables: build from a model, list a controller's, roll back"),
+    "wave": ("wave", "load and start the wave generator (optionally recording the run), or stop it"),
 }
 
 # Libraries whose exceptions mean the link to the controller failed (exit 5)

@@ -15,7 +15,7 @@ import pytest
 from piezoctl import cli, device, interface
 from piezoctl.device import connect
 from piezoctl.errors import ControllerRefused
-from piezoctl.golden.ctl import dcc_image, eupi_image
+from piezoctl.fixtures.ctl import dcc_image, eupi_image
 from sil_fixture import SilStage, sil  # noqa: F401  (fixture)
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -244,7 +244,7 @@ def test_tables_list_and_rollback(sil, capsys, tmp_path):
 
 def test_controller_flash_refusal_raises_controller_refused(sil):
     from piezoctl.tables.build import ctl_section, kp_dcc_sections
-    from piezoctl.golden.ctl import DCC_LINE
+    from piezoctl.fixtures.ctl import DCC_LINE
     from piezoctl.tables.image import build_image
     _img, d = dcc_image()
     valve = build_image("kp_dcc", [ctl_section(*DCC_LINE)] + kp_dcc_sections(d),
