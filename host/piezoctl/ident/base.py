@@ -421,8 +421,12 @@ def _select_dynamics(xs, ys, k0s, max_rows, refine, band=None, orders=ORDERS):
     if refine:   # output-error refinement of the chosen order and the next (the costly part: a simulation per step)
         for order in (best, min(best + 2, orders[-1])):
             if order > 0 and models[order] is not None:
-                models[order] = _oe_refine(models[order], xs, ys, k0s)
-                scores[order] = _sim_rmse(models[order], xs, ys, k0s)
+                m = _oe_refine(models[order], xs, ys, k0s)
+                # a refinement that makes a plausible model implausible is not taken: it would drop the
+                # identified dynamics altogether (an own-stage creep case lost its 600 Hz mode to order 0)
+                if plausible(m, band) or not plausible(models[order], band):
+                    models[order] = m
+                    scores[order] = _sim_rmse(m, xs, ys, k0s)
         best = pick()
     if models[best] is None:   # no stable fit of the only order asked for: static
         return (np.array([1.0]), np.array([1.0])), 0, scores
