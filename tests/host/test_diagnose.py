@@ -218,3 +218,18 @@ def test_where_and_discontinuities_read_as_table_rows():
                       "where": "last sample"}]}]
     assert discontinuity_rows(dd) == [["valve.csv", "recording", "1", "20000", "2.0000", "-95.05 -> -1.78",
                                        "+93.27", "last sample"]]
+
+
+def test_drive_side_terms_offer_nothing_within_the_loops_own_latency():
+    """A lag of two sample periods or less is the sampled loop's own latency: no delay or amplifier bandwidth
+    setting (grid or refinement) is that small, so a null stage's one-sample latency cannot be named."""
+    from piezoctl.ident.terms import LATENCY_SAMPLES, TERMS
+    ctx = type("Ctx", (), {"dt": 1e-4})()
+    assert min(TERMS["delay"].settings(ctx)) > LATENCY_SAMPLES
+    bw = TERMS["amplifier_bandwidth"]
+    grid = bw.settings(ctx)
+    finer = [f for lvl in (1, 2) for g in grid for f in bw.refine(ctx, g, lvl)]
+    assert grid and finer
+    assert all(1.0 / (2 * np.pi * f) > LATENCY_SAMPLES * ctx.dt for f in grid + finer)
+    # without the rule the grid reaches 2.5 kHz (a 0.06 ms lag): the test can fail
+    assert max(grid) < 1.0 / (2 * np.pi * LATENCY_SAMPLES * ctx.dt) < 2500.0

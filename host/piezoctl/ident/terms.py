@@ -174,6 +174,13 @@ def h_of_drive(ctx, ue, u, h_now) -> np.ndarray:
     return hysteresis_parts(ctx.base["hysteresis"], v)[0]
 
 
+# A lag within this many sample periods is the sampled loop's own latency (the ZOH's half sample, the tick's
+# computation, the converters), which a calibration below a few hundred Hz cannot identify: a drive-side term
+# whose low-frequency lag is that small is not offered (a null stage's one-sample latency was named
+# `amplifier_bandwidth` at 988 Hz, a 0.16 ms lag).
+LATENCY_SAMPLES = 2.0
+
+
 class _DriveTerm(Term):
     stage = "drive"
     group = "drive_dynamics"
@@ -181,8 +188,16 @@ class _DriveTerm(Term):
     key = ""          # the model file's parameter
     geometric = False  # the grid is geometric and refined around its best point
 
+    @staticmethod
+    def lag_s(setting) -> float:
+        """The term's lag at low frequency [s] (inf: not a lag)."""
+        return float("inf")
+
+    def beyond_latency(self, ctx, settings) -> list:
+        return [st for st in settings if self.lag_s(st) > LATENCY_SAMPLES * ctx.dt]
+
     def refine(self, ctx, setting, level):
-        return _geo_refine(self.settings(ctx), setting, level) if self.geometric else []
+        return self.beyond_latency(ctx, _geo_refine(self.settings(ctx), setting, level)) if self.geometric else []
 
     @staticmethod
     def drive(u, setting, dt) -> np.ndarray:
@@ -235,7 +250,7 @@ class Delay(_DriveTerm):
         return np.interp(idx, np.arange(u.size), u, left=u[0])
 
     def settings(self, ctx):
-        return list(self.DELAYS)
+        return [d for d in self.DELAYS if d > LATENCY_SAMPLES]   # in samples: beyond the loop's own latency
 
     def h_with(self, ctx, setting, u, h_now, dt):
         return self.drive(h_now, setting, dt)   # H is rate independent: delaying its input delays its output
@@ -256,9 +271,13 @@ class AmplifierBandwidth(_DriveTerm):
     def drive(u, hz, dt):
         return lowpass(u, hz, dt)
 
+    @staticmethod
+    def lag_s(hz):
+        return 1.0 / (2.0 * np.pi * float(hz))
+
     def settings(self, ctx):
         fs = 1.0 / ctx.dt
-        return [float(f) for f in np.geomspace(fs / 500.0, fs / 4.0, 14)]
+        return self.beyond_latency(ctx, [float(f) for f in np.geomspace(fs / 500.0, fs / 4.0, 14)])
 
     def describe_own(self, ctx, fc, coef):
         return ({"hz": round(fc, 1)},
