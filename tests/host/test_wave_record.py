@@ -146,7 +146,7 @@ def test_triangle_recorded_exactly(sil, capsys, tmp_path):
     res = json.loads(stdout)
     assert res["running"] and res["record"]["decimation"] == 1 and res["record"]["frames"] == 3000
     ctl = connect(sil.spec)
-    rec = np.loadtxt(out, delimiter=",", comments="#", skiprows=3)
+    rec = _rows(out)
     ref_q = np.array([ctl.q15_position(v) for v in rec[:, 1]])
     want = triangle_q15(np.arange(len(ref_q)), freq_word(7, TICK), ctl.q15_position(10.0),
                         int(math.floor(6 / ctl.scale.p_half * 32768 + 0.5)))
@@ -231,7 +231,7 @@ def test_stream_longer_than_the_recorder(sil, capsys, tmp_path):
                "--freq", "3", "--record", str(out), "--duration", "4", "--stream", "--decimation", "2",
                "--signals", "ref,y,u,err,ff,fb,y2,u2", "--json")[0] == 0
     ctl = connect(sil.spec)
-    rec = np.loadtxt(out, delimiter=",", comments="#", skiprows=3)
+    rec = _rows(out)
     n = np.round(rec[:, 0] * TICK).astype(np.int64)
     assert n[-1] == 2 * 19999
     assert len(n) > CAP // 8  # more than the recorder holds
@@ -283,3 +283,10 @@ def test_wave_and_record_import_nothing_heavy():
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == ""
+
+
+def _rows(path):
+    """The recording's numeric rows (metadata lines and the header skipped, however many metadata lines)."""
+    lines = path.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line and not line.startswith("#"))
+    return np.loadtxt(lines[header + 1:], delimiter=",", ndmin=2)
