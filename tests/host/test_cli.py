@@ -30,7 +30,6 @@ from sil_fixture import sil  # noqa: F401  (pytest fixture)
 
 # The commands this part of the issue converted; the others follow the same
 # conventions in their owners' branches (then add them here).
-CONVERTED = ("identify", "status", "stage simulate", "golden-error")
 HEAVY = ("scipy", "matplotlib")
 
 
@@ -96,14 +95,6 @@ def _leaf_parsers():
 
     walk("", cli.build_parser())
     return dict(out)
-
-
-@pytest.mark.parametrize("command", CONVERTED)
-def test_json_and_quiet(command):
-    p = _leaf_parsers()[command]
-    p.format_help()   # runs the before-parse hooks (identify: none without --model)
-    flags = {s for a in p._actions for s in a.option_strings}
-    assert {"--json", "--quiet"} <= flags
 
 
 def test_port_described_once():
@@ -288,3 +279,24 @@ def test_library_logs_and_warnings_stay_out(debug):
         assert "Connection to (x, 1) failed" in p.stderr and "RuntimeWarning" in p.stderr
     else:
         assert p.stderr == "logging works again after the command\n"
+
+
+@pytest.mark.parametrize("command", sorted(_leaf_parsers()))
+def test_json_and_quiet(command):
+    p = _leaf_parsers()[command]
+    p.format_help()   # runs the before-parse hooks (identify: none without --model)
+    flags = {s for a in p._actions for s in a.option_strings}
+    assert {"--json", "--quiet"} <= flags
+
+
+@pytest.mark.parametrize("command", sorted(_leaf_parsers()))
+def test_every_port_option_carries_the_one_description(command):
+    p = _leaf_parsers()[command]
+    ports = [a for a in p._actions if "--port" in a.option_strings]
+    assert all(a.help.endswith(_options.PORT_HELP) for a in ports)
+
+
+@pytest.mark.parametrize("name", sorted(cli.COMMANDS))
+def test_every_command_help_imports_no_scipy_or_matplotlib(name):
+    """``piezoctl NAME --help`` loads the command's parser only (the 0.5 s start-up: tools/bench-cli)."""
+    assert not set(HEAVY) & _imports_after([name, "--help"])
