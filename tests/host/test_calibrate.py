@@ -50,6 +50,7 @@ def test_calibrate_writes_the_contract_files(calibration):
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64") >= 3 and s["table_crc_hex"] in html
     assert not s["rolled_back"]
+    assert s["params_saved"] == "ok"       # the accepted feedback, notch and shaper persist
     assert s["target"] == {"kind": "sil", "transport": "tcp"}
 
 

@@ -319,6 +319,16 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             text += (f"; compensation made {', '.join(worse)} worse: "
                      + ("rolled back to the previous table" if rolled_back else
                         f"rollback refused ({rollback_result}): the new table stays active"))
+        # the accepted feedback, notch and shaper persist across a restart: the controller's parameter
+        # record (A/B flash with a CRC, docs/operate.md), saved disarmed with the compensated settings loaded
+        params_saved = None
+        if not rolled_back:
+            ctl.configure_shaper(fb["shaper_ticks"], fb["shaper_q15"], fb["preview_ticks"])
+            ctl.configure_feedback(kp=fb["kp"], ki=fb["ki"], notch=fb["notch"])
+            ctl.arm(False)
+            params_saved = ctl.params_command("save")
+            text += ("; feedback, notch and shaper saved in the controller's flash" if params_saved == "ok" else
+                     f"; saving the parameters was refused ({params_saved}): they are lost at a restart")
         steps.result(row, text)
 
     with steps.step(7, "report") as row:
@@ -333,6 +343,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             "rolled_back": rolled_back,
             "worse_than_uncompensated": worse,
             "rollback_result": rollback_result,
+            "params_saved": params_saved,
             "tracking": tracking,
             "checks": {"forward_inverse_max_error_fraction": identity_err, "quantization_max_lsb": quant_lsb,
                        **{k: v for k, v in comp.info.items() if isinstance(v, (int, float))}},
