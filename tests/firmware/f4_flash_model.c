@@ -13,6 +13,7 @@ void f4_model_reset(uint32_t busy_len)
     f4_model.cr = PIEZO_FLASH_CR_LOCK;
     f4_model.busy_len = busy_len;
     memset(f4_model.mem, 0xFF, sizeof f4_model.mem);
+    memset(f4_model.pmem, 0xFF, sizeof f4_model.pmem);
 }
 
 static void start_busy(void)
@@ -91,7 +92,11 @@ void piezo_f4_flash_wr(uint32_t off, uint32_t value)
         uint32_t snb = (value & PIEZO_FLASH_CR_SNB_MASK) >> PIEZO_FLASH_CR_SNB_SHIFT;
         if (snb >= 8u && snb <= 11u) {
             uint32_t i = snb >= 10u ? snb - 10u : snb - 8u + 2u;
-            memset(f4_model.mem[i], 0xFF, F4_MODEL_BYTES);
+            if (i < 2u) {
+                memset(f4_model.mem[i], 0xFF, F4_MODEL_BYTES);
+            } else {
+                memset(f4_model.pmem[i - 2u], 0xFF, F4_MODEL_PARAM_BYTES);
+            }
             f4_model.erases[i]++;
         }
         start_busy();
@@ -102,10 +107,13 @@ static uint8_t *cell(uint32_t addr)
 {
     uint32_t off = addr - PIEZO_FLASH_PARAMS_A_ADDR; /* sectors 8..11, 128 KiB each */
     uint32_t s = off / PIEZO_FLASH_SLOT_BYTES, o = off % PIEZO_FLASH_SLOT_BYTES;
-    if (addr < PIEZO_FLASH_PARAMS_A_ADDR || s > 3u || o >= F4_MODEL_BYTES) {
+    if (addr < PIEZO_FLASH_PARAMS_A_ADDR || s > 3u) {
         return 0;
     }
-    return &f4_model.mem[s >= 2u ? s - 2u : s + 2u][o];
+    if (s >= 2u) { /* sectors 10, 11: tables */
+        return o < F4_MODEL_BYTES ? &f4_model.mem[s - 2u][o] : 0;
+    }
+    return o < F4_MODEL_PARAM_BYTES ? &f4_model.pmem[s][o] : 0; /* sectors 8, 9: parameters */
 }
 
 uint8_t piezo_f4_mem_rd8(uint32_t addr)

@@ -6,8 +6,10 @@
  * chip flags: a CR write while locked, programming without PG or with
  * another PSIZE (PGSERR, PGPERR), an unaligned word (PGAERR), a wrong key
  * (CR locked until reset), an operation started while BSY. Sectors 10 and 11
- * (tables: index 0, 1) and 8 and 9 (parameters: index 2, 3) are modelled
- * over their first F4_MODEL_BYTES (the rest reads 0xFF).
+ * (tables: index 0, 1) are modelled over their first F4_MODEL_BYTES, sectors
+ * 8 and 9 (parameters: index 2, 3) over their first F4_MODEL_PARAM_BYTES (a
+ * parameter record is one slot of a few hundred bytes; the rest reads 0xFF).
+ * The sizes keep the test image inside the chip's RAM under QEMU.
  */
 #ifndef F4_FLASH_MODEL_H
 #define F4_FLASH_MODEL_H
@@ -15,6 +17,7 @@
 #include <stdint.h>
 
 #define F4_MODEL_BYTES (20u * 1024u)
+#define F4_MODEL_PARAM_BYTES 1024u
 
 typedef struct {
     uint32_t sr, cr;
@@ -27,7 +30,8 @@ typedef struct {
     /* rule breaches the chip would flag or hang on */
     uint32_t writes_while_locked, ops_while_busy, wrong_keys, key_writes;
     uint32_t erases[4], words_programmed;
-    uint8_t mem[4][F4_MODEL_BYTES];
+    uint8_t mem[2][F4_MODEL_BYTES];        /* sectors 10, 11 */
+    uint8_t pmem[2][F4_MODEL_PARAM_BYTES]; /* sectors 8, 9 */
 } f4_flash_model_t;
 
 extern f4_flash_model_t f4_model;
