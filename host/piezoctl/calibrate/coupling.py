@@ -31,10 +31,8 @@ from __future__ import annotations
 
 import json
 import pathlib
-import struct
 import sys
 import time
-import zlib
 
 import numpy as np
 
@@ -52,8 +50,13 @@ SETTLE_S = 1.0
 EVAL_FREQS = (1.0, 10.0)
 
 
-def _log(text: str) -> None:
-    print(f"[coupling] {text}", file=sys.stderr, flush=True)
+def _log(args, text: str) -> None:
+    """A progress line on stderr (silenced by the command's --quiet and --json)."""
+    if args is None:
+        print(f"[coupling] {text}", file=sys.stderr, flush=True)
+    else:
+        from ..commands._options import progress
+        progress(args, f"coupling: {text}")
 
 
 def other_axis_port(port: str, axis: int = 2) -> tuple[str, int]:
@@ -134,21 +137,9 @@ def identify_coupling(ci, cj) -> dict:
 
 
 def flash_coupling(ctl, img: bytes, timeout_s: float = 2.0) -> int:
-    """Upload, verify, commit a coupling table; wait until it runs. Returns its CRC."""
-    crc = struct.unpack_from("<I", img, len(img) - 4)[0]
-    ctl.upload_table(img)
-    back = ctl.read_staged(len(img))
-    if back != img or zlib.crc32(back[:-4]) & 0xFFFFFFFF != crc:
-        raise CliError("coupling table: the read-back differs from the upload")
-    reason = ctl.commit_table()
-    if reason != "ok":
-        raise CliError(f"coupling table refused by the controller: {reason}")
-    deadline = time.monotonic() + timeout_s
-    while ctl.status()["coupling_table_crc"] != crc:
-        if time.monotonic() > deadline:
-            raise CliError("coupling table committed but not running")
-        time.sleep(0.02)
-    return crc
+    """Upload, verify, commit a coupling table and wait until it runs (``Controller.flash``, the one way a
+    table reaches a controller). Returns its CRC."""
+    return int(ctl.flash(img, timeout_s=timeout_s)["crc"])
 
 
 def _configure_compensated(ctl, comp: dict) -> None:
@@ -207,7 +198,8 @@ def _comp_of(summary: dict, out: pathlib.Path) -> dict:
     return c
 
 
-def calibrate_two_axis(c1, port: str, out: pathlib.Path, summary1: dict, *, kinds=("eupi", "kp")) -> dict:
+def calibrate_two_axis(c1, port: str, out: pathlib.Path, summary1: dict, *, kinds=("eupi", "kp"),
+                       args=None) -> dict:
     """Axis 2's own calibration into ``out/axis2``, then the coupling both ways; returns axis 1's summary with ``coupling``."""
     from .pipeline import calibrate
     from .report import append_coupling_html
@@ -215,8 +207,8 @@ def calibrate_two_axis(c1, port: str, out: pathlib.Path, summary1: dict, *, kind
     c2 = connect_axis(port, 2)
     if c2.identity.axis != 1:
         raise CliError(f"{port}: axis 2 answers as axis {c2.identity.axis + 1}")
-    _log("axis 2: its own calibration")
-    summary2 = calibrate(c2, out / "axis2", kinds=kinds, target=summary1.get("target"))
+    _log(args, "axis 2: its own calibration")
+    summary2 = calibrate(c2, out / "axis2", kinds=kinds, target=summary1.get("target"), args=args)
     ctls = {1: c1, 2: c2}
     sums = {1: summary1, 2: summary2}
     dirs = {1: out, 2: out / "axis2"}
@@ -226,7 +218,7 @@ def calibrate_two_axis(c1, port: str, out: pathlib.Path, summary1: dict, *, kind
         # persistent one latches again and stops the arm below
         st = c.status()
         if st["faults"]:
-            _log(f"axis {a}: faults latched while idle: {', '.join(st['faults_names'])}; cleared")
+            _log(args, f"axis {a}: faults latched while idle: {', '.join(st['faults_names'])}; cleared")
             c.command("clear_faults")
     coupling = {}
     for i, j in ((1, 2), (2, 1)):
@@ -250,7 +242,7 @@ def calibrate_two_axis(c1, port: str, out: pathlib.Path, summary1: dict, *, kind
                             "by_frequency": ev, "table_crc_hex": f"{crc:#010x}",
                             "table": f"coupling_table_axis{i}.bin", "fit_nrmse": resid,
                             "drive_per_um": drive_per_um, "line_gain": line}
-        _log(f"axis {i} from axis {j}: table {crc:#010x}; " + ", ".join(
+        _log(args, f"axis {i} from axis {j}: table {crc:#010x}; " + ", ".join(
             f"{k} Hz {v['rmse_uncompensated_um'] * 1e3:.1f} -> {v['rmse_compensated_um'] * 1e3:.1f} nm"
             for k, v in ev.items()))
     summary1 = dict(summary1)

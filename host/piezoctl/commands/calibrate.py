@@ -52,7 +52,7 @@ def _calibrate(port: str, out: pathlib.Path, kinds, target: dict | None = None, 
     summary = calibrate(ctl, out, kinds=kinds, target=target or _target_of(port), args=args)
     if ctl.identity.n_axes == 2:
         from ..calibrate.coupling import calibrate_two_axis
-        summary = calibrate_two_axis(ctl, port, out, summary, kinds=kinds)
+        summary = calibrate_two_axis(ctl, port, out, summary, kinds=kinds, args=args)
     return summary
 
 
