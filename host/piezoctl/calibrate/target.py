@@ -25,15 +25,6 @@ def _build(preset: str, build: pathlib.Path, target: str, what: str, jobs: int) 
         raise CliError(f"cannot build {what} ({target}): {exc}") from None
 
 
-def sil_binary() -> pathlib.Path:
-    """The sil_stage executable, built with the ``sil`` preset if missing."""
-    build = pathlib.Path(os.environ.get("PIEZOCTL_BUILD", ROOT / "build" / "sil"))
-    exe = build / "sil_stage"
-    if not exe.exists():
-        _build("sil", build, "sil_stage", "the virtual controller", jobs=2)
-    return exe
-
-
 class SilTarget:
     """A virtual controller running for the duration of a ``with`` block.
 
@@ -55,7 +46,7 @@ class SilTarget:
         self.port = None
 
     def __enter__(self) -> "SilTarget":
-        from ..sil.launch import VirtualController  # the one launcher of sil_stage
+        from ..sil.launch import VirtualController, sil_binary  # the one launcher of sil_stage
         self._vc = VirtualController(stage=self.stage, flash=self.flash, seed=self.seed,
                                      exe=sil_binary()).start()
         self.proc, self.port = self._vc.proc, self._vc.port
