@@ -325,8 +325,11 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         if not rolled_back:
             ctl.configure_shaper(fb["shaper_ticks"], fb["shaper_q15"], fb["preview_ticks"])
             ctl.configure_feedback(kp=fb["kp"], ki=fb["ki"], notch=fb["notch"])
+            was_armed = bool(ctl.status()["armed"])
             ctl.arm(False)
             params_saved = ctl.params_command("save")
+            if was_armed:   # as the acceptance left it (a second axis is calibrated next to this one)
+                ctl.arm(True)
             text += ("; feedback, notch and shaper saved in the controller's flash" if params_saved == "ok" else
                      f"; saving the parameters was refused ({params_saved}): they are lost at a restart")
         steps.result(row, text)
