@@ -12,6 +12,7 @@
 #include "nor_flash.h"
 #include "param_store.h"
 #include "regmap.h"
+#include "mb_request.h"
 
 static piezo_ctl_t ctl;
 static piezo_regmap_t map;
@@ -43,17 +44,8 @@ static void erase_all(void)
 static uint8_t write_regs(uint16_t addr, uint16_t n, const uint16_t *v)
 {
     uint8_t req[PIEZO_MB_PDU_MAX];
-    req[0] = PIEZO_MB_FC_WRITE_MULTIPLE;
-    req[1] = (uint8_t)(addr >> 8);
-    req[2] = (uint8_t)addr;
-    req[3] = (uint8_t)(n >> 8);
-    req[4] = (uint8_t)n;
-    req[5] = (uint8_t)(2u * n);
-    for (uint16_t i = 0; i < n; i++) {
-        req[6 + 2 * i] = (uint8_t)(v[i] >> 8);
-        req[7 + 2 * i] = (uint8_t)v[i];
-    }
-    assert_true(piezo_mb_pdu_process(&regs, req, 6u + 2u * n, rsp, sizeof rsp) >= 2u);
+    size_t len = mb_req_write_multiple(req, addr, v, n);
+    assert_true(piezo_mb_pdu_process(&regs, req, len, rsp, sizeof rsp) >= 2u);
     return (rsp[0] & PIEZO_MB_EXCEPTION_BIT) ? rsp[1] : 0u;
 }
 

@@ -5,6 +5,7 @@
 #include "piezo_test.h"
 #include "modbus_pdu.h"
 #include "test_modbus_regs.h"
+#include "mb_request.h"
 
 static tregs_t bank;
 static piezo_mb_regs_t regs;
@@ -54,13 +55,7 @@ static size_t req5(uint8_t *q, uint8_t fc, uint16_t a, uint16_t b)
 /* Builds an FC 16 request writing v[0..n) at addr. */
 static size_t req16(uint8_t *q, uint16_t addr, const uint16_t *v, uint16_t n)
 {
-    req5(q, 0x10, addr, n);
-    q[5] = (uint8_t)(2u * n);
-    for (uint16_t i = 0; i < n; i++) {
-        q[6 + 2 * i] = (uint8_t)(v[i] >> 8);
-        q[7 + 2 * i] = (uint8_t)v[i];
-    }
-    return 6u + 2u * n;
+    return mb_req_write_multiple(q, addr, v, n);
 }
 
 /* Builds an FC 23 request. */
