@@ -174,9 +174,9 @@ def smoothness_penalty(layout: PlaneLayout, n_extra: int) -> np.ndarray:
     return Om
 
 
-def _ridge_solve(A, b, ridge, Om=None):
-    """Solve (A + ridge * s * Om + 1e-10 * s * I) x = b, s = mean(diag A): a roughness penalty ``Om`` (default: the
-    identity, plain ridge) scaled to the data."""
+def _penalized(A, ridge, Om=None):
+    """A + ridge * s * Om (Om scaled to unit mean diagonal; default the identity) + 1e-10 * s * I, s = mean(diag A):
+    the penalized normal matrix of every plane fit."""
     s = float(np.mean(np.diag(A))) or 1.0
     M = A.copy()
     if Om is None:
@@ -184,6 +184,13 @@ def _ridge_solve(A, b, ridge, Om=None):
     else:
         M += ridge * s * Om / max(float(np.mean(np.diag(Om))), 1e-300)
     M[np.diag_indices_from(M)] += 1e-10 * s
+    return M
+
+
+def _ridge_solve(A, b, ridge, Om=None):
+    """Solve (A + ridge * s * Om + 1e-10 * s * I) x = b, s = mean(diag A): a roughness penalty ``Om`` (default: the
+    identity, plain ridge) scaled to the data."""
+    M = _penalized(A, ridge, Om)
     try:
         return np.linalg.solve(M, b)
     except np.linalg.LinAlgError:
@@ -216,9 +223,7 @@ def _plane_solve(A, b, ridge, Om, layout: PlaneLayout, sign: float):
     from scipy.linalg import cho_factor, cho_solve, solve_triangular
     from scipy.optimize import nnls
     n, p = A.shape[0], layout.n_plane
-    s = float(np.mean(np.diag(A))) or 1.0
-    M = A + ridge * s * Om / max(float(np.mean(np.diag(Om))), 1e-300)
-    M[np.diag_indices_from(M)] += 1e-10 * s
+    M = _penalized(A, ridge, Om)
     L = _cumulative(layout, n)
     L[:, :p] *= sign
     Md, qd = L.T @ M @ L, L.T @ b
