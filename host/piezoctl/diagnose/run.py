@@ -25,7 +25,7 @@ from ..ident import refined
 from ..ident.base import fit_base
 from ..ident.terms import TERMS, VOCABULARY
 from ..io.modelfile import make_provenance, save_model
-from ..io.recording import load_recording, session_start
+from ..io.recording import load_recording, sensor_session, session_start
 from . import locate as loc
 from . import significance as sg
 from .discriminate import calibration_band_hz
@@ -121,7 +121,7 @@ def locate(base, cal, recs, names, settle_s, block_s):
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
               cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
               cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
-              **_drift_clock(cal, recs))
+              **_drift_clock(cal, recs), **_offset_groups(cal, recs))
     # samples where the drive is (or within OUT_GUARD_S was) outside the calibrated range: the base model
     # extrapolates there. They stay in the selection - saturation or a sensor's curvature may show only there -
     # and are reported on their own, so the user can weigh a finding that rests on them
@@ -152,6 +152,22 @@ def _drift_clock(cal, recs) -> dict:
     ends = [s + float(r.t[-1] - r.t[0]) for s, r in zip(starts, list(cal) + list(recs))]
     t0 = max(ends[:len(cal)]) if cal else min(starts)
     return {"drift_t0": t0, "drift_span": max(max(ends) - t0, 0.0)}
+
+
+def _offset_groups(cal, recs) -> dict:
+    """The sensor zero's columns (``Ctx.offset_group``): when every recording carries ``session``, one constant per
+    session other than the calibration's (a sensor's zero is a property of the session: recordings of one session
+    share it, and the calibration's session has the base's); else none (a constant per recording)."""
+    labels = [sensor_session(r) for r in list(cal) + list(recs)]
+    if not labels or any(x is None for x in labels):
+        return {}
+    cal_labels = set(labels[:len(cal)])
+    sessions = []
+    for x in labels[len(cal):]:
+        if x not in cal_labels and x not in sessions:
+            sessions.append(x)
+    return {"offset_group": [-1 if x in cal_labels else sessions.index(x) for x in labels[len(cal):]],
+            "offset_sessions": sessions}
 
 
 def _nrmse_pooled(ys, yhats, masks, span):

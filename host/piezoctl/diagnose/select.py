@@ -20,12 +20,12 @@ from ..dsp import filt
 from ..ident import refined
 from ..ident.terms import Term
 from ..io.recording import session_start
-from ..models.hysteresis import hysteresis_groups
+from ..models.hysteresis import hysteresis_groups, initial_state_span
 from . import significance as sg
 from .discriminate import discriminate_group, highpassed
 
 __all__ = ["Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
-           "simulate_refined", "hysteresis_nuisance", "dynamics_nuisance", "term_nuisance", "best_setting", "train_rows"]
+           "simulate_refined", "hysteresis_nuisance", "dynamics_nuisance", "initial_state_nuisance", "term_nuisance", "best_setting", "train_rows"]
 
 
 @dataclasses.dataclass
@@ -79,10 +79,29 @@ class Ctx:
     design_cache: dict = dataclasses.field(default_factory=dict)
     nuisance: np.ndarray | None = None   # hysteresis_nuisance() of this model, computed on first use
     dyn_nuisance: np.ndarray | None = None   # dynamics_nuisance() of this model, computed on first use
+    init_nuisance: np.ndarray | None = None  # initial_state_nuisance() of this model, computed on first use
     cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
     cal_u_hi: float = 0.0
     drift_t0: float | None = None   # the session clock's reference for drift [s] (end of the calibration), when
     drift_span: float = 0.0         # every recording has session_time_s; the span of the recordings after it [s]
+    offset_group: list | None = None  # per recording: its sensor-zero column (-1: the calibration's session, no
+    #                                   offset of its own); None: one per recording (sessions unknown)
+    offset_sessions: list | None = None  # the session label of each column, when sessions are known
+
+    def offset_columns(self, s) -> np.ndarray:
+        """The sensor-zero columns (n, m) of recording ``s``: a constant per sensor session other than the
+        calibration's when every recording carries ``session``, else a constant per recording."""
+        X = np.zeros((s.t.size, self.n_offset()))
+        if self.offset_of(s.index) >= 0:
+            X[:, self.offset_of(s.index)] = 1.0
+        return X
+
+    def n_offset(self) -> int:
+        return self.n_rec if self.offset_group is None else len(self.offset_sessions or [])
+
+    def offset_of(self, i: int) -> int:
+        """Recording i's sensor-zero column (-1: none)."""
+        return i if self.offset_group is None else int(self.offset_group[i])
 
 
 @dataclasses.dataclass
@@ -180,6 +199,16 @@ def _lstsq_bounded(X, y, lb):
     return sol.x / sc
 
 
+def _lstsq_box(X, y, lo, hi):
+    """Least squares with box bounds ``lo <= theta <= hi`` (+-inf: free) on unit-RMS columns."""
+    from scipy.optimize import lsq_linear
+    sc = np.sqrt(np.mean(X ** 2, axis=0))
+    sc[sc == 0] = 1.0
+    sol = lsq_linear(X / sc, y, bounds=(np.asarray(lo, float) * sc, np.asarray(hi, float) * sc), method="bvls",
+                     lsq_solver="exact")
+    return sol.x / sc
+
+
 def train_rows(train, rows):
     idx = np.flatnonzero(train)
     if idx.size > rows:
@@ -193,9 +222,15 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None):
     coefficients first, unbounded), sliced once per fold by the caller."""
     idx = train_rows(train, rows)
     Xtr = X[idx] if nuis is None else np.hstack([nuis[0], X[idx]])
-    if lb is not None and nuis is not None:
-        lb = np.concatenate([np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
-    th = _lstsq(Xtr, e[idx]) if lb is None else _lstsq_bounded(Xtr, e[idx], lb)
+    box = nuis is not None and len(nuis) > 2 and nuis[2] is not None
+    if box:   # bounded nuisance columns (the initial state's gains): a box solve over all columns
+        lo = np.concatenate([nuis[2][0], np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)])
+        hi = np.concatenate([nuis[2][1], np.full(X.shape[1], np.inf)])
+        th = _lstsq_box(Xtr, e[idx], lo, hi)
+    else:
+        if lb is not None and nuis is not None:
+            lb = np.concatenate([np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
+        th = _lstsq(Xtr, e[idx]) if lb is None else _lstsq_bounded(Xtr, e[idx], lb)
     sse_tr = float(np.sum((e[idx] - Xtr @ th) ** 2)) * (np.sum(train) / max(idx.size, 1))
     if nuis is None:
         return th, X[test] @ th, sse_tr
@@ -275,16 +310,61 @@ def dynamics_nuisance(ctx):
     return ctx.dyn_nuisance
 
 
-def term_nuisance(ctx, term, dynamics: bool = True):
+def initial_state_nuisance(ctx):
+    """The level-like terms' extra nuisance (n_settled, n_rec): per recording, the current model's output with
+    the history coming down from the top of the calibrated range minus coming up from its bottom, through the
+    dynamics. A recording starts in a hysteresis state nobody recorded; for a Preisach density of one sign every
+    state's output lies between these two, so the true output is the model's plus ``g`` times this difference
+    with ``|g| <= 1`` (the bounds of :func:`initial_state_bounds`); the difference dies out once the drive has
+    visited both ends. Without it a null whose recording never wiped its initial state named a sensor offset
+    (round 6, held-out null s102-004: one recording 0.21 um off). Cached on the context."""
+    if ctx.init_nuisance is None:
+        hp = ctx.base["hysteresis"]
+        b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+        mid, half = float(ctx.base["u_mid"]), float(ctx.base["u_half"])
+        v_lo, v_hi = (ctx.cal_u_lo - mid) / half, (ctx.cal_u_hi - mid) / half
+        cols = []
+        for s in ctx.signals:
+            d = np.zeros((s.v.size, ctx.n_rec))
+            d[:, s.index] = filt(b, a, initial_state_span(hp, s.v, v_lo, v_hi))
+            cols.append(d)
+        ctx.init_nuisance = np.vstack([c[v] for c, v in zip(cols, ctx.valid)])
+    return ctx.init_nuisance
+
+
+def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True):
     """The nested test's nuisance columns for ``term`` (None: not nested); ``dynamics=False`` leaves out the
     dynamics corrections (the term's setting for the model is chosen without them: they would take part of a
-    delay or a pole and bias the setting)."""
+    delay or a pole and bias the setting); ``initial=False`` leaves out the initial-state columns (the same for
+    the coefficients: the refined model has no initial state per recording, so a level they took would be
+    missing from its term). The initial-state columns, when taken, come last (bounds: :func:`nuisance_bounds`)."""
     parts = []
     if term.nested:
         parts.append(hysteresis_nuisance(ctx))
     if term.nested_dynamics and dynamics:
         parts.append(dynamics_nuisance(ctx))
+    if term.initial_state and initial:
+        parts.append(initial_state_nuisance(ctx))
     return np.hstack(parts) if parts else None
+
+
+def nuisance_bounds(ctx, term, N, initial: bool = True):
+    """(lo, hi) of the nuisance columns ``N`` of ``term`` (None: all free): the initial state's gains within
+    [-1, 1], the other columns free."""
+    if N is None or not (term.initial_state and initial):
+        return None
+    m = N.shape[1]
+    lo, hi = np.full(m, -np.inf), np.full(m, np.inf)
+    lo[m - ctx.n_rec:], hi[m - ctx.n_rec:] = -1.0, 1.0
+    return lo, hi
+
+
+def _nuis(ctx, term, train, test, rows, dynamics: bool = True, initial: bool = True):
+    """The nuisance as passed to :func:`_fit_predict`: (train rows, test rows, bounds), or None."""
+    N = term_nuisance(ctx, term, dynamics, initial)
+    if N is None:
+        return None
+    return (N[train_rows(train, rows)], N[test], nuisance_bounds(ctx, term, N, initial))
 
 
 def residual(ctx):
@@ -309,19 +389,15 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
         k = max(_design(ctx, term, st).k for st in settings) - len(own) + (1 if len(settings) > 1 else 0)
         train, test = fold_all == f, fold_all == 1 - f
         e_before[test] = e[test]
-        N = None
-        Nall = term_nuisance(ctx, term)   # nested against a refit of the model's own flexibility on this fold
-        if Nall is not None:
-            N = (Nall[train_rows(train, rows)], Nall[test])
+        N = _nuis(ctx, term, train, test, rows)   # nested against a refit of the model's own flexibility here
         if own or N is not None:  # "before" is the model with the nuisance columns alone refitted here
             Xn = d0.X[:, own] if own else np.zeros((e.size, 0))
             _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
             e_before[test] = e[test] - pn
         best = best_setting(ctx, term, e, train, test, rows, N)
         pred_after[test] = best[3] - (e[test] - e_before[test])
-        if term.nested_dynamics:   # the model's setting and coefficients: without the dynamics corrections
-            Nm = term_nuisance(ctx, term, dynamics=False)
-            Nm = None if Nm is None else (Nm[train_rows(train, rows)], Nm[test])
+        if term.nested_dynamics or term.initial_state:   # the model's setting and coefficients: without the
+            Nm = _nuis(ctx, term, train, test, rows, dynamics=False, initial=False)   # columns it will not have
             chosen.append(best_setting(ctx, term, e, train, test, rows, Nm))
         else:
             chosen.append(best)
@@ -386,7 +462,7 @@ def rebase(ctx, params, recs):
         sigs.append(dataclasses.replace(s, v=p["v"], h=p["h"], hyst=p["hyst"], yb=y, ydyn=p["y_dyn"] + off))
     cal_h = [refined.simulate_parts(params, r.t, r.u, r.u2)["h"] for r in ctx.cal]
     return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={},
-                               nuisance=None, dyn_nuisance=None)
+                               nuisance=None, dyn_nuisance=None, init_nuisance=None)
 
 
 def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
@@ -494,10 +570,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
         allmask = fold_all >= 0
         e_all = residual(ctx_all)
         term = best.term
-        N = None
-        Nall = term_nuisance(ctx_all, term, dynamics=False)
-        if Nall is not None:
-            N = (Nall[train_rows(allmask, rows)], Nall[:0])
+        N = _nuis(ctx_all, term, allmask, np.zeros(e_all.size, bool), rows, dynamics=False, initial=False)
         st, _, _, _, th = best_setting(ctx_all, term, e_all, allmask, np.zeros(e_all.size, bool), rows, N)
         best.setting_all, best.coef_all = st, th
         best.described = term.describe(ctx_all, st, th)

@@ -81,6 +81,7 @@ class Term:
     nested = True       # tested against free gains on the hysteresis channels refitted on the same fold
     nested_dynamics = False  # also against low-order corrections of the dynamics (drive-side terms, a mode)
     supersedes = ()     # names of simpler terms this one contains (as its nuisance): when both pass, it goes first
+    initial_state = False  # also against a bounded gain per recording on its unknown initial hysteresis state
 
     def applicable(self, ctx) -> bool:
         return True
@@ -430,6 +431,7 @@ class Creep(Term):
     intercept = True
     nested = False     # it carries its own (richer) nuisance
     signature = "residual correlated with the low-passed drive history; large after steps and dwells"
+    initial_state = True   # a level per recording: the unknown initial state sets one too
     TAUS = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0)   # [s]: faster "creep" is a lag of the dynamics, not creep
 
     @staticmethod
@@ -583,6 +585,7 @@ class ThermalDrift(Term):
 
     name = "thermal_drift"
     signature = "slow trend with time (or temperature), independent of the drive"
+    initial_state = True   # a level per recording: the unknown initial state sets one too
     supersedes = ("sensor_offset",)
     TAUS = (5.0, 15.0, 50.0, 150.0, 500.0)
 
@@ -602,19 +605,26 @@ class ThermalDrift(Term):
         # a time constant is offered only when the span is at least twice as long: over a shorter span the
         # exponential and the slope are nearly collinear and fit with cancelling values (12 um "drift" over the
         # valve's 5 s runs); otherwise the slope alone
+        # each setting carries the drift's direction: the warm-up and the trend go the same way (a warm-up with
+        # a trend against it drew a 2.1 um "drift" cancelled by -5.3 um/min over a 40 s reveal, round 7: the
+        # recordings' starting transients of creep, not a drift)
         span = ctx.drift_span if ctx.drift_t0 is not None else ctx.duration
-        return [tau for tau in self.TAUS if tau <= 0.5 * span] + [np.inf]
+        return [(tau, sgn) for tau in [t for t in self.TAUS if t <= 0.5 * span] + [np.inf] for sgn in (1.0, -1.0)]
+
+    def lower(self, ctx):   # the offsets free, the drift's amplitude and trend >= 0 along the setting's sign
+        return [-np.inf] * ctx.n_offset() + [0.0, 0.0]
 
     def n_nuisance(self, ctx):
-        return ctx.n_rec
+        return ctx.n_offset()
 
-    def columns(self, ctx, s, tau):
-        X = np.zeros((s.t.size, ctx.n_rec))
-        X[:, s.index] = 1.0
-        return np.column_stack([X, self.basis(s.t, tau, self._t_from(ctx.drift_t0, s.t_session))])
+    def columns(self, ctx, s, setting):
+        tau, sgn = setting
+        return np.column_stack([ctx.offset_columns(s),
+                                sgn * self.basis(s.t, tau, self._t_from(ctx.drift_t0, s.t_session))])
 
-    def model_params(self, ctx, tau, coef):
-        c = np.asarray(coef, float)[self.n_nuisance(ctx):]
+    def model_params(self, ctx, setting, coef):
+        tau, sgn = setting
+        c = sgn * np.asarray(coef, float)[self.n_nuisance(ctx):]
         lin = float(tau) >= 1e30
         out = {"amplitude_um": 0.0 if lin else float(c[0]), "tau_s": 1e300 if lin else float(tau),
                "slope_um_per_s": float(c[1])}
@@ -627,8 +637,9 @@ class ThermalDrift(Term):
         st.y = st.y + self.basis(st.t, float(p["tau_s"]), t_from) @ [float(p["amplitude_um"]),
                                                                      float(p.get("slope_um_per_s", 0.0))]
 
-    def describe_own(self, ctx, tau, coef):
-        c = np.asarray(coef, float)[self.n_nuisance(ctx):]
+    def describe_own(self, ctx, setting, coef):
+        tau, sgn = setting
+        c = sgn * np.asarray(coef, float)[self.n_nuisance(ctx):]
         clock = (f"with session time since the end of the calibration (t = {ctx.drift_t0:.1f} s)"
                  if ctx.drift_t0 is not None else "with time since the start of each recording")
         if float(tau) >= 1e30:
@@ -641,25 +652,44 @@ class ThermalDrift(Term):
 
 
 class SensorOffset(Term):
+    """The sensor's zero moved: a constant per sensor session other than the calibration's when the recordings
+    carry ``session`` (``Ctx.offset_columns``), else a constant per recording (then a level per recording from a
+    drift, creep or the unknown initial state cannot be told from it, and the description says so)."""
+
     name = "sensor_offset"
-    signature = "a constant per recording (session)"
+    signature = "a constant per sensor session (per recording when the sessions are unknown)"
+    initial_state = True   # a level per recording: the unknown initial state sets one too
+
+    def applicable(self, ctx) -> bool:
+        return ctx.n_offset() > 0
 
     def columns(self, ctx, s, setting):
-        X = np.zeros((s.t.size, ctx.n_rec))
-        X[:, s.index] = 1.0
-        return X
+        return ctx.offset_columns(s)
+
+    def _per_recording(self, ctx, coef) -> list:
+        c = np.asarray(coef, float)
+        return [float(c[ctx.offset_of(i)]) if ctx.offset_of(i) >= 0 else 0.0 for i in range(ctx.n_rec)]
 
     def model_params(self, ctx, setting, coef):
-        return {"offset_um": float(np.mean(coef)), "per_recording": {n: float(c) for n, c in zip(ctx.names, coef)}}
+        per = self._per_recording(ctx, coef)
+        return {"offset_um": float(np.mean(per)), "per_recording": {n: c for n, c in zip(ctx.names, per)}}
 
     def apply(self, p, st):
         st.y = st.y + float(p["offset_um"])
 
     def describe_own(self, ctx, setting, coef):
-        per = {n: round(float(c), 4) for n, c in zip(ctx.names, coef)}
+        per = {n: round(c, 4) for n, c in zip(ctx.names, self._per_recording(ctx, coef))}
+        if ctx.offset_sessions is not None:
+            by = {str(x): round(float(c), 4) for x, c in zip(ctx.offset_sessions, np.asarray(coef, float))}
+            return ({"offset_um_per_session": by, "offset_um_per_recording": per},
+                    "the residual is a constant per sensor session (" + ", ".join(
+                        f"session {x}: {c:+.3f} um" for x, c in by.items())
+                    + ", the same in every recording of the session): the sensor's zero moved between sessions")
         return ({"offset_um_per_recording": per},
                 "the residual is a constant per recording (" + ", ".join(f"{n}: {c:+.3f} um" for n, c in per.items())
-                + "): the sensor's zero moved between sessions")
+                + "): the sensor's zero moved between sessions, or something else set a level per recording "
+                  "(the recordings carry no `session`, so a drift, creep or the unknown initial state of each "
+                  "recording cannot be told from a zero shift)")
 
 
 class SensorNonlinearity(Term):

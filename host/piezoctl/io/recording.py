@@ -523,3 +523,13 @@ def session_start(rec) -> float | None:
     except (TypeError, ValueError):
         return None
     return x if np.isfinite(x) else None
+
+
+def sensor_session(rec) -> str | None:
+    """The recording's sensor session (metadata ``session``: any label; recordings with the same label share the
+    sensor's zero, i.e. the sensor was not re-zeroed, remounted or re-powered between them), or None."""
+    value = getattr(rec, "meta", {}).get("session")
+    if value is None:
+        return None
+    value = str(value).strip()
+    return value or None

@@ -39,7 +39,7 @@ from .play import play_outputs
 
 __all__ = ["bouc_wen_h", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
            "poly_clamped", "hysteresis_features", "add_to_features", "hysteresis_channels",
-           "scale_channels", "hysteresis_groups", "scale_groups"]
+           "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span"]
 
 _STATE_CACHE: "collections.OrderedDict" = collections.OrderedDict()
 _STATE_CACHE_MAX_SAMPLES = 20_000_000   # about 160 MB of float64
@@ -366,3 +366,16 @@ def scale_groups(hp: dict, gains) -> dict:
     if hp.get("bw"):
         per[n] = g[k]
     return scale_channels(hp, per)
+
+
+def initial_state_span(hp: dict, v, v_lo: float, v_hi: float) -> np.ndarray:
+    """H[v] [um] with the history coming down from ``v_hi`` minus coming up from ``v_lo`` (normalized drive; each
+    widened to the drive's own extremes). For a Preisach density of one sign every initial state's output lies
+    between the two, and the difference is zero once the drive has visited both ends (wiping out)."""
+    v = np.asarray(v, float)
+    if v.size == 0:
+        return np.zeros(0)
+    lo, hi = min(float(v_lo), float(v.min())), max(float(v_hi), float(v.max()))
+    top = hysteresis_parts(hp, np.concatenate([[lo, hi], v]))[0][2:]
+    bottom = hysteresis_parts(hp, np.concatenate([[hi, lo], v]))[0][2:]
+    return top - bottom

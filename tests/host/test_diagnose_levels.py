@@ -1,0 +1,59 @@
+"""Levels per recording in the diagnosis: the sensor's zero per session, the unknown initial state."""
+
+import numpy as np
+import pytest
+
+from piezoctl.diagnose.run import _offset_groups
+from piezoctl.diagnose.select import _fit_predict
+from piezoctl.io.recording import sensor_session
+from piezoctl.models.hysteresis import initial_state_span
+
+
+class _Rec:
+    def __init__(self, session=None):
+        self.meta = {} if session is None else {"session": session}
+
+
+def test_offset_groups_one_column_per_session_other_than_the_calibrations():
+    cal = [_Rec("A"), _Rec("A")]
+    recs = [_Rec("B"), _Rec("C"), _Rec("B"), _Rec("A")]
+    g = _offset_groups(cal, recs)
+    assert g["offset_sessions"] == ["B", "C"]
+    assert g["offset_group"] == [0, 1, 0, -1]   # the calibration's session keeps the base's zero
+
+
+def test_offset_groups_need_every_recording_labelled():
+    assert _offset_groups([_Rec("A")], [_Rec("B"), _Rec()]) == {}
+    assert _offset_groups([_Rec()], [_Rec("B")]) == {}
+    assert sensor_session(_Rec("  ")) is None and sensor_session(_Rec(" 2 ")) == "2"
+
+
+def _plane():
+    # reversible part plus two plays with increasing F_j: a Preisach density of one sign
+    return {"type": "plane", "r": [0.0, 0.2, 0.5], "knots": [[-1.5, 1.5]] * 3,
+            "values": [[-3.0, 3.0], [-1.0, 1.0], [-2.0, 2.0]], "v_rest": 0.0}
+
+
+def test_initial_state_span_is_positive_until_the_drive_wipes_it():
+    hp = _plane()
+    up = np.linspace(0.1, 0.6, 50)        # a drive that has not yet visited either end
+    sweep = np.concatenate([up, np.linspace(0.6, 1.0, 40), np.linspace(1.0, -1.0, 200), np.linspace(-1.0, 0.3, 100)])
+    d = initial_state_span(hp, sweep, -1.0, 1.0)
+    assert np.all(d[:50] > 0.1)           # the two histories disagree by the plays' memory
+    assert np.allclose(d[290:], 0.0)      # after both ends were visited nothing of the start is left
+    assert np.all(d >= -1e-12)
+
+
+def test_bounded_nuisance_gain_stays_within_one():
+    rng = np.random.default_rng(1)
+    n = 400
+    N = np.linspace(1.0, 0.0, n)[:, None]        # an initial-state column
+    X = rng.normal(size=(n, 1))
+    e = 5.0 * N[:, 0] + 0.3 * X[:, 0]             # a level far beyond what the initial state can explain
+    train = np.arange(n) % 2 == 0
+    test = ~train
+    idx = np.flatnonzero(train)
+    th, _, _ = _fit_predict(X, e, train, test, rows=n, nuis=(N[idx], N[test], (np.array([-1.0]), np.array([1.0]))))
+    assert th[0] == pytest.approx(1.0)            # clipped at the bound: the rest stays for the term to explain
+    th_free, _, _ = _fit_predict(X, e, train, test, rows=n, nuis=(N[idx], N[test]))
+    assert th_free[0] == pytest.approx(5.0, rel=0.05)
