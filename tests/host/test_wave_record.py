@@ -219,9 +219,15 @@ def test_record_chooses_decimation_and_plots(sil, capsys, tmp_path):
     code, _, err = run(capsys, "record", "--port", sil.spec, "--duration", "2.5", "--signals", "ref,y,u,err,ff,fb,y2,u2",
                        "--decimation", "2", "--out", str(out))
     assert code == 2 and "use --decimation 4 or more" in err
-    code, _, err = run(capsys, "record", "--port", sil.spec, "--duration", "0.5", "--out", str(out))
+    assert "session" not in rec.meta   # only written when the user names the sensor session
+    code, _, err = run(capsys, "record", "--port", sil.spec, "--duration", "0.5", "--out", str(out),
+                       "--session", "rezeroed-2")
     assert code == 0, err
     assert float(load_recording(out).meta["session_time_s"]) >= t_first + 2.5
+    assert load_recording(out).meta["session"] == "rezeroed-2"
+    before = out.read_bytes()
+    code, _, err = run(capsys, "record", "--port", sil.spec, "--duration", "0.5", "--out", str(out), "--session", " ")
+    assert code == 2 and "--session" in err and out.read_bytes() == before
 
 
 def test_stream_longer_than_the_recorder(sil, capsys, tmp_path):

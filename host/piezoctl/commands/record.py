@@ -46,6 +46,9 @@ def add_capture_options(p, *, duration_required: bool) -> None:
                    help="read the recorder while it runs (ring), for captures longer than it holds; "
                         "lost frames are reported")
     p.add_argument("--plot", metavar="FILE.png", help="also draw the recording (png, svg or pdf)")
+    p.add_argument("--session", metavar="LABEL",
+                   help="sensor session label written as the `session` metadata: recordings with the same label "
+                        "share the sensor's zero (docs/recordings.md)")
 
 
 def parse_signals(text: str) -> list[str]:
@@ -148,6 +151,9 @@ def record(args, ctl, signals: list[str], duration_s: float, out: str, *, start_
     started and fires its (software) trigger, so ``t = 0`` is the wave's
     first sample. Returns the result fields of ``--json``.
     """
+    label = getattr(args, "session", None)
+    if label is not None and (not label.strip() or any(c in label for c in "\r\n")):
+        raise CliError(f"--session must be a non-empty label on one line (got {label!r})")
     dec, frames, why = choose_decimation(duration_s, len(signals), ctl.identity.tick_hz,
                                          ctl.identity.rec_capacity, args.decimation, args.stream)
     progress(args, why)
@@ -170,7 +176,7 @@ def record(args, ctl, signals: list[str], duration_s: float, out: str, *, start_
         else:
             raw = ctl.capture(signals, frames, decimation=dec, trigger=trigger, start_wave=start_wave)
     cols = {"t": raw["t"], **{COLUMNS[s]: raw[s] for s in signals}}
-    write_recording(out, cols, ctl.identity.tick_hz / dec, session_s)
+    write_recording(out, cols, ctl.identity.tick_hz / dec, session_s, label)
     if args.plot:
         with Progress(args, f"plot {args.plot}"):
             plot_recording(args.plot, cols, title=f"{os.path.basename(out)}: {duration_s:g} s, "
@@ -182,15 +188,19 @@ def record(args, ctl, signals: list[str], duration_s: float, out: str, *, start_
             "stream": bool(args.stream), "plot": args.plot}
 
 
-def write_recording(path: str, cols: dict, rate_hz: float, session_s: float | None = None) -> None:
+def write_recording(path: str, cols: dict, rate_hz: float, session_s: float | None = None,
+                    session: str | None = None) -> None:
     """Write ``cols`` (``t`` and recording columns) as a recording CSV at ``rate_hz`` [Hz]; ``session_s`` [s]:
-    the controller's time since start when the capture began (metadata ``session_time_s``)."""
+    the controller's time since start when the capture began (metadata ``session_time_s``); ``session``: the
+    sensor session's label (metadata ``session``)."""
     from ..io.recording import write_csv
 
     names = ["t"] + [c for c in ("u", "y", "reference", "u2", "x2", "err", "ff", "fb") if c in cols]
     meta = {"sample_rate_hz": f"{rate_hz:g}", "source": "piezoctl record"}
     if session_s is not None:
         meta["session_time_s"] = f"{session_s:.4f}"
+    if session:
+        meta["session"] = str(session)
     write_csv(path, {n: cols[n] for n in names}, meta=meta)
 
 
