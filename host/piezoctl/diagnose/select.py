@@ -473,8 +473,11 @@ def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
     e_new = np.concatenate([(s.y - y)[v] for s, y, v in zip(ctx.signals, ys, ctx.valid)])
     e_old = residual(ctx)
     test = fold_all == 1 - f
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])
+    per = [(float(np.sum(e_old[test & (rec == i)] ** 2)), float(np.sum(e_new[test & (rec == i)] ** 2)))
+           for i in range(len(ctx.valid))]
     return {"params": new, "sse_before": float(np.sum(e_old[test] ** 2)), "sse_after": float(np.sum(e_new[test] ** 2)),
-            "n": int(np.sum(test)), "ys": ys}
+            "n": int(np.sum(test)), "ys": ys, "per_recording": per}
 
 
 def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
@@ -511,6 +514,21 @@ def _supersede(evals):
             evals.insert(simpler[0], evals.pop(i))
 
 
+def _worsened(ex, names):
+    """(recording, factor) of the recording whose held-out RMS error (both folds) the term raises most, when
+    beyond ``WORSEN_MAX``; else None."""
+    worst = None
+    for i, n in enumerate(names):
+        b = sum(x["per_recording"][i][0] for x in ex)
+        a = sum(x["per_recording"][i][1] for x in ex)
+        if b <= 0:
+            continue
+        k = float(np.sqrt(a / b))
+        if k > sg.WORSEN_MAX and (worst is None or k > worst[1]):
+            worst = (n, k)
+    return worst
+
+
 def _first_exact(evals, fctx, fold_all, recs, span, log):
     """The first significant candidate whose exact refined model lowers the held-out error in each fold."""
     for c in evals:
@@ -523,9 +541,16 @@ def _first_exact(evals, fctx, fold_all, recs, span, log):
         c.exact_before = float(np.sqrt(sum(x["sse_before"] for x in ex) / max(n_ex, 1)) / span)
         c.exact_after = float(np.sqrt(sum(x["sse_after"] for x in ex) / max(n_ex, 1)) / span)
         log(f"    exact {c.name}: {c.exact_fold_ratios} {c.exact_before:.4f} -> {c.exact_after:.4f}")
-        if max(c.exact_fold_ratios) < 1.0:
+        worse = _worsened(ex, fctx[0].names)
+        if max(c.exact_fold_ratios) < 1.0 and worse is None:
             c.exact = ex
             return c
+        if worse is not None:
+            c.veto = (f"the exact simulation of the refined model with this term makes {worse[0]} worse (held-out "
+                      f"error x{worse[1]:.2f} there, limit x{sg.WORSEN_MAX:g}): a physical effect does not fit one "
+                      "recording by breaking another")
+            log(f"    {c.name} vetoed: {worse[0]} x{worse[1]:.2f}")
+            continue
         c.veto = ("the exact simulation of the refined model with this term does not lower the held-out "
                   f"error in each fold (ratios {c.exact_fold_ratios[0]:.2f}, {c.exact_fold_ratios[1]:.2f})")
     return None

@@ -588,6 +588,7 @@ class ThermalDrift(Term):
     initial_state = True   # a level per recording: the unknown initial state sets one too
     supersedes = ("sensor_offset",)
     TAUS = (5.0, 15.0, 50.0, 150.0, 500.0)
+    MIN_MOVE = 0.2   # the warm-up's least change over the recordings, of its amplitude
 
     @staticmethod
     def basis(t, tau, t_from: float = 0.0) -> np.ndarray:
@@ -608,8 +609,16 @@ class ThermalDrift(Term):
         # each setting carries the drift's direction: the warm-up and the trend go the same way (a warm-up with
         # a trend against it drew a 2.1 um "drift" cancelled by -5.3 um/min over a 40 s reveal, round 7: the
         # recordings' starting transients of creep, not a drift)
+        # and only when the exponential still moves over the recordings: with the session clock the first one
+        # may start long after the calibration, where a fast warm-up is a constant that cancels against the
+        # offsets (a -184 um warm-up against +184 um offsets, round 7)
         span = ctx.drift_span if ctx.drift_t0 is not None else ctx.duration
-        return [(tau, sgn) for tau in [t for t in self.TAUS if t <= 0.5 * span] + [np.inf] for sgn in (1.0, -1.0)]
+        a = 0.0
+        if ctx.drift_t0 is not None:
+            starts = [s.t_session for s in ctx.signals if s.t_session is not None]
+            a = max(min(starts) - float(ctx.drift_t0), 0.0) if starts else 0.0
+        taus = [t for t in self.TAUS if t <= 0.5 * span and np.exp(-a / t) - np.exp(-span / t) >= self.MIN_MOVE]
+        return [(tau, sgn) for tau in taus + [np.inf] for sgn in (1.0, -1.0)]
 
     def lower(self, ctx):   # the offsets free, the drift's amplitude and trend >= 0 along the setting's sign
         return [-np.inf] * ctx.n_offset() + [0.0, 0.0]
