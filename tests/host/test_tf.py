@@ -283,3 +283,45 @@ def test_cli_fit_tf_missing_file_and_too_few_points(tmp_path, capsys):
     _write_frf(frf, F_PAPER[:3], paper_h(F_PAPER[:3]))
     assert cli.main(["fit-tf", "--frf", str(frf), "--order", "4", "--out", str(tmp_path / "o.json")]) == 2
     assert "cannot determine" in capsys.readouterr().err
+
+
+def test_cli_no_refine_gives_the_papers_method_and_the_default_refines(tmp_path):
+    frf = tmp_path / "frf.csv"
+    _write_frf(frf, F_PAPER, noisy(paper_h(), 0.02, 0))
+    outs = {}
+    for name, extra in (("paper", ["--no-refine"]), ("refined", [])):
+        out = tmp_path / f"{name}.json"
+        assert cli.main(["fit-tf", "--frf", str(frf), "--order", "4", "--out", str(out), "--quiet"] + extra) == 0
+        outs[name] = json.loads(out.read_text())
+    paper, refined = outs["paper"], outs["refined"]
+    assert paper["info"]["refined"] is False and refined["info"]["refined"] is True
+    assert paper["te"] == paper["info"]["pso_te"] and refined["info"]["pso_te"] == paper["te"]
+    assert paper["stable"] and refined["stable"]
+    truth = lambda d: tf.relative_error(tf.freqresp(d["num"], d["den"], 2 * np.pi * F_PAPER), paper_h())  # noqa: E731
+    assert truth(refined) <= 0.005 < 0.01 < truth(paper)
+
+
+def test_cli_no_refine_with_wcls_is_refused(tmp_path, capsys):
+    frf = tmp_path / "frf.csv"
+    _write_frf(frf, F_PAPER, paper_h())
+    out = tmp_path / "o.json"
+    rc = cli.main(["fit-tf", "--frf", str(frf), "--order", "4", "--method", "wcls", "--no-refine", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "--no-refine applies to --method pso-wcls" in err
+    assert not out.exists()
+
+
+def test_cli_warns_about_a_real_pole_far_outside_the_data(tmp_path, capsys):
+    # exact data of real poles at 10 Hz and 50 kHz seen over 1-50 Hz: WCLS recovers both; the
+    # 50 kHz pole is a thousand times above the data and is said to be undetermined
+    num, den = [2 * np.pi * 10 * 2 * np.pi * 5e4], np.polymul([1, 2 * np.pi * 10], [1, 2 * np.pi * 5e4])
+    f = np.logspace(0, np.log10(50), 60)
+    frf = tmp_path / "frf.csv"
+    _write_frf(frf, f, tf.freqresp(num, den, 2 * np.pi * f))
+    rc = cli.main(["fit-tf", "--frf", str(frf), "--order", "2", "--num-order", "0", "--method", "wcls",
+                   "--out", str(tmp_path / "o.json"), "--json"])
+    d = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert [round(r["f_hz"]) for r in d["poles_hz"]] == [10, 50000]
+    (warn,) = [w for w in d["warnings"] if w.startswith("real pole at")]
+    assert "5e+04 Hz is more than a decade outside the data (1-50 Hz)" in warn

@@ -96,6 +96,7 @@ __all__ = [
     "wcls",
     "pso_wcls",
     "refine_output_error",
+    "sanathanan_koerner",
     "fit_tf",
     "frf_from_time",
     "discretize",
@@ -379,6 +380,12 @@ def _num_for_den(s, h, den_low_scaled, nb):
 
 ZETA_MIN = 1e-6
 """Smallest damping ratio of a section in the refinement [1] (keeps it strictly stable)."""
+ZETA_MAX = 10.0
+"""Largest damping ratio of a section in the refinement [1]: a pair of real poles
+at most about 4 ZETA_MAX^2 = 400 apart."""
+POLE_RANGE = 10.0
+"""Natural frequencies in the refinement lie within ``[min(w) / POLE_RANGE,
+POLE_RANGE max(w)]`` [1]."""
 
 
 def _sections_from_den(den_scaled) -> list[np.ndarray]:
@@ -428,6 +435,12 @@ def _den_from_sections(th) -> np.ndarray:
 def refine_output_error(w, h, start: TFResult, n_num: int | None = None) -> TFResult:
     """Minimize the relative output error from a stable start; the result is stable.
 
+    The denominator is searched as stable sections (module docstring) with
+    :math:`10^{-6} \\le \\zeta \\le` ``ZETA_MAX`` and natural frequencies within a
+    decade of the data, ``POLE_RANGE``: from ``min(w) / 10`` to ``10 max(w)``. A
+    pole further out is not determined by the data (without the bound a real pole
+    can run off towards infinity, 4.5e10 Hz on the SIL stage's chirp).
+
     Parameters
     ----------
     w, h
@@ -443,8 +456,10 @@ def refine_output_error(w, h, start: TFResult, n_num: int | None = None) -> TFRe
     -------
     TFResult
         ``method`` copied from the start; ``info``: ``refine_evaluations`` (residual
-        evaluations), ``refine_status`` (``least_squares`` status), ``start_te``.
-        Its sum of squared relative errors is never above the start's.
+        evaluations), ``refine_status`` (``least_squares`` status of the kept
+        solution, 0 when the start was kept), ``start_te``. Its sum of squared
+        relative errors is never above the start's: if the search ends higher
+        (a start outside the bounds), the start is returned.
     """
     w, h = _check_frf(w, h)
     n = start.den.size - 1
@@ -452,8 +467,10 @@ def refine_output_error(w, h, start: TFResult, n_num: int | None = None) -> TFRe
     w0 = float(start.info.get("w0", w.max()))
     s = 1j * w / w0
     den_s = np.concatenate(([1.0], _scale_den(start.den, w0)))
-    lo = np.full(n, -np.inf)  # n parameters: 2 per section, 1 for a first-order one
-    lo[1:2 * (n // 2):2] = np.log(ZETA_MIN)
+    zeta = np.zeros(n, dtype=bool)  # n parameters: (ln wn, ln zeta) per section, ln wn for a first-order one
+    zeta[1:2 * (n // 2):2] = True
+    lo = np.where(zeta, np.log(ZETA_MIN), np.log(w.min() / w0 / POLE_RANGE))
+    hi = np.where(zeta, np.log(ZETA_MAX), np.log(w.max() / w0 * POLE_RANGE))
 
     def residual(x):
         a = np.polyval(_den_from_sections(x), s)
@@ -462,21 +479,55 @@ def refine_output_error(w, h, start: TFResult, n_num: int | None = None) -> TFRe
 
     from scipy.optimize import least_squares  # scipy.optimize only here
 
-    x0 = np.maximum(_sections_from_den(den_s)[0], lo)
-    x, cost, nfev, status = x0, 0.5 * float(np.sum(residual(x0) ** 2)), 0, 0
+    e0 = (freqresp(start.num, start.den, w) - h) / np.abs(h)
+    cost0 = 0.5 * float(np.sum(np.abs(e0) ** 2))
+    x, cost, nfev, status = None, np.inf, 0, 0
     for start_x in _sections_from_den(den_s):
-        sol = least_squares(residual, np.maximum(start_x, lo), bounds=(lo, np.inf), method="trf")
+        sol = least_squares(residual, np.clip(start_x, lo, hi), bounds=(lo, hi), method="trf")
         nfev += int(sol.nfev)
-        if sol.cost <= cost:  # never worse than the start
+        if sol.cost < cost:
             x, cost, status = sol.x, float(sol.cost), int(sol.status)
+    info = dict(start.info)
+    info.update({"refine_evaluations": nfev, "refine_status": status, "start_te": float(start.te)})
+    if not cost <= cost0:  # never worse than the start
+        info["refine_status"] = 0
+        return TFResult(start.num, start.den, start.te, start.method, info)
     d = _den_from_sections(x)
     b = _projected_numerator(s, h, np.polyval(d, s), nb)[0]
     num, den = _unscale(b, d[1:], w0, n)
     te = relative_error(freqresp(num, den, w), h)
-    info = dict(start.info)
-    info.update({"refine_evaluations": nfev, "refine_status": status,
-                 "start_te": float(start.te)})
     return TFResult(num, den, te, start.method, info)
+
+
+def sanathanan_koerner(w, h, n: int, n_num: int | None = None, iterations: int = 10) -> TFResult:
+    """WCLS iterated with the Sanathanan-Koerner weights :math:`1/(|H_i|^2 |A_{k-1}(j\\omega_i)|^2)`.
+
+    Each iteration divides the equation error by the previous denominator, which
+    removes the :math:`|A|` factor of WCLS at convergence; nothing keeps the poles
+    stable. For comparison in ``tools/bench-tf`` (``docs/dynamics.md``).
+
+    Parameters
+    ----------
+    w, h, n, n_num
+        As for :func:`wcls`.
+    iterations : int
+        Reweighted WCLS solves after the first one.
+
+    Returns
+    -------
+    TFResult
+        ``method == "wcls-sk"``; may be unstable.
+    """
+    t0 = time.perf_counter()
+    res = wcls(w, h, n, n_num)
+    w, h = _check_frf(w, h)
+    w0 = res.info["w0"]
+    for _ in range(int(iterations)):
+        a = np.polyval(np.concatenate(([1.0], _scale_den(res.den, w0))), 1j * w / w0)
+        res = wcls(w, h, n, n_num, weights=1.0 / (np.abs(h) ** 2 * np.abs(a) ** 2))
+    res.method = "wcls-sk"
+    res.info["seconds"] = time.perf_counter() - t0
+    return res
 
 
 def pso_wcls(w, h, n: int, n_num: int | None = None, weights=None, *, swarm: int = 100,
