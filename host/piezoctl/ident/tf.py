@@ -121,10 +121,12 @@ class TFResult:
     te : float
         Mean relative error :math:`T_e` over the fitted frequencies [1].
     method : str
-        ``"wcls"`` or ``"pso-wcls"``.
+        ``"wcls"``, ``"pso-wcls"`` or ``"wcls-sk"``.
     info : dict
         Details: ``flipped`` (number of reflected poles), ``generations`` (PSO
-        generations run), ``wcls_te``, ``seconds``.
+        generations run), ``wcls_te``, ``w0`` [rad/s], ``seconds``; from
+        :func:`pso_wcls` also ``refined``, ``pso_te``, ``refine_evaluations``,
+        ``refine_status``.
     """
 
     num: np.ndarray
@@ -674,7 +676,7 @@ def fit_tf(frf: FRF, order: int, method: str = "pso-wcls", n_num: int | None = N
     n_num : int, optional
         Numerator order (default ``order``).
     **pso_options
-        Passed to :func:`pso_wcls`.
+        Passed to :func:`pso_wcls` (``seed``, ``always``, ``refine``, ...).
     """
     if method == "wcls":
         return wcls(frf.w, frf.h, order, n_num)
