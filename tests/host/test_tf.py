@@ -95,15 +95,81 @@ def test_pso_wcls_returns_stable_better_model_when_wcls_is_unstable():
 
 
 def test_pso_wcls_keeps_stable_wcls_unless_asked():
+    # the paper's rule (refine=False): a stable WCLS result is the answer, the swarm does not run
     w = 2 * np.pi * F_PAPER
     h = noisy(paper_h(), 0.01, 1)
     r0 = tf.wcls(w, h, 4)
     assert r0.stable
-    r1 = tf.pso_wcls(w, h, 4)
+    r1 = tf.pso_wcls(w, h, 4, refine=False)
     np.testing.assert_array_equal(r1.den, r0.den)
-    assert r1.info["generations"] == 0
-    r2 = tf.pso_wcls(w, h, 4, always=True)
+    assert r1.info["generations"] == 0 and r1.info["refined"] is False
+    r2 = tf.pso_wcls(w, h, 4, always=True, refine=False)
     assert r2.stable and r2.te < r0.te and r2.info["generations"] >= 1
+    # the default refines the same stable start
+    r3 = tf.pso_wcls(w, h, 4)
+    assert r3.info["generations"] == 0 and r3.info["refined"] is True
+    assert r3.info["pso_te"] == r0.te and r3.te < r0.te
+
+
+def te_true(res):
+    """Te of a fit against the noise-free paper response (the issue's measure)."""
+    return tf.relative_error(tf.freqresp(res.num, res.den, 2 * np.pi * F_PAPER), paper_h())
+
+
+def test_refined_pso_wcls_is_within_te_001_of_the_true_response_one_seed():
+    # Issue 15 item 5 on one seed (tools/bench-tf checks the median of 5): 2 % noise,
+    # order 4. Measured: refined 0.0018; without the refinement (the paper's
+    # PSO-WCLS, here equal to WCLS, which is stable for this seed) 0.037.
+    w = 2 * np.pi * F_PAPER
+    h = noisy(paper_h(), 0.02, 0)
+    res = tf.pso_wcls(w, h, 4, seed=0)
+    assert res.stable
+    assert te_true(res) <= 0.005
+    paper = tf.pso_wcls(w, h, 4, seed=0, refine=False)
+    assert te_true(paper) > 0.01  # the margin above is not met without the refinement
+    # the fit to the data is at the noise floor, not below it (no over-fitting):
+    # the truth's own Te against these data is 0.0177
+    assert 0.9 * tf.relative_error(paper_h(), h) < res.te < tf.relative_error(paper_h(), h)
+
+
+def test_refinement_after_the_swarm_when_wcls_is_unstable():
+    w, h = _unstable_wcls_case()
+    res = tf.pso_wcls(w, h, 4, seed=7)
+    assert res.stable and res.info["flipped"] >= 1 and res.info["generations"] >= 1
+    assert res.te < res.info["pso_te"]
+    assert te_true(res) <= 0.005
+
+
+@pytest.mark.parametrize("level", [0.01, 0.02, 0.05])
+def test_pso_wcls_is_always_stable_and_refinement_never_worsens_the_fit(level):
+    w = 2 * np.pi * F_PAPER
+    for seed in range(8):
+        h = noisy(paper_h(), level, 100 + seed)
+        start = tf.pso_wcls(w, h, 4, seed=seed, refine=False)
+        res = tf.refine_output_error(w, h, start)
+        assert res.stable and np.all(res.poles.real < 0)
+        sq = lambda r: float(np.sum(np.abs(tf.freqresp(r.num, r.den, w) - h) ** 2 / np.abs(h) ** 2))  # noqa: E731
+        assert sq(res) <= sq(start) * (1 + 1e-12)
+        assert te_true(res) < te_true(start)
+
+
+def test_refinement_recovers_odd_order_model_with_real_poles_from_a_poor_start():
+    # 3rd order: a real pole at 5 Hz and a pair at 60 Hz, zeta 0.1; numerator order 1.
+    # The start has every pole 30 % off (and real poles only): the sections must
+    # turn a real pair into the complex one and keep the leftover real pole.
+    p_true = np.array([-2 * np.pi * 5, 2 * np.pi * 60 * (-0.1 + 1j * np.sqrt(0.99)),
+                       2 * np.pi * 60 * (-0.1 - 1j * np.sqrt(0.99))])
+    den = np.real(np.poly(p_true))
+    num = np.array([3.0, 3.0 * 2 * np.pi * 20]) * den[-1] / (3.0 * 2 * np.pi * 20)
+    f = np.logspace(-1, np.log10(300), 150)
+    w = 2 * np.pi * f
+    h = tf.freqresp(num, den, w)
+    start_den = np.real(np.poly(1.3 * np.array([-2 * np.pi * 5, -2 * np.pi * 40, -2 * np.pi * 90])))
+    start = tf.TFResult(np.array([1.0, 1.0]), start_den, 1.0, "pso-wcls", {"w0": float(w.max())})
+    res = tf.refine_output_error(w, h, start)
+    np.testing.assert_allclose(res.den, den, rtol=1e-6)
+    np.testing.assert_allclose(res.num, num, rtol=1e-6)
+    assert res.te < 1e-7 and res.stable
 
 
 def test_pso_stops_at_te_target():
@@ -217,3 +283,45 @@ def test_cli_fit_tf_missing_file_and_too_few_points(tmp_path, capsys):
     _write_frf(frf, F_PAPER[:3], paper_h(F_PAPER[:3]))
     assert cli.main(["fit-tf", "--frf", str(frf), "--order", "4", "--out", str(tmp_path / "o.json")]) == 2
     assert "cannot determine" in capsys.readouterr().err
+
+
+def test_cli_no_refine_gives_the_papers_method_and_the_default_refines(tmp_path):
+    frf = tmp_path / "frf.csv"
+    _write_frf(frf, F_PAPER, noisy(paper_h(), 0.02, 0))
+    outs = {}
+    for name, extra in (("paper", ["--no-refine"]), ("refined", [])):
+        out = tmp_path / f"{name}.json"
+        assert cli.main(["fit-tf", "--frf", str(frf), "--order", "4", "--out", str(out), "--quiet"] + extra) == 0
+        outs[name] = json.loads(out.read_text())
+    paper, refined = outs["paper"], outs["refined"]
+    assert paper["info"]["refined"] is False and refined["info"]["refined"] is True
+    assert paper["te"] == paper["info"]["pso_te"] and refined["info"]["pso_te"] == paper["te"]
+    assert paper["stable"] and refined["stable"]
+    truth = lambda d: tf.relative_error(tf.freqresp(d["num"], d["den"], 2 * np.pi * F_PAPER), paper_h())  # noqa: E731
+    assert truth(refined) <= 0.005 < 0.01 < truth(paper)
+
+
+def test_cli_no_refine_with_wcls_is_refused(tmp_path, capsys):
+    frf = tmp_path / "frf.csv"
+    _write_frf(frf, F_PAPER, paper_h())
+    out = tmp_path / "o.json"
+    rc = cli.main(["fit-tf", "--frf", str(frf), "--order", "4", "--method", "wcls", "--no-refine", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "--no-refine applies to --method pso-wcls" in err
+    assert not out.exists()
+
+
+def test_cli_warns_about_a_real_pole_far_outside_the_data(tmp_path, capsys):
+    # exact data of real poles at 10 Hz and 50 kHz seen over 1-50 Hz: WCLS recovers both; the
+    # 50 kHz pole is a thousand times above the data and is said to be undetermined
+    num, den = [2 * np.pi * 10 * 2 * np.pi * 5e4], np.polymul([1, 2 * np.pi * 10], [1, 2 * np.pi * 5e4])
+    f = np.logspace(0, np.log10(50), 60)
+    frf = tmp_path / "frf.csv"
+    _write_frf(frf, f, tf.freqresp(num, den, 2 * np.pi * f))
+    rc = cli.main(["fit-tf", "--frf", str(frf), "--order", "2", "--num-order", "0", "--method", "wcls",
+                   "--out", str(tmp_path / "o.json"), "--json"])
+    d = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert [round(r["f_hz"]) for r in d["poles_hz"]] == [10, 50000]
+    (warn,) = [w for w in d["warnings"] if w.startswith("real pole at")]
+    assert "5e+04 Hz is more than a decade outside the data (1-50 Hz)" in warn

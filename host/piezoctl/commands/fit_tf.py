@@ -3,6 +3,7 @@
 Contract (``docs/dynamics.md``)::
 
     piezoctl fit-tf (--frf FRF.csv | --data REC.csv) --order N --method {wcls,pso-wcls} --out TF.json
+                    [--num-order NB] [--seed S] [--te-target T] [--always-pso] [--no-refine]
                     [--plot FILE.png] [--frf-out FRF.csv] [estimate options of piezoctl frf]
 
 ``FRF.csv`` has a header line naming the columns ``f_hz,mag,phase_deg`` (order
@@ -29,6 +30,8 @@ from ._outputs import Outputs, check_output_paths
 from .frf import ESTIMATE_OPTIONS, add_estimate_options, estimate_from_args, write_frf_csv
 
 FRF_COLUMNS = ("f_hz", "mag", "phase_deg")
+FAR_OUT = 10.0
+"""A real pole below ``f_min / FAR_OUT`` or above ``FAR_OUT f_max`` of the data is warned about [1]."""
 
 
 def add_parser(sub) -> None:
@@ -40,10 +43,16 @@ def add_parser(sub) -> None:
                      help="recording (t,u,y): estimate its FRF as piezoctl frf does, then fit it")
     p.add_argument("--order", required=True, type=int, help="denominator order n (>= 1)")
     p.add_argument("--num-order", type=int, default=None, help="numerator order (default: n)")
-    p.add_argument("--method", choices=("wcls", "pso-wcls"), default="pso-wcls")
+    p.add_argument("--method", choices=("wcls", "pso-wcls"), default="pso-wcls",
+                   help="wcls: weighted complex least squares alone (may be unstable); pso-wcls "
+                        "(default): WCLS, the particle swarm when unstable, then the output-error "
+                        "refinement; always stable")
     p.add_argument("--seed", type=int, default=0, help="PSO random seed (default 0)")
     p.add_argument("--te-target", type=float, default=1e-3, help="PSO stop criterion Te* (default 1e-3)")
     p.add_argument("--always-pso", action="store_true", help="run the swarm even if WCLS is stable")
+    p.add_argument("--no-refine", action="store_true",
+                   help="pso-wcls: the paper's PSO-WCLS alone, without the output-error refinement "
+                        "(for comparison; docs/dynamics.md)")
     p.add_argument("--out", required=True, metavar="TF.json", help="output TF.json")
     p.add_argument("--plot", metavar="FILE.png", help="Bode plot of the data and the fit")
     p.add_argument("--frf-out", metavar="FRF.csv", help="with --data: also write the estimated FRF")
@@ -140,6 +149,8 @@ def run(args) -> int:
     check_output_paths(args.out, args.plot, args.frf_out)
     if args.order < 1:
         raise CliError(f"--order must be >= 1 (got {args.order})")
+    if args.no_refine and args.method != "pso-wcls":
+        raise CliError("--no-refine applies to --method pso-wcls (wcls has no refinement)")
     if args.num_order is not None and not 0 <= args.num_order <= args.order:
         raise CliError(f"--num-order must be in 0..{args.order} (got {args.num_order})")
     from ..ident import frf as frfmod
@@ -169,7 +180,8 @@ def run(args) -> int:
                        f"{nb + 1 + args.order} parameters of an order-{args.order} model")
     opts = {}
     if args.method == "pso-wcls":
-        opts = {"seed": args.seed, "te_target": args.te_target, "always": args.always_pso}
+        opts = {"seed": args.seed, "te_target": args.te_target, "always": args.always_pso,
+                "refine": not args.no_refine}
     with Progress(args, f"fit ({args.method}, order {args.order})"):
         res = tf.fit_tf(frf, args.order, args.method, args.num_order, **opts)
     resonances = frfmod.check_resonances(res.poles, frf, gaps)
@@ -178,6 +190,14 @@ def run(args) -> int:
             verdict = "is not supported by the data" if not r["supported"] else "is flagged"
             warnings.append(f"resonance at {r['f_hz']:.4g} Hz (zeta {r['damping']:.3g}) {verdict}: "
                             f"{'; '.join(r['problems'])}")
+    lo_hz, hi_hz = float(frf.f_hz[0]), float(frf.f_hz[-1])
+    for r in res.to_dict()["poles_hz"]:
+        # complex pairs outside the data are flagged by check_resonances; a real pole far out
+        # (the refinement bounds poles to a decade beyond the data) is not determined by them
+        if not r["pair"] and not lo_hz / FAR_OUT <= r["f_hz"] <= hi_hz * FAR_OUT:
+            warnings.append(f"real pole at {r['f_hz']:.4g} Hz is more than a decade outside the data "
+                            f"({lo_hz:.4g}-{hi_hz:.4g} Hz): the data do not determine it (a lower --order "
+                            f"or --num-order may describe them as well)")
     out = res.to_dict()
     out["order"] = args.order
     out["f_range_hz"] = [float(frf.f_hz[0]), float(frf.f_hz[-1])]

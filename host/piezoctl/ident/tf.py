@@ -49,6 +49,29 @@ PSO-WCLS (stable models)
     ``inertia[1]``; the search stops at :math:`T_e \\le T_e^*` or after the last
     generation. The random generator is seeded, so a fit is reproducible.
 
+Output-error refinement (``refine=True``, the default of :func:`pso_wcls`)
+    WCLS minimizes the *equation* error :math:`|A(j\\omega_i) D_i - A(j\\omega_i) H_i|`
+    weighted by :math:`1/|H_i|^2`: the relative output error multiplied by
+    :math:`|A(j\\omega_i)|`. That factor grows as :math:`\\omega^n` above the poles,
+    so noise at the high end of the band drags the fit (the Levy bias), and the
+    fitted denominator can be unstable. The refinement removes the factor: it
+    minimizes the relative *output* error
+
+    .. math::
+
+        \\sum_i \\frac{|N(j\\omega_i)/A(j\\omega_i) - H_i|^2}{|H_i|^2}
+
+    (the maximum-likelihood criterion for complex multiplicative noise) by
+    Levenberg-Marquardt-type trust-region least squares
+    (``scipy.optimize.least_squares``, ``trf``), started from the stable PSO-WCLS
+    model. Only the denominator is a nonlinear unknown: for a given :math:`A` the
+    numerator is the linear least-squares solution (variable projection). The
+    denominator is a product of sections :math:`s'^2 + 2\\zeta\\omega_n s' + \\omega_n^2`
+    (and one :math:`s' + \\omega_n` for an odd order) in the scaled frequency, with
+    :math:`\\omega_n = e^{\\theta_1}`, :math:`\\zeta = e^{\\theta_2} \\ge 10^{-6}`: every
+    such polynomial is stable (:math:`\\zeta > 1` is a pair of real poles) and every
+    stable one is such a product, so the search never leaves the stable models.
+
 Also here: :func:`pole_report` and :func:`resonance_hz` (poles in Hz with their
 damping), :func:`freqresp`, :func:`discretize` and :func:`simulate_tf` (FOH or
 ZOH simulation). :class:`FRF` and :func:`frf_from_time` live in
@@ -72,6 +95,8 @@ __all__ = [
     "relative_error",
     "wcls",
     "pso_wcls",
+    "refine_output_error",
+    "sanathanan_koerner",
     "fit_tf",
     "frf_from_time",
     "discretize",
@@ -96,10 +121,12 @@ class TFResult:
     te : float
         Mean relative error :math:`T_e` over the fitted frequencies [1].
     method : str
-        ``"wcls"`` or ``"pso-wcls"``.
+        ``"wcls"``, ``"pso-wcls"`` or ``"wcls-sk"``.
     info : dict
         Details: ``flipped`` (number of reflected poles), ``generations`` (PSO
-        generations run), ``wcls_te``, ``seconds``.
+        generations run), ``wcls_te``, ``w0`` [rad/s], ``seconds``; from
+        :func:`pso_wcls` also ``refined``, ``pso_te``, ``refine_evaluations``,
+        ``refine_status``.
     """
 
     num: np.ndarray
@@ -329,25 +356,188 @@ def _flip_unstable(den) -> tuple[np.ndarray, int]:
     return d, int(np.count_nonzero(bad))
 
 
-def _num_for_den(s, h, den_low_scaled, nb):
-    """Least-squares numerator (scaled) for a fixed scaled denominator; relative error."""
-    n = den_low_scaled.size
-    a = s ** n + sum(den_low_scaled[i] * s ** (n - 1 - i) for i in range(n))
-    r = np.column_stack([s ** k for k in range(nb, -1, -1)]) / (a * np.abs(h))[:, None]
-    tgt = h / np.abs(h)
+def _projected_numerator(s, h, a, nb):
+    """Least-squares numerator (scaled, descending) for denominator values ``a`` at ``s``.
+
+    Minimizes the relative output error :math:`|N(s_i)/a_i - H_i| / |H_i|`, linear in
+    the numerator. Returns the numerator and the complex relative errors.
+    """
+    ah = np.abs(h)
+    r = np.column_stack([s ** k for k in range(nb, -1, -1)]) / (a * ah)[:, None]
+    tgt = h / ah
     xr = np.vstack([r.real, r.imag])
     cn = np.linalg.norm(xr, axis=0)
     cn[cn == 0] = 1.0
     b = np.linalg.lstsq(xr / cn, np.concatenate([tgt.real, tgt.imag]), rcond=None)[0] / cn
-    model = np.polyval(b, s) / a
-    return b, float(np.mean(np.abs(model - h) / np.abs(h)))
+    return b, (np.polyval(b, s) / a - h) / ah
+
+
+def _num_for_den(s, h, den_low_scaled, nb):
+    """Least-squares numerator (scaled) for a fixed scaled denominator; relative error Te."""
+    n = den_low_scaled.size
+    a = s ** n + sum(den_low_scaled[i] * s ** (n - 1 - i) for i in range(n))
+    b, e = _projected_numerator(s, h, a, nb)
+    return b, float(np.mean(np.abs(e)))
+
+
+ZETA_MIN = 1e-6
+"""Smallest damping ratio of a section in the refinement [1] (keeps it strictly stable)."""
+ZETA_MAX = 10.0
+"""Largest damping ratio of a section in the refinement [1]: a pair of real poles
+at most about 4 ZETA_MAX^2 = 400 apart."""
+POLE_RANGE = 10.0
+"""Natural frequencies in the refinement lie within ``[min(w) / POLE_RANGE,
+POLE_RANGE max(w)]`` [1]."""
+
+
+def _sections_from_den(den_scaled) -> list[np.ndarray]:
+    """Stable monic polynomial (scaled, descending) -> section parameters, one per start.
+
+    Complex pairs and pairs of real roots (adjacent in magnitude) become
+    :math:`(\\ln\\omega_n, \\ln\\zeta)`; with an odd number of real roots one is
+    left over as a first-order section :math:`\\ln\\omega_n`, last. Which one is
+    a guess, so one parameter vector is returned per choice (one vector when
+    there is no choice). The start is stable, but a root the reflection put just
+    left of the axis may come back from ``np.roots`` on it: real parts are taken
+    as :math:`-|\\mathrm{Re}\\,p|` and the damping clamped to ``ZETA_MIN``.
+    """
+    p = np.roots(den_scaled)
+    p = -np.abs(p.real) + 1j * p.imag
+    tiny = 1e-12
+    th_pairs = []
+    for z in sorted((z for z in p if z.imag > 0), key=abs):
+        wn = max(abs(z), tiny)
+        th_pairs += [np.log(wn), np.log(max(-z.real / wn, ZETA_MIN))]
+    real = sorted((float(z.real) for z in p if z.imag == 0), key=abs)
+    leftovers = range(len(real)) if len(real) % 2 else [None]
+    out = []
+    for k in leftovers:
+        rest = [r for i, r in enumerate(real) if i != k]
+        th = list(th_pairs)
+        for r1, r2 in zip(rest[0::2], rest[1::2]):
+            wn = max(np.sqrt(r1 * r2), tiny)
+            th += [np.log(wn), np.log(max(-(r1 + r2) / (2 * wn), ZETA_MIN))]
+        if k is not None:
+            th.append(np.log(max(-real[k], tiny)))
+        out.append(np.array(th))
+    return out
+
+
+def _den_from_sections(th) -> np.ndarray:
+    """Section parameters -> monic polynomial (scaled, descending); inverse of :func:`_sections_from_den`."""
+    d = np.array([1.0])
+    for i in range(0, th.size - 1, 2):
+        wn, z = np.exp(th[i]), np.exp(th[i + 1])
+        d = np.polymul(d, [1.0, 2.0 * z * wn, wn * wn])
+    if th.size % 2:
+        d = np.polymul(d, [1.0, np.exp(th[-1])])
+    return d
+
+
+def refine_output_error(w, h, start: TFResult, n_num: int | None = None) -> TFResult:
+    """Minimize the relative output error from a stable start; the result is stable.
+
+    The denominator is searched as stable sections (module docstring) with
+    :math:`10^{-6} \\le \\zeta \\le` ``ZETA_MAX`` and natural frequencies within a
+    decade of the data, ``POLE_RANGE``: from ``min(w) / 10`` to ``10 max(w)``. A
+    pole further out is not determined by the data (without the bound a real pole
+    can run off towards infinity, 4.5e10 Hz on the SIL stage's chirp).
+
+    Parameters
+    ----------
+    w, h
+        As for :func:`wcls`: angular frequencies [rad/s] and the measured response.
+    start : TFResult
+        A stable model of the wanted order (e.g. from :func:`pso_wcls` with
+        ``refine=False``); its ``info["w0"]`` [rad/s] is the frequency scale
+        (default ``max(w)``).
+    n_num : int, optional
+        Numerator order (default: the start's).
+
+    Returns
+    -------
+    TFResult
+        ``method`` copied from the start; ``info``: ``refine_evaluations`` (residual
+        evaluations), ``refine_status`` (``least_squares`` status of the kept
+        solution, 0 when the start was kept), ``start_te``. Its sum of squared
+        relative errors is never above the start's: if the search ends higher
+        (a start outside the bounds), the start is returned.
+    """
+    w, h = _check_frf(w, h)
+    n = start.den.size - 1
+    nb = start.num.size - 1 if n_num is None else int(n_num)
+    w0 = float(start.info.get("w0", w.max()))
+    s = 1j * w / w0
+    den_s = np.concatenate(([1.0], _scale_den(start.den, w0)))
+    zeta = np.zeros(n, dtype=bool)  # n parameters: (ln wn, ln zeta) per section, ln wn for a first-order one
+    zeta[1:2 * (n // 2):2] = True
+    lo = np.where(zeta, np.log(ZETA_MIN), np.log(w.min() / w0 / POLE_RANGE))
+    hi = np.where(zeta, np.log(ZETA_MAX), np.log(w.max() / w0 * POLE_RANGE))
+
+    def residual(x):
+        a = np.polyval(_den_from_sections(x), s)
+        e = _projected_numerator(s, h, a, nb)[1]
+        return np.concatenate([e.real, e.imag])
+
+    from scipy.optimize import least_squares  # scipy.optimize only here
+
+    e0 = (freqresp(start.num, start.den, w) - h) / np.abs(h)
+    cost0 = 0.5 * float(np.sum(np.abs(e0) ** 2))
+    x, cost, nfev, status = None, np.inf, 0, 0
+    for start_x in _sections_from_den(den_s):
+        sol = least_squares(residual, np.clip(start_x, lo, hi), bounds=(lo, hi), method="trf")
+        nfev += int(sol.nfev)
+        if sol.cost < cost:
+            x, cost, status = sol.x, float(sol.cost), int(sol.status)
+    info = dict(start.info)
+    info.update({"refine_evaluations": nfev, "refine_status": status, "start_te": float(start.te)})
+    if not cost <= cost0:  # never worse than the start
+        info["refine_status"] = 0
+        return TFResult(start.num, start.den, start.te, start.method, info)
+    d = _den_from_sections(x)
+    b = _projected_numerator(s, h, np.polyval(d, s), nb)[0]
+    num, den = _unscale(b, d[1:], w0, n)
+    te = relative_error(freqresp(num, den, w), h)
+    return TFResult(num, den, te, start.method, info)
+
+
+def sanathanan_koerner(w, h, n: int, n_num: int | None = None, iterations: int = 10) -> TFResult:
+    """WCLS iterated with the Sanathanan-Koerner weights :math:`1/(|H_i|^2 |A_{k-1}(j\\omega_i)|^2)`.
+
+    Each iteration divides the equation error by the previous denominator, which
+    removes the :math:`|A|` factor of WCLS at convergence; nothing keeps the poles
+    stable. For comparison in ``tools/bench-tf`` (``docs/dynamics.md``).
+
+    Parameters
+    ----------
+    w, h, n, n_num
+        As for :func:`wcls`.
+    iterations : int
+        Reweighted WCLS solves after the first one.
+
+    Returns
+    -------
+    TFResult
+        ``method == "wcls-sk"``; may be unstable.
+    """
+    t0 = time.perf_counter()
+    res = wcls(w, h, n, n_num)
+    w, h = _check_frf(w, h)
+    w0 = res.info["w0"]
+    for _ in range(int(iterations)):
+        a = np.polyval(np.concatenate(([1.0], _scale_den(res.den, w0))), 1j * w / w0)
+        res = wcls(w, h, n, n_num, weights=1.0 / (np.abs(h) ** 2 * np.abs(a) ** 2))
+    res.method = "wcls-sk"
+    res.info["seconds"] = time.perf_counter() - t0
+    return res
 
 
 def pso_wcls(w, h, n: int, n_num: int | None = None, weights=None, *, swarm: int = 100,
              generations: int = 20, spread: float = 0.5, inertia=(0.9, 0.4),
              c1: float = 2.0, c2: float = 2.0, te_target: float = 1e-3, seed: int = 0,
-             always: bool = False) -> TFResult:
-    """WCLS, then (if unstable) a particle-swarm search for a stable denominator.
+             always: bool = False, refine: bool = True) -> TFResult:
+    """WCLS, then (if unstable) a particle-swarm search for a stable denominator,
+    then (``refine``) the output-error refinement from that stable model.
 
     Parameters
     ----------
@@ -370,13 +560,41 @@ def pso_wcls(w, h, n: int, n_num: int | None = None, weights=None, *, swarm: int
         Seed of ``numpy.random.default_rng``; the same seed gives the same fit.
     always : bool
         Run the swarm even when WCLS is already stable (a refinement). Default
-        False: a stable WCLS result is returned unchanged, as in the paper.
+        False: a stable WCLS result goes on unchanged, as in the paper.
+    refine : bool
+        Refine the stable model by :func:`refine_output_error` (default True).
+        False returns the paper's PSO-WCLS result alone (for comparison).
 
     Returns
     -------
     TFResult
-        ``method == "pso-wcls"``; stable whenever the swarm found a stable particle
-        (the reflected-pole start always is one).
+        ``method == "pso-wcls"``, always stable (checked: an unstable result
+        raises ``RuntimeError``, a bug). ``info``: ``flipped``, ``generations``,
+        ``wcls_te``, ``w0``, ``refined``, ``pso_te`` (Te before the refinement),
+        ``refine_evaluations``, ``seconds``.
+    """
+    t0 = time.perf_counter()
+    res = _paper_pso_wcls(w, h, n, n_num, weights, swarm=swarm, generations=generations,
+                          spread=spread, inertia=inertia, c1=c1, c2=c2, te_target=te_target,
+                          seed=seed, always=always)
+    res.info["refined"] = bool(refine)
+    res.info["pso_te"] = res.te
+    if refine:
+        res = refine_output_error(w, h, res, n_num)
+        del res.info["start_te"]
+    res.info["seconds"] = time.perf_counter() - t0
+    if not res.stable:
+        raise RuntimeError(f"pso-wcls returned an unstable model (poles {res.poles}): a bug")
+    return res
+
+
+def _paper_pso_wcls(w, h, n, n_num, weights, *, swarm, generations, spread, inertia, c1, c2,
+                    te_target, seed, always) -> TFResult:
+    """The paper's PSO-WCLS (options as :func:`pso_wcls`): stable WCLS, or the swarm's best.
+
+    When the swarm finds no stable particle (it starts from the reflected-pole
+    denominator, which is stable, so only through rounding) the reflected-pole
+    model is returned.
     """
     t0 = time.perf_counter()
     res = wcls(w, h, n, n_num, weights)
@@ -436,8 +654,8 @@ def pso_wcls(w, h, n: int, n_num: int | None = None, weights=None, *, swarm: int
             gbest, gbest_f, gbest_num = pbest[g].copy(), pbest_f[g], pbest_num[g]
     info["generations"] = gen
     if not np.isfinite(gbest_f):
-        info["seconds"] = time.perf_counter() - t0
-        return TFResult(res.num, res.den, res.te, "pso-wcls", info)
+        gbest = center
+        gbest_num = _num_for_den(s, h, center, nb)[0]
     num, den = _unscale(gbest_num, gbest, w0, n)
     te = relative_error(freqresp(num, den, w), h)
     info["seconds"] = time.perf_counter() - t0
@@ -458,7 +676,7 @@ def fit_tf(frf: FRF, order: int, method: str = "pso-wcls", n_num: int | None = N
     n_num : int, optional
         Numerator order (default ``order``).
     **pso_options
-        Passed to :func:`pso_wcls`.
+        Passed to :func:`pso_wcls` (``seed``, ``always``, ``refine``, ...).
     """
     if method == "wcls":
         return wcls(frf.w, frf.h, order, n_num)
