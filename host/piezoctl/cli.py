@@ -31,7 +31,7 @@ import traceback
 import warnings
 
 from . import __version__, commands
-from .errors import (EXIT_CONNECTION, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_REFUSED, CliError,
+from .errors import (EXIT_CONNECTION, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OUTPUT_CLOSED, EXIT_REFUSED, CliError,
                      exit_code)
 
 __all__ = ["main", "build_parser", "CliError", "CommandParser", "COMMANDS"]
@@ -191,6 +191,11 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return EXIT_INTERNAL
     except Exception as exc:  # last resort: the causes are fixed where they arise
+        if isinstance(exc, BrokenPipeError) and _stdout_closed():
+            # `piezoctl ... | head`: the reader left; not the controller's link (also a BrokenPipeError)
+            with contextlib.suppress(OSError):
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return EXIT_OUTPUT_CLOSED
         if os.environ.get("PIEZOCTL_DEBUG"):
             raise
         if isinstance(exc, ConnectionError) or type(exc).__module__.split(".")[0] in _LINK_LIBRARIES:
@@ -202,6 +207,17 @@ def main(argv: list[str] | None = None) -> int:
               f"(hint: this is a bug; rerun with PIEZOCTL_DEBUG=1 for the traceback and report it)",
               file=sys.stderr)
         return EXIT_INTERNAL
+
+
+def _stdout_closed() -> bool:
+    """True when stdout is a pipe whose reader went away (poll reports an error on it)."""
+    import select
+    try:
+        p = select.poll()
+        p.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in p.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def _one_line(exc: BaseException) -> str:

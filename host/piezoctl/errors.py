@@ -20,7 +20,7 @@ Exit codes of ``piezoctl`` (``docs/recordings.md``, ``docs/model-file.md``):
 
 __all__ = ["CliError", "CheckFailed", "ControllerRefused", "ConnectionFailed", "exit_code",
            "EXIT_OK", "EXIT_CHECK_FAILED", "EXIT_REFUSED", "EXIT_INTERNAL", "EXIT_CONTROLLER",
-           "EXIT_CONNECTION", "EXIT_INTERRUPTED"]
+           "EXIT_CONNECTION", "EXIT_INTERRUPTED", "EXIT_OUTPUT_CLOSED"]
 
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
@@ -29,6 +29,7 @@ EXIT_INTERNAL = 3
 EXIT_CONTROLLER = 4
 EXIT_CONNECTION = 5
 EXIT_INTERRUPTED = 130
+EXIT_OUTPUT_CLOSED = 141   # 128 + SIGPIPE, as a shell reports it: the reader of stdout went away (| head)
 
 
 class CliError(Exception):

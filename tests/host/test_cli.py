@@ -300,3 +300,22 @@ def test_every_port_option_carries_the_one_description(command):
 def test_every_command_help_imports_no_scipy_or_matplotlib(name):
     """``piezoctl NAME --help`` loads the command's parser only (the 0.5 s start-up: tools/bench-cli)."""
     assert not set(HEAVY) & _imports_after([name, "--help"])
+
+
+def test_closed_stdout_is_not_a_connection_error(tmp_path):
+    """`piezoctl ... | head`: the reader leaves; exit 141 (128 + SIGPIPE) and no error line, not exit 5."""
+    script = ("import sys\n"
+              "from piezoctl import cli\n"
+              "from piezoctl.commands import status as s\n"
+              "def run(args):\n"
+              "    for _ in range(100000):\n"
+              "        print('line of output')\n"
+              "s.run = run\n"
+              "sys.exit(cli.main(['status', '--port', 'tcp:127.0.0.1:1']))\n")
+    p = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         env={k: v for k, v in os.environ.items() if k != "PIEZOCTL_DEBUG"})
+    p.stdout.read(100)
+    p.stdout.close()                      # the reader goes away while the command writes
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=60) == 141
+    assert "connection" not in err and "error" not in err, err
