@@ -33,25 +33,18 @@
  *
  * Saturation: none; nothing can overflow within the documented ranges.
  *
- * Work per sample (docs/kernels-pi.md, "Operators that move" and "Runs"):
- * the results are those of the formula applied to every operator, but
- * process() touches only the operators that can change. With the thresholds
- * non-decreasing, for each slope (column) the operators that move form a
- * prefix in threshold order: rising input, F = max(u - r, F) moves iff
- * u - r > F, and F + r is non-decreasing in r; falling input, F moves iff
- * F > hi = a (u + r) rounded (then F = max(u - r, hi)), and F - hi is
- * non-increasing in r up to one LSB of the rounding, so the scan stops at the
- * first F - hi <= -1. An operator that moved keeps moving until the input
- * reverses, so each column keeps a run: its first k operators, whose outputs
- * are the branch at the present input (u - r_i; falling, the first m of them
- * u - r_i and the others the upper branch) and are not stored until the next
- * reversal. The run's weighted sum comes in closed form from sums kept in
- * the run (sum w, sum w r, and on the upper branch sum w H with H the high
- * part of off, plus one carry test per member there); the others' sum is
- * kept as operators join. A reversal stores every run's members once. An
- * unchanged input changes nothing (the update is idempotent). The first
- * sample after init or reset updates every operator. Worst case: linear in
- * the operator count.
+ * Work per sample (docs/kernels-pi.md, "Operators that move"): the results
+ * are those of the formula applied to every operator, but process() touches
+ * only the operators that can change and keeps the weighted sum up to date
+ * by w_k * (F_new - F_old). With the thresholds non-decreasing, for each
+ * slope (column) the operators that move form a prefix in threshold order:
+ * rising input, F = max(u - r, F) moves iff u - r > F, and F + r is
+ * non-decreasing in r; falling input, F moves iff F > hi = a (u + r) rounded
+ * (then F = max(u - r, hi)), and F - hi is non-increasing in r up to one LSB
+ * of the rounding, so the scan stops at the first F - hi <= -1. An unchanged
+ * input changes nothing (the update is idempotent). The first sample after
+ * init or reset updates every operator. Worst case (every operator moves):
+ * linear in the operator count.
  *
  * Initial state: every operator output is 0 after init and reset (relaxed,
  * demagnetized actuator at u = 0).
@@ -63,10 +56,7 @@
  * |w * F| < 2^31 * 2^21 = 2^52, and at most PIEZO_PLAY_MAX_OPS = 256 = 2^8
  * terms give |sum| < 2^60: the int64 accumulator has 3 guard bits left.
  * Inputs in [-1, 1) with thresholds in [0, 1) (the EUPI model) keep
- * |F| <= 2^16 and |sum| < 2^55. A run's closed form has partial terms
- * beyond int64 (a u times the sum of the weights, sum w H with H up to
- * 2^27); they are kept in uint64, i.e. modulo 2^64, and add up to the exact
- * weighted sum, which fits int64 by the bound above, so the result is exact.
+ * |F| <= 2^16 and |sum| < 2^55.
  */
 #ifndef PIEZO_PLAY_H
 #define PIEZO_PLAY_H
@@ -81,14 +71,6 @@
 
 /* Operators in a bank of n_r thresholds and n_a slopes (n_a = 0: classical). */
 #define PIEZO_PLAY_N_OPS(n_r, n_a) ((size_t)(n_r) * ((n_a) ? (size_t)(n_a) : 1u))
-
-/* int64 words of a column's run (play.c) */
-#define PIEZO_PLAY_RUN_WORDS 5u
-
-/* Work array of an unparallel bank: the branch constants (n_r * n_a) and
- * one run per slope; a classical bank needs none (its run is in the instance). */
-#define PIEZO_PLAY_WORK_LEN(n_r, n_a) \
-    ((n_a) ? (size_t)(n_r) * (size_t)(n_a) + PIEZO_PLAY_RUN_WORDS * (size_t)(n_a) : (size_t)0)
 
 /* Coefficients: constant, may be shared by several instances. */
 struct piezo_play_coef {
@@ -107,22 +89,16 @@ struct piezo_play {
                             * piezo_play_output() */
     int64_t *off_q39;      /* [n_ops] a_j * r_i + 2^23 (UPI banks only), column by
                             * column and split for a carry add (play.c) */
-    int64_t *run_q39;      /* [n_a * PIEZO_PLAY_RUN_WORDS] the columns' runs, after
-                            * off_q39 in the work array (UPI banks only) */
-    int64_t run0_q39[PIEZO_PLAY_RUN_WORDS]; /* the classical bank's run */
     size_t n_ops;
     int64_t acc_q39;       /* sum_k w_k F_k of the current outputs */
-    int64_t rest_q39;      /* the same sum over the operators outside the runs */
     int32_t u_prev_q15;    /* input of the last sample */
-    int8_t dir;            /* direction of the runs: +1 rising, -1 falling, 0 none */
     uint8_t primed;        /* 0 after reset: the next sample updates every operator */
 };
 
 /*
  * Check the coefficients, bind the caller's arrays and reset.
- * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; off_q39 (the work
- * array) needs PIEZO_PLAY_WORK_LEN(n_r, n_a) for an unparallel bank and may be
- * NULL (off_len 0) for a classical one.
+ * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; off_q39 needs as
+ * many for an unparallel bank and may be NULL (off_len 0) for a classical one.
  * Returns PIEZO_OK, PIEZO_EINVAL (NULL pointer, r < 0 or r > WIDE_MAX,
  * a <= 0), PIEZO_EORDER (thresholds decreasing) or PIEZO_ERANGE (more than
  * PIEZO_PLAY_MAX_OPS operators, or an array too short).
@@ -135,12 +111,16 @@ void piezo_play_reset(struct piezo_play *p);
 
 /*
  * One sample: update every operator with u_q15 (|u_q15| <= WIDE_MAX) and
- * return sum_k w_q24[k] * F_k in Q39. Read the outputs through
- * piezo_play_output(): the members of a run are not stored until a reversal.
+ * return sum_k w_q24[k] * F_k in Q39. The outputs stay readable through
+ * piezo_play_output().
  */
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15);
 
 /* Output F_k of operator k = i * n_a + j (row-major, as the weights). */
-int32_t piezo_play_output(const struct piezo_play *p, size_t k);
+static inline int32_t piezo_play_output(const struct piezo_play *p, size_t k)
+{
+    const size_t n_a = p->coef->n_a;
+    return n_a == 0u ? p->f_q15[k] : p->f_q15[(k % n_a) * p->coef->n_r + k / n_a];
+}
 
 #endif /* PIEZO_PLAY_H */

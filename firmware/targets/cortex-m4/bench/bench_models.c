@@ -66,7 +66,7 @@ static const struct piezo_play_coef upi_coef = {bench_eupi_r_upi_q15, bench_eupi
                                                 BENCH_EUPI_NUR, BENCH_EUPI_NUA};
 static struct piezo_play play;
 static int32_t play_f[BENCH_EUPI_NUR * BENCH_EUPI_NUA];
-static int64_t play_off[PIEZO_PLAY_WORK_LEN(BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
+static int64_t play_off[BENCH_EUPI_NUR * BENCH_EUPI_NUA];
 static void play_tick(uint32_t k)
 {
     piezo_bench_sink = (int32_t)(piezo_play_process(&play, piezo_bench_u[k]) >> 24);
@@ -124,7 +124,7 @@ void piezo_bench_models(void)
                 play_tick);
     run_or_fail("play_upi10x3",
                 piezo_play_init(&play, &upi_coef, play_f, BENCH_EUPI_NUR * BENCH_EUPI_NUA, play_off,
-                                sizeof play_off / sizeof play_off[0]) == PIEZO_OK,
+                                BENCH_EUPI_NUR * BENCH_EUPI_NUA) == PIEZO_OK,
                 play_tick);
     run_or_fail("eupi",
                 piezo_eupi_init(&eupi, &eupi_coef, eupi_state, sizeof eupi_state / sizeof eupi_state[0],
