@@ -204,7 +204,25 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
             const int32_t *rp = r;
             const int32_t *wp = w + j;
             /* F == hi goes through the update too: F >= u - r while
-             * falling, so then max(hi, u - r) == F and nothing changes. */
+             * falling, so then max(hi, u - r) == F and nothing changes.
+             * The lower branch cannot win when a <= 1 and u <= 0 or
+             * a >= 1 and u >= 0: u - r - hi <= u (1 - a) - r (1 + a) + 1/2
+             * (hi rounded half up), which is then below 1 (an integer <= 0);
+             * the scan then skips u - r and the max. */
+            const int32_t a_j = c->a_q24[j];
+            if (a_j <= PIEZO_Q24_ONE ? u_q15 <= 0 : u_q15 >= 0) {
+                for (size_t i = n_r; i != 0u; i--) {
+                    const int32_t hi = upper(*op++, au_lo, au_hi);
+                    const int32_t y = *fp;
+                    if (y < hi) {
+                        break;
+                    }
+                    *fp++ = hi;
+                    acc += (int64_t)*wp * (hi - y);
+                    wp += n_a;
+                }
+                continue;
+            }
             for (size_t i = n_r; i != 0u; i--) {
                 const int32_t hi = upper(*op++, au_lo, au_hi);
                 const int32_t y = *fp;

@@ -181,16 +181,112 @@ static void test_branches_by_hand(void **state)
     assert_int_equal(piezo_play_init(&p, &c, f, 1, NULL, 0), PIEZO_OK);
     for (size_t k = 0; k < 5; k++) {
         (void)piezo_play_process(&p, u[k]);
-        assert_golden_i32("cpi by hand", k, f[0], want[k]);
+        assert_golden_i32("cpi by hand", k, piezo_play_output(&p, 0), want[k]);
     }
     c.n_a = 1; /* F = max(u - 0.25, min(0.5 (u + 0.25), F)) */
     assert_int_equal(piezo_play_init(&p, &c, f, 1, off, 1), PIEZO_OK);
     assert_true(piezo_play_process(&p, -16384) == (int64_t)-4096 * PIEZO_Q24_ONE);
-    assert_int_equal(f[0], -4096);                    /* 0.5 (-0.5 + 0.25) */
+    assert_int_equal(piezo_play_output(&p, 0), -4096);                    /* 0.5 (-0.5 + 0.25) */
     (void)piezo_play_process(&p, 32767);
-    assert_int_equal(f[0], 24575);                    /* lower branch u - r */
+    assert_int_equal(piezo_play_output(&p, 0), 24575);                    /* lower branch u - r */
     (void)piezo_play_process(&p, 3);
-    assert_int_equal(f[0], 4098);                     /* 0.5 (3 + 8192) = 4097.5 -> up */
+    assert_int_equal(piezo_play_output(&p, 0), 4098);                     /* 0.5 (3 + 8192) = 4097.5 -> up */
+}
+
+/* Lazy runs against the eager formula: random banks (thresholds with
+ * repeats, slopes below, at and above 1, weights of both signs and full
+ * range, inputs up to the wide limit) on random inputs made of monotone runs
+ * of random lengths and steps, pauses and reversals every sample; every
+ * operator output and the sum after every sample. */
+static uint32_t lcg_state;
+static uint32_t lcg(void)
+{
+    lcg_state = lcg_state * 1664525u + 1013904223u;
+    return lcg_state >> 8; /* 24 bits */
+}
+
+static int32_t lcg_range(int32_t lo, int32_t hi) /* [lo, hi], hi - lo < 2^24 */
+{
+    return lo + (int32_t)(lcg() % (uint32_t)(hi - lo + 1));
+}
+
+static void eager_step(const struct piezo_play_coef *c, int32_t *f, int32_t u)
+{
+    const size_t n_a = c->n_a;
+    for (size_t i = 0; i < c->n_r; i++) {
+        for (size_t j = 0; j < (n_a ? n_a : 1u); j++) {
+            const int32_t r = c->r_q15[i];
+            const int32_t hi = n_a ? (int32_t)piezo_rshift_rnd64((int64_t)c->a_q24[j] * (u + r), 24u)
+                                   : u + r;
+            const int32_t lo = u - r;
+            int32_t *y = &f[i * (n_a ? n_a : 1u) + j];
+            *y = *y < hi ? *y : hi;
+            *y = *y > lo ? *y : lo;
+        }
+    }
+}
+
+static void test_runs_equal_eager_formula(void **state)
+{
+    (void)state;
+    static int32_t r[PIEZO_PLAY_MAX_OPS], a[PIEZO_PLAY_MAX_OPS], w[PIEZO_PLAY_MAX_OPS];
+    static int32_t eager[PIEZO_PLAY_MAX_OPS];
+    static const uint16_t shapes[][3] = {
+        /* n_r, n_a, input span (log2 of the q15-scaled bound) */
+        {10, 0, 15}, {1, 0, 20}, {40, 0, 20}, {10, 3, 15}, {16, 8, 15},
+        {1, 1, 15}, {7, 5, 20}, {128, 2, 20}, {25, 10, 16},
+    };
+    lcg_state = 12345u;
+    for (size_t s = 0; s < sizeof shapes / sizeof shapes[0]; s++) {
+        const uint16_t n_r = shapes[s][0], n_a = shapes[s][1];
+        const int32_t span = (int32_t)1 << shapes[s][2];
+        const size_t n_ops = PIEZO_PLAY_N_OPS(n_r, n_a);
+        int32_t t = 0;
+        for (size_t i = 0; i < n_r; i++) {
+            if (i == 0u || lcg() % 4u != 0u) { /* one in four repeats the last */
+                t += lcg_range(0, span / (int32_t)n_r);
+            }
+            r[i] = t < span ? t : span;
+        }
+        for (size_t j = 0; j < n_a; j++) {
+            const uint32_t pick = lcg() % 4u; /* a = 1 exactly, below, above */
+            a[j] = pick == 0u ? PIEZO_Q24_ONE
+                 : pick == 1u ? lcg_range(1, PIEZO_Q24_ONE - 1)
+                              : lcg_range(PIEZO_Q24_ONE + 1, 4 * PIEZO_Q24_ONE);
+        }
+        for (size_t k = 0; k < n_ops; k++) {
+            w[k] = (int32_t)(lcg() << 8 ^ lcg()); /* any int32 */
+        }
+        const struct piezo_play_coef c = {r, a, w, n_r, n_a};
+        struct piezo_play p;
+        assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, off_buf,
+                                         PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+        memset(eager, 0, sizeof eager);
+        int32_t u = 0;
+        int32_t dir = 1, left = 0, step = 1;
+        for (size_t k = 0; k < 2000u; k++) {
+            if (left-- <= 0) { /* a new run: direction, length, step size */
+                const uint32_t kind = lcg() % 8u;
+                dir = lcg() % 2u ? 1 : -1;
+                left = kind == 0u ? 1 : lcg_range(1, 200);
+                step = kind == 1u ? 0 : kind == 2u ? lcg_range(0, span) : lcg_range(0, span / 64);
+            }
+            const int32_t jitter = lcg() % 16u == 0u ? -dir * lcg_range(0, 3) : 0; /* small reversals */
+            int64_t next = (int64_t)u + dir * step + jitter;
+            next = next > span ? span : next < -span ? -span : next;
+            u = (int32_t)next;
+            eager_step(&c, eager, u);
+            int64_t want = 0;
+            for (size_t q = 0; q < n_ops; q++) {
+                want += (int64_t)w[q] * eager[q];
+            }
+            assert_golden_i32("runs: sum", s * 100000u + k, piezo_play_process(&p, u), want);
+            for (size_t q = 0; q < n_ops; q++) {
+                assert_golden_i32("runs: output", (s * 100000u + k) * 1000u + q,
+                                  piezo_play_output(&p, q), eager[q]);
+            }
+        }
+    }
 }
 
 int main(void)
@@ -203,6 +299,7 @@ int main(void)
         cmocka_unit_test(test_reset_zeroes_state),
         cmocka_unit_test(test_init_refuses_bad_coefficients),
         cmocka_unit_test(test_branches_by_hand),
+        cmocka_unit_test(test_runs_equal_eager_formula),
     };
     return cmocka_run_group_tests_name("play", tests, NULL, NULL);
 }
