@@ -57,3 +57,14 @@ def test_bounded_nuisance_gain_stays_within_one():
     assert th[0] == pytest.approx(1.0)            # clipped at the bound: the rest stays for the term to explain
     th_free, _, _ = _fit_predict(X, e, train, test, rows=n, nuis=(N[idx], N[test]))
     assert th_free[0] == pytest.approx(5.0, rel=0.05)
+
+
+def test_a_term_that_breaks_one_recording_is_flagged():
+    from piezoctl.diagnose import significance as sg
+    from piezoctl.diagnose.select import _worsened
+    # per fold, per recording: (sse before, sse after) on the held-out samples
+    fine = [{"per_recording": [(4.0, 1.0), (1.0, 1.1)]}, {"per_recording": [(4.0, 1.0), (1.0, 1.0)]}]
+    assert _worsened(fine, ["walk", "triangle"]) is None
+    broken = [{"per_recording": [(4.0, 0.5), (1.0, 4.0)]}, {"per_recording": [(4.0, 0.5), (1.0, 4.0)]}]
+    name, k = _worsened(broken, ["walk", "triangle"])
+    assert name == "triangle" and k == pytest.approx(2.0) and k > sg.WORSEN_MAX
