@@ -52,7 +52,7 @@ from . import tf
 from .common import IdentError, check_positive_int, fit_stride, normalize, solve_linear
 
 __all__ = ["fit_joint", "simulate_joint", "creep_taus", "mode_tf", "lti_columns", "delay_columns",
-           "period_folds", "CREEP_TAU0_S", "CREEP_RATIO", "MAX_CREEP"]
+           "period_folds", "fundamental_hz", "CREEP_TAU0_S", "CREEP_RATIO", "MAX_CREEP"]
 
 CREEP_TAU0_S = 0.01   # first creep time constant [s]
 CREEP_RATIO = 5.0     # ratio between successive creep time constants
@@ -95,6 +95,21 @@ def delay_columns(Y: np.ndarray, d: float) -> np.ndarray:
     return (1.0 - f) * Y[idx0] + f * Y[idx1]
 
 
+def fundamental_hz(t, u) -> float:
+    """Frequency [Hz] of the strongest spectral line of the drive's rate (0 for a constant drive).
+
+    For a triangle the rate is a square wave at the fundamental; a held start
+    adds little there.
+    """
+    t = np.asarray(t, float)
+    u = np.asarray(u, float)
+    du = np.diff(u, prepend=u[0])
+    p = np.abs(np.fft.rfft(du * np.hanning(u.size))) ** 2
+    f = np.fft.rfftfreq(u.size, float(np.median(np.diff(t))))
+    p[0] = 0.0
+    return float(f[int(np.argmax(p))]) if np.any(p > 0) else 0.0
+
+
 def period_folds(t, u, k: int) -> np.ndarray:
     """Fold index (0..k-1) of every sample: the drive's periods dealt round-robin.
 
@@ -105,12 +120,8 @@ def period_folds(t, u, k: int) -> np.ndarray:
     """
     t = np.asarray(t, float)
     u = np.asarray(u, float)
-    du = np.diff(u, prepend=u[0])
-    p = np.abs(np.fft.rfft(du * np.hanning(u.size))) ** 2
-    f = np.fft.rfftfreq(u.size, float(np.median(np.diff(t))))
-    p[0] = 0.0
     span = float(t[-1] - t[0])
-    f0 = f[int(np.argmax(p))] if np.any(p > 0) else 0.0
+    f0 = fundamental_hz(t, u)
     if f0 * span < k:
         return np.minimum((np.arange(u.size) * k) // u.size, k - 1)
     return (np.floor((t - t[0]) * f0).astype(int)) % int(k)
