@@ -337,7 +337,7 @@ def main(argv=None) -> int:
             b = r.get("residual")
             if b:
                 print(f"  {r['kind']:14s} {r['case']:34s} {b['total']:.4f}  {b['startup']:.4f}   {b['hold']:.4f}  "
-                      f"{b['sweep_harmonics']:.4f}    {b['sweep_other']:.4f}  ({b['noise']:.4f}; "
+                      f"{b['sweep_harmonics']:.4f}    {b['sweep_other']:.4f}  ({b['noise']:.5f}; "
                       f"fundamental {b['fundamental_hz']:.1f} Hz)")
     return 0
 
