@@ -157,6 +157,10 @@ def test_bad_options_and_model_fields_are_refused(sweeps, fitted):
         C.fit([sweeps[0]], Options(cascade_joint=True, cascade_order=3))
     with pytest.raises(IdentError, match="--cascade-cv-folds"):
         C.fit([sweeps[0]], Options(cascade_joint=True, cascade_cv_folds=1))
+    with pytest.raises(IdentError, match="per-file"):
+        C.fit([sweeps[0]], Options(cascade_joint=True, offset="per-file"))
+    with pytest.raises(IdentError, match="--cascade-u-before: only with --cascade-joint"):
+        C.fit([sweeps[0]], Options(cascade_u_before=0.0, cascade_fallback=True))
     t, u = sweeps[1].t, sweeps[1].u
     for bad in ({"creep": {"tau_s": [-0.1], "gain_um": [1.0]}}, {"creep": {"tau_s": [0.1], "gain_um": []}},
                 {"delay_s": 5.0}, {"u_before": "x"}, {"den": [1.0, 2.0]}):

@@ -172,6 +172,10 @@ def fit(recordings, options) -> dict:
     if _opt(options, "joint"):
         from .cascade_joint import fit_joint
         return fit_joint(recordings, options)
+    given = [name for name, key in (("--cascade-creep", "creep"), ("--cascade-cv-folds", "cv_folds"),
+                                    ("--cascade-u-before", "u_before")) if _opt(options, key) != DEFAULTS[key]]
+    if given:
+        raise IdentError(f"{', '.join(given)}: only with --cascade-joint")
     static, dynamic = split_recordings(recordings, options)
     hp = eupi_kind.fit([recordings[i] for i in static], _hyst_opts(options))
     frfs = []

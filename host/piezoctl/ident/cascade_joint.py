@@ -219,6 +219,8 @@ def fit_joint(recordings, options) -> dict:
     if int(_opt(options, "order")) != 2 or _opt(options, "num_order") not in (None, 0):
         raise IdentError("--cascade-joint fits one second-order mode: --cascade-order 2 and no "
                          "--cascade-num-order")
+    if options.get("offset", "shared") != "shared":
+        raise IdentError("--cascade-joint fits one offset shared by all files (no --offset per-file)")
     k = check_positive_int("--cascade-cv-folds", _opt(options, "cv_folds"), 2)
     creep = str(_opt(options, "creep"))
     if creep != "auto" and creep not in {str(i) for i in range(MAX_CREEP + 1)}:
