@@ -87,7 +87,8 @@ def add_options(parser) -> None:
     parser.add_argument("--cascade-joint", action="store_true",
                         help="identify hysteresis weights, creep, a second-order mode and a delay jointly "
                              "from the time-domain data of every recording (variable projection), in place "
-                             "of the quasi-static / FRF steps: for sweeps whose harmonics carry the dynamics")
+                             "of the quasi-static / FRF steps: for runs that are not a quasi-static + chirp pair, "
+                             "such as sweeps (docs/identification.md)")
     parser.add_argument("--cascade-creep", default="auto", choices=("auto", "0", "1", "2", "3", "4"),
                         help="with --cascade-joint: creep lags, time constants 0.01 5^k s (k < n); auto "
                              "(default): the count with the lowest cross-validated NRMSE inside the data")

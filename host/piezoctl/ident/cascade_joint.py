@@ -11,11 +11,14 @@ The model, with ``v`` the drive normalized to [-1, 1] and all terms in um::
 - ``G = wn^2 / (s^2 + 2 zeta wn s + wn^2)``: one mode, unit static gain;
 - ``tau_d``: a delay [s], fractional samples by linear interpolation.
 
-Why: a triangle sweep's harmonics (20 Hz: 20, 40, 60, ... Hz) sample the
-dynamics at many frequencies, and the valve recordings start with the drive
-switched on (a step from 0 V, ``--cascade-u-before 0``) whose ringing shows the
-mode. The FRF route of the plain ``cascade`` cannot use either: coherence
-lines from one triangle do not determine G above its harmonics.
+Why: fitted in the time domain, every part of a recording weighs in at
+once: a triangle sweep's harmonics (20 Hz: 20, 40, 60, ... Hz) carry the
+hysteresis and the creep, and a step in the data (the valve recordings start
+with the drive switched on from 0 V, ``--cascade-u-before 0``) rings at the
+mode. On the valve the harmonics alone leave the 730 Hz mode undetermined;
+the step places it (docs/identification.md). The FRF route of the plain
+``cascade`` uses neither: coherence lines from one triangle do not determine
+G above its harmonics.
 
 Identification (variable projection): for fixed ``(f_n, zeta, tau_d)`` the
 output is linear in the hysteresis weights, the creep gains and the offset
