@@ -174,11 +174,13 @@ def test_bench_covers_the_documented_figures():
     doc = (Path(__file__).resolve().parents[2] / "docs" / "identification.md").read_text()
     assert "tools/bench-ident --kinds cascade-joint" in doc
     assert "cascade-joint" in bench.VARIANTS
-    table = [ln for ln in doc.splitlines() if ln.startswith("| model |")][0]
-    cases = [c.strip() for c in table.strip("|").split("|")[1:]]
+    lines = doc.splitlines()
+    top = [i for i, ln in enumerate(lines) if ln.startswith("| model |")][0]     # the real-data table
+    end = next(i for i in range(top, len(lines)) if not lines[i].startswith("|"))
+    cases = [c.strip() for c in lines[top].strip("|").split("|")[1:]]
     names = [c.name for c in bench.CASES]
     assert cases == names
-    row = [ln for ln in doc.splitlines() if ln.startswith("| cascade-joint |")]
+    row = [ln for ln in lines[top:end] if ln.startswith("| cascade-joint |")]
     assert len(row) == 1 and len(row[0].strip("|").split("|")) == len(cases) + 1
     assert re.search(r"\| cascade-joint \| 0\.\d{4} \| 0\.\d{4} \|", row[0])
     opts = bench.options_for("cascade-joint", [], 0.0)
