@@ -186,3 +186,20 @@ def test_bench_covers_the_documented_figures():
     opts = bench.options_for("cascade-joint", [], 0.0)
     assert opts["cascade_joint"] and opts["cascade_u_before"] == 0.0 and not opts.get("cascade_fallback")
     assert all(c.start_v == 0.0 for c in bench.CASES if c.name.startswith("valve"))
+
+
+def test_residual_breakdown_parts_add_up_and_find_harmonic_error():
+    t, v = forc_drive(20.0)
+    y = true_output(t, v)
+    f0 = 20.0
+    sweep = t >= 0.2
+    err = np.where(sweep, 0.05 * np.sin(2 * np.pi * 3 * f0 * t), 0.0)      # at the 3rd harmonic
+    err[:50] += 0.3                                                        # start-up
+    b = bench.residual_breakdown(t, 50 + 50 * v, y, y + err)
+    parts = [b[k] for k in ("startup", "hold", "sweep_harmonics", "sweep_other")]
+    assert sum(p ** 2 for p in parts) == pytest.approx(b["total"] ** 2, rel=1e-9)
+    assert b["total"] == pytest.approx(nrmse(y, y + err), rel=1e-12)
+    assert b["fundamental_hz"] == pytest.approx(f0, rel=0.02)
+    assert b["sweep_harmonics"] > 20 * b["sweep_other"]
+    assert b["startup"] == pytest.approx(np.sqrt(50 * 0.09 / t.size) / np.ptp(y), rel=1e-9)
+    assert b["hold"] == 0.0
