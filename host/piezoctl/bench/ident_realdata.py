@@ -30,7 +30,8 @@ from ..ident.common import Options, nrmse
 from ..io.modelfile import Model
 from ..io.recording import load_recording, save_recording
 
-__all__ = ["CASES", "Case", "run_cases", "speed", "main", "default_data_dir", "options_for"]
+__all__ = ["CASES", "Case", "VARIANTS", "run_cases", "speed", "main", "default_data_dir", "options_for",
+           "residual_breakdown"]
 
 
 @dataclass
@@ -41,6 +42,8 @@ class Case:
     is still run on the whole file, so its operators see the full history).
     ``fit_until_s``: the fit uses only samples before this time [s].
     ``extra``: identify options of the case (e.g. ``--delay-s``).
+    ``start_v``: the drive [V] before the files' first sample, for the kinds
+    that take it (``cascade-joint``: ``--cascade-u-before``); None: unknown.
     """
 
     name: str
@@ -50,17 +53,22 @@ class Case:
     fit_until_s: float | None = None
     test_from_s: float = 0.0
     note: str = ""
+    start_v: float | None = None
+
+
+# Rows of the table that run a kind with options of its own: label -> (kind, options).
+VARIANTS = {"cascade-joint": ("cascade", ["--cascade-joint"])}
 
 
 CASES = [
-    Case("valve 20Hz->40Hz", ["valve_20hz_forc.csv"], ["valve_40hz_forc.csv"]),
-    Case("valve 40Hz->20Hz", ["valve_40hz_forc.csv"], ["valve_20hz_forc.csv"]),
+    Case("valve 20Hz->40Hz", ["valve_20hz_forc.csv"], ["valve_40hz_forc.csv"], start_v=0.0),
+    Case("valve 40Hz->20Hz", ["valve_40hz_forc.csv"], ["valve_20hz_forc.csv"], start_v=0.0),
     Case("valve sweeps->inv_sine50", ["valve_20hz_forc.csv", "valve_40hz_forc.csv"], ["valve_inverse_sine50.csv"],
-         note="other session: offset differs"),
+         note="other session: offset differs", start_v=0.0),
     Case("valve sweeps->inv_tri50", ["valve_20hz_forc.csv", "valve_40hz_forc.csv"], ["valve_inverse_tri50.csv"],
-         note="other session: offset differs"),
+         note="other session: offset differs", start_v=0.0),
     Case("valve sweeps->inv_bigsine", ["valve_20hz_forc.csv", "valve_40hz_forc.csv"], ["valve_inverse_bigsine.csv"],
-         note="other session: offset differs"),
+         note="other session: offset differs", start_v=0.0),
     Case("actuator 3.5-6.5s->6.5-10s", ["actuator_150v_1hz.csv"], ["actuator_150v_1hz.csv"],
          extra=["--skip-s", "3.5"], fit_until_s=6.5, test_from_s=6.5,
          note="step at 3.26 s and ringing skipped"),
@@ -77,11 +85,17 @@ def default_data_dir() -> Path:
     return Path(__file__).resolve().parents[3] / ".." / "shared" / "realdata"
 
 
-def options_for(kind: str, extra: list) -> Options:
-    """The identify options of ``kind`` with their defaults, as the CLI would give them."""
+def options_for(kind: str, extra: list, start_v: float | None = None) -> Options:
+    """The identify options of ``kind`` (or a :data:`VARIANTS` label) with their defaults, as the CLI
+    would give them; ``start_v``: the case's drive before the first sample, for the kinds that take it."""
     from ..commands import identify as ident_cmd
     ap = build_parser()
-    if kind == "cascade":
+    if kind in VARIANTS:
+        kind, more = VARIANTS[kind]
+        extra = [*extra, *more]
+        if start_v is not None:
+            extra = [*extra, "--cascade-u-before", repr(float(start_v))]
+    if kind == "cascade" and "--cascade-joint" not in extra:
         # the real recordings are single runs (sweeps, or one drive each), not
         # the paper's quasi-static + inverse-processed chirp pairs
         extra = [*extra, "--cascade-fallback"]
@@ -93,15 +107,66 @@ def options_for(kind: str, extra: list) -> Options:
     return opts
 
 
-def _evaluate(kind, params, path, t_from):
+def _evaluate(kind, params, path, t_from, breakdown=False):
     rec = load_recording(path)
     y = simulate_model(Model(kind=kind, params=params, provenance={}), rec.t, rec.u, rec.u2)
     m = rec.t >= rec.t[0] + t_from
     e = y[m] - rec.y[m]
-    return nrmse(rec.y[m], y[m]), nrmse(rec.y[m], y[m] - e.mean()), float(e.mean())
+    out = (nrmse(rec.y[m], y[m]), nrmse(rec.y[m], y[m] - e.mean()), float(e.mean()))
+    return (*out, residual_breakdown(rec.t[m], rec.u[m], rec.y[m], y[m])) if breakdown else out
 
 
-def run_cases(data_dir: Path, kinds, cases=CASES, tmp: str | None = None):
+def residual_breakdown(t, u, y, y_model, startup_s: float = 0.1) -> dict:
+    """Where the test error lies, as parts of the NRMSE whose squares add up to its square.
+
+    Parameters
+    ----------
+    t, u, y, y_model : ndarray, shape (T,)
+        Times [s], drive [V], measured and modelled output [um].
+    startup_s : float
+        The first ``startup_s`` [s] count as the start-up.
+
+    Returns
+    -------
+    dict
+        ``total``; ``startup`` (t < startup_s), ``hold`` (the rest before the
+        drive first moves), ``sweep_harmonics`` (after it: the error's power
+        at multiples of the drive's fundamental, +-1 FFT line) and
+        ``sweep_other`` (the rest of the sweep's error power); ``noise``: the
+        measurement noise's share, from the hold's sample-to-sample
+        differences (std / sqrt 2), as if it were on every sample;
+        ``fundamental_hz``.
+    """
+    from ..ident.cascade_joint import fundamental_hz
+    t, u, y, ym = (np.asarray(a, float) for a in (t, u, y, y_model))
+    e = ym - y
+    n, span = e.size, float(np.ptp(y))
+    moved = np.flatnonzero(np.abs(u - u[0]) > 1e-6 * max(np.ptp(u), 1e-12))
+    i_move = int(moved[0]) if moved.size else n
+    i_start = int(np.searchsorted(t - t[0], startup_s))
+    part = {"startup": e[:min(i_start, i_move)], "hold": e[min(i_start, i_move):i_move]}
+    sw = e[i_move:]
+    f0 = fundamental_hz(t[i_move:], u[i_move:]) if sw.size > 4 else 0.0
+    harm = 0.0
+    if sw.size > 4 and f0 > 0:
+        E = np.fft.rfft(sw)
+        f = np.fft.rfftfreq(sw.size, float(np.median(np.diff(t))))
+        p = np.abs(E) ** 2 * 2 / sw.size      # one-sided: sum(p) ~ sum(sw**2)
+        p[0] /= 2
+        k = np.rint(f / f0)
+        near = (k >= 1) & (np.abs(f - k * f0) <= 1.01 * (f[1] - f[0]))
+        harm = float(np.sum(p[near]) / np.sum(p) * np.sum(sw ** 2)) if np.sum(p) > 0 else 0.0
+    out = {k: float(np.sqrt(np.sum(v ** 2) / n) / span) for k, v in part.items()}
+    out["sweep_harmonics"] = float(np.sqrt(harm / n) / span)
+    out["sweep_other"] = float(np.sqrt(max(float(np.sum(sw ** 2)) - harm, 0.0) / n) / span)
+    hold_y = y[min(i_start, i_move):i_move]
+    out["noise"] = float(np.std(np.diff(hold_y)) / np.sqrt(2) / span) if hold_y.size > 10 else float("nan")
+    out["total"] = float(np.sqrt(np.mean(e ** 2)) / span)
+    out["fundamental_hz"] = f0
+    return out
+
+
+def run_cases(data_dir: Path, kinds, cases=CASES, tmp: str | None = None, breakdown: bool = False):
     """Fit and evaluate every kind on every case.
 
     Returns
@@ -109,6 +174,7 @@ def run_cases(data_dir: Path, kinds, cases=CASES, tmp: str | None = None):
     list of dict
         One per (kind, case, test file): ``nrmse``, ``nrmse_offset_removed``,
         ``mean_error_um``, ``fit_nrmse`` (mean over fit files), ``fit_time_s``,
+        with ``breakdown`` also ``residual`` (:func:`residual_breakdown`),
         or ``error`` when the kind failed.
     """
     rows = []
@@ -125,16 +191,18 @@ def run_cases(data_dir: Path, kinds, cases=CASES, tmp: str | None = None):
                 fit_paths.append(p)
             for kind in kinds:
                 try:
-                    opts = options_for(kind, case.extra)
+                    opts = options_for(kind, case.extra, case.start_v)
+                    base = VARIANTS[kind][0] if kind in VARIANTS else kind
                     t0 = time.perf_counter()
-                    res = identify(kind, fit_paths, opts)
+                    res = identify(base, fit_paths, opts)
                     dt = time.perf_counter() - t0
                     fit_scores = [d["nrmse"] for d in res["provenance"]["data"]]
                     for name in case.test:
-                        n, n_off, mean = _evaluate(kind, res["params"], data_dir / name, case.test_from_s)
-                        rows.append({"kind": kind, "case": case.name, "test": name, "nrmse": n,
-                                     "nrmse_offset_removed": n_off, "mean_error_um": mean,
-                                     "fit_nrmse": float(np.mean(fit_scores)), "fit_time_s": dt})
+                        got = _evaluate(base, res["params"], data_dir / name, case.test_from_s, breakdown)
+                        rows.append({"kind": kind, "case": case.name, "test": name, "nrmse": got[0],
+                                     "nrmse_offset_removed": got[1], "mean_error_um": got[2],
+                                     "fit_nrmse": float(np.mean(fit_scores)), "fit_time_s": dt,
+                                     **({"residual": got[3]} if breakdown else {})})
                 except (CliError, ValueError, np.linalg.LinAlgError) as exc:
                     rows.append({"kind": kind, "case": case.name, "error": f"{type(exc).__name__}: {exc}"})
     return rows
@@ -169,7 +237,7 @@ def speed(kinds, tmp: str | None = None):
             t0 = time.perf_counter()
             c0 = time.process_time()
             try:
-                res = identify(kind, [path], opts)
+                res = identify(VARIANTS[kind][0] if kind in VARIANTS else kind, [path], opts)
                 out[kind] = (time.perf_counter() - t0, time.process_time() - c0,
                              res["provenance"]["data"][0]["nrmse"], None)
             except (CliError, ValueError) as exc:
@@ -235,9 +303,15 @@ def format_table(rows, markdown: bool = False) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="bench-ident", description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=default_data_dir(), help="real recordings directory")
-    ap.add_argument("--kinds", nargs="+", default=None, help="kinds to run (default: all that import)")
+    ap.add_argument("--kinds", nargs="+", default=None,
+                    help="kinds to run (default: all that import), or variants: " + ", ".join(VARIANTS))
+    ap.add_argument("--cases", nargs="+", default=None, metavar="NAME",
+                    help="only the cases whose name starts with one of these (e.g. 'valve 20' 'valve 40')")
     ap.add_argument("--speed", action="store_true", help="only time each kind on 30 s of 10 kHz synthetic data")
     ap.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    ap.add_argument("--residual", action="store_true",
+                    help="also print where each test error lies: start-up, hold, the sweep's harmonics, "
+                         "the rest, and the noise floor (parts of the NRMSE)")
     args = ap.parse_args(argv)
     kinds = args.kinds or available_kinds()
     if args.speed:
@@ -249,9 +323,22 @@ def main(argv=None) -> int:
     if not args.data.is_dir():
         print(f"bench-ident: no real recordings at {args.data}", file=sys.stderr)
         return 2
-    rows = run_cases(args.data, kinds)
+    cases = CASES if not args.cases else [c for c in CASES if any(c.name.startswith(x) for x in args.cases)]
+    if not cases:
+        print(f"bench-ident: no case starts with {args.cases}", file=sys.stderr)
+        return 2
+    rows = run_cases(args.data, kinds, cases, breakdown=args.residual)
     print("NRMSE = RMS(model - measured) / range(measured); inv_* cases: (offset removed) in parentheses")
     print(format_table(rows, markdown=args.markdown))
+    if args.residual:
+        print("\nwhere the test error lies (parts of the NRMSE; their squares add up to the total's square):")
+        print(f"  {'model':14s} {'case':34s} total   start-up hold    harmonics other   (noise floor)")
+        for r in rows:
+            b = r.get("residual")
+            if b:
+                print(f"  {r['kind']:14s} {r['case']:34s} {b['total']:.4f}  {b['startup']:.4f}   {b['hold']:.4f}  "
+                      f"{b['sweep_harmonics']:.4f}    {b['sweep_other']:.4f}  ({b['noise']:.5f}; "
+                      f"fundamental {b['fundamental_hz']:.1f} Hz)")
     return 0
 
 

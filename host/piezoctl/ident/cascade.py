@@ -60,7 +60,8 @@ __all__ = ["KIND", "DESCRIPTION", "add_options", "fit", "simulate", "split_recor
            "spectral_centroid"]
 
 DEFAULTS = {"order": 2, "num_order": None, "method": "pso-wcls", "static_hz": 2.0, "static": None,
-            "fmin": None, "fmax": None, "refine": 50, "refine_rounds": 2, "seed": 0, "fallback": False}
+            "fmin": None, "fmax": None, "refine": 50, "refine_rounds": 2, "seed": 0, "fallback": False,
+            "joint": False, "creep": "auto", "cv_folds": 4, "u_before": None}
 
 
 def add_options(parser) -> None:
@@ -83,6 +84,21 @@ def add_options(parser) -> None:
                         help="when the data has only quasi-static or only dynamic recordings, use every "
                              "recording for both steps (the joint refinement then does the separating)")
     parser.add_argument("--cascade-seed", type=int, default=0, help="PSO seed")
+    parser.add_argument("--cascade-joint", action="store_true",
+                        help="identify hysteresis weights, creep, a second-order mode and a delay jointly "
+                             "from the time-domain data of every recording (variable projection), in place "
+                             "of the quasi-static / FRF steps: for runs that are not a quasi-static + chirp pair, "
+                             "such as sweeps (docs/identification.md)")
+    parser.add_argument("--cascade-creep", default="auto", choices=("auto", "0", "1", "2", "3", "4"),
+                        help="with --cascade-joint: creep lags, time constants 0.01 5^k s (k < n); auto "
+                             "(default): the count with the lowest cross-validated NRMSE inside the data")
+    parser.add_argument("--cascade-cv-folds", type=int, default=4, metavar="K",
+                        help="with --cascade-joint: folds of the cross-validation, drive periods dealt "
+                             "round-robin (default 4)")
+    parser.add_argument("--cascade-u-before", type=float, default=None, metavar="V",
+                        help="with --cascade-joint: drive [V] held before each recording's first sample "
+                             "(the model then predicts the start-up step; default: none, the model starts "
+                             "at rest at the first sample)")
 
 
 def _opt(options, name):
@@ -154,6 +170,13 @@ def fit(recordings, options) -> dict:
     dict
         Parameters (see the module docstring).
     """
+    if _opt(options, "joint"):
+        from .cascade_joint import fit_joint
+        return fit_joint(recordings, options)
+    given = [name for name, key in (("--cascade-creep", "creep"), ("--cascade-cv-folds", "cv_folds"),
+                                    ("--cascade-u-before", "u_before")) if _opt(options, key) != DEFAULTS[key]]
+    if given:
+        raise IdentError(f"{', '.join(given)}: only with --cascade-joint")
     static, dynamic = split_recordings(recordings, options)
     hp = eupi_kind.fit([recordings[i] for i in static], _hyst_opts(options))
     frfs = []
@@ -287,7 +310,6 @@ def refine_weights(params: dict, recordings, xs=None) -> dict:
         ``hysteresis`` (refitted, k_ex chosen again), ``c1``, ``c0`` and
         ``refine_weights_cost`` ([before, after] [um^2]); empty if it did not help.
     """
-    from ..models import eupi as eupiref
     hp = dict(params["hysteresis"])
     num, den = params["num"], params["den"]
     if xs is None:
@@ -312,15 +334,32 @@ def refine_weights(params: dict, recordings, xs=None) -> dict:
     cost0 = cost(hp, c1, c0)
     # output units: y = (X theta' ) with theta' = y_half theta; the last column is the constant
     sol = optimize.lsq_linear(A, y, bounds=(lo, hi), method="bvls")
-    th = sol.x
+    new = _eupi_with_weights(hp, sol.x[:-1], float(sol.x[-1]))
+    cost1 = cost(new, 1.0, 0.0)
+    if cost1 < cost0:
+        return {"hysteresis": new, "c1": 1.0, "c0": 0.0, "refine_weights_cost": [cost0, cost1]}
+    return {}
+
+
+def _eupi_with_weights(hp: dict, th_um, offset_um: float) -> dict:
+    """EUPI parameters ``hp`` with the weights of its operator columns replaced.
+
+    ``th_um``: weights [um per operator output] of :func:`_operator_columns`'
+    columns (a0, b, d row-major, p), ``offset_um`` [um]; converted to the
+    normalized units (divided by ``y_half``), signs clipped to the EUPI's
+    bounds, ``k_ex`` chosen again for the margin 0.05.
+    """
+    from ..models import eupi as eupiref
+    th = np.asarray(th_um, float)
+    n_cpi, n_u = len(hp["r_cpi"]), len(hp["r_upi"]) * len(hp["a_upi"])
     yh = float(hp["y_half"])
     new = dict(hp)
     new["a0"] = float(max(th[0] / yh, eupi_kind.A0_MIN))
     new["b"] = np.maximum(th[1:1 + n_cpi] / yh, 0.0)
     d = np.maximum(th[1 + n_cpi:1 + n_cpi + n_u] / yh, 0.0)
     new["d"] = d.reshape(len(hp["r_upi"]), len(hp["a_upi"])) if n_u else np.zeros((0, 0))
-    new["p"] = th[1 + n_cpi + n_u:-1] / yh
-    new["p0"] = float((th[-1] - float(hp["y_mid"])) / yh)
+    new["p"] = th[1 + n_cpi + n_u:] / yh
+    new["p0"] = float((float(offset_um) - float(hp["y_mid"])) / yh)
     base = eupi_kind.to_params({**new, "k_ex": 0.0})
     new["margin_at_kex0"] = eupiref.small_gain_margin(base, -1.0, 1.0)
     try:
@@ -329,14 +368,19 @@ def refine_weights(params: dict, recordings, xs=None) -> dict:
         new["small_gain_margin"] = eupiref.small_gain_margin(eupiref.apply_kex(base, kex), -1.0, 1.0)
     except ValueError:
         new["k_ex"], new["invertible"], new["small_gain_margin"] = 0.0, False, new["margin_at_kex0"]
-    cost1 = cost(new, 1.0, 0.0)
-    if cost1 < cost0:
-        return {"hysteresis": new, "c1": 1.0, "c0": 0.0, "refine_weights_cost": [cost0, cost1]}
-    return {}
+    return new
 
 
 def simulate(params: dict, t, u, u2=None) -> np.ndarray:
-    """Model output y [um] for drive u [V]: EUPI, then the discretized dynamics (``u2`` unused)."""
+    """Model output y [um] for drive u [V]: EUPI, then the discretized dynamics (``u2`` unused).
+
+    A model from ``--cascade-joint`` (``method`` "joint") also has creep lags,
+    a delay and possibly the drive before the first sample
+    (:func:`piezoctl.ident.cascade_joint.simulate_joint`).
+    """
+    if params.get("method") == "joint":
+        from .cascade_joint import simulate_joint
+        return simulate_joint(params, t, u)
     w = eupi_kind.simulate(params["hysteresis"], t, u)
     w = float(params.get("c1", 1.0)) * w + float(params.get("c0", 0.0))
     return tf.simulate_tf(params["num"], params["den"], t, w)
