@@ -238,12 +238,17 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
             "evidence": (f"{phrase[0].upper() + phrase[1:]}; adding it to the model lowers the exact held-out NRMSE "
                          f"from {a.exact_before:.4f} to {a.exact_after:.4f} (active-block t and signed-rank tests on "
                          f"the linearized term, nested against a refit of the base's hysteresis, p = {a.p:.1e}, "
-                         f"threshold {a.p_max:.1e})." + (f" {a.discrimination}" if a.discrimination else "")),
+                         f"threshold {a.p_max:.1e})." + (f" {a.discrimination}" if a.discrimination else "")
+                         + (f" Caution: the refined model is worse on {a.worsened[0]} (held-out error x"
+                            f"{a.worsened[1]:.2f} there): where it is wrong, this model does not hold."
+                            if a.worsened else "")),
             "where": where, "params": params,
             "improvement": {"nrmse_before": a.exact_before, "nrmse_after": a.exact_after,
                             "exact_fold_ratios": a.exact_fold_ratios,
                             "linearized": {"nrmse_before": a.nrmse_before, "nrmse_after": a.nrmse_after},
-                            "fold_ratios": a.fold_ratios, "p_value": a.p, "delta_bic": a.dbic},
+                            "fold_ratios": a.fold_ratios, "p_value": a.p, "delta_bic": a.dbic,
+                            "worse_on": ({"recording": a.worsened[0], "factor": a.worsened[1]}
+                                         if a.worsened else None)},
             "signature": a.term.signature})
     last = rounds[-1] if rounds else []
     named = {x["name"] for x in effects}

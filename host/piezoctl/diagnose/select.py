@@ -132,6 +132,7 @@ class Candidate:
     coef_all: np.ndarray | None = None
     described: tuple | None = None            # (params with units, phrase)
     contrib: list | None = None               # per recording: the term's own contribution [um]
+    worsened: tuple | None = None             # (recording, factor): one whose held-out error the term raised
 
     @property
     def name(self) -> str:
@@ -516,7 +517,9 @@ def _supersede(evals):
 
 def _worsened(ex, names):
     """(recording, factor) of the recording whose held-out RMS error (both folds) the term raises most, when
-    beyond ``WORSEN_MAX``; else None."""
+    beyond ``WORSEN_MAX``; else None. Reported with the effect, not a veto: as a veto (round 7) it also refused
+    a true rate dependence and a true creep on held-out cases, whose refined models made a slow in-range
+    triangle 2.7 to 3.1x worse at the noise floor."""
     worst = None
     for i, n in enumerate(names):
         b = sum(x["per_recording"][i][0] for x in ex)
@@ -541,16 +544,10 @@ def _first_exact(evals, fctx, fold_all, recs, span, log):
         c.exact_before = float(np.sqrt(sum(x["sse_before"] for x in ex) / max(n_ex, 1)) / span)
         c.exact_after = float(np.sqrt(sum(x["sse_after"] for x in ex) / max(n_ex, 1)) / span)
         log(f"    exact {c.name}: {c.exact_fold_ratios} {c.exact_before:.4f} -> {c.exact_after:.4f}")
-        worse = _worsened(ex, fctx[0].names)
-        if max(c.exact_fold_ratios) < 1.0 and worse is None:
+        if max(c.exact_fold_ratios) < 1.0:
             c.exact = ex
+            c.worsened = _worsened(ex, fctx[0].names)
             return c
-        if worse is not None:
-            c.veto = (f"the exact simulation of the refined model with this term makes {worse[0]} worse (held-out "
-                      f"error x{worse[1]:.2f} there, limit x{sg.WORSEN_MAX:g}): a physical effect does not fit one "
-                      "recording by breaking another")
-            log(f"    {c.name} vetoed: {worse[0]} x{worse[1]:.2f}")
-            continue
         c.veto = ("the exact simulation of the refined model with this term does not lower the held-out "
                   f"error in each fold (ratios {c.exact_fold_ratios[0]:.2f}, {c.exact_fold_ratios[1]:.2f})")
     return None

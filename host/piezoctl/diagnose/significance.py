@@ -29,9 +29,8 @@ from scipy import stats
 __all__ = ["RATIO_MAX", "WORSEN_MAX", "ALPHA", "ACTIVE_FRAC", "ACTIVE_PCT", "active_block_test", "effective_n", "bic_delta"]
 
 RATIO_MAX = 0.8
-WORSEN_MAX = 1.5      # a term whose exact refined model raises one recording's held-out error beyond this factor
-                      # is not the physics (a sensor curve that fits one random walk's level and breaks the
-                      # full-range triangles at the same positions: the base's misfit in that walk)
+WORSEN_MAX = 1.5      # a named term whose exact refined model raises one recording's held-out error beyond this
+                      # factor says so in its evidence (the model is wrong there)
 ALPHA = 0.01          # family-wise error per selection round (Bonferroni over the candidates)
 ACTIVE_PCT = 80.0     # reference block RMS of the correction: this percentile over the blocks (not the largest: a
                       # few blocks with spikes, e.g. steps of the other axis, must not silence the rest)
