@@ -116,6 +116,9 @@ def chirp_frf(ch: dict, *, fmin: float = 5.0, fmax: float = 2000.0, coherence_mi
     return tfid.FRF(f_hz, mag, np.concatenate(ph), coh)
 
 
+MULTITONE_HZ = (1.0, 7.0, 23.0)   # the acceptance's multitone [Hz]
+
+
 def _settled_capture(ctl, period_s: float, periods: int, settle_periods: int) -> dict:
     tick = ctl.identity.tick_hz
     total_s = period_s * (periods + settle_periods)
@@ -131,15 +134,25 @@ def _settled_capture(ctl, period_s: float, periods: int, settle_periods: int) ->
 def triangle_run(ctl, f_hz: float, centre_um: float, amp_um: float, *, periods: int = 2,
                  settle_periods: int = 1) -> dict:
     """Play a position triangle in the current mode; ``ref`` and ``y`` [um] over whole periods after settling."""
-    ctl.configure_wave("triangle", offset_q15=ctl.q15_position(centre_um),
-                       amplitude_q15=int(round(amp_um / ctl.scale.p_half * 32768)), f_hz=f_hz)
+    load_triangle(ctl, f_hz, centre_um, amp_um)
     return _settled_capture(ctl, 1.0 / f_hz, periods, settle_periods)
 
 
-def multitone_run(ctl, freqs=(1.0, 7.0, 23.0), centre_um: float = 0.0, amp_um: float = 1.0,
-                  *, periods: int = 1, settle_periods: int = 1) -> dict:
-    """A multitone (equal amplitudes summing to ``amp_um``) over whole periods of the lowest tone."""
+def load_triangle(ctl, f_hz: float, centre_um: float, amp_um: float) -> None:
+    """Load (not start) the position triangle of :func:`triangle_run`."""
+    ctl.configure_wave("triangle", offset_q15=ctl.q15_position(centre_um),
+                       amplitude_q15=int(round(amp_um / ctl.scale.p_half * 32768)), f_hz=f_hz)
+
+
+def load_multitone(ctl, freqs=MULTITONE_HZ, centre_um: float = 0.0, amp_um: float = 1.0) -> None:
+    """Load (not start) the multitone of :func:`multitone_run`."""
     each = int(round(amp_um / len(freqs) / ctl.scale.p_half * 32768))
     ctl.configure_wave("multisine", offset_q15=ctl.q15_position(centre_um),
                        tones=[(each, f, 0.0) for f in freqs])
+
+
+def multitone_run(ctl, freqs=MULTITONE_HZ, centre_um: float = 0.0, amp_um: float = 1.0,
+                  *, periods: int = 1, settle_periods: int = 1) -> dict:
+    """A multitone (equal amplitudes summing to ``amp_um``) over whole periods of the lowest tone."""
+    load_multitone(ctl, freqs, centre_um, amp_um)
     return _settled_capture(ctl, 1.0 / min(freqs), periods, settle_periods)

@@ -30,13 +30,20 @@ from ..io.modelfile import load_model, make_provenance, save_model
 from ..io.recording import load_recording, save_recording
 from ..tables.from_model import compile_model
 from ..tables.image import TableImageError, build_image
-from . import excitation
+from . import excitation, ilc
 from .feedback import design_feedback
 
 __all__ = ["calibrate", "fit_model", "Steps"]
 
 STEPS = 7
-FREQS = (1.0, 10.0, 50.0)
+FREQS = (1.0, 10.0, 50.0, 100.0)
+LEARNED = "learned"   # runs key: compensated plus the learned feedforward (ilc.py)
+ILC_TRIALS = 8
+
+
+def _periods(f_hz: float) -> int:
+    """Periods measured (after one of settling): about 0.1 s of a fast triangle, 2 of a slow one."""
+    return 2 if f_hz < 10 else max(5, int(round(0.1 * f_hz)))
 
 
 class Steps:
@@ -279,33 +286,69 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         runs = {}
         tracking = {}
         compensated = "ff_feedback"
-        for mode in ("open_loop", compensated):
-            label = "uncompensated" if mode == "open_loop" else f"compensated ({mode})"
+        keys = list(FREQS) + ["multitone"]
+        # what each part of the compensation buys: each configuration on every reference
+        configs = (("open_loop", "uncompensated", "open_loop", False),
+                   ("feedback", "feedback only (PI + notch)", "feedback", False),
+                   ("hysteresis", "+ hysteresis inverse", compensated, False),
+                   (compensated, "+ dynamics (preview, shaper)", compensated, True))
+        for key_mode, label, mode, dyn in configs:
             _park(ctl, ctl.q15_position(y_lo))
-            if mode == "open_loop":
+            if dyn:
+                ctl.configure_shaper(fb["shaper_ticks"], fb["shaper_q15"], fb["preview_ticks"])
+            else:
                 ctl.configure_shaper()
+            if mode == "open_loop":
                 ctl.configure_feedback()
             else:
-                ctl.configure_shaper(fb["shaper_ticks"], fb["shaper_q15"], fb["preview_ticks"])
                 ctl.configure_feedback(kp=fb["kp"], ki=fb["ki"], notch=fb["notch"])
             ctl.set_mode(mode)
             st = ctl.status()
             if st["faults"]:
                 raise CliError(f"the controller reports faults: {', '.join(st['faults_names'])}")
             ctl.arm(True)
+            ilc.switch_off(ctl)
             for f in FREQS:
                 if f < 10:   # the long one (3 s at 1 Hz): said on its own so the step is never silent long
                     steps.say(f"{label}: {f:g} Hz triangle ...")
-                runs[(mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=2 if f < 10 else 5)
+                runs[(key_mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=_periods(f))
             steps.say(f"{label}: multitone ...")
-            runs[(mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
+            runs[(key_mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
+        # + the learned feedforward: trials on the controller, then the same measurement with it played
+        learned = {}
+        f_cut_max = 0.5 * fb["resonance_hz"]
+        for key in keys:
+            f0 = key if key != "multitone" else min(excitation.MULTITONE_HZ)
+            if key == "multitone":
+                excitation.load_multitone(ctl, centre_um=centre, amp_um=amp)
+            else:
+                excitation.load_triangle(ctl, key, centre, amp)
+            name = f"{key:g} Hz triangle" if key != "multitone" else "multitone"
+            steps.say(f"learned feedforward: {name}, {ILC_TRIALS} trials ...")
+            res = ilc.learn_on_controller(ctl, f0, preview_ticks=fb["preview_ticks"],
+                                          f_cut_hz=min(f_cut_max, 0.4 * ilc.FF_MAX * f0), iterations=ILC_TRIALS,
+                                          periods=1 if f0 < 10 else _periods(f0))
+            learned[key] = res
+            if key == "multitone":
+                runs[(LEARNED, key)] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
+            else:
+                runs[(LEARNED, key)] = excitation.triangle_run(ctl, key, centre, amp, periods=_periods(key))
+            ilc.switch_off(ctl)
         _park(ctl, ctl.q15_position(y_lo))
-        for key in list(FREQS) + ["multitone"]:
-            unc = _rms(runs[("open_loop", key)]["ref"] - runs[("open_loop", key)]["y"])
-            com = _rms(runs[(compensated, key)]["ref"] - runs[(compensated, key)]["y"])
+        for key in keys:
+            rms = {k: _rms(runs[(k, key)]["ref"] - runs[(k, key)]["y"])
+                   for k in ("open_loop", "feedback", "hysteresis", compensated, LEARNED)}
+            unc, com = rms["open_loop"], rms[LEARNED]
             name = f"{key:g}" if key != "multitone" else "multitone"
+            res = learned[key]
             tracking[name] = {"rmse_uncompensated_um": unc, "rmse_compensated_um": com,
-                              "reduction": unc / com if com > 0 else float("inf")}
+                              "reduction": unc / com if com > 0 else float("inf"),
+                              "rmse_by_part_um": {"feedback": rms["feedback"], "hysteresis": rms["hysteresis"],
+                                                  "dynamics": rms[compensated], "learned": com},
+                              "learned": {"trials": len(res["history"]), "refused": res["refused"],
+                                          "trial_rms_um": [h["rms_um"] for h in res["history"]],
+                                          "lag_s": res["lag_s"], "f_cut_hz": res["f_cut_hz"],
+                                          "entries": res["n_entries"]}}
         worse = [k for k, v in tracking.items() if v["rmse_compensated_um"] > v["rmse_uncompensated_um"]]
         rolled_back = False
         rollback_result = None
@@ -371,7 +414,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         # the report's own row: its duration so far (the figures are most of it)
         row["result"] = f"{out / 'report.html'}"
         write_report(out / "report.html", summary, forc=forc, model=model, frf=frf, tf=tf, runs=runs, img=img,
-                     compensated=compensated, steps=steps.rows + [row], say=steps.say)
+                     compensated=LEARNED, steps=steps.rows + [row], say=steps.say)
         summary["duration_s"] = time.monotonic() - t_start
         steps.result(row, f"{out / 'report.html'} ({summary['duration_s']:.0f} s in all)")
     (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True))

@@ -28,7 +28,7 @@ def figure_html(fig) -> str:
 
 
 NM_PER_UM = 1000.0
-KEYS = (1.0, 10.0, 50.0, "multitone")
+KEYS = (1.0, 10.0, 50.0, 100.0, "multitone")
 MULTITONE_HZ = (1.0, 7.0, 23.0)   # excitation.multitone_run's default tones
 
 
