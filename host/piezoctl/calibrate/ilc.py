@@ -10,17 +10,18 @@ where the learning acts, and trial ``j`` to ``j + 1`` does, per harmonic ``k``
 of the period (the signals are periodic, so the filters are exact and
 zero-phase in the period's DFT)::
 
-    C[k] <- Q[k] (C[k] + alpha exp(+i w_k lag) E[k])
+    C[k] <- Q[k] (C[k] + alpha E[k] / T_hat[k])
 
-- ``L = alpha exp(+i w lag)``: the learning gain with a phase lead of the
-  loop's residual lag (``lag`` estimated from the first trial, ``T`` measured
-  at the reference's own harmonics), a non-causal filter that only a periodic,
-  recorded error allows;
+- ``L = alpha / T_hat``: the learning gain times the inverse of the closed
+  loop as measured in the first trial (``Y / R`` at the reference's own
+  harmonics; between them interpolated, beyond them a pure lag fitted to
+  their phase), ``|1 / T_hat|`` limited to ``gain_max``: a non-causal,
+  phase-leading filter that only a periodic, recorded error allows;
 - ``Q``: a zero-phase low-pass, 1 up to ``0.8 f_cut`` and a raised cosine to 0
   at ``f_cut``, so the learning stays away from the resonance where ``T`` is
   not close to a delay; the correction has no content above ``f_cut``.
 
-The error then shrinks by ``|1 - alpha T exp(i w lag)|`` per trial at each
+The error then shrinks by ``|1 - alpha T / T_hat|`` per trial at each
 harmonic below ``f_cut``. Divergence guard: a trial whose RMS error grows more
 than ``grow`` times the best so far is refused, the correction goes back to
 the best one and ``alpha`` is halved; below ``alpha_min`` the learning stops.
@@ -33,7 +34,7 @@ import numpy as np
 
 from .. import interface
 
-__all__ = ["ILC", "learn", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
+__all__ = ["ILC", "learn", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
 
 FF_MAX = interface.HOLDING_REGISTERS["wave_ff_levels"][2]
 
@@ -52,7 +53,13 @@ class ILC:
     alpha : float
         Learning gain, 0 < alpha <= 1 (1: the whole error per trial on ``T = 1``).
     lag_s : float
-        Phase lead of the learning filter [s] (the closed loop's residual lag).
+        Phase lead of the learning filter [s] (the closed loop's residual lag),
+        where ``loop`` is not given.
+    loop : array of complex, optional
+        The closed loop ``T_hat`` at every harmonic ``0 .. n_samples // 2``
+        (:func:`loop_response`); the learning filter is ``alpha / T_hat``.
+    gain_max : float
+        Largest ``|1 / T_hat|`` the learning filter applies.
     grow : float
         A trial whose RMS error exceeds ``grow`` times the best one is refused.
     alpha_min : float
@@ -60,7 +67,8 @@ class ILC:
     """
 
     def __init__(self, n_samples: int, f0_hz: float, f_cut_hz: float, *, alpha: float = 0.5,
-                 lag_s: float = 0.0, grow: float = 1.05, alpha_min: float = 0.05):
+                 lag_s: float = 0.0, loop=None, gain_max: float = 10.0, grow: float = 1.05,
+                 alpha_min: float = 0.05):
         if n_samples < 4 or f0_hz <= 0 or f_cut_hz <= f0_hz or not 0 < alpha <= 1:
             raise ValueError("ILC needs >= 4 samples a period, f_cut above f0 and 0 < alpha <= 1")
         self.n = int(n_samples)
@@ -73,6 +81,14 @@ class ILC:
         x = np.clip((self.f_hz - 0.8 * f_cut_hz) / (0.2 * f_cut_hz), 0.0, 1.0)
         self.q = np.where(self.f_hz < f_cut_hz, 0.5 * (1 + np.cos(np.pi * x)), 0.0)
         self.q[self.n // 2:] = 0.0   # no Nyquist line: it has no phase to lead
+        if loop is None:
+            self.inv = np.exp(2j * np.pi * self.f_hz * self.lag_s)
+        else:
+            loop = np.asarray(loop, dtype=complex)
+            if loop.shape != self.f_hz.shape:
+                raise ValueError(f"the loop response needs {self.f_hz.size} harmonics, not {loop.shape}")
+            mag = np.maximum(np.abs(loop), 1.0 / gain_max)
+            self.inv = np.exp(-1j * np.angle(loop)) / mag
         self.c_spec = np.zeros(self.n // 2 + 1, dtype=complex)
         self.best_spec = self.c_spec.copy()
         self.best_rms = np.inf
@@ -103,8 +119,7 @@ class ILC:
             return False
         if rms < self.best_rms:
             self.best_rms, self.best_spec = rms, self.c_spec.copy()
-        lead = np.exp(2j * np.pi * self.f_hz * self.lag_s)
-        self.c_spec = self.q * (self.c_spec + self.alpha * lead * np.fft.rfft(e))
+        self.c_spec = self.q * (self.c_spec + self.alpha * self.inv * np.fft.rfft(e))
         return True
 
 
@@ -121,6 +136,29 @@ def lag_from_trial(r: np.ndarray, y: np.ndarray, f0_hz: float, f_max_hz: float) 
     phase = np.angle(ys[sel] / rs[sel])
     om = 2 * np.pi * f[sel]
     return float(max(0.0, -np.sum(w[sel] * phase * om) / np.sum(w[sel] * om ** 2)))
+
+
+def loop_response(r: np.ndarray, y: np.ndarray, f0_hz: float, f_max_hz: float, *, rel: float = 1e-4):
+    """The closed loop ``T = Y / R`` at every harmonic of one period (``r``, ``y``
+    one period each, no correction played).
+
+    Measured where the reference has a harmonic above ``rel`` of its largest
+    (a triangle: the odd ones) and up to ``f_max_hz``; in between interpolated
+    (magnitude, unwrapped phase); outside them a unit magnitude and the pure lag
+    :func:`lag_from_trial` fits (a multitone's three tones say little beyond).
+    """
+    rs, ys = np.fft.rfft(r - np.mean(r)), np.fft.rfft(y - np.mean(y))
+    f = np.arange(rs.size) * f0_hz
+    lag = lag_from_trial(r, y, f0_hz, f_max_hz)
+    model = np.exp(-2j * np.pi * f * lag)
+    w = np.abs(rs)
+    sel = (f > 0) & (f <= f_max_hz) & (w > rel * w.max())
+    if np.count_nonzero(sel) < 2:
+        return model
+    ratio = ys[sel] / rs[sel] / model[sel]   # what the pure lag misses, interpolated between measured lines
+    mag = np.interp(f, f[sel], np.abs(ratio))
+    ph = np.interp(f, f[sel], np.unwrap(np.angle(ratio)))
+    return model * mag * np.exp(1j * ph)
 
 
 def learn(trial, ilc: ILC, iterations: int) -> dict:
@@ -186,22 +224,16 @@ def switch_off(ctl) -> None:
     ctl.client.write_holding(interface.HOLDING_REGISTERS["wave_ff_command"][0], [_FF_OFF])
 
 
-def _decimation(n_ticks: int, f_cut_hz: float, tick_hz: float, frames_max: int) -> int:
-    """The largest divisor of the period [ticks] that keeps 2.5 f_cut below the
-    recording's Nyquist rate and the period within ``frames_max`` (1 if none)."""
-    best = 1
+def _decimation(n_ticks: int, frames_max: int) -> int:
+    """The smallest divisor of the period [ticks] that fits one period in ``frames_max`` frames."""
     for d in range(1, n_ticks + 1):
-        if n_ticks % d == 0 and tick_hz / d >= 5.0 * f_cut_hz and d <= 16:
-            best = d
-    while n_ticks // best > frames_max and best > 1:
-        best -= 1
-        while n_ticks % best:
-            best -= 1
-    return best
+        if n_ticks % d == 0 and n_ticks // d <= frames_max:
+            return d
+    return n_ticks
 
 
 def periodic_trial(ctl, n_ticks: int, *, periods: int, settle_periods: int = 1, decimation: int = 1,
-                   preview_ticks: int = 0) -> np.ndarray:
+                   preview_ticks: int = 0, rms_all: list | None = None) -> np.ndarray:
     """Start the loaded wave, record ``ref`` and ``y``; the error ``r - y`` [um]
     averaged over ``periods`` whole periods after ``settle_periods``, indexed by
     the wave's own sample (the recorder sees the reference ``preview_ticks`` late)."""
@@ -209,7 +241,10 @@ def periodic_trial(ctl, n_ticks: int, *, periods: int, settle_periods: int = 1, 
     frames = m * (periods + settle_periods)
     cols = ctl.capture(["ref", "y"], frames, decimation=decimation, trigger="software", start_wave=True)
     ctl.command("stop_wave")
-    e = (cols["ref"] - cols["y"])[settle_periods * m:].reshape(periods, m).mean(axis=0)
+    e_all = (cols["ref"] - cols["y"])[settle_periods * m:].reshape(periods, m)
+    if rms_all is not None:
+        rms_all.append(float(np.sqrt(np.mean(e_all ** 2))))
+    e = e_all.mean(axis=0)
     # recorded sample i is wave sample i - preview: shift back (exactly, in the period's DFT)
     spec = np.fft.rfft(e) * np.exp(2j * np.pi * np.arange(m // 2 + 1) * preview_ticks / n_ticks)
     return np.fft.irfft(spec, n=m)
@@ -224,17 +259,20 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
     """
     tick = float(ctl.identity.tick_hz)
     n_ticks = int(round(tick / f0_hz))
-    dec = _decimation(n_ticks, f_cut_hz, tick, ctl.identity.rec_capacity // 2 // (periods + 1))
+    from .excitation import settle_periods
+    settle = settle_periods(f0_hz)
+    dec = _decimation(n_ticks, ctl.identity.rec_capacity // 2 // (periods + settle))
     m = n_ticks // dec
     switch_off(ctl)
-    # the first trial without correction also gives the loop's lag: r and y at the wave's harmonics
-    cols = ctl.capture(["ref", "y"], m * (periods + 1), decimation=dec, trigger="software", start_wave=True)
+    # the first trial without correction also gives the loop's response at the wave's harmonics
+    cols = ctl.capture(["ref", "y"], m * (periods + settle), decimation=dec, trigger="software", start_wave=True)
     ctl.command("stop_wave")
-    r = cols["ref"][m:].reshape(periods, m).mean(axis=0)
-    y = cols["y"][m:].reshape(periods, m).mean(axis=0)
+    r = cols["ref"][settle * m:].reshape(periods, m).mean(axis=0)
+    y = cols["y"][settle * m:].reshape(periods, m).mean(axis=0)
     lag = lag_from_trial(r, y, f0_hz, f_cut_hz)
-    ilc = ILC(m, f0_hz, f_cut_hz, alpha=alpha, lag_s=lag)
+    ilc = ILC(m, f0_hz, f_cut_hz, alpha=alpha, loop=loop_response(r, y, f0_hz, f_cut_hz))
     first = True
+    rms_all = [float(np.sqrt(np.mean((cols["ref"] - cols["y"])[settle * m:] ** 2)))]
 
     def trial(c):
         nonlocal first
@@ -243,13 +281,14 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
             spec = np.fft.rfft(r - y) * np.exp(2j * np.pi * np.arange(m // 2 + 1) * preview_ticks / n_ticks)
             return np.fft.irfft(spec, n=m)
         upload(ctl, c, f0_hz)
-        e = periodic_trial(ctl, n_ticks, periods=periods, decimation=dec, preview_ticks=preview_ticks)
+        e = periodic_trial(ctl, n_ticks, periods=periods, settle_periods=settle, decimation=dec,
+                           preview_ticks=preview_ticks, rms_all=rms_all)
         if say:
             say(f"  trial {len(ilc.history) + 1}: {np.sqrt(np.mean(e ** 2)) * 1e3:.1f} nm RMS")
         return e
 
     res = learn(trial, ilc, iterations)
     info = upload(ctl, res["best"], f0_hz)
-    res.update({"lag_s": lag, "decimation": dec, "n_entries": info["n"], "clipped": info["clipped"],
+    res.update({"rms_all_um": rms_all, "lag_s": lag, "decimation": dec, "n_entries": info["n"], "clipped": info["clipped"],
                 "f_cut_hz": f_cut_hz})
     return res

@@ -38,7 +38,8 @@ __all__ = ["calibrate", "fit_model", "Steps"]
 STEPS = 7
 FREQS = (1.0, 10.0, 50.0, 100.0)
 LEARNED = "learned"   # runs key: compensated plus the learned feedforward (ilc.py)
-ILC_TRIALS = 8
+ILC_TRIALS = {"slow": 5, "fast": 10}   # trials of a 1 s period (1 Hz, the multitone) and of a faster one
+ILC_F_CUT = 2.0   # the learning's band edge, a multiple of the resonance
 
 
 def _periods(f_hz: float) -> int:
@@ -316,7 +317,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             runs[(key_mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
         # + the learned feedforward: trials on the controller, then the same measurement with it played
         learned = {}
-        f_cut_max = 0.5 * fb["resonance_hz"]
+        f_cut_max = ILC_F_CUT * fb["resonance_hz"]
         for key in keys:
             f0 = key if key != "multitone" else min(excitation.MULTITONE_HZ)
             if key == "multitone":
@@ -324,9 +325,10 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             else:
                 excitation.load_triangle(ctl, key, centre, amp)
             name = f"{key:g} Hz triangle" if key != "multitone" else "multitone"
-            steps.say(f"learned feedforward: {name}, {ILC_TRIALS} trials ...")
+            trials = ILC_TRIALS["slow" if f0 < 10 else "fast"]
+            steps.say(f"learned feedforward: {name}, {trials} trials ...")
             res = ilc.learn_on_controller(ctl, f0, preview_ticks=fb["preview_ticks"],
-                                          f_cut_hz=min(f_cut_max, 0.4 * ilc.FF_MAX * f0), iterations=ILC_TRIALS,
+                                          f_cut_hz=min(f_cut_max, 0.4 * ilc.FF_MAX * f0), iterations=trials,
                                           periods=1 if f0 < 10 else _periods(f0))
             learned[key] = res
             if key == "multitone":
@@ -347,6 +349,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                                                   "dynamics": rms[compensated], "learned": com},
                               "learned": {"trials": len(res["history"]), "refused": res["refused"],
                                           "trial_rms_um": [h["rms_um"] for h in res["history"]],
+                                          "trial_rms_all_um": res["rms_all_um"],
                                           "lag_s": res["lag_s"], "f_cut_hz": res["f_cut_hz"],
                                           "entries": res["n_entries"]}}
         worse = [k for k, v in tracking.items() if v["rmse_compensated_um"] > v["rmse_uncompensated_um"]]
