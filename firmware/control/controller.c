@@ -237,7 +237,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     const piezo_ctl_cfg_t *g = &c->cfg;
     int16_t y, y2, r, r_loop, r_ahead, u_ff = 0, u_fb = 0, u;
     int8_t pend;
-    uint8_t mode = c->mode;
+    uint8_t mode = c->mode, rec_was;
     int run, wave_on;
 
     /* 1. a committed table takes over only here, between two ticks */
@@ -348,7 +348,12 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     c->sig[PIEZO_SIG_FB] = u_fb;
     c->sig[PIEZO_SIG_Y2] = y2;
     c->sig[PIEZO_SIG_U2] = c->u2_q15;
+    rec_was = c->rec.state;
     piezo_rec_process(&c->rec, c->sig);
+    if (c->wave_on_trigger && rec_was == PIEZO_REC_ARMED && c->rec.state != PIEZO_REC_ARMED) {
+        c->wave_on_trigger = 0u;
+        (void)piezo_ctl_start_wave(c); /* checked when it was armed */
+    }
     c->overrun_run = 0u;
     c->st.ticks++;
 }
@@ -444,7 +449,25 @@ int piezo_ctl_start_wave(piezo_ctl_t *c)
 
 void piezo_ctl_stop_wave(piezo_ctl_t *c)
 {
+    c->wave_on_trigger = 0u;
     c->wave.running = 0u;
+}
+
+int piezo_ctl_start_wave_on_trigger(piezo_ctl_t *c)
+{
+    piezo_wave_t trial;
+    int rc;
+    c->wave_cfg.tones = c->tones;
+    c->wave_cfg.levels_q15 = c->levels_q15;
+    c->wave_cfg.durations = c->durations;
+    if (c->wave_cfg.n_levels > PIEZO_CTL_WAVE_MAX_LEVELS) {
+        return PIEZO_ERANGE;
+    }
+    if ((rc = piezo_wave_init(&trial, &c->wave_cfg)) != PIEZO_OK) {
+        return rc;
+    }
+    c->wave_on_trigger = 1u;
+    return PIEZO_OK;
 }
 
 int piezo_ctl_wave_ff_commit(piezo_ctl_t *c, const int16_t *staged_q15, uint16_t n, uint32_t freq_word)

@@ -198,6 +198,7 @@ typedef struct {
     volatile int8_t wave_ff_pending; /* committed slot for the tick, PIEZO_CTL_WAVE_FF_OFF, or -1 */
     uint32_t wave_ff_phase;          /* phase of r_ahead; restarts with the wave */
     int16_t wave_ff_q15;             /* last correction added to the feedforward reference */
+    volatile uint8_t wave_on_trigger; /* 1: start the wave when the recorder triggers */
 
     piezo_rec_t rec;
     int16_t rec_buf[PIEZO_CTL_REC_SAMPLES];
@@ -248,6 +249,11 @@ void piezo_ctl_clear_faults(piezo_ctl_t *c);
  *  A disarmed unit is armed (PIEZO_EORDER with faults). */
 int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on);
 int piezo_ctl_start_wave(piezo_ctl_t *c);  /* from wave_cfg; triggers a SOFTWARE recorder */
+/** Start the wave (as piezo_ctl_start_wave) at the tick the armed recorder
+ *  triggers, e.g. on the other axis' drive u2 crossing a level: the wave's
+ *  first sample is the next tick's, in step with the other axis' wave. The
+ *  wave is checked now (its error returned, nothing armed). */
+int piezo_ctl_start_wave_on_trigger(piezo_ctl_t *c);
 /** Commit the learned feedforward: copy staged[0 .. n) and freq_word into the
  *  slot not being played; the tick plays it from its next start (step 1).
  *  PIEZO_EINVAL: n outside 1..PIEZO_CTL_WAVE_FF_MAX or freq_word 0, staged

@@ -409,6 +409,7 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd, ui
         switch (v) {
         case PIEZO_CMD_CLEAR_FAULTS: piezo_ctl_clear_faults(c); break;
         case PIEZO_CMD_START_WAVE: (void)piezo_ctl_start_wave(c); break;
+        case PIEZO_CMD_START_WAVE_ON_TRIGGER: (void)piezo_ctl_start_wave_on_trigger(c); break;
         case PIEZO_CMD_STOP_WAVE: piezo_ctl_stop_wave(c); break;
         case PIEZO_CMD_ARM_RECORDER:
             piezo_rec_reset(&c->rec);

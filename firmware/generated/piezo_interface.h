@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0x7C328D93u
+#define PIEZO_INTERFACE_CRC32 0x0A358CC0u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -398,7 +398,8 @@ enum piezo_enum_command {
     PIEZO_CMD_RESET_RECORDER = 6,  /* reset the recorder */
     PIEZO_CMD_SERVO_OFF = 7,  /* open loop holding the drive applied now: setpoint := that drive, mode direct, reference source setpoint, wave stopped; armed only */
     PIEZO_CMD_SERVO_ON = 8,  /* closed loop at the present position: setpoint := position, mode feedback, the integrator preloaded with the applied drive (no jump); arms a disarmed unit without faults */
-    PIEZO_CMD_N = 9
+    PIEZO_CMD_START_WAVE_ON_TRIGGER = 9,  /* start the wave generator at the tick the armed recorder triggers (its signal crossing its level, e.g. the other axis' drive u2), so a wave runs in step with the other axis'; a wave that does not check is refused */
+    PIEZO_CMD_N = 10
 };
 /* table actions (holding register table_command); they need the unlock */
 enum piezo_enum_table_command {

@@ -131,6 +131,42 @@ static void test_the_played_table_is_never_half_written(void **state)
     assert_int_equal(piezo_ctl_wave_ff_n(&ctl), 0u);
 }
 
+static void test_wave_starts_in_step_with_the_other_axis(void **state)
+{
+    (void)state;
+    piezo_rec_cfg_t rc = {0};
+    setup_wave(PIEZO_MODE_DIRECT, 0u);
+    piezo_ctl_stop_wave(&ctl);
+    ctl.ref_source = PIEZO_REF_SETPOINT;
+    ctl.setpoint_q15 = 0;
+    ctl.wave_cfg.amplitude_q15 = 20000;
+    rc.n_channels = 1u;
+    rc.signal[0] = PIEZO_SIG_U;
+    rc.decimation = 1u;
+    rc.trigger = PIEZO_REC_RISING;
+    rc.trigger_signal = PIEZO_SIG_U2;
+    rc.trigger_level_q15 = 0;
+    assert_int_equal(piezo_rec_configure(&ctl.rec, &rc), PIEZO_OK);
+    piezo_rec_arm(&ctl.rec);
+    ctl.wave_cfg.kind = 99; /* a wave that does not check is refused, nothing armed */
+    assert_int_equal(piezo_ctl_start_wave_on_trigger(&ctl), PIEZO_EINVAL);
+    assert_int_equal(ctl.wave_on_trigger, 0);
+    ctl.wave_cfg.kind = PIEZO_WAVE_TRIANGLE;
+    assert_int_equal(piezo_ctl_start_wave_on_trigger(&ctl), PIEZO_OK);
+    ctl.u2_q15 = -500;
+    for (uint32_t k = 0; k < 7u; k++) {
+        assert_int_equal(tick(0), 0); /* the setpoint until the other axis' drive rises through 0 */
+        assert_int_equal(piezo_wave_running(&ctl.wave), 0);
+    }
+    ctl.u2_q15 = 500;
+    assert_int_equal(tick(0), 0); /* the trigger tick: the wave starts after it */
+    assert_int_equal(ctl.ref_source, PIEZO_REF_WAVE);
+    assert_int_equal(tick(0), 0);    /* sample 0: the triangle starts at 0 rising */
+    assert_int_equal(tick(0), 1250); /* sample 1: 20000 * 2048 / 32768 */
+    piezo_ctl_stop_wave(&ctl);
+    assert_int_equal(ctl.wave_on_trigger, 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -138,6 +174,7 @@ int main(void)
         cmocka_unit_test(test_loop_sees_the_correction_the_recorder_the_true_error),
         cmocka_unit_test(test_bad_commits_are_refused_and_change_nothing),
         cmocka_unit_test(test_the_played_table_is_never_half_written),
+        cmocka_unit_test(test_wave_starts_in_step_with_the_other_axis),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
