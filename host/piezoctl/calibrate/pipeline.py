@@ -38,6 +38,7 @@ __all__ = ["calibrate", "fit_model", "Steps"]
 STEPS = 7
 FREQS = (1.0, 10.0, 50.0, 100.0)
 LEARNED = "learned"   # runs key: compensated plus the learned feedforward (ilc.py)
+MAX_F_OF_RESONANCE = 0.4   # triangles up to this fraction of the resonance
 ILC_TRIALS = {"slow": 5, "fast": 10}   # trials of a 1 s period (1 Hz, the multitone) and of a faster one
 ILC_F_CUT = 2.0   # the learning's band edge, a multiple of the resonance
 
@@ -287,7 +288,9 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         runs = {}
         tracking = {}
         compensated = "ff_feedback"
-        keys = list(FREQS) + ["multitone"]
+        # a triangle well below the resonance only (its harmonics ring the mode: on a 140 Hz stage a
+        # 100 Hz triangle uncompensated carries the stage out of its sensor's range)
+        keys = [f for f in FREQS if f <= MAX_F_OF_RESONANCE * fb["resonance_hz"]] + ["multitone"]
         # what each part of the compensation buys: each configuration on every reference
         configs = (("open_loop", "uncompensated", "open_loop", False),
                    ("feedback", "feedback only (PI + notch)", "feedback", False),
@@ -309,7 +312,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                 raise CliError(f"the controller reports faults: {', '.join(st['faults_names'])}")
             ctl.arm(True)
             ilc.switch_off(ctl)
-            for f in FREQS:
+            for f in keys[:-1]:
                 if f < 10:   # the long one (3 s at 1 Hz): said on its own so the step is never silent long
                     steps.say(f"{label}: {f:g} Hz triangle ...")
                 runs[(key_mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=_periods(f))

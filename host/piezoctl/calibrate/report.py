@@ -28,7 +28,11 @@ def figure_html(fig) -> str:
 
 
 NM_PER_UM = 1000.0
-KEYS = (1.0, 10.0, 50.0, 100.0, "multitone")
+KEYS = (1.0, 10.0, 50.0, 100.0, "multitone")   # the acceptance's references, those that ran are plotted
+
+
+def _keys(runs: dict) -> list:
+    return [k for k in KEYS if ("open_loop", k) in runs]
 MULTITONE_HZ = (1.0, 7.0, 23.0)   # excitation.multitone_run's default tones
 
 
@@ -61,8 +65,9 @@ def tracking_figure(runs: dict, compensated: str):
     """Reference and position [um] above, the error reference - position [nm] on its own axis below,
     for every acceptance reference, uncompensated (left) and compensated (right)."""
     import matplotlib.pyplot as plt
-    fig = plt.figure(figsize=(11, 3.4 * len(KEYS)), layout="constrained")
-    for k, sub in zip(KEYS, fig.subfigures(len(KEYS), 1)):
+    keys = _keys(runs)
+    fig = plt.figure(figsize=(11, 3.4 * len(keys)), layout="constrained")
+    for k, sub in zip(keys, fig.subfigures(len(keys), 1)):
         ax = sub.subplots(2, 2, sharex="col", gridspec_kw={"height_ratios": [2, 1]})
         for j, mode in enumerate(("open_loop", compensated)):
             r = runs[(mode, k)]
@@ -87,7 +92,7 @@ def loops_figure(runs: dict, compensated: str):
     """Measured position against the reference [um] for each triangle, uncompensated and compensated:
     the hysteresis loop before compensation and what is left of it after."""
     import matplotlib.pyplot as plt
-    tri = [k for k in KEYS if k != "multitone"]
+    tri = [k for k in _keys(runs) if k != "multitone"]
     fig, ax = plt.subplots(1, len(tri), figsize=(11, 3.8), squeeze=False)
     for a, k in zip(ax[0], tri):
         lo = min(float(np.min(runs[(m, k)]["ref"])) for m in ("open_loop", compensated))
@@ -106,7 +111,7 @@ def error_frequency_figure(summary: dict, runs: dict, compensated: str):
     """Tracking error against frequency: RMS over the triangles [nm], and the multitone's error at each tone."""
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
-    tri = [k for k in KEYS if k != "multitone"]
+    tri = [k for k in _keys(runs) if k != "multitone"]
     for key, colour, name in (("rmse_uncompensated_um", "C1", "uncompensated"),
                               ("rmse_compensated_um", "C0", "compensated")):
         ax[0].loglog(tri, [summary["tracking"][f"{k:g}"][key] * NM_PER_UM for k in tri], "o-", color=colour,
