@@ -283,6 +283,13 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
         upload(ctl, c, f0_hz)
         e = periodic_trial(ctl, n_ticks, periods=periods, settle_periods=settle, decimation=dec,
                            preview_ticks=preview_ticks, rms_all=rms_all)
+        if ctl.status()["faults"]:
+            # the correction rang the stage past its sensor: a failed trial (its error, the
+            # disarmed stage's, is large: refused), and the controller armed again
+            ctl.arm(False)
+            ctl.command("clear_faults")
+            ctl.arm(True)
+            e = np.full_like(e, 1e3 * max(1.0, float(np.sqrt(np.mean(e ** 2)))))
         if say:
             say(f"  trial {len(ilc.history) + 1}: {np.sqrt(np.mean(e ** 2)) * 1e3:.1f} nm RMS")
         return e

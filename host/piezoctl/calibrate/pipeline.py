@@ -149,6 +149,21 @@ def _park(ctl, bottom_q15: int, seconds: float = 0.2, steps: int = 40) -> None:
     ctl.arm(False)
 
 
+def _recover(ctl, faulted: list, label: str, say) -> None:
+    """After a configuration's runs: a fault (a reference that rang the stage past
+    its sensor's range) is recorded in ``faulted`` and said, cleared, and the
+    controller parked and armed again, so the next configuration starts clean."""
+    st = ctl.status()
+    if not st["faults"]:
+        return
+    faulted.append({"configuration": label, "faults": st["faults_names"]})
+    say(f"{label}: the controller faulted ({', '.join(st['faults_names'])}): its figures are invalid; "
+        "faults cleared")
+    ctl.arm(False)
+    ctl.command("clear_faults")
+    ctl.arm(True)
+
+
 def _resonance(frf, tf) -> tuple[float, float]:
     """(identified resonance [Hz], the fit's natural frequency [Hz]).
 
@@ -292,6 +307,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         # 100 Hz triangle uncompensated carries the stage out of its sensor's range)
         keys = [f for f in FREQS if f <= MAX_F_OF_RESONANCE * fb["resonance_hz"]] + ["multitone"]
         # what each part of the compensation buys: each configuration on every reference
+        faulted = []   # configurations after whose runs the controller had faulted
         configs = (("open_loop", "uncompensated", "open_loop", False),
                    ("feedback", "feedback only (PI + notch)", "feedback", False),
                    ("hysteresis", "+ hysteresis inverse", compensated, False),
@@ -318,6 +334,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                 runs[(key_mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=_periods(f))
             steps.say(f"{label}: multitone ...")
             runs[(key_mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
+            _recover(ctl, faulted, label, steps.say)
         # + the learned feedforward: trials on the controller, then the same measurement with it played
         learned = {}
         f_cut_max = ILC_F_CUT * fb["resonance_hz"]
@@ -339,6 +356,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             else:
                 runs[(LEARNED, key)] = excitation.triangle_run(ctl, key, centre, amp, periods=_periods(key))
             ilc.switch_off(ctl)
+            _recover(ctl, faulted, f"+ learned feedforward, {name}", steps.say)
         _park(ctl, ctl.q15_position(y_lo))
         for key in keys:
             rms = {k: _rms(runs[(k, key)]["ref"] - runs[(k, key)]["y"])
@@ -355,13 +373,17 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                                           "trial_rms_all_um": res["rms_all_um"],
                                           "lag_s": res["lag_s"], "f_cut_hz": res["f_cut_hz"],
                                           "entries": res["n_entries"]}}
+        if faulted:
+            text_faults = "; faulted: " + ", ".join(f["configuration"] for f in faulted)
+        else:
+            text_faults = ""
         worse = [k for k, v in tracking.items() if v["rmse_compensated_um"] > v["rmse_uncompensated_um"]]
         rolled_back = False
         rollback_result = None
         text = "; ".join(f"{k} Hz {v['rmse_uncompensated_um']:.3f} -> {v['rmse_compensated_um']:.3f} um "
                          f"({v['reduction']:.1f}x)" if k != "multitone" else
                          f"multitone {v['rmse_uncompensated_um']:.3f} -> {v['rmse_compensated_um']:.3f} um "
-                         f"({v['reduction']:.1f}x)" for k, v in tracking.items())
+                         f"({v['reduction']:.1f}x)" for k, v in tracking.items()) + text_faults
         if worse:
             rollback_result = ctl.rollback_table()
             rolled_back = rollback_result == "ok"
@@ -397,6 +419,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             "rollback_result": rollback_result,
             "params_saved": params_saved,
             "tracking": tracking,
+            "acceptance_faults": faulted,
             "checks": {"forward_inverse_max_error_fraction": identity_err, "quantization_max_lsb": quant_lsb,
                        **{k: v for k, v in comp.info.items() if isinstance(v, (int, float))}},
             "compensation": {"mode": compensated, "preview_ticks": fb["preview_ticks"], "kp": fb["kp"],

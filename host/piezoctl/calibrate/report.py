@@ -287,15 +287,19 @@ def append_coupling_html(path, coupling: dict) -> None:
     rows = []
     for axis, c in sorted(coupling.items()):
         for f, v in c["by_frequency"].items():
+            table_only = v.get("rmse_table_only_um")
             rows.append(f"<tr><td>{html.escape(axis)}</td><td>{c['from_axis']}</td><td>{html.escape(f)}</td>"
-                        f"<td>{v['rmse_uncompensated_um'] * 1e3:.2f}</td><td>{v['rmse_compensated_um'] * 1e3:.2f}</td>"
-                        f"<td>{v['reduction']:.1f}x</td></tr>")
+                        f"<td>{v['rmse_uncompensated_um'] * 1e3:.2f}</td>"
+                        f"<td>{'-' if table_only is None else f'{table_only * 1e3:.2f}'}</td>"
+                        f"<td>{v['rmse_compensated_um'] * 1e3:.2f}</td><td>{v['reduction']:.1f}x</td></tr>")
     tables = ", ".join(f"axis {a}: {html.escape(c['table_crc_hex'])}" for a, c in sorted(coupling.items()))
     section = ("<h2>Cross-axis coupling</h2><p>Error of an axis holding mid stroke while the other axis "
-               "tracks a sine over 60 % of its stroke, with the cross-coupling compensation bypassed and "
-               f"applied (coupling tables {tables}).</p><table><tr><th>axis</th><th>from axis</th>"
-               "<th>other axis sine [Hz]</th><th>RMS error uncompensated [nm]</th><th>compensated [nm]</th>"
-               "<th>reduction</th></tr>" + "".join(rows) + "</table>")
+               "tracks a triangle over 60 % of its stroke: uncompensated (its feedback, the coupling table "
+               f"bypassed), with the coupling table (tables {tables}), and with the table plus the held "
+               "axis' learned feedforward, started in step with the other axis' wave.</p>"
+               "<table><tr><th>axis</th><th>from axis</th><th>other axis triangle [Hz]</th>"
+               "<th>RMS error uncompensated [nm]</th><th>coupling table [nm]</th>"
+               "<th>+ learned feedforward [nm]</th><th>reduction</th></tr>" + "".join(rows) + "</table>")
     with open(path, encoding="utf-8") as fh:
         page = fh.read()
     page = page.replace("</body></html>", section + "</body></html>")
