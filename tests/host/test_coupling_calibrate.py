@@ -49,7 +49,9 @@ def test_two_axis_calibration_keeps_the_contract_and_adds_axis_2(calibration):
         assert summ["tracking"]["1"]["reduction"] > 10.0
         assert summ["tracking"]["10"]["reduction"] > 2.0
         assert summ["tracking"]["50"]["reduction"] >= 5.0, summ["tracking"]["50"]
-    assert seconds < 300.0
+    # 5 minutes until the learned feedforward: each axis now also learns its 5 references and the
+    # held axis its correction at 10 and 50 Hz (about 4.5 minutes alone on this 2-core machine)
+    assert seconds < 420.0
 
 
 def test_two_axis_coupling_is_reduced_and_reported(calibration):

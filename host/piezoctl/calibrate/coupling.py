@@ -17,14 +17,22 @@ axis 2 into ``DIR/axis2/``), for each receiving axis i and the other axis j:
    of its calibrated straight line) is uploaded, read back, committed and
    confirmed through ``coupling_table_crc``;
 4. evaluation: both axes in their compensated mode (their tables, feedback,
-   shaper), axis i holding mid stroke while axis j tracks a sine over 60 % of
-   its stroke at 1 and 10 Hz; axis i's RMS error with the compensation
-   bypassed (``xcouple_bypass`` = 1) and applied.
+   shaper), axis i holding mid stroke while axis j tracks a triangle over
+   80 % of its stroke at 10 and at 50 Hz; axis i's RMS error with the
+   compensation bypassed (``xcouple_bypass`` = 1: uncompensated), applied,
+   and applied with axis i's learned feedforward: axis i's wave (a constant
+   at mid stroke, at axis j's frequency) starts at the tick axis j's drive
+   rises through its middle (``start_wave_on_trigger``, the recorder's
+   trigger on ``u2``), so its correction (``ilc.py``, learned over 10
+   trials while axis j keeps running, through axis i's loop measured with a
+   small triangle of its own) is in step with the coupling in every trial.
 
 ``summary.json`` (axis 1's) gains ``coupling``: per axis (``"1"``, ``"2"``:
 the receiving axis) ``rmse_uncompensated_um``, ``rmse_compensated_um`` and
-``reduction`` at 10 Hz, ``by_frequency`` for both frequencies, the table CRC
-and the fit; and ``axes``: where axis 2's own calibration is.
+``reduction`` at 10 Hz, ``by_frequency`` for both frequencies (also
+``rmse_table_only_um``, ``rmse_periodic_um``: the error's part that repeats
+with the wave, and the learning's trials), the table CRC and the fit; and
+``axes``: where axis 2's own calibration is.
 """
 
 from __future__ import annotations
@@ -51,6 +59,7 @@ CHIRP_S = 3.0
 SETTLE_S = 1.0
 EVAL_FREQS = (10.0, 50.0)     # the other axis' triangle [Hz]
 ILC_TRIALS = 10
+OTHER_STROKE = 0.8            # the other axis' triangle: over this fraction of its stroke, as the acceptance's
 ILC_F_CUT = 3.0               # the held axis' learning band, a multiple of its resonance
 
 
@@ -163,7 +172,7 @@ def _notch(comp: dict, tick_hz: float):
 def _hold_and_drive(ci, cj, comp_i: dict, comp_j: dict, f: float, bypass: int) -> float:
     """Both axes compensated (axis i's coupling table bypassed or applied), axis i
     holding mid stroke (its wave loaded: a constant there, at the other's
-    frequency), axis j tracking a triangle of ``f`` [Hz] over 60 % of its stroke,
+    frequency), axis j tracking a triangle of ``f`` [Hz] over 80 % of its stroke,
     settled; returns axis i's mid position [um]."""
     _configure_compensated(ci, comp_i)
     ci.configure("xcouple_bypass", bypass)
@@ -173,7 +182,7 @@ def _hold_and_drive(ci, cj, comp_i: dict, comp_j: dict, f: float, bypass: int) -
     ci.configure_wave("triangle", offset_q15=ci.q15_position(mid_i), amplitude_q15=0, f_hz=f)
     ci.arm(True)
     lo, hi = comp_j["stroke"]
-    load_triangle(cj, f, 0.5 * (lo + hi), 0.3 * (hi - lo))
+    load_triangle(cj, f, 0.5 * (lo + hi), 0.5 * OTHER_STROKE * (hi - lo))
     cj.arm(True)
     cj.command("start_wave")
     time.sleep(max(1.0, 2.0 / f))              # settle
@@ -250,7 +259,7 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
     tick = ci.identity.tick_hz
     for f in EVAL_FREQS:
         n = int(round(tick / f))
-        periods = max(2, int(round(0.1 * f)))
+        periods = max(5, int(round(0.1 * f)))   # 0.1 s at least: the 2 nm sensor noise averaged down
         settle = settle_periods(f)
         f_cut = min(ILC_F_CUT * comp_i["notch_hz"], 0.4 * ilc.FF_MAX * f)
         loop = _still_loop(ci, comp_i, f, f_cut)

@@ -39,13 +39,14 @@ STEPS = 7
 FREQS = (1.0, 10.0, 50.0, 100.0)
 LEARNED = "learned"   # runs key: compensated plus the learned feedforward (ilc.py)
 MAX_F_OF_RESONANCE = 0.4   # triangles up to this fraction of the resonance
-ILC_TRIALS = {"slow": 5, "fast": 10}   # trials of a 1 s period (1 Hz, the multitone) and of a faster one
+ILC_TRIALS = {"slow": 4, "fast": 10}   # trials of a 1 s period (1 Hz, the multitone) and of a faster one
 ILC_F_CUT = 2.0   # the learning's band edge, a multiple of the resonance
 
 
 def _periods(f_hz: float) -> int:
-    """Periods measured (after one of settling): about 0.1 s of a fast triangle, 2 of a slow one."""
-    return 2 if f_hz < 10 else max(5, int(round(0.1 * f_hz)))
+    """Periods measured after settling: about 0.1 s of a fast triangle, one of a slow one
+    (a 1 Hz period holds 10000 samples already; two cost a second in each of five configurations)."""
+    return 1 if f_hz < 10 else max(5, int(round(0.1 * f_hz)))
 
 
 class Steps:
