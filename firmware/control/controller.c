@@ -271,7 +271,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     run = c->st.armed && mode != PIEZO_MODE_IDLE;
 
     /* 4. reference: r_ahead for the feedforward, r (preview_ticks later) for the rest */
-    wave_on = c->ref_source == PIEZO_REF_WAVE && piezo_wave_running(&c->wave);
+    wave_on = c->ref_source == PIEZO_REF_WAVE && c->wave.running != 0u; /* (no call: the tick runs from RAM) */
     r_ahead = (c->ref_source == PIEZO_REF_WAVE) ? piezo_wave_process(&c->wave) : c->setpoint_q15;
     r = r_ahead;
     if (g->preview_ticks != 0u) {
@@ -351,8 +351,10 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     rec_was = c->rec.state;
     piezo_rec_process(&c->rec, c->sig);
     if (c->wave_on_trigger && rec_was == PIEZO_REC_ARMED && c->rec.state != PIEZO_REC_ARMED) {
+        /* the wave was loaded at its start when this was armed: only switch to it */
         c->wave_on_trigger = 0u;
-        (void)piezo_ctl_start_wave(c); /* checked when it was armed */
+        c->ref_source = PIEZO_REF_WAVE;
+        c->wave_ff_phase = 0u;
     }
     c->overrun_run = 0u;
     c->st.ticks++;
@@ -455,17 +457,22 @@ void piezo_ctl_stop_wave(piezo_ctl_t *c)
 
 int piezo_ctl_start_wave_on_trigger(piezo_ctl_t *c)
 {
+    piezo_wave_cfg_t *w = &c->wave_cfg;
     piezo_wave_t trial;
     int rc;
-    c->wave_cfg.tones = c->tones;
-    c->wave_cfg.levels_q15 = c->levels_q15;
-    c->wave_cfg.durations = c->durations;
-    if (c->wave_cfg.n_levels > PIEZO_CTL_WAVE_MAX_LEVELS) {
+    w->tones = c->tones;
+    w->levels_q15 = c->levels_q15;
+    w->durations = c->durations;
+    if (w->n_levels > PIEZO_CTL_WAVE_MAX_LEVELS) {
         return PIEZO_ERANGE;
     }
-    if ((rc = piezo_wave_init(&trial, &c->wave_cfg)) != PIEZO_OK) {
-        return rc;
+    if ((rc = piezo_wave_init(&trial, w)) != PIEZO_OK) {
+        return rc; /* refused: nothing changes */
     }
+    /* hold the wave's offset until the trigger, the wave loaded at its start */
+    c->setpoint_q15 = w->offset_q15;
+    c->ref_source = PIEZO_REF_SETPOINT;
+    (void)piezo_wave_init(&c->wave, w);
     c->wave_on_trigger = 1u;
     return PIEZO_OK;
 }

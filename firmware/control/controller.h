@@ -68,7 +68,11 @@
 #define PIEZO_CTL_REC_SAMPLES 65536u /* recorder buffer, samples of all channels */
 #endif
 #define PIEZO_CTL_WAVE_MAX_LEVELS 256u
-#define PIEZO_CTL_WAVE_FF_MAX PIEZO_HOLDING_WAVE_FF_LEVELS_COUNT /* learned feedforward entries */
+#ifndef PIEZO_CTL_WAVE_FF_MAX /* learned feedforward entries (a small target may take fewer, -D) */
+#define PIEZO_CTL_WAVE_FF_MAX PIEZO_HOLDING_WAVE_FF_LEVELS_COUNT
+#endif
+typedef char piezo_ctl_wave_ff_max_check_t[(PIEZO_CTL_WAVE_FF_MAX >= 2u &&
+                                            PIEZO_CTL_WAVE_FF_MAX <= PIEZO_HOLDING_WAVE_FF_LEVELS_COUNT) ? 1 : -1];
 #define PIEZO_CTL_WAVE_FF_OFF 2 /* wave_ff_pending: switch the learned feedforward off */
 
 /* The learned feedforward of a periodic wave (iterative learning control,
@@ -249,10 +253,12 @@ void piezo_ctl_clear_faults(piezo_ctl_t *c);
  *  A disarmed unit is armed (PIEZO_EORDER with faults). */
 int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on);
 int piezo_ctl_start_wave(piezo_ctl_t *c);  /* from wave_cfg; triggers a SOFTWARE recorder */
-/** Start the wave (as piezo_ctl_start_wave) at the tick the armed recorder
- *  triggers, e.g. on the other axis' drive u2 crossing a level: the wave's
- *  first sample is the next tick's, in step with the other axis' wave. The
- *  wave is checked now (its error returned, nothing armed). */
+/** Start the wave at the tick the armed recorder triggers, e.g. on the other
+ *  axis' drive u2 crossing a level: the wave's first sample is the next
+ *  tick's, in step with the other axis' wave. Now: the wave is checked (its
+ *  error returned, nothing changed), loaded at its start, and the reference
+ *  holds its offset (source setpoint) until the trigger; then the tick only
+ *  switches the source to the wave and restarts the learned feedforward. */
 int piezo_ctl_start_wave_on_trigger(piezo_ctl_t *c);
 /** Commit the learned feedforward: copy staged[0 .. n) and freq_word into the
  *  slot not being played; the tick plays it from its next start (step 1).

@@ -124,6 +124,7 @@ static uint32_t input_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, 
     case PIEZO_IREG_PREVIOUS_TABLE_CRC: return c->previous >= 0 ? c->set[c->previous].crc : 0u;
     case PIEZO_IREG_WAVE_RUNNING: return (uint32_t)piezo_wave_running(&c->wave);
     case PIEZO_IREG_WAVE_FF_N_LIVE: return piezo_ctl_wave_ff_n(c);
+    case PIEZO_IREG_WAVE_FF_CAPACITY: return PIEZO_CTL_WAVE_FF_MAX;
     case PIEZO_IREG_REC_STATE: return c->rec.state;
     case PIEZO_IREG_REC_FRAMES: return piezo_rec_frames(&c->rec);
     case PIEZO_IREG_ACTIVE_TABLE_KIND: {
@@ -232,7 +233,7 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
     case PIEZO_HREG_WAVE_FF_N: return m->wave_ff_n;
     case PIEZO_HREG_WAVE_FF_FREQ_WORD: return m->wave_ff_freq_word;
     case PIEZO_HREG_WAVE_FF_COMMAND: return 0u;
-    case PIEZO_HREG_WAVE_FF_LEVELS: return (uint16_t)c->wave_ff_staged_q15[elem];
+    case PIEZO_HREG_WAVE_FF_LEVELS: return elem < PIEZO_CTL_WAVE_FF_MAX ? (uint16_t)c->wave_ff_staged_q15[elem] : 0u;
     case PIEZO_HREG_REC_N_CHANNELS: return m->rec_cfg.n_channels;
     case PIEZO_HREG_REC_SIGNALS: return m->rec_cfg.signal[elem];
     case PIEZO_HREG_REC_DECIMATION: return m->rec_cfg.decimation;
@@ -324,6 +325,7 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     case PIEZO_HREG_WAVE_N_LEVELS: return v <= PIEZO_CTL_WAVE_MAX_LEVELS;
     case PIEZO_HREG_WAVE_FF_N: return v <= PIEZO_CTL_WAVE_FF_MAX; /* 0 and a freq word 0: the commit refuses */
     case PIEZO_HREG_WAVE_FF_COMMAND: return v > PIEZO_WAVE_FF_CMD_NONE && v < PIEZO_WAVE_FF_CMD_N;
+    case PIEZO_HREG_WAVE_FF_LEVELS: return p->elem < PIEZO_CTL_WAVE_FF_MAX; /* this target's capacity */
     case PIEZO_HREG_REC_N_CHANNELS: return v >= 1u && v <= PIEZO_REC_MAX_CHANNELS;
     case PIEZO_HREG_REC_SIGNALS:
     case PIEZO_HREG_REC_TRIGGER_SIGNAL: return v < PIEZO_SIG_N;

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0x0A358CC0u
+#define PIEZO_INTERFACE_CRC32 0x44F98EF8u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -182,6 +182,7 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_INPUT_PREVIOUS_TABLE_KIND 0x012Cu  /* uint16 */
 #define PIEZO_INPUT_REC_WRITTEN 0x012Du  /* uint32 */
 #define PIEZO_INPUT_WAVE_FF_N_LIVE 0x012Fu  /* uint16 */
+#define PIEZO_INPUT_WAVE_FF_CAPACITY 0x0130u  /* uint16 */
 #define PIEZO_HOLDING_UNLOCK 0x1000u  /* uint16 */
 #define PIEZO_HOLDING_MODE 0x1001u  /* uint16 */
 #define PIEZO_HOLDING_ARM 0x1002u  /* uint16 */
@@ -308,6 +309,7 @@ enum piezo_input_reg_id {
     PIEZO_IREG_PREVIOUS_TABLE_KIND,
     PIEZO_IREG_REC_WRITTEN,
     PIEZO_IREG_WAVE_FF_N_LIVE,
+    PIEZO_IREG_WAVE_FF_CAPACITY,
     PIEZO_IREG_N
 };
 extern const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N];

@@ -137,8 +137,8 @@ static void test_wave_starts_in_step_with_the_other_axis(void **state)
     piezo_rec_cfg_t rc = {0};
     setup_wave(PIEZO_MODE_DIRECT, 0u);
     piezo_ctl_stop_wave(&ctl);
-    ctl.ref_source = PIEZO_REF_SETPOINT;
-    ctl.setpoint_q15 = 0;
+    ctl.ref_source = PIEZO_REF_WAVE;
+    ctl.setpoint_q15 = 3000; /* replaced by the wave's offset (0) when armed */
     ctl.wave_cfg.amplitude_q15 = 20000;
     rc.n_channels = 1u;
     rc.signal[0] = PIEZO_SIG_U;
@@ -151,12 +151,13 @@ static void test_wave_starts_in_step_with_the_other_axis(void **state)
     ctl.wave_cfg.kind = 99; /* a wave that does not check is refused, nothing armed */
     assert_int_equal(piezo_ctl_start_wave_on_trigger(&ctl), PIEZO_EINVAL);
     assert_int_equal(ctl.wave_on_trigger, 0);
+    assert_int_equal(ctl.setpoint_q15, 3000);
     ctl.wave_cfg.kind = PIEZO_WAVE_TRIANGLE;
     assert_int_equal(piezo_ctl_start_wave_on_trigger(&ctl), PIEZO_OK);
     ctl.u2_q15 = -500;
     for (uint32_t k = 0; k < 7u; k++) {
-        assert_int_equal(tick(0), 0); /* the setpoint until the other axis' drive rises through 0 */
-        assert_int_equal(piezo_wave_running(&ctl.wave), 0);
+        assert_int_equal(tick(0), 0); /* the wave's offset until the other axis' drive rises through 0 */
+        assert_int_equal(ctl.ref_source, PIEZO_REF_SETPOINT);
     }
     ctl.u2_q15 = 500;
     assert_int_equal(tick(0), 0); /* the trigger tick: the wave starts after it */

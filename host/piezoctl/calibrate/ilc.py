@@ -36,7 +36,12 @@ from .. import interface
 
 __all__ = ["ILC", "learn", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
 
-FF_MAX = interface.HOLDING_REGISTERS["wave_ff_levels"][2]
+FF_MAX = interface.HOLDING_REGISTERS["wave_ff_levels"][2]   # the register map's; a target may hold fewer
+
+
+def capacity(ctl) -> int:
+    """Entries of the learned feedforward this controller holds (input ``wave_ff_capacity``)."""
+    return int(ctl.client.read_input(interface.INPUT_REGISTERS["wave_ff_capacity"][0], 1)[0])
 
 
 class ILC:
@@ -194,12 +199,12 @@ def table_entries(c_um: np.ndarray, n_entries: int) -> np.ndarray:
 def upload(ctl, c_um: np.ndarray, f_hz: float) -> dict:
     """Stage the correction (one period, [um]) in ``wave_ff_levels`` and commit it.
 
-    At most :data:`FF_MAX` entries: a longer period is resampled
-    (:func:`table_entries`). Returns ``n`` (entries), ``clipped`` (entries
-    beyond the q15 range) and ``freq_word``.
+    At most the controller's :func:`capacity` entries: a longer period is
+    resampled (:func:`table_entries`). Returns ``n`` (entries), ``clipped``
+    (entries beyond the q15 range) and ``freq_word``.
     """
     from ..device import freq_word
-    n = min(len(c_um), FF_MAX)
+    n = min(len(c_um), capacity(ctl))
     c = np.asarray(c_um, dtype=np.float64) if n == len(c_um) else table_entries(c_um, n)
     q = np.floor(c / ctl.scale.p_half * 32768.0 + 0.5)
     clipped = int(np.count_nonzero((q < -32768) | (q > 32767)))
@@ -255,9 +260,12 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
     """Learn the correction of the wave loaded in ``ctl`` (armed, its mode and
     feedback set), period ``1 / f0_hz``, and leave the best one committed.
 
-    Returns :func:`learn`'s result plus ``lag_s``, ``decimation``, ``n_entries``.
+    ``f_cut_hz`` is lowered to 0.4 x the controller's table entries x ``f0_hz``
+    (the table's own band). Returns :func:`learn`'s result plus ``lag_s``,
+    ``decimation``, ``n_entries``, ``f_cut_hz``.
     """
     tick = float(ctl.identity.tick_hz)
+    f_cut_hz = min(f_cut_hz, 0.4 * capacity(ctl) * f0_hz)
     n_ticks = int(round(tick / f0_hz))
     from .excitation import settle_periods
     settle = settle_periods(f0_hz)

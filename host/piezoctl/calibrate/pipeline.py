@@ -349,7 +349,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             trials = ILC_TRIALS["slow" if f0 < 10 else "fast"]
             steps.say(f"learned feedforward: {name}, {trials} trials ...")
             res = ilc.learn_on_controller(ctl, f0, preview_ticks=fb["preview_ticks"],
-                                          f_cut_hz=min(f_cut_max, 0.4 * ilc.FF_MAX * f0), iterations=trials,
+                                          f_cut_hz=f_cut_max, iterations=trials,
                                           periods=1 if f0 < 10 else _periods(f0))
             learned[key] = res
             if key == "multitone":

@@ -294,7 +294,7 @@ def append_coupling_html(path, coupling: dict) -> None:
                         f"<td>{v['rmse_compensated_um'] * 1e3:.2f}</td><td>{v['reduction']:.1f}x</td></tr>")
     tables = ", ".join(f"axis {a}: {html.escape(c['table_crc_hex'])}" for a, c in sorted(coupling.items()))
     section = ("<h2>Cross-axis coupling</h2><p>Error of an axis holding mid stroke while the other axis "
-               "tracks a triangle over 80 % of its stroke: uncompensated (its feedback, the coupling table "
+               "tracks a triangle over 60 % of its stroke: uncompensated (its feedback, the coupling table "
                f"bypassed), with the coupling table (tables {tables}), and with the table plus the held "
                "axis' learned feedforward, started in step with the other axis' wave.</p>"
                "<table><tr><th>axis</th><th>from axis</th><th>other axis triangle [Hz]</th>"
