@@ -55,6 +55,7 @@ def test_calibrate_writes_the_contract_files(calibration):
     assert html.count("data:image/png;base64") >= 3 and s["table_crc_hex"] in html
     assert not s["rolled_back"]
     assert s["params_saved"] == "ok"       # the accepted feedback, notch and shaper persist
+    assert s["acceptance_faults"] == []   # no configuration faulted the default stage
     assert s["target"] == {"kind": "sil", "transport": "tcp"}
 
 
