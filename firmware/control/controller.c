@@ -192,6 +192,7 @@ static void servo_switch(piezo_ctl_t *c, uint8_t req)
 {
     int16_t u_now = c->limit.prev_q15;
     c->wave.running = 0u;
+    c->wave_on_trigger = 0u; /* a pending start goes with the wave */
     c->ref_source = PIEZO_REF_SETPOINT;
     if (req == 1u) {
         if (!c->st.armed) {
@@ -442,6 +443,7 @@ int piezo_ctl_start_wave(piezo_ctl_t *c)
         return rc;
     }
     c->ref_source = PIEZO_REF_WAVE;
+    c->wave_on_trigger = 0u; /* started now: a pending start on the trigger is void */
     c->wave_ff_phase = 0u; /* the learned feedforward restarts with the wave */
     if (c->rec.state == PIEZO_REC_ARMED && c->rec.cfg.trigger == PIEZO_REC_SOFTWARE) {
         piezo_rec_trigger(&c->rec);
