@@ -339,6 +339,18 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         # + the learned feedforward: trials on the controller, then the same measurement with it played
         learned = {}
         f_cut_max = ILC_F_CUT * fb["resonance_hz"]
+        # the learning starts from the full configuration, unless that one faulted the controller (the
+        # 140 Hz stage's 50 Hz triangle with preview and shaper, sometimes): then from the one before it
+        learn_base = compensated
+        if any(f["configuration"] == configs[-1][1] for f in faulted):
+            learn_base = "hysteresis"
+            steps.say("learned feedforward: from the hysteresis inverse and feedback (preview and shaper "
+                      "faulted the controller)")
+            _park(ctl, ctl.q15_position(y_lo))
+            ctl.configure_shaper()
+            ctl.configure_feedback(kp=fb["kp"], ki=fb["ki"], notch=fb["notch"])
+            ctl.set_mode(compensated)
+            ctl.arm(True)
         for key in keys:
             f0 = key if key != "multitone" else min(excitation.MULTITONE_HZ)
             if key == "multitone":
@@ -348,7 +360,8 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             name = f"{key:g} Hz triangle" if key != "multitone" else "multitone"
             trials = ILC_TRIALS["slow" if f0 < 10 else "fast"]
             steps.say(f"learned feedforward: {name}, {trials} trials ...")
-            res = ilc.learn_on_controller(ctl, f0, preview_ticks=fb["preview_ticks"],
+            res = ilc.learn_on_controller(ctl, f0, preview_ticks=fb["preview_ticks"] if learn_base == compensated
+                                          else 0,
                                           f_cut_hz=f_cut_max, iterations=trials,
                                           periods=1 if f0 < 10 else _periods(f0))
             learned[key] = res
@@ -370,6 +383,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                               "rmse_by_part_um": {"feedback": rms["feedback"], "hysteresis": rms["hysteresis"],
                                                   "dynamics": rms[compensated], "learned": com},
                               "learned": {"trials": len(res["history"]), "refused": res["refused"],
+                                          "base": learn_base,
                                           "trial_rms_um": [h["rms_um"] for h in res["history"]],
                                           "trial_rms_all_um": res["rms_all_um"],
                                           "lag_s": res["lag_s"], "f_cut_hz": res["f_cut_hz"],
