@@ -30,6 +30,8 @@ The best correction is what is kept.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .. import interface
@@ -237,6 +239,25 @@ def _decimation(n_ticks: int, frames_max: int) -> int:
     return n_ticks
 
 
+def _end_after(ctl, periods: int) -> None:
+    """Let a triangle or sine end by itself one period after ``periods``: at the
+    end of a period it is back at its offset, where ``stop_wave`` at a random
+    phase steps the reference by up to its amplitude (on the 140 Hz stage a
+    step that rang the mode into a sensor fault)."""
+    ctl.write("wave_cycles", periods + 1)
+
+
+def _stop(ctl, timeout_s: float = 3.0) -> None:
+    """Wait for a wave that ends by itself (cycles), then stop it anyway (a
+    multisine has no cycles)."""
+    kind = ctl.client.read_holding(interface.HOLDING_REGISTERS["wave_kind"][0], 1)[0]
+    if kind in (interface.ENUMS["wave_kind"]["sine"], interface.ENUMS["wave_kind"]["triangle"]):
+        deadline = time.monotonic() + timeout_s
+        while ctl.status()["wave_running"] and time.monotonic() < deadline:
+            time.sleep(0.01)
+    ctl.command("stop_wave")
+
+
 def periodic_trial(ctl, n_ticks: int, *, periods: int, settle_periods: int = 1, decimation: int = 1,
                    preview_ticks: int = 0, rms_all: list | None = None) -> np.ndarray:
     """Start the loaded wave, record ``ref`` and ``y``; the error ``r - y`` [um]
@@ -244,8 +265,9 @@ def periodic_trial(ctl, n_ticks: int, *, periods: int, settle_periods: int = 1, 
     the wave's own sample (the recorder sees the reference ``preview_ticks`` late)."""
     m = n_ticks // decimation
     frames = m * (periods + settle_periods)
+    _end_after(ctl, periods + settle_periods)
     cols = ctl.capture(["ref", "y"], frames, decimation=decimation, trigger="software", start_wave=True)
-    ctl.command("stop_wave")
+    _stop(ctl)
     e_all = (cols["ref"] - cols["y"])[settle_periods * m:].reshape(periods, m)
     if rms_all is not None:
         rms_all.append(float(np.sqrt(np.mean(e_all ** 2))))
@@ -273,8 +295,9 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
     m = n_ticks // dec
     switch_off(ctl)
     # the first trial without correction also gives the loop's response at the wave's harmonics
+    _end_after(ctl, periods + settle)
     cols = ctl.capture(["ref", "y"], m * (periods + settle), decimation=dec, trigger="software", start_wave=True)
-    ctl.command("stop_wave")
+    _stop(ctl)
     r = cols["ref"][settle * m:].reshape(periods, m).mean(axis=0)
     y = cols["y"][settle * m:].reshape(periods, m).mean(axis=0)
     lag = lag_from_trial(r, y, f0_hz, f_cut_hz)
