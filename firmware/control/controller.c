@@ -25,6 +25,8 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
     c->xc_pending = -1;
     c->xc_previous = -1;
     c->staged_owner = -1;
+    c->wave_ff_active = -1;
+    c->wave_ff_pending = -1;
     c->wave_cfg.kind = PIEZO_WAVE_OFF;
     if ((rc = piezo_pid_init(&c->pid, &c->cfg.pid)) != PIEZO_OK ||
         (rc = piezo_biquad_init(&c->notch, &c->cfg.notch)) != PIEZO_OK ||
@@ -190,6 +192,7 @@ static void servo_switch(piezo_ctl_t *c, uint8_t req)
 {
     int16_t u_now = c->limit.prev_q15;
     c->wave.running = 0u;
+    c->wave_on_trigger = 0u; /* a pending start goes with the wave */
     c->ref_source = PIEZO_REF_SETPOINT;
     if (req == 1u) {
         if (!c->st.armed) {
@@ -217,13 +220,26 @@ static void servo_switch(piezo_ctl_t *c, uint8_t req)
     }
 }
 
+/* The learned feedforward at phase ph: linear interpolation between the two
+ * entries around ph * n / 2^32 (the 16 fraction bits below the index), one
+ * rounding (piezo_rshift_rnd64), wrapping from the last entry to the first.
+ * Scaling: |b - a| < 2^16, times a fraction < 2^16: < 2^32 in int64; the
+ * result lies between two q15 entries, so it needs no saturation. */
+static int16_t wave_ff_at(const piezo_ctl_wave_ff_t *t, uint32_t ph)
+{
+    uint64_t pos = (uint64_t)ph * t->n;
+    uint32_t i = (uint32_t)(pos >> 32), j = (i + 1u >= t->n) ? 0u : i + 1u;
+    int32_t frac = (int32_t)((pos >> 16) & 0xFFFFu), a = t->c_q15[i], b = t->c_q15[j];
+    return (int16_t)(a + piezo_rshift_rnd64((int64_t)(b - a) * frac, 16u));
+}
+
 void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 {
     const piezo_ctl_cfg_t *g = &c->cfg;
-    int16_t y, y2, r, r_ahead, u_ff = 0, u_fb = 0, u;
+    int16_t y, y2, r, r_loop, r_ahead, u_ff = 0, u_fb = 0, u;
     int8_t pend;
-    uint8_t mode = c->mode;
-    int run;
+    uint8_t mode = c->mode, rec_was;
+    int run, wave_on;
 
     /* 1. a committed table takes over only here, between two ticks */
     pend = c->pending;
@@ -235,6 +251,11 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     if (pend >= 0) {
         c->xc_active = pend;
         c->xc_pending = -1;
+    }
+    pend = c->wave_ff_pending;
+    if (pend >= 0) {
+        c->wave_ff_active = (pend == PIEZO_CTL_WAVE_FF_OFF) ? (int8_t)-1 : pend;
+        c->wave_ff_pending = -1;
     }
     if (c->servo_req != 0u) {
         servo_switch(c, c->servo_req);
@@ -251,6 +272,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     run = c->st.armed && mode != PIEZO_MODE_IDLE;
 
     /* 4. reference: r_ahead for the feedforward, r (preview_ticks later) for the rest */
+    wave_on = c->ref_source == PIEZO_REF_WAVE && c->wave.running != 0u; /* (no call: the tick runs from RAM) */
     r_ahead = (c->ref_source == PIEZO_REF_WAVE) ? piezo_wave_process(&c->wave) : c->setpoint_q15;
     r = r_ahead;
     if (g->preview_ticks != 0u) {
@@ -259,6 +281,18 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         if (++c->fifo_pos >= g->preview_ticks) {
             c->fifo_pos = 0u;
         }
+    }
+    /* 4b. the wave's learned feedforward, in sync with it (controller.h):
+     *     r_ahead + c(phase), and for the error r + c(phase - preview) */
+    r_loop = r;
+    c->wave_ff_q15 = 0;
+    if (wave_on && c->wave_ff_active >= 0) {
+        const piezo_ctl_wave_ff_t *t = &c->wave_ff[c->wave_ff_active];
+        c->wave_ff_q15 = wave_ff_at(t, c->wave_ff_phase);
+        r_ahead = piezo_sat_q15((int32_t)r_ahead + c->wave_ff_q15);
+        r_loop = piezo_sat_q15((int32_t)r +
+                               wave_ff_at(t, c->wave_ff_phase - (uint32_t)g->preview_ticks * t->freq_word));
+        c->wave_ff_phase += t->freq_word;
     }
 
     /* 5. feedforward (of the shaped early reference) */
@@ -278,7 +312,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 6. feedback */
     if (run && (mode == PIEZO_MODE_FF_FEEDBACK || mode == PIEZO_MODE_FEEDBACK)) {
-        int16_t e = piezo_sat_q15((int32_t)r - y);
+        int16_t e = piezo_sat_q15((int32_t)r_loop - y);
         u_fb = piezo_pid_process(&c->pid, e);
         if (g->notch_on) {
             u_fb = piezo_biquad_process(&c->notch, u_fb);
@@ -315,7 +349,14 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     c->sig[PIEZO_SIG_FB] = u_fb;
     c->sig[PIEZO_SIG_Y2] = y2;
     c->sig[PIEZO_SIG_U2] = c->u2_q15;
+    rec_was = c->rec.state;
     piezo_rec_process(&c->rec, c->sig);
+    if (c->wave_on_trigger && rec_was == PIEZO_REC_ARMED && c->rec.state != PIEZO_REC_ARMED) {
+        /* the wave was loaded at its start when this was armed: only switch to it */
+        c->wave_on_trigger = 0u;
+        c->ref_source = PIEZO_REF_WAVE;
+        c->wave_ff_phase = 0u;
+    }
     c->overrun_run = 0u;
     c->st.ticks++;
 }
@@ -402,6 +443,8 @@ int piezo_ctl_start_wave(piezo_ctl_t *c)
         return rc;
     }
     c->ref_source = PIEZO_REF_WAVE;
+    c->wave_on_trigger = 0u; /* started now: a pending start on the trigger is void */
+    c->wave_ff_phase = 0u; /* the learned feedforward restarts with the wave */
     if (c->rec.state == PIEZO_REC_ARMED && c->rec.cfg.trigger == PIEZO_REC_SOFTWARE) {
         piezo_rec_trigger(&c->rec);
     }
@@ -410,7 +453,62 @@ int piezo_ctl_start_wave(piezo_ctl_t *c)
 
 void piezo_ctl_stop_wave(piezo_ctl_t *c)
 {
+    c->wave_on_trigger = 0u;
     c->wave.running = 0u;
+}
+
+int piezo_ctl_start_wave_on_trigger(piezo_ctl_t *c)
+{
+    piezo_wave_cfg_t *w = &c->wave_cfg;
+    piezo_wave_t trial;
+    int rc;
+    w->tones = c->tones;
+    w->levels_q15 = c->levels_q15;
+    w->durations = c->durations;
+    if (w->n_levels > PIEZO_CTL_WAVE_MAX_LEVELS) {
+        return PIEZO_ERANGE;
+    }
+    if ((rc = piezo_wave_init(&trial, w)) != PIEZO_OK) {
+        return rc; /* refused: nothing changes */
+    }
+    /* hold the wave's offset until the trigger, the wave loaded at its start */
+    c->setpoint_q15 = w->offset_q15;
+    c->ref_source = PIEZO_REF_SETPOINT;
+    (void)piezo_wave_init(&c->wave, w);
+    c->wave_on_trigger = 1u;
+    return PIEZO_OK;
+}
+
+int piezo_ctl_wave_ff_commit(piezo_ctl_t *c, const int16_t *staged_q15, uint16_t n, uint32_t freq_word)
+{
+    int8_t spare;
+    if (staged_q15 == NULL || n == 0u || n > PIEZO_CTL_WAVE_FF_MAX || freq_word == 0u) {
+        return PIEZO_EINVAL;
+    }
+    if (c->wave_ff_pending >= 0) {
+        return PIEZO_EBUSY; /* the tick has not taken the last one: its slot may be the spare */
+    }
+    spare = (c->wave_ff_active == 0) ? 1 : 0; /* never the slot being played */
+    memcpy(c->wave_ff[spare].c_q15, staged_q15, (size_t)n * sizeof staged_q15[0]);
+    c->wave_ff[spare].n = n;
+    c->wave_ff[spare].freq_word = freq_word;
+    c->wave_ff_pending = spare; /* published last: the tick sees a whole slot */
+    return PIEZO_OK;
+}
+
+int piezo_ctl_wave_ff_off(piezo_ctl_t *c)
+{
+    if (c->wave_ff_pending >= 0) {
+        return PIEZO_EBUSY;
+    }
+    c->wave_ff_pending = PIEZO_CTL_WAVE_FF_OFF;
+    return PIEZO_OK;
+}
+
+uint16_t piezo_ctl_wave_ff_n(const piezo_ctl_t *c)
+{
+    int8_t a = c->wave_ff_pending >= 0 ? c->wave_ff_pending : c->wave_ff_active;
+    return (a >= 0 && a != PIEZO_CTL_WAVE_FF_OFF) ? c->wave_ff[a].n : 0u;
 }
 
 void piezo_ctl_set_key(piezo_ctl_t *c, uint32_t key)

@@ -68,6 +68,27 @@
 #define PIEZO_CTL_REC_SAMPLES 65536u /* recorder buffer, samples of all channels */
 #endif
 #define PIEZO_CTL_WAVE_MAX_LEVELS 256u
+#ifndef PIEZO_CTL_WAVE_FF_MAX /* learned feedforward entries (a small target may take fewer, -D) */
+#define PIEZO_CTL_WAVE_FF_MAX PIEZO_HOLDING_WAVE_FF_LEVELS_COUNT
+#endif
+typedef char piezo_ctl_wave_ff_max_check_t[(PIEZO_CTL_WAVE_FF_MAX >= 2u &&
+                                            PIEZO_CTL_WAVE_FF_MAX <= PIEZO_HOLDING_WAVE_FF_LEVELS_COUNT) ? 1 : -1];
+#define PIEZO_CTL_WAVE_FF_OFF 2 /* wave_ff_pending: switch the learned feedforward off */
+
+/* The learned feedforward of a periodic wave (iterative learning control,
+ * host/piezoctl/calibrate/ilc.py): a position correction c (q15 of the
+ * position half-range, like the reference) tabulated at n_q15 entries spread
+ * evenly over one period of freq_word. While the wave runs it is added to the
+ * loop's reference, in sync with it: the feedforward sees r_ahead + c at the
+ * same phase, the feedback the error (r + c) - y at the phase preview_ticks
+ * earlier, so the correction goes through the whole closed loop (whose gain
+ * is close to 1 where the learning acts). The recorder's ref and err stay the
+ * true reference r and r - y, the errors the learning minimizes. */
+typedef struct {
+    int16_t c_q15[PIEZO_CTL_WAVE_FF_MAX];
+    uint16_t n;          /* entries over one period, 1..PIEZO_CTL_WAVE_FF_MAX */
+    uint32_t freq_word;  /* periods per tick * 2^32 */
+} piezo_ctl_wave_ff_t;
 
 typedef struct {
     int32_t adc_zero;          /* ADC code of zero displacement */
@@ -173,6 +194,15 @@ typedef struct {
     piezo_wave_tone_t tones[PIEZO_WAVE_MAX_TONES];
     int16_t levels_q15[PIEZO_CTL_WAVE_MAX_LEVELS];
     uint32_t durations[PIEZO_CTL_WAVE_MAX_LEVELS];
+    /* learned feedforward: entries staged by the host, two slots (one played,
+     * one a commit fills), swapped at the tick boundary like the tables */
+    int16_t wave_ff_staged_q15[PIEZO_CTL_WAVE_FF_MAX];
+    piezo_ctl_wave_ff_t wave_ff[2];
+    volatile int8_t wave_ff_active;  /* slot played, -1 = none */
+    volatile int8_t wave_ff_pending; /* committed slot for the tick, PIEZO_CTL_WAVE_FF_OFF, or -1 */
+    uint32_t wave_ff_phase;          /* phase of r_ahead; restarts with the wave */
+    int16_t wave_ff_q15;             /* last correction added to the feedforward reference */
+    volatile uint8_t wave_on_trigger; /* 1: start the wave when the recorder triggers */
 
     piezo_rec_t rec;
     int16_t rec_buf[PIEZO_CTL_REC_SAMPLES];
@@ -223,6 +253,23 @@ void piezo_ctl_clear_faults(piezo_ctl_t *c);
  *  A disarmed unit is armed (PIEZO_EORDER with faults). */
 int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on);
 int piezo_ctl_start_wave(piezo_ctl_t *c);  /* from wave_cfg; triggers a SOFTWARE recorder */
+/** Start the wave at the tick the armed recorder triggers, e.g. on the other
+ *  axis' drive u2 crossing a level: the wave's first sample is the next
+ *  tick's, in step with the other axis' wave. Now: the wave is checked (its
+ *  error returned, nothing changed), loaded at its start, and the reference
+ *  holds its offset (source setpoint) until the trigger; then the tick only
+ *  switches the source to the wave and restarts the learned feedforward. */
+int piezo_ctl_start_wave_on_trigger(piezo_ctl_t *c);
+/** Commit the learned feedforward: copy staged[0 .. n) and freq_word into the
+ *  slot not being played; the tick plays it from its next start (step 1).
+ *  PIEZO_EINVAL: n outside 1..PIEZO_CTL_WAVE_FF_MAX or freq_word 0, staged
+ *  NULL; PIEZO_EBUSY: the previous commit not yet taken by a tick. A refused
+ *  commit changes nothing: the slot being played is never written. */
+int piezo_ctl_wave_ff_commit(piezo_ctl_t *c, const int16_t *staged_q15, uint16_t n, uint32_t freq_word);
+/** Stop playing the learned feedforward (from the next tick). PIEZO_EBUSY as above. */
+int piezo_ctl_wave_ff_off(piezo_ctl_t *c);
+/** Entries of the learned feedforward played (0 = none; a pending commit counts). */
+uint16_t piezo_ctl_wave_ff_n(const piezo_ctl_t *c);
 void piezo_ctl_stop_wave(piezo_ctl_t *c);
 
 /* Provisioning: the unlock key (>= 32 bits; 0 = none, every unlock refused)

@@ -123,6 +123,8 @@ static uint32_t input_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, 
     case PIEZO_IREG_TICK_TIME_MAX_NS: return m->tick_time_max_ns;
     case PIEZO_IREG_PREVIOUS_TABLE_CRC: return c->previous >= 0 ? c->set[c->previous].crc : 0u;
     case PIEZO_IREG_WAVE_RUNNING: return (uint32_t)piezo_wave_running(&c->wave);
+    case PIEZO_IREG_WAVE_FF_N_LIVE: return piezo_ctl_wave_ff_n(c);
+    case PIEZO_IREG_WAVE_FF_CAPACITY: return PIEZO_CTL_WAVE_FF_MAX;
     case PIEZO_IREG_REC_STATE: return c->rec.state;
     case PIEZO_IREG_REC_FRAMES: return piezo_rec_frames(&c->rec);
     case PIEZO_IREG_ACTIVE_TABLE_KIND: {
@@ -228,6 +230,10 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
     }
     case PIEZO_HREG_WAVE_LEVELS: return (uint16_t)c->levels_q15[elem];
     case PIEZO_HREG_WAVE_DURATIONS: return c->durations[elem];
+    case PIEZO_HREG_WAVE_FF_N: return m->wave_ff_n;
+    case PIEZO_HREG_WAVE_FF_FREQ_WORD: return m->wave_ff_freq_word;
+    case PIEZO_HREG_WAVE_FF_COMMAND: return 0u;
+    case PIEZO_HREG_WAVE_FF_LEVELS: return elem < PIEZO_CTL_WAVE_FF_MAX ? (uint16_t)c->wave_ff_staged_q15[elem] : 0u;
     case PIEZO_HREG_REC_N_CHANNELS: return m->rec_cfg.n_channels;
     case PIEZO_HREG_REC_SIGNALS: return m->rec_cfg.signal[elem];
     case PIEZO_HREG_REC_DECIMATION: return m->rec_cfg.decimation;
@@ -317,6 +323,9 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     case PIEZO_HREG_WAVE_KIND: return v < PIEZO_WAVE_KIND_N;
     case PIEZO_HREG_WAVE_N_TONES: return v <= PIEZO_WAVE_MAX_TONES;
     case PIEZO_HREG_WAVE_N_LEVELS: return v <= PIEZO_CTL_WAVE_MAX_LEVELS;
+    case PIEZO_HREG_WAVE_FF_N: return v <= PIEZO_CTL_WAVE_FF_MAX; /* 0 and a freq word 0: the commit refuses */
+    case PIEZO_HREG_WAVE_FF_COMMAND: return v > PIEZO_WAVE_FF_CMD_NONE && v < PIEZO_WAVE_FF_CMD_N;
+    case PIEZO_HREG_WAVE_FF_LEVELS: return p->elem < PIEZO_CTL_WAVE_FF_MAX; /* this target's capacity */
     case PIEZO_HREG_REC_N_CHANNELS: return v >= 1u && v <= PIEZO_REC_MAX_CHANNELS;
     case PIEZO_HREG_REC_SIGNALS:
     case PIEZO_HREG_REC_TRIGGER_SIGNAL: return v < PIEZO_SIG_N;
@@ -383,7 +392,8 @@ static int config_ok(const piezo_ctl_cfg_t *g)
 }
 
 /* Stores a checked value; runs its action. */
-static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd, uint16_t *params_cmd)
+static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd, uint16_t *params_cmd,
+                  uint16_t *ff_cmd)
 {
     piezo_ctl_t *c = m->ctl;
     piezo_wave_cfg_t *w = &c->wave_cfg;
@@ -401,6 +411,7 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd, ui
         switch (v) {
         case PIEZO_CMD_CLEAR_FAULTS: piezo_ctl_clear_faults(c); break;
         case PIEZO_CMD_START_WAVE: (void)piezo_ctl_start_wave(c); break;
+        case PIEZO_CMD_START_WAVE_ON_TRIGGER: (void)piezo_ctl_start_wave_on_trigger(c); break;
         case PIEZO_CMD_STOP_WAVE: piezo_ctl_stop_wave(c); break;
         case PIEZO_CMD_ARM_RECORDER:
             piezo_rec_reset(&c->rec);
@@ -447,6 +458,10 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd, ui
     }
     case PIEZO_HREG_WAVE_LEVELS: c->levels_q15[p->elem] = s16(v); break;
     case PIEZO_HREG_WAVE_DURATIONS: c->durations[p->elem] = v; break;
+    case PIEZO_HREG_WAVE_FF_N: m->wave_ff_n = (uint16_t)v; break;
+    case PIEZO_HREG_WAVE_FF_FREQ_WORD: m->wave_ff_freq_word = v; break;
+    case PIEZO_HREG_WAVE_FF_COMMAND: *ff_cmd = (uint16_t)v; break;
+    case PIEZO_HREG_WAVE_FF_LEVELS: c->wave_ff_staged_q15[p->elem] = s16(v); break;
     case PIEZO_HREG_REC_N_CHANNELS: m->rec_cfg.n_channels = (uint8_t)v; break;
     case PIEZO_HREG_REC_SIGNALS: m->rec_cfg.signal[p->elem] = (uint8_t)v; break;
     case PIEZO_HREG_REC_DECIMATION: m->rec_cfg.decimation = (uint16_t)v; break;
@@ -630,7 +645,7 @@ static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uin
     piezo_ctl_t *c = m->ctl;
     pending_t p[MAX_PENDING];
     unsigned n = 0u;
-    uint16_t table_cmd = 0u, params_cmd = 0u;
+    uint16_t table_cmd = 0u, params_cmd = 0u, ff_cmd = 0u;
     int config = 0;
     uint32_t offset = m->table_offset;
     if (count > MAX_PENDING) {
@@ -703,7 +718,7 @@ static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uin
     }
     /* 3. store and act, in address order */
     for (unsigned i = 0; i < n; i++) {
-        apply(m, &p[i], &table_cmd, &params_cmd);
+        apply(m, &p[i], &table_cmd, &params_cmd, &ff_cmd);
     }
     if (config) {
         rebind(c);
@@ -717,6 +732,19 @@ static uint8_t write_holding(void *ctx, uint16_t addr, uint16_t count, const uin
     }
     if (params_cmd != PIEZO_PARAMS_CMD_NONE) {
         params_command(m, params_cmd);
+    }
+    /* the learned feedforward last (its count and frequency may come in the
+     * same request); a refused commit leaves the played table as it was */
+    if (ff_cmd != PIEZO_WAVE_FF_CMD_NONE) {
+        int rc = (ff_cmd == PIEZO_WAVE_FF_CMD_COMMIT)
+                     ? piezo_ctl_wave_ff_commit(c, c->wave_ff_staged_q15, m->wave_ff_n, m->wave_ff_freq_word)
+                     : piezo_ctl_wave_ff_off(c);
+        if (rc == PIEZO_EBUSY) {
+            return PIEZO_MB_EX_SERVER_DEVICE_BUSY;
+        }
+        if (rc != PIEZO_OK) {
+            return PIEZO_MB_EX_ILLEGAL_DATA_VALUE;
+        }
     }
     return 0u;
 }

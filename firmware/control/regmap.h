@@ -45,6 +45,8 @@ typedef struct {
     uint32_t tick_time_max_ns;
     uint32_t table_offset;
     uint32_t rec_read_index;
+    uint16_t wave_ff_n;         /* learned feedforward: entries of the next commit */
+    uint32_t wave_ff_freq_word; /* and its periods per tick * 2^32 */
     piezo_rec_cfg_t rec_cfg;                  /* applied when the recorder is armed */
     uint8_t session;                          /* whose request runs (PIEZO_MB_SESSION_*) */
     /* controller parameters = the configuration registers (docs/operate.md) */

@@ -45,6 +45,8 @@ const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N] = {
     {0x012Au, 2u, 0u, 1u, PIEZO_IREG_PREVIOUS_TABLE_VERSION},
     {0x012Cu, 1u, 0u, 1u, PIEZO_IREG_PREVIOUS_TABLE_KIND},
     {0x012Du, 2u, 0u, 1u, PIEZO_IREG_REC_WRITTEN},
+    {0x012Fu, 1u, 0u, 1u, PIEZO_IREG_WAVE_FF_N_LIVE},
+    {0x0130u, 1u, 0u, 1u, PIEZO_IREG_WAVE_FF_CAPACITY},
 };
 
 const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
@@ -66,6 +68,9 @@ const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
     {0x110Bu, 1u, 0u, 1u, PIEZO_HREG_WAVE_N_TONES},
     {0x110Cu, 1u, 0u, 1u, PIEZO_HREG_WAVE_N_LEVELS},
     {0x110Du, 2u, 0u, 1u, PIEZO_HREG_WAVE_HOLD_TICKS},
+    {0x1110u, 1u, 0u, 1u, PIEZO_HREG_WAVE_FF_N},
+    {0x1111u, 2u, 0u, 1u, PIEZO_HREG_WAVE_FF_FREQ_WORD},
+    {0x1113u, 1u, 0u, 1u, PIEZO_HREG_WAVE_FF_COMMAND},
     {0x1120u, 1u, 0u, 40u, PIEZO_HREG_WAVE_TONES},
     {0x1200u, 1u, PIEZO_REG_SIGNED, 256u, PIEZO_HREG_WAVE_LEVELS},
     {0x1300u, 2u, 0u, 256u, PIEZO_HREG_WAVE_DURATIONS},
@@ -79,6 +84,7 @@ const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {
     {0x160Fu, 1u, 0u, 1u, PIEZO_HREG_REC_RING},
     {0x1700u, 2u, 0u, 1u, PIEZO_HREG_REC_READ_INDEX},
     {0x1702u, 1u, PIEZO_REG_SIGNED | PIEZO_REG_READONLY, 121u, PIEZO_HREG_REC_WINDOW},
+    {0x1800u, 1u, PIEZO_REG_SIGNED, 1024u, PIEZO_HREG_WAVE_FF_LEVELS},
     {0x2000u, 2u, 0u, 1u, PIEZO_HREG_TABLE_OFFSET},
     {0x2002u, 1u, 0u, 121u, PIEZO_HREG_TABLE_WINDOW},
     {0x2080u, 1u, 0u, 1u, PIEZO_HREG_TABLE_COMMAND},

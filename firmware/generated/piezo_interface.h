@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0x8A5C37BEu
+#define PIEZO_INTERFACE_CRC32 0x44F98EF8u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -181,6 +181,8 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_INPUT_PREVIOUS_TABLE_VERSION 0x012Au  /* uint32 */
 #define PIEZO_INPUT_PREVIOUS_TABLE_KIND 0x012Cu  /* uint16 */
 #define PIEZO_INPUT_REC_WRITTEN 0x012Du  /* uint32 */
+#define PIEZO_INPUT_WAVE_FF_N_LIVE 0x012Fu  /* uint16 */
+#define PIEZO_INPUT_WAVE_FF_CAPACITY 0x0130u  /* uint16 */
 #define PIEZO_HOLDING_UNLOCK 0x1000u  /* uint16 */
 #define PIEZO_HOLDING_MODE 0x1001u  /* uint16 */
 #define PIEZO_HOLDING_ARM 0x1002u  /* uint16 */
@@ -199,12 +201,17 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_HOLDING_WAVE_N_TONES 0x110Bu  /* uint16 */
 #define PIEZO_HOLDING_WAVE_N_LEVELS 0x110Cu  /* uint16 */
 #define PIEZO_HOLDING_WAVE_HOLD_TICKS 0x110Du  /* uint32 */
+#define PIEZO_HOLDING_WAVE_FF_N 0x1110u  /* uint16 */
+#define PIEZO_HOLDING_WAVE_FF_FREQ_WORD 0x1111u  /* uint32 */
+#define PIEZO_HOLDING_WAVE_FF_COMMAND 0x1113u  /* uint16 */
 #define PIEZO_HOLDING_WAVE_TONES 0x1120u  /* uint16 x40 */
 #define PIEZO_HOLDING_WAVE_TONES_COUNT 40u
 #define PIEZO_HOLDING_WAVE_LEVELS 0x1200u  /* int16 x256 */
 #define PIEZO_HOLDING_WAVE_LEVELS_COUNT 256u
 #define PIEZO_HOLDING_WAVE_DURATIONS 0x1300u  /* uint32 x256 */
 #define PIEZO_HOLDING_WAVE_DURATIONS_COUNT 256u
+#define PIEZO_HOLDING_WAVE_FF_LEVELS 0x1800u  /* int16 x1024 */
+#define PIEZO_HOLDING_WAVE_FF_LEVELS_COUNT 1024u
 #define PIEZO_HOLDING_REC_N_CHANNELS 0x1600u  /* uint16 */
 #define PIEZO_HOLDING_REC_SIGNALS 0x1601u  /* uint16 x8 */
 #define PIEZO_HOLDING_REC_SIGNALS_COUNT 8u
@@ -301,6 +308,8 @@ enum piezo_input_reg_id {
     PIEZO_IREG_PREVIOUS_TABLE_VERSION,
     PIEZO_IREG_PREVIOUS_TABLE_KIND,
     PIEZO_IREG_REC_WRITTEN,
+    PIEZO_IREG_WAVE_FF_N_LIVE,
+    PIEZO_IREG_WAVE_FF_CAPACITY,
     PIEZO_IREG_N
 };
 extern const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N];
@@ -323,6 +332,9 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_WAVE_N_TONES,
     PIEZO_HREG_WAVE_N_LEVELS,
     PIEZO_HREG_WAVE_HOLD_TICKS,
+    PIEZO_HREG_WAVE_FF_N,
+    PIEZO_HREG_WAVE_FF_FREQ_WORD,
+    PIEZO_HREG_WAVE_FF_COMMAND,
     PIEZO_HREG_WAVE_TONES,
     PIEZO_HREG_WAVE_LEVELS,
     PIEZO_HREG_WAVE_DURATIONS,
@@ -336,6 +348,7 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_REC_RING,
     PIEZO_HREG_REC_READ_INDEX,
     PIEZO_HREG_REC_WINDOW,
+    PIEZO_HREG_WAVE_FF_LEVELS,
     PIEZO_HREG_TABLE_OFFSET,
     PIEZO_HREG_TABLE_WINDOW,
     PIEZO_HREG_TABLE_COMMAND,
@@ -387,7 +400,8 @@ enum piezo_enum_command {
     PIEZO_CMD_RESET_RECORDER = 6,  /* reset the recorder */
     PIEZO_CMD_SERVO_OFF = 7,  /* open loop holding the drive applied now: setpoint := that drive, mode direct, reference source setpoint, wave stopped; armed only */
     PIEZO_CMD_SERVO_ON = 8,  /* closed loop at the present position: setpoint := position, mode feedback, the integrator preloaded with the applied drive (no jump); arms a disarmed unit without faults */
-    PIEZO_CMD_N = 9
+    PIEZO_CMD_START_WAVE_ON_TRIGGER = 9,  /* start the wave generator at the tick the armed recorder triggers (its signal crossing its level, e.g. the other axis' drive u2), so a wave runs in step with the other axis'; a wave that does not check is refused */
+    PIEZO_CMD_N = 10
 };
 /* table actions (holding register table_command); they need the unlock */
 enum piezo_enum_table_command {
@@ -422,6 +436,13 @@ enum piezo_enum_wave_kind {
     PIEZO_WAVE_KIND_STEPS = 5,  /* levels held for their durations */
     PIEZO_WAVE_KIND_ARBITRARY = 6,  /* levels played back, hold_ticks each */
     PIEZO_WAVE_KIND_N = 7
+};
+/* learned feedforward of the wave (holding register wave_ff_command; docs/wave-record.md) */
+enum piezo_enum_wave_ff_command {
+    PIEZO_WAVE_FF_CMD_NONE = 0,  /* reads 0; writing it is refused */
+    PIEZO_WAVE_FF_CMD_COMMIT = 1,  /* copy wave_ff_levels[0 .. wave_ff_n) into the spare slot; the tick plays it from the next tick on (refused: n outside 1..1024, freq word 0, a swap still pending) */
+    PIEZO_WAVE_FF_CMD_OFF = 2,  /* stop playing the learned feedforward (from the next tick) */
+    PIEZO_WAVE_FF_CMD_N = 3
 };
 /* signals the recorder keeps (all q15) */
 enum piezo_enum_rec_signals {

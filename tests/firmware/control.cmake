@@ -7,3 +7,5 @@ piezo_add_cmocka_test(test_controller SOURCES test_controller.c nor_flash.c LIBS
 piezo_add_cmocka_test(test_regmap SOURCES test_regmap.c LIBS piezo_control FIXTURES ctl)
 # Controller parameters in flash (A/B, CRC) through the register map; the servo switch.
 piezo_add_cmocka_test(params_store SOURCES params_store.c nor_flash.c LIBS piezo_control)
+# The wave's learned feedforward (iterative learning control's table).
+piezo_add_cmocka_test(test_wave_ff SOURCES test_wave_ff.c LIBS piezo_control)

@@ -30,13 +30,23 @@ from ..io.modelfile import load_model, make_provenance, save_model
 from ..io.recording import load_recording, save_recording
 from ..tables.from_model import compile_model
 from ..tables.image import TableImageError, build_image
-from . import excitation
+from . import excitation, ilc
 from .feedback import design_feedback
 
 __all__ = ["calibrate", "fit_model", "Steps"]
 
 STEPS = 7
-FREQS = (1.0, 10.0, 50.0)
+FREQS = (1.0, 10.0, 50.0, 100.0)
+LEARNED = "learned"   # runs key: compensated plus the learned feedforward (ilc.py)
+MAX_F_OF_RESONANCE = 0.4   # triangles up to this fraction of the resonance
+ILC_TRIALS = {"slow": 4, "fast": 10}   # trials of a 1 s period (1 Hz, the multitone) and of a faster one
+ILC_F_CUT = 2.0   # the learning's band edge, a multiple of the resonance
+
+
+def _periods(f_hz: float) -> int:
+    """Periods measured after settling: about 0.1 s of a fast triangle, one of a slow one
+    (a 1 Hz period holds 10000 samples already; two cost a second in each of five configurations)."""
+    return 1 if f_hz < 10 else max(5, int(round(0.1 * f_hz)))
 
 
 class Steps:
@@ -138,6 +148,21 @@ def _park(ctl, bottom_q15: int, seconds: float = 0.2, steps: int = 40) -> None:
             ctl.write("setpoint_q15", int(round(q0 + (bottom_q15 - q0) * k / steps)))
             time.sleep(seconds / steps)
     ctl.arm(False)
+
+
+def _recover(ctl, faulted: list, label: str, say) -> None:
+    """After a configuration's runs: a fault (a reference that rang the stage past
+    its sensor's range) is recorded in ``faulted`` and said, cleared, and the
+    controller parked and armed again, so the next configuration starts clean."""
+    st = ctl.status()
+    if not st["faults"]:
+        return
+    faulted.append({"configuration": label, "faults": st["faults_names"]})
+    say(f"{label}: the controller faulted ({', '.join(st['faults_names'])}): its figures are invalid; "
+        "faults cleared")
+    ctl.arm(False)
+    ctl.command("clear_faults")
+    ctl.arm(True)
 
 
 def _resonance(frf, tf) -> tuple[float, float]:
@@ -279,40 +304,101 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         runs = {}
         tracking = {}
         compensated = "ff_feedback"
-        for mode in ("open_loop", compensated):
-            label = "uncompensated" if mode == "open_loop" else f"compensated ({mode})"
+        # a triangle well below the resonance only (its harmonics ring the mode: on a 140 Hz stage a
+        # 100 Hz triangle uncompensated carries the stage out of its sensor's range)
+        keys = [f for f in FREQS if f <= MAX_F_OF_RESONANCE * fb["resonance_hz"]] + ["multitone"]
+        # what each part of the compensation buys: each configuration on every reference
+        faulted = []   # configurations after whose runs the controller had faulted
+        configs = (("open_loop", "uncompensated", "open_loop", False),
+                   ("feedback", "feedback only (PI + notch)", "feedback", False),
+                   ("hysteresis", "+ hysteresis inverse", compensated, False),
+                   (compensated, "+ dynamics (preview, shaper)", compensated, True))
+        for key_mode, label, mode, dyn in configs:
             _park(ctl, ctl.q15_position(y_lo))
-            if mode == "open_loop":
+            if dyn:
+                ctl.configure_shaper(fb["shaper_ticks"], fb["shaper_q15"], fb["preview_ticks"])
+            else:
                 ctl.configure_shaper()
+            if mode == "open_loop":
                 ctl.configure_feedback()
             else:
-                ctl.configure_shaper(fb["shaper_ticks"], fb["shaper_q15"], fb["preview_ticks"])
                 ctl.configure_feedback(kp=fb["kp"], ki=fb["ki"], notch=fb["notch"])
             ctl.set_mode(mode)
             st = ctl.status()
             if st["faults"]:
                 raise CliError(f"the controller reports faults: {', '.join(st['faults_names'])}")
             ctl.arm(True)
-            for f in FREQS:
+            ilc.switch_off(ctl)
+            for f in keys[:-1]:
                 if f < 10:   # the long one (3 s at 1 Hz): said on its own so the step is never silent long
                     steps.say(f"{label}: {f:g} Hz triangle ...")
-                runs[(mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=2 if f < 10 else 5)
+                runs[(key_mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=_periods(f))
             steps.say(f"{label}: multitone ...")
-            runs[(mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
+            runs[(key_mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
+            _recover(ctl, faulted, label, steps.say)
+        # + the learned feedforward: trials on the controller, then the same measurement with it played
+        learned = {}
+        f_cut_max = ILC_F_CUT * fb["resonance_hz"]
+        # the learning starts from the full configuration, unless that one faulted the controller (the
+        # 140 Hz stage's 50 Hz triangle with preview and shaper, sometimes): then from the one before it
+        learn_base = compensated
+        if any(f["configuration"] == configs[-1][1] for f in faulted):
+            learn_base = "hysteresis"
+            steps.say("learned feedforward: from the hysteresis inverse and feedback (preview and shaper "
+                      "faulted the controller)")
+            _park(ctl, ctl.q15_position(y_lo))
+            ctl.configure_shaper()
+            ctl.configure_feedback(kp=fb["kp"], ki=fb["ki"], notch=fb["notch"])
+            ctl.set_mode(compensated)
+            ctl.arm(True)
+        for key in keys:
+            f0 = key if key != "multitone" else min(excitation.MULTITONE_HZ)
+            if key == "multitone":
+                excitation.load_multitone(ctl, centre_um=centre, amp_um=amp)
+            else:
+                excitation.load_triangle(ctl, key, centre, amp)
+            name = f"{key:g} Hz triangle" if key != "multitone" else "multitone"
+            trials = ILC_TRIALS["slow" if f0 < 10 else "fast"]
+            steps.say(f"learned feedforward: {name}, {trials} trials ...")
+            res = ilc.learn_on_controller(ctl, f0, preview_ticks=fb["preview_ticks"] if learn_base == compensated
+                                          else 0,
+                                          f_cut_hz=f_cut_max, iterations=trials,
+                                          periods=1 if f0 < 10 else _periods(f0))
+            learned[key] = res
+            if key == "multitone":
+                runs[(LEARNED, key)] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
+            else:
+                runs[(LEARNED, key)] = excitation.triangle_run(ctl, key, centre, amp, periods=_periods(key))
+            ilc.switch_off(ctl)
+            _recover(ctl, faulted, f"+ learned feedforward, {name}", steps.say)
         _park(ctl, ctl.q15_position(y_lo))
-        for key in list(FREQS) + ["multitone"]:
-            unc = _rms(runs[("open_loop", key)]["ref"] - runs[("open_loop", key)]["y"])
-            com = _rms(runs[(compensated, key)]["ref"] - runs[(compensated, key)]["y"])
+        for key in keys:
+            rms = {k: _rms(runs[(k, key)]["ref"] - runs[(k, key)]["y"])
+                   for k in ("open_loop", "feedback", "hysteresis", compensated, LEARNED)}
+            unc, com = rms["open_loop"], rms[LEARNED]
             name = f"{key:g}" if key != "multitone" else "multitone"
+            res = learned[key]
             tracking[name] = {"rmse_uncompensated_um": unc, "rmse_compensated_um": com,
-                              "reduction": unc / com if com > 0 else float("inf")}
+                              "reduction": unc / com if com > 0 else float("inf"),
+                              "rmse_by_part_um": {"feedback": rms["feedback"], "hysteresis": rms["hysteresis"],
+                                                  "dynamics": rms[compensated], "learned": com},
+                              "learned": {"trials": len(res["history"]), "refused": res["refused"],
+                                          "base": learn_base,
+                                          "trial_rms_um": [h["rms_um"] for h in res["history"]],
+                                          "trial_rms_all_um": res["rms_all_um"],
+                                          "lag_s": res["lag_s"], "f_cut_hz": res["f_cut_hz"],
+                                          "entries": res["n_entries"]}}
+        if faulted:
+            text_faults = "; faulted: " + ", ".join(f["configuration"] for f in faulted)
+        else:
+            text_faults = ""
         worse = [k for k, v in tracking.items() if v["rmse_compensated_um"] > v["rmse_uncompensated_um"]]
         rolled_back = False
         rollback_result = None
         text = "; ".join(f"{k} Hz {v['rmse_uncompensated_um']:.3f} -> {v['rmse_compensated_um']:.3f} um "
                          f"({v['reduction']:.1f}x)" if k != "multitone" else
                          f"multitone {v['rmse_uncompensated_um']:.3f} -> {v['rmse_compensated_um']:.3f} um "
-                         f"({v['reduction']:.1f}x)" for k, v in tracking.items())
+                         f"({v['reduction']:.1f}x)" for k, v in tracking.items()) + text_faults
         if worse:
             rollback_result = ctl.rollback_table()
             rolled_back = rollback_result == "ok"
@@ -348,6 +434,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             "rollback_result": rollback_result,
             "params_saved": params_saved,
             "tracking": tracking,
+            "acceptance_faults": faulted,
             "checks": {"forward_inverse_max_error_fraction": identity_err, "quantization_max_lsb": quant_lsb,
                        **{k: v for k, v in comp.info.items() if isinstance(v, (int, float))}},
             "compensation": {"mode": compensated, "preview_ticks": fb["preview_ticks"], "kp": fb["kp"],
@@ -371,7 +458,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         # the report's own row: its duration so far (the figures are most of it)
         row["result"] = f"{out / 'report.html'}"
         write_report(out / "report.html", summary, forc=forc, model=model, frf=frf, tf=tf, runs=runs, img=img,
-                     compensated=compensated, steps=steps.rows + [row], say=steps.say)
+                     compensated=LEARNED, steps=steps.rows + [row], say=steps.say)
         summary["duration_s"] = time.monotonic() - t_start
         steps.result(row, f"{out / 'report.html'} ({summary['duration_s']:.0f} s in all)")
     (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True))

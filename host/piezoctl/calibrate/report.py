@@ -28,7 +28,11 @@ def figure_html(fig) -> str:
 
 
 NM_PER_UM = 1000.0
-KEYS = (1.0, 10.0, 50.0, "multitone")
+KEYS = (1.0, 10.0, 50.0, 100.0, "multitone")   # the acceptance's references, those that ran are plotted
+
+
+def _keys(runs: dict) -> list:
+    return [k for k in KEYS if ("open_loop", k) in runs]
 MULTITONE_HZ = (1.0, 7.0, 23.0)   # excitation.multitone_run's default tones
 
 
@@ -61,8 +65,9 @@ def tracking_figure(runs: dict, compensated: str):
     """Reference and position [um] above, the error reference - position [nm] on its own axis below,
     for every acceptance reference, uncompensated (left) and compensated (right)."""
     import matplotlib.pyplot as plt
-    fig = plt.figure(figsize=(11, 3.4 * len(KEYS)), layout="constrained")
-    for k, sub in zip(KEYS, fig.subfigures(len(KEYS), 1)):
+    keys = _keys(runs)
+    fig = plt.figure(figsize=(11, 3.4 * len(keys)), layout="constrained")
+    for k, sub in zip(keys, fig.subfigures(len(keys), 1)):
         ax = sub.subplots(2, 2, sharex="col", gridspec_kw={"height_ratios": [2, 1]})
         for j, mode in enumerate(("open_loop", compensated)):
             r = runs[(mode, k)]
@@ -87,7 +92,7 @@ def loops_figure(runs: dict, compensated: str):
     """Measured position against the reference [um] for each triangle, uncompensated and compensated:
     the hysteresis loop before compensation and what is left of it after."""
     import matplotlib.pyplot as plt
-    tri = [k for k in KEYS if k != "multitone"]
+    tri = [k for k in _keys(runs) if k != "multitone"]
     fig, ax = plt.subplots(1, len(tri), figsize=(11, 3.8), squeeze=False)
     for a, k in zip(ax[0], tri):
         lo = min(float(np.min(runs[(m, k)]["ref"])) for m in ("open_loop", compensated))
@@ -106,7 +111,7 @@ def error_frequency_figure(summary: dict, runs: dict, compensated: str):
     """Tracking error against frequency: RMS over the triangles [nm], and the multitone's error at each tone."""
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
-    tri = [k for k in KEYS if k != "multitone"]
+    tri = [k for k in _keys(runs) if k != "multitone"]
     for key, colour, name in (("rmse_uncompensated_um", "C1", "uncompensated"),
                               ("rmse_compensated_um", "C0", "compensated")):
         ax[0].loglog(tri, [summary["tracking"][f"{k:g}"][key] * NM_PER_UM for k in tri], "o-", color=colour,
@@ -210,6 +215,19 @@ def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
                      k if k != "multitone" else " + ".join(f"{f:g}" for f in MULTITONE_HZ),
                      f"{v['rmse_uncompensated_um'] * NM_PER_UM:.1f}", f"{v['rmse_compensated_um'] * NM_PER_UM:.1f}",
                      f"{v['reduction']:.1f}x"] for k, v in summary["tracking"].items()])
+    part_rows = []
+    for k, v in summary["tracking"].items():
+        p = v.get("rmse_by_part_um")
+        if not p:
+            continue
+        lr = v.get("learned", {})
+        part_rows.append([_ref_name(float(k) if k != "multitone" else k)]
+                         + [f"{x * NM_PER_UM:.1f}" for x in (v["rmse_uncompensated_um"], p["feedback"],
+                                                             p["hysteresis"], p["dynamics"], p["learned"])]
+                         + [f"{lr.get('trials', 0)} ({lr.get('refused', 0)} refused)"])
+    parts_table = _table(["reference", "uncompensated [nm]", "feedback only (PI + notch) [nm]",
+                          "+ hysteresis inverse [nm]", "+ dynamics: preview and shaper [nm]",
+                          "+ learned feedforward [nm]", "learning trials"], part_rows) if part_rows else ""
     step_table = _table(["step", "what", "time [s]", "result"],
                         [[f"{r['step']}/7", r["name"], "-" if r.get("seconds") is None else f"{r['seconds']:.1f}",
                           r.get("result", "")] for r in (steps or [])], cls="left")
@@ -239,8 +257,15 @@ def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
             f"<b>{html.escape(summary['table_kind'])}</b>, CRC {summary['table_crc_hex']}, stroke "
             f"{summary['stroke_um']:.2f} um, resonance {f_res:.0f} Hz, {summary['duration_s']:.0f} s"
             f"{', <b>rolled back</b>' if summary['rolled_back'] else ''}.</p>",
-            "<h2>Tracking</h2><p>RMS of reference minus measured position over whole periods after one settling "
-            "period; uncompensated: the best straight line, no preview, shaper or feedback.</p>", track,
+            "<h2>Tracking</h2><p>RMS of reference minus measured position over whole periods after at least "
+            "50 ms of settling; uncompensated: the best straight line, no preview, shaper or feedback; "
+            "compensated: the table's inverse, preview, shaper, PI + notch and the learned feedforward "
+            "played with the wave.</p>", track,
+            "<h3>What each part contributes</h3><p>The same references, each configuration measured on its "
+            "own: the feedback loop alone; plus the hysteresis inverse (the table); plus the dynamics "
+            "(reference preview of the loop's lag and the input shaper at the resonance); plus the "
+            "feedforward learned over trials on the controller (iterative learning control, stored with the "
+            "wave and played by the firmware).</p>", parts_table,
             "<h2>Steps</h2>", step_table]
     for title, note, fig_html in parts:
         body += [f"<h2>{html.escape(title)}</h2>"] + ([f"<p>{html.escape(note)}</p>"] if note else []) + [fig_html]
@@ -262,15 +287,19 @@ def append_coupling_html(path, coupling: dict) -> None:
     rows = []
     for axis, c in sorted(coupling.items()):
         for f, v in c["by_frequency"].items():
+            table_only = v.get("rmse_table_only_um")
             rows.append(f"<tr><td>{html.escape(axis)}</td><td>{c['from_axis']}</td><td>{html.escape(f)}</td>"
-                        f"<td>{v['rmse_uncompensated_um'] * 1e3:.2f}</td><td>{v['rmse_compensated_um'] * 1e3:.2f}</td>"
-                        f"<td>{v['reduction']:.1f}x</td></tr>")
+                        f"<td>{v['rmse_uncompensated_um'] * 1e3:.2f}</td>"
+                        f"<td>{'-' if table_only is None else f'{table_only * 1e3:.2f}'}</td>"
+                        f"<td>{v['rmse_compensated_um'] * 1e3:.2f}</td><td>{v['reduction']:.1f}x</td></tr>")
     tables = ", ".join(f"axis {a}: {html.escape(c['table_crc_hex'])}" for a, c in sorted(coupling.items()))
     section = ("<h2>Cross-axis coupling</h2><p>Error of an axis holding mid stroke while the other axis "
-               "tracks a sine over 60 % of its stroke, with the cross-coupling compensation bypassed and "
-               f"applied (coupling tables {tables}).</p><table><tr><th>axis</th><th>from axis</th>"
-               "<th>other axis sine [Hz]</th><th>RMS error uncompensated [nm]</th><th>compensated [nm]</th>"
-               "<th>reduction</th></tr>" + "".join(rows) + "</table>")
+               "tracks a triangle over 60 % of its stroke: uncompensated (its feedback, the coupling table "
+               f"bypassed), with the coupling table (tables {tables}), and with the table plus the held "
+               "axis' learned feedforward, started in step with the other axis' wave.</p>"
+               "<table><tr><th>axis</th><th>from axis</th><th>other axis triangle [Hz]</th>"
+               "<th>RMS error uncompensated [nm]</th><th>coupling table [nm]</th>"
+               "<th>+ learned feedforward [nm]</th><th>reduction</th></tr>" + "".join(rows) + "</table>")
     with open(path, encoding="utf-8") as fh:
         page = fh.read()
     page = page.replace("</body></html>", section + "</body></html>")
