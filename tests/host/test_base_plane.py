@@ -144,7 +144,7 @@ def test_term_regressors_are_the_linearized_simulation():
     ctx, _, _ = locate(base, recs, recs, ["a.csv"], 0.5, 1.0)
     s = ctx.signals[0]
     y0 = refined.simulate(base, t, u)
-    cases = {"thermal_drift": (15.0, [0.0, 0.2, 0.01]), "sensor_offset": (None, [0.3]),
+    cases = {"thermal_drift": ((15.0, -1.0), [0.0, 0.2, 0.01]),   # (time constant, the drift's sign) "sensor_offset": (None, [0.3]),
              "asymmetric_hysteresis": (None, [0.4, -0.2, 0.0]), "rate_dependent_hysteresis": (3.0, [0.2, 0.0]),
              "unmodeled_resonance": ((900.0, 0.02), [0.05, 0.02]), "sensor_nonlinearity": (None, [0.05, 0.02, 0.0])}
     for name, (setting, coef) in cases.items():
@@ -175,10 +175,10 @@ def test_thermal_drift_on_the_session_clock_is_its_regressor_and_continues_acros
     assert ctx.drift_t0 == pytest.approx(3.0 - 1 / FS) and ctx.drift_span == pytest.approx(30.0)
     term = TERMS["thermal_drift"]
     coef = [0.0, 0.0, 0.3, 0.002]
-    par = dict(base, terms={"thermal_drift": term.term(ctx, 15.0, coef)})
+    par = dict(base, terms={"thermal_drift": term.term(ctx, (15.0, 1.0), coef)})
     for s, r in zip(ctx.signals, recs):
         d = refined.simulate(par, t, u, t_session=float(r.meta["session_time_s"])) - y
-        assert np.max(np.abs(d - term.regressors(ctx, s, 15.0) @ coef)) < 1e-9
+        assert np.max(np.abs(d - term.regressors(ctx, s, (15.0, 1.0)) @ coef)) < 1e-9
     d0 = refined.simulate(par, t, u, t_session=10.0) - y
     d1 = refined.simulate(par, t, u, t_session=30.0) - y
     # the second recording starts where the drift has got to 20 s later, not at zero
