@@ -68,6 +68,7 @@ def test_calibrate_meets_the_tracking_goals_in_time(calibration):
         # the learned feedforward is the last part: it left less than the feedforward and feedback before it
         assert t["rmse_by_part_um"]["learned"] < t["rmse_by_part_um"]["dynamics"], (key, t)
         assert t["rmse_compensated_um"] == t["rmse_by_part_um"]["learned"]
+        assert t["compensation_used"] == "learned"
     assert seconds < 120.0
 
 

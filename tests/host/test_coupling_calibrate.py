@@ -44,7 +44,18 @@ def test_two_axis_calibration_keeps_the_contract_and_adds_axis_2(calibration):
     s2 = json.loads((out / "axis2" / "summary.json").read_text())
     assert s["axes"]["2"]["table_crc_hex"] == s2["table_crc_hex"]
     # the feedback design holds the 140 Hz stage: tracking improves at 1 and 10 Hz on both axes
+    labels = {"learned": "+ learned feedforward", "ff_feedback": "+ dynamics (preview, shaper)",
+              "hysteresis": "+ hysteresis inverse", "feedback": "feedback only (PI + notch)"}
     for summ in (s, s2):
+        # a configuration that faulted the controller is never the one a figure comes from
+        bad = {f["configuration"] for f in summ["acceptance_faults"]}
+        for key, t in summ["tracking"].items():
+            used = labels[t["compensation_used"]]
+            name = f"{key} Hz triangle" if key != "multitone" else "multitone"
+            assert used not in bad and f"{used}, {name}" not in bad, (key, t, bad)
+            by_part = {"learned": "learned", "ff_feedback": "dynamics", "hysteresis": "hysteresis",
+                       "feedback": "feedback"}[t["compensation_used"]]
+            assert t["rmse_compensated_um"] == t["rmse_by_part_um"][by_part]
         assert summ["compensation"]["notch_hz"] == pytest.approx(140.0, abs=8.0)
         assert summ["tracking"]["1"]["reduction"] > 10.0
         assert summ["tracking"]["10"]["reduction"] > 2.0

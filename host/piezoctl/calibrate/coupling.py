@@ -251,6 +251,19 @@ def _still_loop(ci, comp_i: dict, f: float, f_cut: float) -> np.ndarray:
     return ilc.loop_response(r, y, f, f_cut)
 
 
+def _clear_latched(ctls, args, when: str) -> list:
+    """Faults latched on any of ``ctls`` (the 140 Hz stage's mode, rung through the coupling or by a learning
+    trial, can carry a sensor out of its range): said, recorded and cleared, so the next measurement can arm."""
+    out = []
+    for c in ctls:
+        st = c.status()
+        if st["faults"]:
+            _log(args, f"axis {c.identity.axis + 1}: faults latched {when}: {', '.join(st['faults_names'])}; cleared")
+            c.command("clear_faults")
+            out.append({"axis": c.identity.axis + 1, "when": when, "faults": list(st["faults_names"])})
+    return out
+
+
 def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_TRIALS, args=None) -> dict:
     """Axis i's RMS error [um] holding mid stroke while axis j tracks triangles:
     the coupling table bypassed (uncompensated), applied, and applied with axis
@@ -259,6 +272,7 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
     out = {}
     tick = ci.identity.tick_hz
     for f in EVAL_FREQS:
+        faults = _clear_latched((ci, cj), args, f"before the {f:g} Hz evaluation")
         n = int(round(tick / f))
         periods = max(5, int(round(0.1 * f)))   # 0.1 s at least: the 2 nm sensor noise averaged down
         settle = settle_periods(f)
@@ -290,17 +304,22 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
         ilc_rms = rms_all[-1]   # the best correction, played in step, measured like the others
         ilc.switch_off(ci)
         cj.command("stop_wave")
+        learn_faults = _clear_latched((ci, cj), args, f"while learning at {f:g} Hz")
+        faults += learn_faults
+        # a fault during the learning makes its figures invalid: the coupling table alone is what holds
+        used = "table" if learn_faults else "learned"
+        com = res[0] if learn_faults else ilc_rms
         for c, comp in ((ci, comp_i), (cj, comp_j)):
             _park(c, c.q15_position(comp["stroke"][0]))
         ci.configure("xcouple_bypass", 0)
         _log(args, f"axis {ci.identity.axis + 1}, other axis' {f:g} Hz triangle: {res[1] * 1e3:.1f} nm, "
                    f"coupling table {res[0] * 1e3:.1f} nm, + learned {ilc_rms * 1e3:.1f} nm "
                    f"({len(learned['history'])} trials, {learned['refused']} refused)")
-        out[f"{f:g}"] = {"rmse_uncompensated_um": res[1], "rmse_compensated_um": ilc_rms,
-                         "rmse_table_only_um": res[0],
+        out[f"{f:g}"] = {"rmse_uncompensated_um": res[1], "rmse_compensated_um": com,
+                         "rmse_table_only_um": res[0], "compensation_used": used, "faults_cleared": faults,
                          # what repeats with the wave (the periods' mean): the rest is the sensor's noise
                          "rmse_periodic_um": float(np.sqrt(np.mean(e_periodic ** 2))),
-                         "reduction": res[1] / ilc_rms if ilc_rms > 0 else float("inf"),
+                         "reduction": res[1] / com if com > 0 else float("inf"),
                          "learned": {"trials": len(learned["history"]), "refused": learned["refused"],
                                      "trial_rms_um": rms_all[:-1], "f_cut_hz": f_cut}}
     return out

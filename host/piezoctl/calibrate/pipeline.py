@@ -372,14 +372,23 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             ilc.switch_off(ctl)
             _recover(ctl, faulted, f"+ learned feedforward, {name}", steps.say)
         _park(ctl, ctl.q15_position(y_lo))
+        bad = {f["configuration"] for f in faulted}
         for key in keys:
             rms = {k: _rms(runs[(k, key)]["ref"] - runs[(k, key)]["y"])
                    for k in ("open_loop", "feedback", "hysteresis", compensated, LEARNED)}
-            unc, com = rms["open_loop"], rms[LEARNED]
             name = f"{key:g}" if key != "multitone" else "multitone"
+            # the compensation this reference gets: the learned feedforward unless its run faulted the
+            # controller (its figures are invalid: the 140 Hz stage's 50 Hz triangle, sometimes), then the
+            # model-based configurations in turn
+            label = f"{key:g} Hz triangle" if key != "multitone" else "multitone"
+            chain = ((LEARNED, f"+ learned feedforward, {label}"), (compensated, configs[3][1]),
+                     ("hysteresis", configs[2][1]), ("feedback", configs[1][1]))
+            used = next((k for k, lab in chain if lab not in bad), "feedback")
+            unc, com = rms["open_loop"], rms[used]
             res = learned[key]
             tracking[name] = {"rmse_uncompensated_um": unc, "rmse_compensated_um": com,
                               "reduction": unc / com if com > 0 else float("inf"),
+                              "compensation_used": "learned" if used == LEARNED else used,
                               "rmse_by_part_um": {"feedback": rms["feedback"], "hysteresis": rms["hysteresis"],
                                                   "dynamics": rms[compensated], "learned": com},
                               "learned": {"trials": len(res["history"]), "refused": res["refused"],
