@@ -102,7 +102,7 @@ def _hold_direct(ctl, q15: int) -> None:
         ctl.set_mode("direct")
         ctl.write("setpoint_q15", -32768)
         ctl.write("ref_source", 0)
-        ctl.arm(True)
+        _arm(ctl)
         q0 = -32768
     else:
         q0 = st["reference_q15"]
@@ -181,10 +181,10 @@ def _hold_and_drive(ci, cj, comp_i: dict, comp_j: dict, f: float, bypass: int) -
     mid_i = 0.5 * (comp_i["stroke"][0] + comp_i["stroke"][1])
     ci.set_setpoint_um(mid_i)
     ci.configure_wave("triangle", offset_q15=ci.q15_position(mid_i), amplitude_q15=0, f_hz=f)
-    ci.arm(True)
+    _arm(ci)
     lo, hi = comp_j["stroke"]
     load_triangle(cj, f, 0.5 * (lo + hi), 0.5 * OTHER_STROKE * (hi - lo))
-    cj.arm(True)
+    _arm(cj)
     cj.command("start_wave")
     time.sleep(max(1.0, 2.0 / f))              # settle
     return mid_i
@@ -238,7 +238,7 @@ def _still_loop(ci, comp_i: dict, f: float, f_cut: float) -> np.ndarray:
     _configure_compensated(ci, comp_i)
     lo, hi = comp_i["stroke"]
     ci.set_setpoint_um(0.5 * (lo + hi))
-    ci.arm(True)
+    _arm(ci)
     n = int(round(ci.identity.tick_hz / f))
     settle = settle_periods(f)
     periods = max(2, int(round(0.1 * f)))
@@ -249,6 +249,24 @@ def _still_loop(ci, comp_i: dict, f: float, f_cut: float) -> np.ndarray:
     y = cols["y"][settle * n:].reshape(periods, n).mean(axis=0)
     _park(ci, ci.q15_position(lo))
     return ilc.loop_response(r, y, f, f_cut)
+
+
+_CLEARED_AT_ARM: list = []   # faults found latched when arming during the evaluation (collected per frequency)
+
+
+def _arm(c, tries: int = 20, wait_s: float = 0.05) -> None:
+    """Arm ``c`` after clearing a latched fault (the other axis' parking rings the 140 Hz mode of this one
+    through the coupling, and its sensor fault can latch again for a few ms after a clear); each clear is
+    recorded in ``_CLEARED_AT_ARM``. A fault that persists stops the arm as before."""
+    for _ in range(tries):
+        st = c.status()
+        if not st["faults"]:
+            break
+        _CLEARED_AT_ARM.append({"axis": c.identity.axis + 1, "when": "at an arm",
+                                "faults": list(st["faults_names"])})
+        c.command("clear_faults")
+        time.sleep(wait_s)
+    c.arm(True)
 
 
 def _clear_latched(ctls, args, when: str) -> list:
@@ -272,6 +290,7 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
     out = {}
     tick = ci.identity.tick_hz
     for f in EVAL_FREQS:
+        _CLEARED_AT_ARM.clear()
         faults = _clear_latched((ci, cj), args, f"before the {f:g} Hz evaluation")
         n = int(round(tick / f))
         periods = max(5, int(round(0.1 * f)))   # 0.1 s at least: the 2 nm sensor noise averaged down
@@ -305,7 +324,8 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
         ilc.switch_off(ci)
         cj.command("stop_wave")
         learn_faults = _clear_latched((ci, cj), args, f"while learning at {f:g} Hz")
-        faults += learn_faults
+        faults += learn_faults + _CLEARED_AT_ARM
+        _CLEARED_AT_ARM.clear()
         # a fault during the learning makes its figures invalid: the coupling table alone is what holds
         used = "table" if learn_faults else "learned"
         com = res[0] if learn_faults else ilc_rms
