@@ -289,7 +289,8 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
     from .pipeline import _park
     out = {}
     tick = ci.identity.tick_hz
-    for f in EVAL_FREQS:
+
+    def at(f):
         _CLEARED_AT_ARM.clear()
         faults = _clear_latched((ci, cj), args, f"before the {f:g} Hz evaluation")
         n = int(round(tick / f))
@@ -335,13 +336,26 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
         _log(args, f"axis {ci.identity.axis + 1}, other axis' {f:g} Hz triangle: {res[1] * 1e3:.1f} nm, "
                    f"coupling table {res[0] * 1e3:.1f} nm, + learned {ilc_rms * 1e3:.1f} nm "
                    f"({len(learned['history'])} trials, {learned['refused']} refused)")
-        out[f"{f:g}"] = {"rmse_uncompensated_um": res[1], "rmse_compensated_um": com,
+        entry = {"rmse_uncompensated_um": res[1], "rmse_compensated_um": com,
                          "rmse_table_only_um": res[0], "compensation_used": used, "faults_cleared": faults,
                          # what repeats with the wave (the periods' mean): the rest is the sensor's noise
                          "rmse_periodic_um": float(np.sqrt(np.mean(e_periodic ** 2))),
                          "reduction": res[1] / com if com > 0 else float("inf"),
                          "learned": {"trials": len(learned["history"]), "refused": learned["refused"],
                                      "trial_rms_um": rms_all[:-1], "f_cut_hz": f_cut}}
+        return entry
+
+    for f in EVAL_FREQS:
+        # a fault during the evaluation (the other axis stopped, or the learning ran into its sensor's
+        # range) makes its figures invalid: measured once more; the second attempt stands, with its faults
+        for attempt in (1, 2):
+            entry = at(f)
+            if not entry["faults_cleared"]:
+                break
+            _log(args, f"{f:g} Hz: faults during attempt {attempt}: "
+                       + ("measured again" if attempt == 1 else "kept, with its faults"))
+        entry["attempts"] = attempt
+        out[f"{f:g}"] = entry
     return out
 
 
