@@ -426,14 +426,22 @@ void piezo_ctl_clear_faults(piezo_ctl_t *c)
     c->overrun_run = 0u;
 }
 
+/* The wave configuration's pointers to the controller's tables, and its level count checked against them
+   (shared by the immediate and the triggered start). */
+static int bind_wave_tables(piezo_ctl_t *c)
+{
+    piezo_wave_cfg_t *w = &c->wave_cfg;
+    w->tones = c->tones;
+    w->levels_q15 = c->levels_q15;
+    w->durations = c->durations;
+    return w->n_levels > PIEZO_CTL_WAVE_MAX_LEVELS ? PIEZO_ERANGE : PIEZO_OK;
+}
+
 int piezo_ctl_start_wave(piezo_ctl_t *c)
 {
     piezo_wave_cfg_t *w = &c->wave_cfg;
     int rc;
-    w->tones = c->tones;
-    w->levels_q15 = c->levels_q15;
-    w->durations = c->durations;
-    if (w->n_levels > PIEZO_CTL_WAVE_MAX_LEVELS) {
+    if (bind_wave_tables(c) != PIEZO_OK) {
         return PIEZO_ERANGE;
     }
     rc = piezo_wave_init(&c->wave, w);
@@ -462,10 +470,7 @@ int piezo_ctl_start_wave_on_trigger(piezo_ctl_t *c)
     piezo_wave_cfg_t *w = &c->wave_cfg;
     piezo_wave_t trial;
     int rc;
-    w->tones = c->tones;
-    w->levels_q15 = c->levels_q15;
-    w->durations = c->durations;
-    if (w->n_levels > PIEZO_CTL_WAVE_MAX_LEVELS) {
+    if (bind_wave_tables(c) != PIEZO_OK) {
         return PIEZO_ERANGE;
     }
     if ((rc = piezo_wave_init(&trial, w)) != PIEZO_OK) {
