@@ -113,8 +113,8 @@ typedef struct {
     uint8_t xcouple_bypass;    /* 1: a loaded coupling table is not applied */
 } piezo_ctl_cfg_t;
 
-#define PIEZO_CTL_MAX_PREVIEW 32u
-#define PIEZO_CTL_MAX_SHAPER 16u
+#define PIEZO_CTL_MAX_PREVIEW 96u
+#define PIEZO_CTL_MAX_SHAPER 64u
 
 typedef struct {
     uint8_t armed;

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0x44F98EF8u
+#define PIEZO_INTERFACE_CRC32 0x9A932ACCu
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */

@@ -18,6 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 
+# the controller's limits (firmware/control/controller.h PIEZO_CTL_MAX_SHAPER, _PREVIEW; the registers
+# shaper_ticks and preview_ticks refuse more): a ZVD spacing of 64 ticks is the half period of a
+# 78 Hz mode at 10 kHz, and the preview covers the shaper's delay m plus the stage's lag
+MAX_SHAPER_TICKS = 64
+MAX_PREVIEW_TICKS = 96
+
 __all__ = ["group_delay_ticks", "resonance_hz", "damping", "zvd_shaper", "notch", "design_feedback"]
 
 
@@ -62,7 +68,7 @@ def zvd_shaper(f_res: float, zeta: float, tick_hz: float) -> tuple[int, list[int
     """Tap spacing m [ticks] and q15 taps (summing to 32768) of a ZVD shaper."""
     fd = f_res * np.sqrt(1.0 - zeta * zeta)
     m = int(np.round(tick_hz / (2.0 * fd)))
-    if not 1 <= m <= 16:
+    if not 1 <= m <= MAX_SHAPER_TICKS:
         return 0, [32768, 0, 0]
     k = np.exp(-zeta * np.pi / np.sqrt(1.0 - zeta * zeta))
     a = np.array([1.0, 2 * k, k * k]) / (1.0 + k) ** 2
@@ -111,4 +117,4 @@ def design_feedback(frf, line_gain: float, tick_hz: float, *, fc_max: float = 12
     delay = group_delay_ticks(frf, tick_hz, f_res / 3.0) if enough else 0
     return {"resonance_hz": f_res, "damping": zeta, "crossover_hz": fc, "kp": 0.2 * line_gain, "ki": ki,
             "notch": notch(f_res, tick_hz), "delay_ticks": delay, "shaper_ticks": m, "shaper_q15": taps,
-            "preview_ticks": int(min(32, delay + m))}
+            "preview_ticks": int(min(MAX_PREVIEW_TICKS, delay + m))}

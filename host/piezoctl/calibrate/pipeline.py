@@ -329,20 +329,22 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                 raise CliError(f"the controller reports faults: {', '.join(st['faults_names'])}")
             ctl.arm(True)
             ilc.switch_off(ctl)
+            # a fault is attributed to the reference whose run latched it: the others stay valid
             for f in keys[:-1]:
                 if f < 10:   # the long one (3 s at 1 Hz): said on its own so the step is never silent long
                     steps.say(f"{label}: {f:g} Hz triangle ...")
                 runs[(key_mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=_periods(f))
+                _recover(ctl, faulted, f"{label}, {f:g} Hz triangle", steps.say)
             steps.say(f"{label}: multitone ...")
             runs[(key_mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
-            _recover(ctl, faulted, label, steps.say)
+            _recover(ctl, faulted, f"{label}, multitone", steps.say)
         # + the learned feedforward: trials on the controller, then the same measurement with it played
         learned = {}
         f_cut_max = ILC_F_CUT * fb["resonance_hz"]
         # the learning starts from the full configuration, unless that one faulted the controller (the
         # 140 Hz stage's 50 Hz triangle with preview and shaper, sometimes): then from the one before it
         learn_base = compensated
-        if any(f["configuration"] == configs[-1][1] for f in faulted):
+        if any(f["configuration"].startswith(configs[-1][1] + ",") for f in faulted):
             learn_base = "hysteresis"
             steps.say("learned feedforward: from the hysteresis inverse and feedback (preview and shaper "
                       "faulted the controller)")
@@ -383,7 +385,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             label = f"{key:g} Hz triangle" if key != "multitone" else "multitone"
             chain = ((LEARNED, f"+ learned feedforward, {label}"), (compensated, configs[3][1]),
                      ("hysteresis", configs[2][1]), ("feedback", configs[1][1]))
-            used = next((k for k, lab in chain if lab not in bad), "feedback")
+            used = next((k for k, lab in chain if lab not in bad and f"{lab}, {label}" not in bad), "feedback")
             unc, com = rms["open_loop"], rms[used]
             res = learned[key]
             tracking[name] = {"rmse_uncompensated_um": unc, "rmse_compensated_um": com,
