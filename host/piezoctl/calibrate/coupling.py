@@ -16,8 +16,10 @@ axis 2 into ``DIR/axis2/``), for each receiving axis i and the other axis j:
 3. the table (output: the coupling divided by axis i's static gain, the slope
    of its calibrated straight line) is uploaded, read back, committed and
    confirmed through ``coupling_table_crc``;
-4. evaluation: both axes in their compensated mode (their tables, feedback,
-   shaper), axis i holding mid stroke while axis j tracks a triangle over
+4. evaluation: both axes in their compensated mode (their tables, feedback;
+   axis j's shaper; axis i holds a constant, so its shaper is off and would
+   only keep the learned correction from its own mode, where the coupling
+   rings it), axis i holding mid stroke while axis j tracks a triangle over
    60 % of its stroke at 10 and at 50 Hz; axis i's RMS error with the
    compensation bypassed (``xcouple_bypass`` = 1: uncompensated), applied,
    and applied with axis i's learned feedforward: axis i's wave (a constant
@@ -30,9 +32,15 @@ axis 2 into ``DIR/axis2/``), for each receiving axis i and the other axis j:
 ``summary.json`` (axis 1's) gains ``coupling``: per axis (``"1"``, ``"2"``:
 the receiving axis) ``rmse_uncompensated_um``, ``rmse_compensated_um`` and
 ``reduction`` at 10 Hz, ``by_frequency`` for both frequencies (also
-``rmse_table_only_um``, ``rmse_periodic_um``: the error's part that repeats
-with the wave, and the learning's trials), the table CRC and the fit; and
-``axes``: where axis 2's own calibration is.
+``rmse_table_only_um``; the part of each error that repeats with the other
+axis' period, noise-corrected (:func:`periodic_rms`), as
+``rmse_periodic_uncompensated_um``, ``rmse_periodic_table_only_um``,
+``rmse_periodic_um`` (compensated) and ``reduction_periodic``, with
+``noise_rms_um`` what does not repeat; ``periods`` measured; ``valid``:
+false when an axis faulted while they were measured; ``faults_cleared``,
+``attempts`` and the learning's trials), the table CRC and the fit; and
+``axes``: where axis 2's own calibration is. The sensor noise floors the
+RMS figures (2 nm on the SIL stages); the periodic ones measure the coupling.
 """
 
 from __future__ import annotations
@@ -58,10 +66,12 @@ LEVELS = (0.3, 0.5, 0.7)       # axis i's drive levels (fractions of the range)
 CHIRP_S = 3.0
 SETTLE_S = 1.0
 EVAL_FREQS = (10.0, 50.0)     # the other axis' triangle [Hz]
-ILC_TRIALS = 10
-OTHER_STROKE = 0.6            # the other axis' triangle over this fraction of its stroke (0.8 measured worse:
-                              # 26.9 -> 6.1 and 313.8 -> 50.8 nm on axis 2, trials refused)
+ILC_TRIALS = 20               # the held axis' learning (at 50 Hz still improving after 10)
+OTHER_STROKE = 0.6            # the other axis' triangle over this fraction of its stroke (0.8, with its shaper:
+                              # the coupling table made 50 Hz worse, 62.8 -> 100.8 nm: beyond what it was fitted on)
 ILC_F_CUT = 3.0               # the held axis' learning band, a multiple of its resonance
+EVAL_PERIODS = 20             # periods of the other axis' triangle each figure is measured over (the
+                              # periodic figures' noise: 2 nm / sqrt(20) before the correction)
 
 
 def _log(args, text: str) -> None:
@@ -201,6 +211,32 @@ def _wait_frames(ctl, frames: int, timeout_s: float) -> None:
         time.sleep(0.02)
 
 
+def periodic_rms(err, n_ticks: int) -> tuple[float, float]:
+    """What repeats with the other axis' period, and the noise, in an error record [um].
+
+    The record's whole periods are averaged; the mean's RMS still holds the
+    noise divided by the number of periods ``P``, so its square is corrected by
+    the noise variance (from the spread across periods) over ``P``: an unbiased
+    estimate of the coupling-induced error's RMS, which the sensor noise (2 nm
+    RMS on the SIL stages) does not floor.
+
+    Returns
+    -------
+    periodic : float
+        RMS of the error that repeats every period [um] (0 when the noise explains it all).
+    noise : float
+        RMS of what does not repeat [um].
+    """
+    e = np.asarray(err, dtype=float)
+    p = e.size // n_ticks
+    if p < 2:
+        raise ValueError(f"a periodic RMS needs at least 2 periods of {n_ticks} samples, not {e.size}")
+    e = e[:p * n_ticks].reshape(p, n_ticks)
+    var_noise = float(np.mean(np.var(e, axis=0, ddof=1)))
+    mean_sq = float(np.mean(e.mean(axis=0) ** 2))
+    return float(np.sqrt(max(0.0, mean_sq - var_noise / p))), float(np.sqrt(var_noise))
+
+
 def _u2_midlevel(ci, n_ticks: int) -> int:
     """The middle of the other axis' drive as axis i sees it (q15): the level its
     rising crossing marks the same phase of every period."""
@@ -212,11 +248,12 @@ def _u2_midlevel(ci, n_ticks: int) -> int:
 
 
 def _still_trial(ci, n_ticks: int, periods: int, settle: int, level_q15: int, preview: int,
-                 rms_all: list) -> np.ndarray:
+                 rms_all: list, periodic_all: list | None = None) -> np.ndarray:
     """Start axis i's wave when the other axis' drive rises through ``level_q15``;
     its error over ``periods`` periods after ``settle`` [um], averaged and
     indexed by its wave's sample (recorded frame k is wave sample k - 1 - preview);
-    the RMS over all those periods goes to ``rms_all``."""
+    the RMS over all those periods goes to ``rms_all``, and (``periodic_all``)
+    :func:`periodic_rms`'s pair."""
     frames = n_ticks * (periods + settle)
     ci.configure_recorder(["err"], trigger="rising", trigger_signal="u2", level_q15=level_q15)
     ci.command("arm_recorder")
@@ -226,6 +263,8 @@ def _still_trial(ci, n_ticks: int, periods: int, settle: int, level_q15: int, pr
     ci.command("stop_wave")
     e_all = err[settle * n_ticks:].reshape(periods, n_ticks)
     rms_all.append(float(np.sqrt(np.mean(e_all ** 2))))
+    if periodic_all is not None:
+        periodic_all.append(periodic_rms(e_all.ravel(), n_ticks))
     spec = np.fft.rfft(e_all.mean(axis=0)) * np.exp(2j * np.pi * np.arange(n_ticks // 2 + 1) * (preview + 1)
                                                     / n_ticks)
     return np.fft.irfft(spec, n=n_ticks)
@@ -289,23 +328,32 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
     from .pipeline import _park
     out = {}
     tick = ci.identity.tick_hz
+    # the held axis holds a constant: its input shaper has nothing to smooth, and it would keep the learned
+    # correction away from the axis' own mode, where the coupling rings it; its preview keeps the lag part
+    comp_i = dict(comp_i, shaper_ticks=0, shaper_q15=[32768, 0, 0],
+                  preview_ticks=max(0, int(comp_i["preview_ticks"]) - int(comp_i["shaper_ticks"])))
 
     def at(f):
         _CLEARED_AT_ARM.clear()
         faults = _clear_latched((ci, cj), args, f"before the {f:g} Hz evaluation")
         n = int(round(tick / f))
-        periods = max(5, int(round(0.1 * f)))   # 0.1 s at least: the 2 nm sensor noise averaged down
+        periods = max(5, int(round(0.1 * f)))   # a learning trial: 0.1 s at least, the sensor noise averaged down
         settle = settle_periods(f)
+        p_eval = max(2, min(EVAL_PERIODS, ci.rec_frames_capacity(1) // n - settle))
         f_cut = min(ILC_F_CUT * comp_i["notch_hz"], 0.4 * ilc.capacity(ci) * f)
         loop = _still_loop(ci, comp_i, f, f_cut)
-        res = {}
+        res, per = {}, {}
         for bypass in (1, 0):
             _hold_and_drive(ci, cj, comp_i, comp_j, f, bypass)
-            cols = ci.capture(["err"], n * 10 if f >= 10 else 2 * n, trigger="immediate")
+            cols = ci.capture(["err"], n * p_eval, trigger="immediate")
             res[bypass] = float(np.sqrt(np.mean(cols["err"] ** 2)))
+            per[bypass] = periodic_rms(cols["err"], n)
             cj.command("stop_wave")
             for c, comp in ((ci, comp_i), (cj, comp_j)):
                 _park(c, c.q15_position(comp["stroke"][0]))
+        # a fault while these were measured (the other axis stopped, or this one disarmed) makes them invalid
+        table_faults = _clear_latched((ci, cj), args, f"while measuring without and with the coupling table "
+                                                      f"at {f:g} Hz")
         # the learned feedforward of the held axis: trials while the other axis keeps running
         _hold_and_drive(ci, cj, comp_i, comp_j, f, 0)
         level = _u2_midlevel(ci, n)
@@ -314,22 +362,29 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
         ilc.switch_off(ci)
 
         def trial(c):
+            # a refused trial sends the learning back to its best correction, which may be none: then the
+            # refused one must stop playing (uploading only nonzero corrections left it on: 4 trials of 50 nm
+            # after a 38 nm start, and the learning gave up)
             if np.any(c):
                 ilc.upload(ci, c, f)
+            else:
+                ilc.switch_off(ci)
             return _still_trial(ci, n, periods, settle, level, comp_i["preview_ticks"], rms_all)
 
         learned = ilc.learn(trial, learner, trials)
         ilc.upload(ci, learned["best"], f)
-        e_periodic = _still_trial(ci, n, periods, settle, level, comp_i["preview_ticks"], rms_all)
+        per_learned: list = []
+        _still_trial(ci, n, p_eval, settle, level, comp_i["preview_ticks"], rms_all, per_learned)
         ilc_rms = rms_all[-1]   # the best correction, played in step, measured like the others
         ilc.switch_off(ci)
         cj.command("stop_wave")
         learn_faults = _clear_latched((ci, cj), args, f"while learning at {f:g} Hz")
-        faults += learn_faults + _CLEARED_AT_ARM
+        faults += table_faults + learn_faults + _CLEARED_AT_ARM
         _CLEARED_AT_ARM.clear()
         # a fault during the learning makes its figures invalid: the coupling table alone is what holds
         used = "table" if learn_faults else "learned"
         com = res[0] if learn_faults else ilc_rms
+        per_com = per[0] if learn_faults else per_learned[0]
         for c, comp in ((ci, comp_i), (cj, comp_j)):
             _park(c, c.q15_position(comp["stroke"][0]))
         ci.configure("xcouple_bypass", 0)
@@ -338,8 +393,14 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
                    f"({len(learned['history'])} trials, {learned['refused']} refused)")
         entry = {"rmse_uncompensated_um": res[1], "rmse_compensated_um": com,
                          "rmse_table_only_um": res[0], "compensation_used": used, "faults_cleared": faults,
-                         # what repeats with the wave (the periods' mean): the rest is the sensor's noise
-                         "rmse_periodic_um": float(np.sqrt(np.mean(e_periodic ** 2))),
+                         # the figures hold only if neither axis faulted while the table's were measured
+                         "valid": not table_faults,
+                         "periods": p_eval,
+                         # what repeats with the other axis' period (noise-corrected, periodic_rms): the
+                         # coupling's error; the rest is the sensor's noise
+                         "rmse_periodic_uncompensated_um": per[1][0], "rmse_periodic_table_only_um": per[0][0],
+                         "rmse_periodic_um": per_com[0], "noise_rms_um": per[1][1],
+                         "reduction_periodic": per[1][0] / per_com[0] if per_com[0] > 0 else float("inf"),
                          "reduction": res[1] / com if com > 0 else float("inf"),
                          "learned": {"trials": len(learned["history"]), "refused": learned["refused"],
                                      "trial_rms_um": rms_all[:-1], "f_cut_hz": f_cut}}
