@@ -98,11 +98,10 @@ def test_two_axis_coupling_is_reduced_and_reported(calibration):
     assert "Cross-axis coupling" in html and c["1"]["table_crc_hex"] in html
 
 
-@pytest.mark.xfail(strict=False, reason="held axis 1's learning: 5.1-7.5 nm left at 10 Hz in 3 runs and 35.6-38.4 nm "
-                   "at 50 Hz in 2 of 3, while axis 2 reaches 2.7-3.9 and 7.8-9.0 nm; docs/cross-coupling.md")
 def test_two_axis_coupling_left_after_learning(calibration):
-    # what the learned correction reaches when it works (axis 2 in every run, axis 1 in one of four): the
-    # coupling of 7.9 nm at 10 Hz and 49 nm at 50 Hz brought to at most 6 and 15 nm on both axes
+    # the coupling of 7.9 nm at 10 Hz and 49 nm at 50 Hz brought to at most 6 and 15 nm on both axes: measured
+    # 2.4-3.9 and 7.3-10.6 nm in 9 evaluations whose identification ran without the shaper (the issue's 10x is
+    # not met: the 2 nm sensor noise floors the RMS; docs/cross-coupling.md)
     rc, out, _ = calibration
     c = json.loads((out / "summary.json").read_text())["coupling"]
     for axis in ("1", "2"):
