@@ -178,11 +178,12 @@ RANDOM_SCAN_WINDOW_S = 0.2   # measured over this long after SETTLE_S [s]
 
 def random_scan_tones(f_hi: float, *, f_lo: float = 3.0, seed: int = RANDOM_SCAN_SEED,
                       n: int = RANDOM_SCAN_TONES) -> list[tuple[float, float]]:
-    """A band-limited random scan: ``n`` tones at random frequencies, log-uniform over
-    [``f_lo``, ``f_hi``] [Hz], random phases [rad]; (frequency, phase) each. Not periodic
-    within any run (the frequencies are not harmonics of one another): no learning has seen it."""
+    """A band-limited random scan: ``n`` tones at random frequencies, uniform over
+    [``f_lo``, ``f_hi``] [Hz] (a flat spectrum, as band-limited noise has), random phases [rad];
+    (frequency, phase) each. Not periodic within any run (the frequencies are not harmonics of
+    one another): no learning has seen it."""
     rng = np.random.default_rng(seed)
-    f = np.sort(np.exp(rng.uniform(np.log(f_lo), np.log(max(f_hi, 2 * f_lo)), n)))
+    f = np.sort(rng.uniform(f_lo, max(f_hi, 2 * f_lo), n))
     return [(float(x), float(p)) for x, p in zip(f, rng.uniform(0.0, 2 * np.pi, n))]
 
 
