@@ -94,7 +94,7 @@ def test_design_inverts_the_band_and_bounds_the_gain(f0, zeta):
 
 @pytest.mark.parametrize("f0,zeta,factor", [(970.0, 0.012, 2.0), (140.0, 0.02, 2.0)])
 def test_inverse_tracks_better_than_preview_and_shaper(f0, zeta, factor):
-    dyn = design_dyninv(_frf(f0, zeta), FS, f0, min_delay=DELAY)
+    dyn = design_dyninv(_frf(f0, zeta), FS, f0, min_delay=DELAY, damping=zeta)
     m, taps_s = zvd_shaper(f0, zeta, FS)
     shaper = np.asarray(taps_s) / 32768.0
     for r in (_triangle(min(50.0, 0.35 * f0)), _random_scan(0.4 * f0)):

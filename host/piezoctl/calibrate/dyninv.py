@@ -133,7 +133,7 @@ def _band(f, g_n, f_res: float, f_nyq: float, max_gain: float) -> float:
 
 def design_dyninv(frf, tick_hz: float, f_res: float, *, n_taps: int = gfir.MAX_TAPS,
                   spacing: int | None = None, max_gain: float = MAX_GAIN, min_delay: int = 0,
-                  shaper: tuple | None = None) -> DynInverse:
+                  damping: float = 0.02, shaper: tuple | None = None) -> DynInverse:
     """Least-squares FIR inverse of the measured dynamics.
 
     Parameters
@@ -153,6 +153,9 @@ def design_dyninv(frf, tick_hz: float, f_res: float, *, n_taps: int = gfir.MAX_T
         Bound on ``|H|`` at every frequency, and the band's edge above the resonance.
     min_delay : int
         Smallest delay ``p`` to try [ticks] (e.g. the stage's identified lag).
+    damping : float
+        The mode's damping ratio: below the lowest coherent line the stage is taken as its lag and
+        the mode's second-order response (the same model :func:`static_gain` takes out).
     shaper : (int, list of int), optional
         Preview and ZVD shaper ``(preview_ticks, shaper_ticks, shaper_q15)`` of the feedback design:
         its in-band error is reported beside the inverse's (``shaper_error``).
@@ -172,7 +175,8 @@ def design_dyninv(frf, tick_hz: float, f_res: float, *, n_taps: int = gfir.MAX_T
     fb, gb = f[inb], g_n[inb]
     # rows: in band G H = z^-p, each line weighted by its precision (the H1 estimate's variance goes as
     # (1 - coherence) / coherence) and a little toward low frequencies, where references carry their
-    # power; below the lowest coherent line the stage is its lag alone (the mode is far); DC gain 1;
+    # power; below the lowest coherent line the stage is its lag and the mode's second-order rise
+    # (continuous with the lines, normalized as static_gain does); DC gain 1;
     # H -> 0 above the band up to the filter's Nyquist frequency; a ridge on the taps
     w_in = (fb / fb[0]) ** -0.25
     if frf.coherence is not None:
@@ -181,7 +185,8 @@ def design_dyninv(frf, tick_hz: float, f_res: float, *, n_taps: int = gfir.MAX_T
     f_below = np.linspace(0.0, fb[0], N_BELOW, endpoint=False)[1:]
     w_below = np.full(f_below.size, float(np.mean(w_in)))
     fb = np.concatenate([f_below, fb])
-    gb = np.concatenate([np.exp(-2j * np.pi * f_below * min_delay / tick_hz), gb])
+    x = f_below / f_res
+    gb = np.concatenate([np.exp(-2j * np.pi * f_below * min_delay / tick_hz) / (1.0 - x * x + 2j * damping * x), gb])
     w_in = np.concatenate([w_below, w_in])
     w_in /= np.sqrt(np.sum(w_in ** 2))
     f_out = np.linspace(f_hi * 1.25, f_nyq, 200) if f_hi * 1.25 < f_nyq else np.array([f_nyq])

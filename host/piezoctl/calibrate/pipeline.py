@@ -286,7 +286,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         steps.say("feedback design ...")
         fb = design_feedback(frf, comp.line[0], idn.tick_hz, f_res=f_res)
         steps.say("dynamics inverse: least-squares FIR on the measured response ...")
-        dyn = design_dyninv(frf, idn.tick_hz, f_res, min_delay=fb["delay_ticks"],
+        dyn = design_dyninv(frf, idn.tick_hz, f_res, min_delay=fb["delay_ticks"], damping=fb["damping"],
                             shaper=(fb["preview_ticks"], fb["shaper_ticks"], fb["shaper_q15"]))
         info = ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in comp.info.items())
         steps.result(row, f"{info}; forward(inverse) within {identity_err:.2%} of the range, fixed-point "
