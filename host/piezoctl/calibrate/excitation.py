@@ -173,10 +173,11 @@ def multitone_run(ctl, freqs=MULTITONE_HZ, centre_um: float = 0.0, amp_um: float
 
 RANDOM_SCAN_TONES = 8     # the wave generator's multisine holds 8 tones
 RANDOM_SCAN_SEED = 15
+RANDOM_SCAN_F_LO = 3.0    # the random scan's band starts here [Hz]
 RANDOM_SCAN_WINDOW_S = 0.2   # measured over this long after SETTLE_S [s]
 
 
-def random_scan_tones(f_hi: float, *, f_lo: float = 3.0, seed: int = RANDOM_SCAN_SEED,
+def random_scan_tones(f_hi: float, *, f_lo: float = RANDOM_SCAN_F_LO, seed: int = RANDOM_SCAN_SEED,
                       n: int = RANDOM_SCAN_TONES) -> list[tuple[float, float]]:
     """A band-limited random scan: ``n`` tones at random frequencies, uniform over
     [``f_lo``, ``f_hi``] [Hz] (a flat spectrum, as band-limited noise has), random phases [rad];

@@ -433,7 +433,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         rnd = {k: _rms(runs[(k, RANDOM)]["ref"] - runs[(k, RANDOM)]["y"]) for k, _, _, _ in configs}
         rnd_bad = {k for k, lab, _, _ in configs if f"{lab}, random scan" in bad}
         tones = excitation.random_scan_tones(f_random)
-        random_scan = {"tones_hz": [round(f, 3) for f, _ in tones], "band_hz": [tones[0][0], f_random],
+        random_scan = {"tones_hz": [round(f, 3) for f, _ in tones], "band_hz": [excitation.RANDOM_SCAN_F_LO, f_random],
                        "window_s": excitation.RANDOM_SCAN_WINDOW_S, "seed": excitation.RANDOM_SCAN_SEED,
                        "rmse_by_part_um": {"uncompensated" if k == "open_loop" else
                                            ("dynamics" if k == compensated else k): v for k, v in rnd.items()},
@@ -444,7 +444,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         worse_inverse = [k for k, v in tracking.items() if v["dynamics_inverse_vs_shaper"] > 1.0]
         if random_scan["dynamics_inverse_vs_shaper"] > 1.0:
             worse_inverse.append("random scan")
-        text_inverse = (f"; random scan (not learned, {tones[0][0]:.0f}..{f_random:.0f} Hz) "
+        text_inverse = (f"; random scan (not learned, {excitation.RANDOM_SCAN_F_LO:g}..{f_random:.0f} Hz) "
                         f"{rnd['open_loop']:.3f} -> {rnd[compensated]:.3f} um with preview and shaper, "
                         f"{rnd[DYNINV]:.3f} um with the dynamics inverse"
                         + (f"; the dynamics inverse is worse than preview and shaper on: {', '.join(worse_inverse)}"
