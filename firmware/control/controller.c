@@ -13,7 +13,7 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
     int rc;
     if (c == NULL || cfg == NULL || cfg->bad_limit == 0u || cfg->dac_min > cfg->dac_max ||
         cfg->adc_min_ok > cfg->adc_max_ok || cfg->max_jump_q15 < 0 || cfg->preview_ticks > PIEZO_CTL_MAX_PREVIEW ||
-        cfg->shaper_ticks > PIEZO_CTL_MAX_SHAPER) {
+        cfg->shaper_ticks > PIEZO_CTL_MAX_SHAPER || piezo_fir_check(&cfg->dyninv) != PIEZO_OK) {
         return PIEZO_EINVAL;
     }
     memset(c, 0, sizeof *c);
@@ -117,6 +117,7 @@ static void reset_loop_state(piezo_ctl_t *c)
     for (uint8_t i = 0; i < 2u * PIEZO_CTL_MAX_SHAPER + 1u; i++) {
         c->shaper_hist[i] = r0;
     }
+    piezo_fir_reset(&c->dyninv, r0);
     c->fifo_pos = 0u;
     c->shaper_pos = 0u;
     piezo_pid_reset(&c->pid);
@@ -182,6 +183,7 @@ static void fill_reference(piezo_ctl_t *c, int16_t r)
     for (uint8_t i = 0; i < 2u * PIEZO_CTL_MAX_SHAPER + 1u; i++) {
         c->shaper_hist[i] = r;
     }
+    piezo_fir_reset(&c->dyninv, r);
 }
 
 /* The servo switch, at a tick boundary (piezo_ctl_servo). u_now is the
@@ -295,8 +297,13 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         c->wave_ff_phase += t->freq_word;
     }
 
-    /* 5. feedforward (of the shaped early reference) */
+    /* 4c. shaper, then the dynamics inverse (none with 0 taps: one compare) */
     r_ahead = shape(c, r_ahead);
+    if (g->dyninv.n_taps != 0u) {
+        r_ahead = piezo_fir_q13_process(&c->dyninv, &g->dyninv, r_ahead);
+    }
+
+    /* 5. feedforward (of the shaped, inverted early reference) */
     if (run && mode != PIEZO_MODE_FEEDBACK) {
         if (mode == PIEZO_MODE_DIRECT) {
             u_ff = r_ahead;

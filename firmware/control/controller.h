@@ -18,7 +18,15 @@
  *      (three taps at 0, m and 2m ticks, e.g. zero-vibration-derivative for
  *      the first mode) smooths the early reference before the feedforward,
  *      so the compensated drive does not excite the resonance; its delay of
- *      m ticks is part of what the preview cancels
+ *      m ticks is part of what the preview cancels. Then the dynamics
+ *      inverse (fir.h, off with dyninv.n_taps = 0): an FIR the host designs
+ *      so that the stage's linear dynamics times the filter is a delay of
+ *      preview_ticks over the identified band (calibrate/dyninv.py); with
+ *      that preview the stage then follows the reference on time, whatever
+ *      the reference (a streamed setpoint, a random scan), not only a
+ *      periodic one. It runs after the shaper; the calibration configures
+ *      it instead of the shaper (shaper_ticks = 0), since its taps already
+ *      hold the first mode's inverse (docs/calibrate.md)
  *   5. feedforward (modes FEEDFORWARD and FF_FEEDBACK): the active table's
  *      EUPI inverse or DCC law, chosen by the table's kind; in OPEN_LOOP the
  *      table's straight line u_ff = r g + o (coefset.h); no table, or
@@ -51,6 +59,7 @@
 #include <stdint.h>
 
 #include "coefset.h"
+#include "fir.h"
 #include "piezo_interface.h"
 #include "pid.h"
 #include "recorder.h"
@@ -111,6 +120,7 @@ typedef struct {
     uint8_t shaper_ticks;      /* tap spacing m, 0 = no shaper, 1..PIEZO_CTL_MAX_SHAPER */
     int16_t shaper_q15[3];     /* taps at 0, m, 2m; they should sum to 32768 (unity DC gain) */
     uint8_t xcouple_bypass;    /* 1: a loaded coupling table is not applied */
+    piezo_fir_coef_t dyninv;   /* dynamics-inverse FIR on the early reference; n_taps 0 = off */
 } piezo_ctl_cfg_t;
 
 #define PIEZO_CTL_MAX_PREVIEW 96u
@@ -215,6 +225,7 @@ typedef struct {
     uint8_t fifo_pos;
     int16_t shaper_hist[2u * PIEZO_CTL_MAX_SHAPER + 1u]; /* early reference history */
     uint8_t shaper_pos;
+    piezo_fir_t dyninv;        /* the dynamics inverse's history (the shaped early reference) */
     int16_t sig[PIEZO_SIG_N];
     int16_t y_prev_q15;
     uint16_t bad_run;

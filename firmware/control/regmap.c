@@ -274,6 +274,9 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
     case PIEZO_HREG_SHAPER_TICKS: return g->shaper_ticks;
     case PIEZO_HREG_SHAPER_Q15: return (uint16_t)g->shaper_q15[elem];
     case PIEZO_HREG_XCOUPLE_BYPASS: return g->xcouple_bypass;
+    case PIEZO_HREG_DYNINV_TAPS: return g->dyninv.n_taps;
+    case PIEZO_HREG_DYNINV_TICKS: return g->dyninv.spacing;
+    case PIEZO_HREG_DYNINV_Q13: return (uint16_t)g->dyninv.h_q13[elem];
     default: return 0u;
     }
 }
@@ -344,6 +347,8 @@ static int legal(const piezo_regmap_t *m, const pending_t *p)
     case PIEZO_HREG_PREVIEW_TICKS: return v <= PIEZO_CTL_MAX_PREVIEW;
     case PIEZO_HREG_SHAPER_TICKS: return v <= PIEZO_CTL_MAX_SHAPER;
     case PIEZO_HREG_XCOUPLE_BYPASS: return v <= 1u;
+    case PIEZO_HREG_DYNINV_TAPS: return v <= PIEZO_FIR_MAX_TAPS;
+    case PIEZO_HREG_DYNINV_TICKS: return v <= PIEZO_FIR_MAX_SPACING;
     case PIEZO_HREG_MAX_JUMP_Q15:
     case PIEZO_HREG_LIMIT_MAX_STEP_Q15: return s16(v) >= 0;
     default: return 1;
@@ -376,6 +381,9 @@ static int apply_config(piezo_ctl_cfg_t *g, const pending_t *p)
     case PIEZO_HREG_SHAPER_TICKS: g->shaper_ticks = (uint8_t)v; break;
     case PIEZO_HREG_SHAPER_Q15: g->shaper_q15[p->elem] = s16(v); break;
     case PIEZO_HREG_XCOUPLE_BYPASS: g->xcouple_bypass = (uint8_t)v; break;
+    case PIEZO_HREG_DYNINV_TAPS: g->dyninv.n_taps = (uint8_t)v; break;
+    case PIEZO_HREG_DYNINV_TICKS: g->dyninv.spacing = (uint8_t)v; break;
+    case PIEZO_HREG_DYNINV_Q13: g->dyninv.h_q13[p->elem] = s16(v); break;
     default: return 0;
     }
     return 1;
@@ -388,7 +396,8 @@ static int config_ok(const piezo_ctl_cfg_t *g)
     piezo_biquad_t bq;
     piezo_limit_t lim;
     return piezo_pid_init(&pid, &g->pid) == PIEZO_OK && piezo_biquad_init(&bq, &g->notch) == PIEZO_OK &&
-           piezo_limit_init(&lim, &g->limit, 0) == PIEZO_OK && g->bad_limit >= 1u;
+           piezo_limit_init(&lim, &g->limit, 0) == PIEZO_OK && g->bad_limit >= 1u &&
+           piezo_fir_check(&g->dyninv) == PIEZO_OK;
 }
 
 /* Stores a checked value; runs its action. */
@@ -489,6 +498,7 @@ static void rebind(piezo_ctl_t *c)
 {
     c->fifo_pos = 0u;
     c->shaper_pos = 0u;
+    piezo_fir_reset(&c->dyninv, c->setpoint_q15); /* the arm fills it with the reference again */
     (void)piezo_pid_init(&c->pid, &c->cfg.pid);
     (void)piezo_biquad_init(&c->notch, &c->cfg.notch);
     (void)piezo_limit_init(&c->limit, &c->cfg.limit, c->limit.prev_q15);

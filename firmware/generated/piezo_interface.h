@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0x9A932ACCu
+#define PIEZO_INTERFACE_CRC32 0x98EF59AEu
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -14,6 +14,8 @@
 #define PIEZO_Q24_FRAC 24
 #define PIEZO_Q16_BITS 32  /* slopes and scales; Q15.16, [-32768, 32768 - 2^-16] */
 #define PIEZO_Q16_FRAC 16
+#define PIEZO_Q13_BITS 16  /* taps of the dynamics-inverse FIR (dyninv_q13); Q2.13, [-4, 4 - 2^-13] */
+#define PIEZO_Q13_FRAC 13
 
 /* exp(-z^2/2) on [0, zmax], linear interpolation between samples */
 #define PIEZO_GAUSS_LUT_N 257
@@ -251,6 +253,10 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_HOLDING_SHAPER_Q15 0x301Bu  /* int16 x3 */
 #define PIEZO_HOLDING_SHAPER_Q15_COUNT 3u
 #define PIEZO_HOLDING_XCOUPLE_BYPASS 0x301Eu  /* uint16 */
+#define PIEZO_HOLDING_DYNINV_TAPS 0x301Fu  /* uint16 */
+#define PIEZO_HOLDING_DYNINV_TICKS 0x3020u  /* uint16 */
+#define PIEZO_HOLDING_DYNINV_Q13 0x3021u  /* int16 x32 */
+#define PIEZO_HOLDING_DYNINV_Q13_COUNT 32u
 
 /* Register descriptors, sorted by address: words per element (1 or 2),
  * elements, and flags. */
@@ -374,6 +380,9 @@ enum piezo_holding_reg_id {
     PIEZO_HREG_SHAPER_TICKS,
     PIEZO_HREG_SHAPER_Q15,
     PIEZO_HREG_XCOUPLE_BYPASS,
+    PIEZO_HREG_DYNINV_TAPS,
+    PIEZO_HREG_DYNINV_TICKS,
+    PIEZO_HREG_DYNINV_Q13,
     PIEZO_HREG_N
 };
 extern const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N];
@@ -483,7 +492,7 @@ enum piezo_enum_ref_source {
 #define PIEZO_PARAMS_MAGIC 0x5250505Au
 #define PIEZO_PARAMS_SLOT_BYTES 256u
 #define PIEZO_PARAMS_FIRST 0x3000u  /* the configuration block */
-#define PIEZO_PARAMS_WORDS 31u
+#define PIEZO_PARAMS_WORDS 65u
 #define PIEZO_PARAMS_REASON_OK 0u
 #define PIEZO_PARAMS_REASON_NONE_STORED 1u
 #define PIEZO_PARAMS_REASON_BAD_MAGIC 2u

@@ -320,6 +320,17 @@ class Controller:
         self.unlock()
         self.client.write_holding(self._h("preview_ticks"), [preview_ticks, ticks] + [_u16(t) for t in taps_q15])
 
+    def configure_dyninv(self, taps_q13=(), spacing: int = 1) -> None:
+        """The dynamics-inverse FIR on the early reference: q13 taps (8192 = 1), newest sample first, spaced
+        ``spacing`` ticks; no taps: off (the preview is :meth:`configure_shaper`'s). Unit disarmed."""
+        n = interface.HOLDING_REGISTERS["dyninv_q13"][2]
+        taps = list(taps_q13)
+        if len(taps) > n:
+            raise ValueError(f"at most {n} taps")
+        self.unlock()
+        self.client.write_holding(self._h("dyninv_taps"),
+                                  [len(taps), spacing] + [_u16(t) for t in taps] + [0] * (n - len(taps)))
+
     # ------------------------------------------------------------ wave generator
     def configure_wave(self, kind: str, *, offset_q15: int = 0, amplitude_q15: int = 0, f_hz: float = 0.0,
                        f_end_hz: float | None = None, duration_s: float | None = None, cycles: int = 0,

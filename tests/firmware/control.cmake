@@ -2,6 +2,8 @@
 piezo_add_cmocka_test(test_wave SOURCES test_wave.c LIBS piezo_core m)
 piezo_add_cmocka_test(test_recorder SOURCES test_recorder.c LIBS piezo_core)
 piezo_add_cmocka_test(test_pid SOURCES test_pid.c LIBS piezo_core m)
+# The dynamics-inverse FIR of the feedforward path, bit for bit against its golden model.
+piezo_add_cmocka_test(test_fir SOURCES test_fir.c LIBS piezo_core GOLDEN fir)
 # The controller: tick pipeline, table commit/rollback/persistence, safety.
 piezo_add_cmocka_test(test_controller SOURCES test_controller.c nor_flash.c LIBS piezo_control FIXTURES ctl)
 piezo_add_cmocka_test(test_regmap SOURCES test_regmap.c LIBS piezo_control FIXTURES ctl)

@@ -323,6 +323,54 @@ static void test_shaper_spreads_a_step_over_its_taps(void **state)
     assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_EINVAL);
 }
 
+/* The dynamics-inverse FIR on the early reference (after the shaper): a lead
+ * 1.5 x(t) - 0.5 x(t - 2) (spacing 2), its saturation, and 0 taps = off. */
+static void test_dyninv_filters_the_early_reference(void **state)
+{
+    (void)state;
+    piezo_ctl_cfg_t cfg = unit_cfg();
+    cfg.dyninv.n_taps = 2;
+    cfg.dyninv.spacing = 2;
+    cfg.dyninv.h_q13[0] = 12288; /* 1.5 */
+    cfg.dyninv.h_q13[1] = -4096; /* -0.5 */
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_DIRECT), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+    const int32_t want[5] = {24000, 24000, 16000, 16000, 16000}; /* overshoot for 2 ticks, then DC gain 1 */
+    for (int k = 0; k < 5; k++) {
+        assert_int_equal(tick(16000, 0), want[k]);
+        assert_int_equal(ctl.sig[PIEZO_SIG_REF], 16000); /* the reference itself is not filtered */
+    }
+    assert_int_equal(tick(-30000, 0), -32768); /* 1.5 (-30000) - 0.5 (16000): saturated */
+    assert_int_equal(tick(-30000, 0), -32768);
+    assert_int_equal(tick(-30000, 0), -30000);
+    /* with a shaper before it: the FIR sees the shaped reference (1/2, 1/2 at 0 and 1 tick) */
+    cfg.shaper_ticks = 1;
+    cfg.shaper_q15[0] = 16384;
+    cfg.shaper_q15[1] = 16384;
+    cfg.shaper_q15[2] = 0;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_DIRECT), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+    const int32_t want_shaped[5] = {12000, 24000, 20000, 16000, 16000}; /* shaped: 8000, 16000, 16000 */
+    for (int k = 0; k < 5; k++) {
+        assert_int_equal(tick(16000, 0), want_shaped[k]);
+    }
+    /* 0 taps: off, whatever the taps hold */
+    cfg.shaper_ticks = 0;
+    cfg.dyninv.n_taps = 0;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_DIRECT), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+    assert_int_equal(tick(16000, 0), 16000);
+    /* more taps or a wider spacing than the filter holds: refused */
+    cfg.dyninv.n_taps = PIEZO_FIR_MAX_TAPS + 1u;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_EINVAL);
+    cfg.dyninv.n_taps = 1;
+    cfg.dyninv.spacing = PIEZO_FIR_MAX_SPACING + 1u;
+    assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_EINVAL);
+}
+
 static void test_load_image_commits_or_names_the_refusal(void **state)
 {
     (void)state;
@@ -352,6 +400,7 @@ int main(void)
         cmocka_unit_test(test_recorder_captures_the_wave_run),
         cmocka_unit_test(test_preview_feeds_the_reference_early),
         cmocka_unit_test(test_shaper_spreads_a_step_over_its_taps),
+        cmocka_unit_test(test_dyninv_filters_the_early_reference),
         cmocka_unit_test(test_load_image_commits_or_names_the_refusal),
     };
     return cmocka_run_group_tests_name("controller", tests, NULL, NULL);

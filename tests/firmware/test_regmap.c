@@ -200,6 +200,21 @@ static void test_configuration_needs_key_and_disarm(void **state)
     assert_int_equal(write1(PIEZO_HOLDING_ARM, 0), 0);
     assert_int_equal(write1(PIEZO_HOLDING_PID_KP_Q24 + 1u, 0x0001), 0);
     assert_int_equal(ctl.cfg.pid.kp_q24, (1 << 23) | 1);
+    /* the dynamics-inverse FIR: count, spacing and taps in one write; a count above 32 or a spacing
+     * above 8 refuses the whole write, nothing changed */
+    uint16_t fir[4] = {2, 3, 12288, (uint16_t)-4096};
+    assert_int_equal(write_regs(PIEZO_HOLDING_DYNINV_TAPS, 4, fir), 0);
+    assert_int_equal(ctl.cfg.dyninv.n_taps, 2);
+    assert_int_equal(ctl.cfg.dyninv.spacing, 3);
+    assert_int_equal(ctl.cfg.dyninv.h_q13[1], -4096);
+    uint16_t fir_bad[3] = {PIEZO_HOLDING_DYNINV_Q13_COUNT + 1u, 1, 8192};
+    assert_int_equal(write_regs(PIEZO_HOLDING_DYNINV_TAPS, 3, fir_bad), PIEZO_MB_EX_ILLEGAL_DATA_VALUE);
+    fir_bad[0] = 1;
+    fir_bad[1] = 9;
+    assert_int_equal(write_regs(PIEZO_HOLDING_DYNINV_TAPS, 3, fir_bad), PIEZO_MB_EX_ILLEGAL_DATA_VALUE);
+    assert_int_equal(ctl.cfg.dyninv.n_taps, 2);
+    assert_int_equal(ctl.cfg.dyninv.spacing, 3);
+    assert_int_equal(ctl.cfg.dyninv.h_q13[0], 12288);
     /* read-only and unknown registers */
     assert_int_equal(write1(PIEZO_HOLDING_REC_WINDOW, 0), PIEZO_MB_EX_ILLEGAL_DATA_ADDRESS);
     assert_int_equal(write1(0x0FFF, 0), PIEZO_MB_EX_ILLEGAL_DATA_ADDRESS);

@@ -45,7 +45,8 @@ def test_calibrate_writes_the_contract_files(calibration):
     for key in ("1", "10", "50", "100", "multitone"):
         assert set(s["tracking"][key]) >= {"rmse_uncompensated_um", "rmse_compensated_um", "reduction",
                                            "rmse_by_part_um", "learned"}
-        assert set(s["tracking"][key]["rmse_by_part_um"]) == {"feedback", "hysteresis", "dynamics", "learned"}
+        assert set(s["tracking"][key]["rmse_by_part_um"]) == {"feedback", "hysteresis", "dynamics",
+                                                               "dynamics_inverse", "learned"}
     assert s["model"] in ("eupi", "kp")
     assert 0 < s["heldout_nrmse"] < 0.05
     img = (out / "table.bin").read_bytes()
@@ -70,6 +71,28 @@ def test_calibrate_meets_the_tracking_goals_in_time(calibration):
         assert t["rmse_compensated_um"] == t["rmse_by_part_um"]["learned"]
         assert t["compensation_used"] == "learned"
     assert seconds < 120.0
+
+
+def test_dynamics_inverse_beats_preview_and_shaper_on_the_random_scan(calibration):
+    """A reference no learning has seen: the dynamics inverse leaves less error than preview and shaper,
+    and the summary says which band it inverted and on which references it was worse."""
+    _, out, *_ = calibration
+    s = json.loads((out / "summary.json").read_text())
+    rs = s["random_scan"]
+    part = rs["rmse_by_part_um"]
+    assert rs["faulted"] == []
+    assert part["dynamics_inverse"] < part["dynamics"] < part["uncompensated"], part
+    assert rs["dynamics_inverse_vs_shaper"] == pytest.approx(part["dynamics_inverse"] / part["dynamics"])
+    assert "random scan" not in s["dynamics_inverse_worse_on"]
+    worse = {k for k, v in s["tracking"].items()
+             if v["rmse_by_part_um"]["dynamics_inverse"] > v["rmse_by_part_um"]["dynamics"]}
+    assert set(s["dynamics_inverse_worse_on"]) == worse
+    di = s["compensation"]["dynamics_inverse"]
+    lo, hi = di["band_hz"]
+    assert lo < 100.0 and hi > s["dynamics"]["resonance_hz"]     # through the first mode
+    assert di["max_gain"] <= 3.0 and len(di["taps_q13"]) == di["taps"] == 32
+    html = (out / "report.html").read_text()
+    assert "dynamics inverse (preview, FIR)" in html and "random scan" in html
 
 
 def test_calibrate_json_is_one_document_and_no_progress(calibration):

@@ -117,11 +117,14 @@ def test_params_set_save_survive_a_restart(tmp_path, capsys):
         rc, res = run_json(capsys, "params", "get", "--port", s.spec)
         assert rc == 0 and res["state"]["source"] == "defaults" and res["state"]["seq"] == 0
         assert res["params"]["pid_kp"]["unit"] == "1" and res["params"]["limit_max"]["unit"] == "V"
+        fir = [0.5, -0.25] + [0.0] * 29 + [0.75]   # the dynamics inverse's 32 taps (q13)
         rc, res = run_json(capsys, "params", "set", "--port", s.spec, "pid_kp=0.25", "limit_max_step=0.5",
-                           "shaper=0.25,0.5,0.25", "shaper_ticks=4")
+                           "shaper=0.25,0.5,0.25", "shaper_ticks=4", "dyninv_taps=32", "dyninv_ticks=3",
+                           "dyninv=" + ",".join(map(str, fir)))
         assert rc == 0 and res["state"]["source"] == "changed"
         assert res["params"]["pid_kp"]["raw"] == 1 << 22
         assert res["params"]["shaper"]["raw"] == [8192, 16384, 8192]
+        assert res["params"]["dyninv"]["raw"] == [4096, -2048] + [0] * 29 + [6144]
         step = res["params"]["limit_max_step"]
         assert abs(step["value"] - 0.5) <= 150.0 / 65536 and step["raw"] == round(0.5 / (150.0 / 65536))
         rc, res = run_json(capsys, "params", "save", "--port", s.spec)
@@ -135,6 +138,8 @@ def test_params_set_save_survive_a_restart(tmp_path, capsys):
         rc, res = run_json(capsys, "params", "get", "--port", s.spec)
         assert res["state"]["source"] == "flash" and res["state"]["seq"] == 2
         assert res["params"]["pid_kp"]["value"] == 0.5 and res["params"]["shaper_ticks"]["value"] == 4
+        assert res["params"]["dyninv_taps"]["value"] == 32 and res["params"]["dyninv_ticks"]["value"] == 3
+        assert res["params"]["dyninv"]["value"] == fir     # the FIR's taps survive a restart
         # load and defaults
         run(capsys, "params", "set", "--port", s.spec, "pid_kp=0.125")
         assert run_json(capsys, "params", "defaults", "--port", s.spec)[0] == 0
@@ -190,6 +195,10 @@ def test_params_bad_input_changes_nothing(sil, capsys):
     # a value the controller refuses (bad_limit 0): all or nothing
     rc, _out, err = run(capsys, "params", "set", "--port", sil.spec, "pid_kp=0.01", "bad_limit=0")
     assert rc == 4 and "refused" in err
+    # more taps than the dynamics inverse holds (32), a wider spacing than 8: refused by the controller
+    for bad in ("dyninv_taps=33", "dyninv_ticks=9"):
+        rc, _out, err = run(capsys, "params", "set", "--port", sil.spec, "pid_kp=0.01", bad)
+        assert rc == 4 and "refused" in err, (bad, err)
     assert connect(sil.spec).read_params() == before
     # armed: refused before anything is written
     run(capsys, "params", "set", "--port", sil.spec, *GAINS)

@@ -169,3 +169,31 @@ def multitone_run(ctl, freqs=MULTITONE_HZ, centre_um: float = 0.0, amp_um: float
     """A multitone (equal amplitudes summing to ``amp_um``) over whole periods of the lowest tone."""
     load_multitone(ctl, freqs, centre_um, amp_um)
     return _settled_capture(ctl, 1.0 / min(freqs), periods, settle_periods)
+
+
+RANDOM_SCAN_TONES = 8     # the wave generator's multisine holds 8 tones
+RANDOM_SCAN_SEED = 15
+RANDOM_SCAN_F_LO = 3.0    # the random scan's band starts here [Hz]
+RANDOM_SCAN_WINDOW_S = 0.2   # measured over this long after SETTLE_S [s]
+
+
+def random_scan_tones(f_hi: float, *, f_lo: float = RANDOM_SCAN_F_LO, seed: int = RANDOM_SCAN_SEED,
+                      n: int = RANDOM_SCAN_TONES) -> list[tuple[float, float]]:
+    """A band-limited random scan: ``n`` tones at random frequencies, uniform over
+    [``f_lo``, ``f_hi``] [Hz] (a flat spectrum, as band-limited noise has), random phases [rad];
+    (frequency, phase) each. Not periodic within any run (the frequencies are not harmonics of
+    one another): no learning has seen it."""
+    rng = np.random.default_rng(seed)
+    f = np.sort(rng.uniform(f_lo, max(f_hi, 2 * f_lo), n))
+    return [(float(x), float(p)) for x, p in zip(f, rng.uniform(0.0, 2 * np.pi, n))]
+
+
+def random_scan_run(ctl, centre_um: float, amp_um: float, f_hi: float, *,
+                    seed: int = RANDOM_SCAN_SEED) -> dict:
+    """Play :func:`random_scan_tones` (equal amplitudes summing to ``amp_um``) in the current mode;
+    ``ref`` and ``y`` [um] over :data:`RANDOM_SCAN_WINDOW_S` after :data:`SETTLE_S`."""
+    tones = random_scan_tones(f_hi, seed=seed)
+    each = int(round(amp_um / len(tones) / ctl.scale.p_half * 32768))
+    ctl.configure_wave("multisine", offset_q15=ctl.q15_position(centre_um),
+                       tones=[(each, f, ph) for f, ph in tones])
+    return _settled_capture(ctl, SETTLE_S, int(round(RANDOM_SCAN_WINDOW_S / SETTLE_S)), 1)

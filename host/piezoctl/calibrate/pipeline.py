@@ -31,6 +31,7 @@ from ..io.recording import load_recording, save_recording
 from ..tables.from_model import compile_model
 from ..tables.image import TableImageError, build_image
 from . import excitation, ilc
+from .dyninv import design_dyninv
 from .feedback import design_feedback
 
 __all__ = ["calibrate", "fit_model", "Steps"]
@@ -38,6 +39,9 @@ __all__ = ["calibrate", "fit_model", "Steps"]
 STEPS = 7
 FREQS = (1.0, 10.0, 50.0, 100.0)
 LEARNED = "learned"   # runs key: compensated plus the learned feedforward (ilc.py)
+DYNINV = "dynamics_inverse"   # runs key: the hysteresis inverse and feedback with the dynamics inverse (dyninv.py)
+RANDOM = "random"     # runs key of the random scan: a reference not known in advance
+RANDOM_F_OF_RESONANCE = 0.4   # the random scan's band: up to this fraction of the resonance (and 300 Hz)
 MAX_F_OF_RESONANCE = 0.4   # triangles up to this fraction of the resonance
 ILC_TRIALS = {"slow": 4, "fast": 10}   # trials of a 1 s period (1 Hz, the multitone) and of a faster one
 ILC_F_CUT = 2.0   # the learning's band edge, a multiple of the resonance
@@ -281,11 +285,18 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                            "not uploading")
         steps.say("feedback design ...")
         fb = design_feedback(frf, comp.line[0], idn.tick_hz, f_res=f_res)
+        steps.say("dynamics inverse: least-squares FIR on the measured response ...")
+        dyn = design_dyninv(frf, idn.tick_hz, f_res, min_delay=fb["delay_ticks"], damping=fb["damping"],
+                            shaper=(fb["preview_ticks"], fb["shaper_ticks"], fb["shaper_q15"]))
         info = ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in comp.info.items())
         steps.result(row, f"{info}; forward(inverse) within {identity_err:.2%} of the range, fixed-point "
                           f"table within {quant_lsb:.1f} LSB of float; feedback: crossover "
                           f"{fb['crossover_hz']:.0f} Hz, notch and ZVD shaper at {fb['resonance_hz']:.0f} Hz "
-                          f"(damping {fb['damping']:.3f}), preview {fb['preview_ticks']} ticks")
+                          f"(damping {fb['damping']:.3f}), preview {fb['preview_ticks']} ticks; dynamics inverse: "
+                          f"{len(dyn.taps_q13)} taps every {dyn.spacing} tick(s), inverts "
+                          f"{dyn.band_hz[0]:.0f}..{dyn.band_hz[1]:.0f} Hz, preview {dyn.preview_ticks} ticks, "
+                          f"|H| <= {dyn.max_gain:.2f}, in-band error {dyn.inband_error:.3f} "
+                          f"(preview and shaper {dyn.shaper_error:.3f})")
 
     with steps.step(5, "build and flash the table") as row:
         data = model.provenance.get("data", [])
@@ -309,16 +320,27 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         keys = [f for f in FREQS if f <= MAX_F_OF_RESONANCE * fb["resonance_hz"]] + ["multitone"]
         # what each part of the compensation buys: each configuration on every reference
         faulted = []   # configurations after whose runs the controller had faulted
-        configs = (("open_loop", "uncompensated", "open_loop", False),
-                   ("feedback", "feedback only (PI + notch)", "feedback", False),
-                   ("hysteresis", "+ hysteresis inverse", compensated, False),
-                   (compensated, "+ dynamics (preview, shaper)", compensated, True))
-        for key_mode, label, mode, dyn in configs:
+        # the dynamics inverse runs before preview and shaper: the learning below starts from the
+        # configuration the loop leaves loaded, preview and shaper
+        configs = (("open_loop", "uncompensated", "open_loop", None),
+                   ("feedback", "feedback only (PI + notch)", "feedback", None),
+                   ("hysteresis", "+ hysteresis inverse", compensated, None),
+                   (DYNINV, "+ dynamics inverse (preview, FIR)", compensated, "inverse"),
+                   (compensated, "+ dynamics (preview, shaper)", compensated, "shaper"))
+        label_of = {k: lab for k, lab, _, _ in configs}
+        f_random = min(300.0, RANDOM_F_OF_RESONANCE * fb["resonance_hz"])
+        for key_mode, label, mode, dynamics in configs:
             _park(ctl, ctl.q15_position(y_lo))
-            if dyn:
+            if dynamics == "shaper":
                 ctl.configure_shaper(fb["shaper_ticks"], fb["shaper_q15"], fb["preview_ticks"])
+            elif dynamics == "inverse":   # instead of the shaper: the taps hold the mode's inverse
+                ctl.configure_shaper(0, (32768, 0, 0), dyn.preview_ticks)
             else:
                 ctl.configure_shaper()
+            if dynamics == "inverse":
+                ctl.configure_dyninv(dyn.taps_q13, dyn.spacing)
+            else:
+                ctl.configure_dyninv()
             if mode == "open_loop":
                 ctl.configure_feedback()
             else:
@@ -338,13 +360,15 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             steps.say(f"{label}: multitone ...")
             runs[(key_mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
             _recover(ctl, faulted, f"{label}, multitone", steps.say)
+            runs[(key_mode, RANDOM)] = excitation.random_scan_run(ctl, centre, amp, f_random)
+            _recover(ctl, faulted, f"{label}, random scan", steps.say)
         # + the learned feedforward: trials on the controller, then the same measurement with it played
         learned = {}
         f_cut_max = ILC_F_CUT * fb["resonance_hz"]
         # the learning starts from the full configuration, unless that one faulted the controller (the
         # 140 Hz stage's 50 Hz triangle with preview and shaper, sometimes): then from the one before it
         learn_base = compensated
-        if any(f["configuration"].startswith(configs[-1][1] + ",") for f in faulted):
+        if any(f["configuration"].startswith(label_of[compensated] + ",") for f in faulted):
             learn_base = "hysteresis"
             steps.say("learned feedforward: from the hysteresis inverse and feedback (preview and shaper "
                       "faulted the controller)")
@@ -377,28 +401,54 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         bad = {f["configuration"] for f in faulted}
         for key in keys:
             rms = {k: _rms(runs[(k, key)]["ref"] - runs[(k, key)]["y"])
-                   for k in ("open_loop", "feedback", "hysteresis", compensated, LEARNED)}
+                   for k in ("open_loop", "feedback", "hysteresis", DYNINV, compensated, LEARNED)}
             name = f"{key:g}" if key != "multitone" else "multitone"
             # the compensation this reference gets: the learned feedforward unless its run faulted the
             # controller (its figures are invalid: the 140 Hz stage's 50 Hz triangle, sometimes), then the
             # model-based configurations in turn
             label = f"{key:g} Hz triangle" if key != "multitone" else "multitone"
-            chain = ((LEARNED, f"+ learned feedforward, {label}"), (compensated, configs[3][1]),
-                     ("hysteresis", configs[2][1]), ("feedback", configs[1][1]))
+            # of the two model-based dynamics parts, the better one on this reference (the other is said)
+            model_based = sorted((compensated, DYNINV), key=lambda k: rms[k])
+            chain = ((LEARNED, f"+ learned feedforward, {label}"),
+                     *((k, label_of[k]) for k in model_based),
+                     ("hysteresis", label_of["hysteresis"]), ("feedback", label_of["feedback"]))
             used = next((k for k, lab in chain if lab not in bad and f"{lab}, {label}" not in bad), "feedback")
             unc, com = rms["open_loop"], rms[used]
             res = learned[key]
             tracking[name] = {"rmse_uncompensated_um": unc, "rmse_compensated_um": com,
                               "reduction": unc / com if com > 0 else float("inf"),
                               "compensation_used": "learned" if used == LEARNED else used,
+                              "dynamics_inverse_vs_shaper": rms[DYNINV] / rms[compensated]
+                              if rms[compensated] > 0 else float("inf"),
                               "rmse_by_part_um": {"feedback": rms["feedback"], "hysteresis": rms["hysteresis"],
-                                                  "dynamics": rms[compensated], "learned": com},
+                                                  "dynamics": rms[compensated], DYNINV: rms[DYNINV],
+                                                  "learned": com},
                               "learned": {"trials": len(res["history"]), "refused": res["refused"],
                                           "base": learn_base,
                                           "trial_rms_um": [h["rms_um"] for h in res["history"]],
                                           "trial_rms_all_um": res["rms_all_um"],
                                           "lag_s": res["lag_s"], "f_cut_hz": res["f_cut_hz"],
                                           "entries": res["n_entries"]}}
+        # the reference not known in advance: no learning, each configuration as it is
+        rnd = {k: _rms(runs[(k, RANDOM)]["ref"] - runs[(k, RANDOM)]["y"]) for k, _, _, _ in configs}
+        rnd_bad = {k for k, lab, _, _ in configs if f"{lab}, random scan" in bad}
+        tones = excitation.random_scan_tones(f_random)
+        random_scan = {"tones_hz": [round(f, 3) for f, _ in tones], "band_hz": [excitation.RANDOM_SCAN_F_LO, f_random],
+                       "window_s": excitation.RANDOM_SCAN_WINDOW_S, "seed": excitation.RANDOM_SCAN_SEED,
+                       "rmse_by_part_um": {"uncompensated" if k == "open_loop" else
+                                           ("dynamics" if k == compensated else k): v for k, v in rnd.items()},
+                       "faulted": sorted("uncompensated" if k == "open_loop" else
+                                         ("dynamics" if k == compensated else k) for k in rnd_bad),
+                       "dynamics_inverse_vs_shaper": rnd[DYNINV] / rnd[compensated]
+                       if rnd[compensated] > 0 else float("inf")}
+        worse_inverse = [k for k, v in tracking.items() if v["dynamics_inverse_vs_shaper"] > 1.0]
+        if random_scan["dynamics_inverse_vs_shaper"] > 1.0:
+            worse_inverse.append("random scan")
+        text_inverse = (f"; random scan (not learned, {excitation.RANDOM_SCAN_F_LO:g}..{f_random:.0f} Hz) "
+                        f"{rnd['open_loop']:.3f} -> {rnd[compensated]:.3f} um with preview and shaper, "
+                        f"{rnd[DYNINV]:.3f} um with the dynamics inverse"
+                        + (f"; the dynamics inverse is worse than preview and shaper on: {', '.join(worse_inverse)}"
+                           if worse_inverse else ""))
         if faulted:
             text_faults = "; faulted: " + ", ".join(f["configuration"] for f in faulted)
         else:
@@ -409,7 +459,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         text = "; ".join(f"{k} Hz {v['rmse_uncompensated_um']:.3f} -> {v['rmse_compensated_um']:.3f} um "
                          f"({v['reduction']:.1f}x)" if k != "multitone" else
                          f"multitone {v['rmse_uncompensated_um']:.3f} -> {v['rmse_compensated_um']:.3f} um "
-                         f"({v['reduction']:.1f}x)" for k, v in tracking.items()) + text_faults
+                         f"({v['reduction']:.1f}x)" for k, v in tracking.items()) + text_inverse + text_faults
         if worse:
             rollback_result = ctl.rollback_table()
             rolled_back = rollback_result == "ok"
@@ -420,6 +470,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         # record (A/B flash with a CRC, docs/operate.md), saved disarmed with the compensated settings loaded
         params_saved = None
         if not rolled_back:
+            ctl.configure_dyninv()
             ctl.configure_shaper(fb["shaper_ticks"], fb["shaper_q15"], fb["preview_ticks"])
             ctl.configure_feedback(kp=fb["kp"], ki=fb["ki"], notch=fb["notch"])
             was_armed = bool(ctl.status()["armed"])
@@ -446,12 +497,15 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             "params_saved": params_saved,
             "tracking": tracking,
             "acceptance_faults": faulted,
+            "random_scan": random_scan,
+            "dynamics_inverse_worse_on": worse_inverse,
             "checks": {"forward_inverse_max_error_fraction": identity_err, "quantization_max_lsb": quant_lsb,
                        **{k: v for k, v in comp.info.items() if isinstance(v, (int, float))}},
             "compensation": {"mode": compensated, "preview_ticks": fb["preview_ticks"], "kp": fb["kp"],
                              "ki_per_tick": fb["ki"], "crossover_hz": fb["crossover_hz"],
                              "notch_hz": fb["resonance_hz"], "damping": fb["damping"],
-                             "shaper_ticks": fb["shaper_ticks"], "shaper_q15": fb["shaper_q15"]},
+                             "shaper_ticks": fb["shaper_ticks"], "shaper_q15": fb["shaper_q15"],
+                             "dynamics_inverse": dyn.to_dict()},
             "dynamics": {"num": list(map(float, tf.num)), "den": list(map(float, tf.den)),
                          "poles": [[float(p.real), float(p.imag)] for p in poles], "te": float(tf.te),
                          "resonance_hz": f_res, "resonance_source": "frequency of the largest magnitude of the "

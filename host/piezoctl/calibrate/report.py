@@ -221,12 +221,25 @@ def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
         if not p:
             continue
         lr = v.get("learned", {})
+        inv = p.get("dynamics_inverse")
         part_rows.append([_ref_name(float(k) if k != "multitone" else k)]
                          + [f"{x * NM_PER_UM:.1f}" for x in (v["rmse_uncompensated_um"], p["feedback"],
-                                                             p["hysteresis"], p["dynamics"], p["learned"])]
-                         + [f"{lr.get('trials', 0)} ({lr.get('refused', 0)} refused)"])
+                                                             p["hysteresis"], p["dynamics"])]
+                         + ["-" if inv is None else f"{inv * NM_PER_UM:.1f}"
+                            + (" (worse)" if inv > p["dynamics"] else "")]
+                         + [f"{p['learned'] * NM_PER_UM:.1f}", f"{lr.get('trials', 0)} ({lr.get('refused', 0)} refused)"])
+    rs = summary.get("random_scan")
+    if rs:
+        q = rs["rmse_by_part_um"]
+        part_rows.append([f"random scan, {len(rs['tones_hz'])} tones {rs['band_hz'][0]:.0f}..{rs['band_hz'][1]:.0f} Hz "
+                          "(not known in advance)"]
+                         + [f"{q[k] * NM_PER_UM:.1f}" for k in ("uncompensated", "feedback", "hysteresis", "dynamics")]
+                         + [f"{q['dynamics_inverse'] * NM_PER_UM:.1f}"
+                            + (" (worse)" if q["dynamics_inverse"] > q["dynamics"] else "")]
+                         + ["-", "none (nothing to learn from)"])
     parts_table = _table(["reference", "uncompensated [nm]", "feedback only (PI + notch) [nm]",
                           "+ hysteresis inverse [nm]", "+ dynamics: preview and shaper [nm]",
+                          "instead: + dynamics inverse (preview, FIR) [nm]",
                           "+ learned feedforward [nm]", "learning trials"], part_rows) if part_rows else ""
     step_table = _table(["step", "what", "time [s]", "result"],
                         [[f"{r['step']}/7", r["name"], "-" if r.get("seconds") is None else f"{r['seconds']:.1f}",
@@ -237,7 +250,14 @@ def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
         ["damping", f"{comp['damping']:.4f}"], ["crossover [Hz]", f"{comp['crossover_hz']:.0f}"],
         ["kp", f"{comp['kp']:.4g}"], ["ki per tick", f"{comp['ki_per_tick']:.4g}"],
         ["shaper spacing [ticks]", comp["shaper_ticks"]], ["shaper taps (q15)", ", ".join(map(str, comp["shaper_q15"]))],
-        ["preview [ticks]", comp["preview_ticks"]]], cls="left")
+        ["preview [ticks]", comp["preview_ticks"]]]
+        + ([["dynamics inverse: taps, spacing [ticks]", f"{len(di['taps_q13'])}, {di['spacing_ticks']}"],
+            ["dynamics inverse: inverted band [Hz]", f"{di['band_hz'][0]:.0f} .. {di['band_hz'][1]:.0f}"],
+            ["dynamics inverse: preview [ticks]", di["preview_ticks"]],
+            ["dynamics inverse: max |H|, in-band error (preview and shaper)",
+             f"{di['max_gain']:.2f}, {di['inband_error']:.3f} ({di['shaper_inband_error']:.3f})"],
+            ["dynamics inverse: taps (q13)", ", ".join(map(str, di["taps_q13"]))]]
+           if (di := comp.get("dynamics_inverse")) else []), cls="left")
     checks = summary["checks"]
     prov_rows = [["table CRC", summary["table_crc_hex"]], ["table kind", summary["table_kind"]],
                  ["image size [bytes]", len(img)], ["model", model.kind],
@@ -265,7 +285,11 @@ def write_report(path, summary: dict, *, forc, model, frf, tf, runs, img: bytes,
             "own: the feedback loop alone; plus the hysteresis inverse (the table); plus the dynamics "
             "(reference preview of the loop's lag and the input shaper at the resonance); plus the "
             "feedforward learned over trials on the controller (iterative learning control, stored with the "
-            "wave and played by the firmware).</p>", parts_table,
+            "wave and played by the firmware). The dynamics inverse is the alternative to preview and shaper "
+            "for any reference: a least-squares FIR on the early reference so that the measured dynamics times "
+            "it is a pure delay over the inverted band (Compensation below), measured instead of the shaper; "
+            "(worse) marks a reference where it leaves more than preview and shaper. The random scan is a "
+            "reference no learning has seen: 8 tones at random frequencies and phases.</p>", parts_table,
             "<h2>Steps</h2>", step_table]
     for title, note, fig_html in parts:
         body += [f"<h2>{html.escape(title)}</h2>"] + ([f"<p>{html.escape(note)}</p>"] if note else []) + [fig_html]

@@ -27,7 +27,7 @@ import math
 from ..errors import CliError, ControllerRefused
 from ._options import add_output, add_port, emit
 
-SUFFIX_FRAC = {"_q24": 24, "_q15": 15}
+SUFFIX_FRAC = {"_q24": 24, "_q15": 15, "_q13": 13}
 TYPE_RANGE = {"int16": (-2**15, 2**15 - 1), "uint16": (0, 2**16 - 1),
               "int32": (-2**31, 2**31 - 1), "uint32": (0, 2**32 - 1)}
 

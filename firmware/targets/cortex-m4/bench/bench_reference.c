@@ -24,6 +24,11 @@
  *      table through piezo_coefset_load, run by piezo_ff_process) on the
  *      reference scaled to 2/3 (0.6 FS, inside the model's range).
  *
+ * "reference_dyninv32" and "ref_control_dyninv32": the same with the
+ * dynamics-inverse FIR on (32 taps, spacing 1: its most taps; the cost does
+ * not depend on the spacing), against "reference" and "ref_control" with it
+ * off (0 taps: one compare in the tick).
+ *
  * The controller runs one feedforward table per tick; the contract's
  * reference counts KP + DCC and EUPI + inverse together, so the DCC table
  * runs inside the controller and the EUPI pair beside it.
@@ -116,11 +121,23 @@ static void reference_part_tick(void)
     }
 }
 
+/* 1: setup() configures the dynamics-inverse FIR with all its taps */
+static unsigned with_dyninv;
+
 static int setup(void)
 {
     piezo_ctl_t *c = &piezo_axis;
     piezo_ctl_cfg_t cfg;
     piezo_control_default_cfg(&cfg);
+    if (with_dyninv) {
+        /* a lead-lag around unity (taps summing to 8192): the value of the taps costs nothing */
+        cfg.dyninv.n_taps = PIEZO_FIR_MAX_TAPS;
+        cfg.dyninv.spacing = 1u;
+        for (uint32_t i = 0; i < PIEZO_FIR_MAX_TAPS; i++) {
+            cfg.dyninv.h_q13[i] = (int16_t)((i & 1u) ? -300 : 300);
+        }
+        cfg.dyninv.h_q13[3] = 8192;
+    }
     cfg.pid = (piezo_pid_coef_t){.kp_q24 = 1 << 22, .ki_q24 = 1 << 19, .kd_q24 = 0,
                                  .out_min_q15 = -8192, .out_max_q15 = 8192};
     /* the notch of bench_kernels.c: about 700 Hz at 10 kHz */
@@ -235,4 +252,36 @@ void piezo_bench_reference(void)
             reference_part_tick();
         }
     }
+    /* the same with the dynamics-inverse FIR on, all its taps */
+    with_dyninv = 1u;
+    if (setup() != 0) {
+        piezo_bench_failures++;
+        piezo_bench_run("reference_dyninv32", 0u, NULL);
+    } else {
+        snprintf(line, sizeof line, "bench reference_dyninv32 %u\n", PIEZO_BENCH_TICKS);
+        piezo_sh_write0(line);
+        for (uint32_t k = 0; k < PIEZO_BENCH_TICKS; k++) {
+            if (k > 0u) {
+                stage_step();
+            }
+            piezo_bench_begin();
+            firmware_tick();
+            piezo_bench_end();
+        }
+        if (check_running() != 0) {
+            piezo_bench_failures++;
+        }
+    }
+    ref_part = 0u;
+    if (setup() != 0) {
+        piezo_bench_failures++;
+        piezo_bench_run("ref_control_dyninv32", 0u, NULL);
+    } else {
+        snprintf(line, sizeof line, "bench ref_control_dyninv32 %u\n", PIEZO_BENCH_TICKS);
+        piezo_sh_write0(line);
+        for (uint32_t k = 0; k < PIEZO_BENCH_TICKS; k++) {
+            reference_part_tick();
+        }
+    }
+    with_dyninv = 0u;
 }
