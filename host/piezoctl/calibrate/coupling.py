@@ -104,7 +104,8 @@ def connect_axis(port: str, axis: int = 2):
 def _hold_direct(ctl, q15: int) -> None:
     """DIRECT mode holding drive ``q15``, reached by a ramp (a drive step rings a
     low first mode past the sensor's range: the sensor fault), with no input
-    shaper or preview: they act on the reference in DIRECT mode too, and an axis
+    shaper, preview, dynamics inverse or learned feedforward: they act on the
+    reference in DIRECT mode too, and an axis
     just calibrated has its own (the 140 Hz stage's ZVD shaper took the chirp's
     content near the mode out of the identification: the first pair's tables
     left 8.3 nm at 10 Hz where the second's left 4.2)."""
@@ -114,6 +115,8 @@ def _hold_direct(ctl, q15: int) -> None:
         _park(ctl, -32768)
         ctl.command("stop_wave")
         ctl.configure_shaper()
+        ctl.configure_dyninv()
+        ilc.switch_off(ctl)
         ctl.set_mode("direct")
         ctl.write("setpoint_q15", -32768)
         ctl.write("ref_source", 0)

@@ -208,6 +208,11 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         ctl.arm(False)
         ctl.command("clear_faults")
         ctl.command("stop_wave")
+        # the excitation is read as the drive: the shaper, the preview, the dynamics inverse and a learned
+        # feedforward act on the reference in DIRECT mode too, and a controller calibrated before keeps them
+        ctl.configure_shaper()
+        ctl.configure_dyninv()
+        ilc.switch_off(ctl)
         steps.result(row, f"axis {idn.axis + 1} of {idn.n_axes}, {idn.tick_hz} Hz, drive {sc.drive_min_v:g}.."
                           f"{sc.drive_max_v:g} V, position {sc.position_min_um:g}..{sc.position_max_um:g} um, "
                           f"active table {st['active_table_crc']:#010x}")
