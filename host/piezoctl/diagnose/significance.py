@@ -9,14 +9,17 @@ A term is *significant* when all hold:
 
 1. the cross-validated held-out NRMSE falls to at most ``RATIO_MAX`` (0.8) of the
    model without the term, in each fold separately;
-2. on the *active* blocks (where the term's held-out predicted correction, computed
+2. on the *active* test units (where the term's held-out predicted correction, computed
    without the test fold's measurements, has at least ``ACTIVE_FRAC`` of its
-   ``ACTIVE_PCT``-th percentile block RMS) a one-sided t-test and a Wilcoxon signed-rank test (p = 2 x the smaller) on the per-block log ratios
-   ``log(MSE_before / MSE_after)`` gives p < ``ALPHA`` / m, m the number of candidates
-   in the selection round (Bonferroni: family-wise error ``ALPHA`` = 1 % per round);
-   blocks are the units, so the residual's autocorrelation within a block does not
-   inflate the sample size, and the log ratio keeps a few large-error blocks (steps,
-   corners) from swamping the test (see :func:`active_block_test`);
+   ``ACTIVE_PCT``-th percentile unit RMS) a one-sided t-test and a Wilcoxon signed-rank test (p = 2 x the
+   smaller) on the per-unit log ratios ``log(MSE_before / MSE_after)`` gives p < ``ALPHA`` / m, m the number of
+   candidates in the selection round (Bonferroni: family-wise error ``ALPHA`` = 1 % per round). Round 8: the
+   units are parts of the blocks at least ``UNIT_TAUS`` correlation times of the residual's and the
+   correction's energy long (:func:`test_units`), and both tests treat the blocks as clusters (a cluster-robust
+   variance, the signed-rank test's variance inflated by the same design effect), so the residual's
+   autocorrelation does not inflate the sample size while independent events (a step's ring) count each; the
+   log ratio keeps a few large-error units (steps, corners) from swamping the test (see
+   :func:`active_block_test`);
 3. the Bayesian information criterion with an effective sample size (the number of
    samples divided by the residual's integrated autocorrelation time) decreases.
 """
