@@ -142,6 +142,9 @@ def test_units_follow_the_residual_energy_correlation_time():
     u = test_units(ring, blocks, rec, dt)
     per_block = [np.unique(u[blocks == b]).size for b in range(nb)]
     assert min(per_block) >= 4 and max(per_block) <= int(round(m * dt / UNIT_MIN_S))
+    # a constant correction (a level) is fully correlated: one unit per block whatever the residual
+    u = test_units(ring, blocks, rec, dt, correction=np.full(ring.size, 0.3))
+    assert np.array_equal(np.unique(u), np.arange(nb))
     # units never straddle blocks
     assert all(np.unique(blocks[u == k]).size == 1 for k in np.unique(u))
 

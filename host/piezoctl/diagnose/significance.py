@@ -67,6 +67,8 @@ def energy_corr_time(e: np.ndarray, max_lag: int) -> float:
     e2 = np.asarray(e, float) ** 2
     if e2.size < 4:
         return float(max(e2.size, 1))
+    if np.var(e2) <= 1e-12 * (float(np.mean(e2)) ** 2 + 1e-300):
+        return float(2 * max_lag)   # a constant (a level per recording): fully correlated, not white
     return float(e2.size / effective_n(e2, max_lag=max(int(max_lag), 2)))
 
 
