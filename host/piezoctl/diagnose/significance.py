@@ -145,6 +145,35 @@ def _active_log_ratios(before, after, correction, groups):
     return np.log((mb[act] + tiny) / (ma[act] + tiny)), np.flatnonzero(act), inv
 
 
+def _unit_test(before, after, correction, blocks, units):
+    """The clustered test on the units (see :func:`active_block_test`): (t, p, n_active_units)."""
+    ures = _active_log_ratios(before, after, correction, units)
+    if ures is None:
+        return 0.0, 1.0, 0
+    zu, act, inv = ures
+    first = np.zeros(inv.max() + 1, int)          # each unit's block: the block of its first sample
+    first[inv[::-1]] = np.arange(inv.size)[::-1]
+    gid, g_inv = np.unique(np.asarray(blocks)[first[act]], return_inverse=True)
+    n, g = int(zu.size), int(gid.size)
+    if n < 4 or g < 2 or not np.any(zu != 0):
+        return 0.0, 1.0, n
+    m = float(np.mean(zu))
+    var = float(np.sum(np.bincount(g_inv, zu - m) ** 2)) / n ** 2 * g / (g - 1)   # cluster-robust
+    t = float(m / np.sqrt(var)) if var > 0 else (np.inf if m > 0 else 0.0)
+    dof = g - 1
+    # the signed-rank statistic on the units, its variance inflated by the same design effect (the
+    # cluster-robust variance of the mean over the independent-units one, at least 1)
+    s2 = float(np.var(zu, ddof=1))
+    deff = max(1.0, var / (s2 / n)) if s2 > 0 else 1.0
+    nz = zu[zu != 0]
+    r = stats.rankdata(np.abs(nz))
+    k = nz.size
+    w = (float(np.sum(r[nz > 0])) - k * (k + 1) / 4.0) / np.sqrt(k * (k + 1) * (2 * k + 1) / 24.0)
+    p_w = float(stats.norm.sf(w / np.sqrt(deff)))
+    p_t = float(stats.t.sf(t, dof)) if np.isfinite(t) else (0.0 if t > 0 else 1.0)
+    return t, min(1.0, 2.0 * min(p_t, p_w)), n
+
+
 def active_block_test(before: np.ndarray, after: np.ndarray, correction: np.ndarray,
                       blocks: np.ndarray, units: np.ndarray | None = None) -> tuple[float, float, int]:
     """One-sided test that the term lowers the held-out error where it acts.
@@ -181,46 +210,28 @@ def active_block_test(before: np.ndarray, after: np.ndarray, correction: np.ndar
     (t, p, n_active) : tuple
         t statistic, combined one-sided p value, number of active blocks (units when given).
     """
-    if units is None:
-        res = _active_log_ratios(before, after, correction, blocks)
-        if res is None:
-            return 0.0, 1.0, 0
-        z = res[0]
-        n = int(z.size)
-        if n < 4 or not np.any(z != 0):
-            return 0.0, 1.0, n
-        # two one-sided tests, Bonferroni-combined (p = 2 min): the t-test (power with few active blocks: a
-        # signed-rank test on n blocks cannot go below 2^-n) and the Wilcoxon signed-rank test (the z_b are heavy
-        # tailed: a few blocks with steps or spikes improve by orders of magnitude, the rest a little, which
-        # inflates the t-test's variance; the rank test only assumes the z_b symmetric about 0 when the term is
-        # useless)
-        p_w = float(stats.wilcoxon(z, alternative="greater").pvalue)
-        sd = float(np.std(z, ddof=1))
-        t = float(np.mean(z) / (sd / np.sqrt(n))) if sd > 0 else (np.inf if np.mean(z) > 0 else 0.0)
-        dof = n - 1
-    else:
-        ures = _active_log_ratios(before, after, correction, units)
-        if ures is None:
-            return 0.0, 1.0, 0
-        zu, act, inv = ures
-        first = np.zeros(inv.max() + 1, int)          # each unit's block: the block of its first sample
-        first[inv[::-1]] = np.arange(inv.size)[::-1]
-        gid, g_inv = np.unique(np.asarray(blocks)[first[act]], return_inverse=True)
-        n, g = int(zu.size), int(gid.size)
-        if n < 4 or g < 2 or not np.any(zu != 0):
-            return 0.0, 1.0, n
-        m = float(np.mean(zu))
-        var = float(np.sum(np.bincount(g_inv, zu - m) ** 2)) / n ** 2 * g / (g - 1)   # cluster-robust
-        t = float(m / np.sqrt(var)) if var > 0 else (np.inf if m > 0 else 0.0)
-        dof = g - 1
-        # the signed-rank statistic on the units, its variance inflated by the same design effect (the
-        # cluster-robust variance of the mean over the independent-units one, at least 1)
-        s2 = float(np.var(zu, ddof=1))
-        deff = max(1.0, var / (s2 / n)) if s2 > 0 else 1.0
-        nz = zu[zu != 0]
-        r = stats.rankdata(np.abs(nz))
-        k = nz.size
-        w = (float(np.sum(r[nz > 0])) - k * (k + 1) / 4.0) / np.sqrt(k * (k + 1) * (2 * k + 1) / 24.0)
-        p_w = float(stats.norm.sf(w / np.sqrt(deff)))
+    if units is not None:
+        # two valid tests, Bonferroni-combined: on the blocks (power where each block improves, e.g. a delay's
+        # edges in every block while the units between edges change little) and on the units (power where the
+        # evidence is many independent events in few blocks)
+        tb, pb, nb = active_block_test(before, after, correction, blocks)
+        tu, pu, nu = _unit_test(before, after, correction, blocks, units)
+        return (tb, min(1.0, 2.0 * pb), nb) if pb <= pu else (tu, min(1.0, 2.0 * pu), nu)
+    res = _active_log_ratios(before, after, correction, blocks)
+    if res is None:
+        return 0.0, 1.0, 0
+    z = res[0]
+    n = int(z.size)
+    if n < 4 or not np.any(z != 0):
+        return 0.0, 1.0, n
+    # two one-sided tests, Bonferroni-combined (p = 2 min): the t-test (power with few active blocks: a
+    # signed-rank test on n blocks cannot go below 2^-n) and the Wilcoxon signed-rank test (the z_b are heavy
+    # tailed: a few blocks with steps or spikes improve by orders of magnitude, the rest a little, which
+    # inflates the t-test's variance; the rank test only assumes the z_b symmetric about 0 when the term is
+    # useless)
+    p_w = float(stats.wilcoxon(z, alternative="greater").pvalue)
+    sd = float(np.std(z, ddof=1))
+    t = float(np.mean(z) / (sd / np.sqrt(n))) if sd > 0 else (np.inf if np.mean(z) > 0 else 0.0)
+    dof = n - 1
     p_t = float(stats.t.sf(t, dof)) if np.isfinite(t) else (0.0 if t > 0 else 1.0)
     return t, min(1.0, 2.0 * min(p_t, p_w)), n
