@@ -124,6 +124,67 @@ def test_active_block_test_finds_a_localized_improvement_and_not_noise():
     assert p > 0.5
 
 
+def test_units_follow_the_residual_energy_correlation_time():
+    from piezoctl.diagnose.significance import UNIT_MIN_S, test_units
+    rng = np.random.default_rng(7)
+    dt, m, nb = 1e-4, 6000, 6
+    blocks = np.repeat(np.arange(nb), m)
+    rec = np.zeros(nb * m, int)
+    # a slow misfit (the error follows the history for seconds): one unit per block, as before round 8
+    slow = np.cumsum(rng.normal(0, 1, nb * m))
+    u = test_units(slow, blocks, rec, dt)
+    assert np.array_equal(np.unique(u), np.arange(nb))
+    # short rings after steps every 0.05 s plus noise: several units per block, each at least UNIT_MIN_S
+    ring = rng.normal(0, 0.1, nb * m)
+    for k0 in range(0, nb * m, 500):
+        k = np.arange(min(200, nb * m - k0))
+        ring[k0 + k] += np.exp(-k / 40) * np.sin(2 * np.pi * k / 10)
+    u = test_units(ring, blocks, rec, dt)
+    per_block = [np.unique(u[blocks == b]).size for b in range(nb)]
+    assert min(per_block) >= 4 and max(per_block) <= int(round(m * dt / UNIT_MIN_S))
+    # a constant correction (a level) is fully correlated: one unit per block whatever the residual
+    u = test_units(ring, blocks, rec, dt, correction=np.full(ring.size, 0.3))
+    assert np.array_equal(np.unique(u), np.arange(nb))
+    # units never straddle blocks
+    assert all(np.unique(blocks[u == k]).size == 1 for k in np.unique(u))
+
+
+def _rings(seed, per_block):
+    """Rings after steps every 0.1 s in 8 blocks of 0.6 s; the term leaves a part of each ring, drawn per ring
+    (independent events) or per block (rings of one block improve together)."""
+    rng = np.random.default_rng(seed)
+    dt, m, nb = 1e-4, 6000, 8
+    blocks = np.repeat(np.arange(nb), m)
+    noise = rng.normal(0, 0.1, nb * m)
+    eff, kept = np.zeros(nb * m), np.zeros(nb * m)
+    how_well = rng.uniform(0.2, 1.1, nb)
+    for k0 in range(0, nb * m, 1000):
+        k = np.arange(300)
+        eff[k0 + k] = np.exp(-k / 60) * np.sin(2 * np.pi * k / 12)
+        kept[k0 + k] = how_well[k0 // m] if per_block else rng.uniform(0.0, 1.3)
+    return dt, blocks, noise, eff, kept
+
+
+def test_units_pool_independent_events_and_not_blocks_that_move_together():
+    from piezoctl.diagnose.significance import active_block_test, test_units
+    for per_block in (False, True):
+        dt, blocks, noise, eff, kept = _rings(0, per_block)
+        rec = np.zeros(blocks.size, int)
+        before, after = noise + eff, noise + kept * eff
+        _, p_blocks, n_blocks = active_block_test(before, after, before - after, blocks)
+        units = test_units(before, blocks, rec, dt)
+        _, p_units, n_units = active_block_test(before, after, before - after, blocks, units)
+        assert n_blocks == 8
+        if not per_block:   # ~48 independent rings: far more evidence than 8 blocks
+            assert n_units > 30 and p_units < 1e-4 and p_units < p_blocks / 20
+        else:               # rings of a block improve together: the design effect keeps the blocks' evidence
+            assert p_units > p_blocks / 3
+    # the same units give no evidence to a term that predicts rings the data do not have
+    _, p_null, _ = active_block_test(noise, noise - 0.7 * eff, 0.7 * eff, blocks,
+                                     test_units(noise, blocks, rec, dt))
+    assert p_null > 0.5
+
+
 def test_outside_mask_guards_after_the_excursion():
     from piezoctl.diagnose.run import OUT_GUARD_S, _outside_mask
     from piezoctl.diagnose.select import Signals

@@ -279,15 +279,20 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                   "channels (a nested test: the model without the term has those gains refitted on "
                                   "the same fold), it lowers the held-out NRMSE to at most "
                                   f"{sg.RATIO_MAX} of the model without it in each fold; a one-sided t-test and a "
-                                  "Wilcoxon signed-rank test (p = 2 x the smaller) on the per-block log ratios "
-                                  "log(MSE before / MSE after) over the blocks where the term's held-out predicted "
-                                  f"correction has at least {sg.ACTIVE_FRAC:g} of its {sg.ACTIVE_PCT:g}th-percentile "
-                                  "block RMS (chosen without the test fold's measurements) gives p < "
+                                  "Wilcoxon signed-rank test (p = 2 x the smaller) on the log ratios "
+                                  "log(MSE before / MSE after) of test units (parts of the blocks at least "
+                                  f"{sg.UNIT_TAUS:g} correlation times of the residual's and the correction's energy "
+                                  f"and {sg.UNIT_MIN_S:g} s long; blocks as clusters: a cluster-robust t-test and a "
+                                  "signed-rank test with the same design effect) over the units where the term's "
+                                  f"held-out predicted correction has at least {sg.ACTIVE_FRAC:g} of its "
+                                  f"{sg.ACTIVE_PCT:g}th-percentile unit RMS (chosen without the test fold's "
+                                  "measurements) gives p < "
                                   f"{sg.ALPHA:g} / (number of candidates in the round) (Bonferroni: family-wise "
                                   "error 1 % per round); and the BIC with the autocorrelation-corrected sample size "
                                   "decreases; and the refined model, simulated exactly with the term fitted on one "
                                   "fold, lowers the error on the other fold in each",
-                     "ratio_max": sg.RATIO_MAX, "alpha_family": sg.ALPHA, "active_fraction": sg.ACTIVE_FRAC},
+                     "ratio_max": sg.RATIO_MAX, "alpha_family": sg.ALPHA, "active_fraction": sg.ACTIVE_FRAC,
+                     "unit_correlation_times": sg.UNIT_TAUS, "unit_min_s": sg.UNIT_MIN_S},
             "outside_calibrated_range": outside_doc,
             "base_info": base_info,
             "located": located,

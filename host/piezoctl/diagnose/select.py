@@ -411,7 +411,9 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
     ra_res = (e_before - pred_after)[used]
     nb = float(np.sqrt(np.mean(rb_res ** 2)) / span)
     na = float(np.sqrt(np.mean(ra_res ** 2)) / span)
-    t, p, n_act = sg.active_block_test(rb_res, ra_res, pred_after[used], block_all[used])
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctxs[0].valid)])[used]
+    units = sg.test_units(rb_res, block_all[used], rec, ctxs[0].dt, pred_after[used])
+    t, p, n_act = sg.active_block_test(rb_res, ra_res, pred_after[used], block_all[used], units)
     neff = sg.effective_n(rb_res)
     dbic = sg.bic_delta(float(np.sum(rb_res ** 2)), float(np.sum(ra_res ** 2)), neff, k)
     significant = bool(max(fold_ratios) <= sg.RATIO_MAX and p < p_max and dbic < 0)
