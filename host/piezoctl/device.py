@@ -436,21 +436,25 @@ class Controller:
         self.command("arm_recorder")
         if start_wave:
             self.command("start_wave")
-        wait = timeout_s if timeout_s is not None else frames * decimation / tick * 3 + 5
-        deadline = time.monotonic() + wait
-        while True:
-            st = self.status()
-            if st["rec_frames"] >= frames or st["rec_state"] == 3:
-                break
-            if time.monotonic() > deadline:
-                raise DeviceError("the recorder did not fill in time (is the controller ticking? "
-                                  "did the trigger condition occur?)")
-            time.sleep(0.02)
+        self.wait_recorder(frames, timeout_s if timeout_s is not None else frames * decimation / tick * 3 + 5)
         data = self.read_recording(len(signals))[:frames]
         cols = {"t": np.arange(data.shape[0]) * decimation / tick}
         for i, sname in enumerate(signals):
             cols[sname] = self.to_physical(sname, data[:, i])
         return cols
+
+    def wait_recorder(self, frames: int, timeout_s: float) -> None:
+        """Wait until the armed recorder holds ``frames`` frames or is full; :class:`DeviceError` after
+        ``timeout_s`` [s]."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            st = self.status()
+            if st["rec_frames"] >= frames or st["rec_state"] == 3:
+                return
+            if time.monotonic() > deadline:
+                raise DeviceError("the recorder did not fill in time (is the controller ticking? "
+                                  "did the trigger condition occur?)")
+            time.sleep(0.02)
 
     def rec_frames_capacity(self, n_signals: int) -> int:
         """Frames of ``n_signals`` signals the recorder holds (``rec_capacity`` / signals)."""

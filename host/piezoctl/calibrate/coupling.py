@@ -109,14 +109,12 @@ def _hold_direct(ctl, q15: int) -> None:
     just calibrated has its own (the 140 Hz stage's ZVD shaper took the chirp's
     content near the mode out of the identification: the first pair's tables
     left 8.3 nm at 10 Hz where the second's left 4.2)."""
-    from .pipeline import _park
+    from .pipeline import _park, drive_path_raw
     st = ctl.status()
     if not (st["armed"] and st["mode"] == 5):
         _park(ctl, -32768)
         ctl.command("stop_wave")
-        ctl.configure_shaper()
-        ctl.configure_dyninv()
-        ilc.switch_off(ctl)
+        drive_path_raw(ctl)
         ctl.set_mode("direct")
         ctl.write("setpoint_q15", -32768)
         ctl.write("ref_source", 0)
@@ -208,49 +206,12 @@ def _hold_and_drive(ci, cj, comp_i: dict, comp_j: dict, f: float, bypass: int) -
     return mid_i
 
 
-def _wait_frames(ctl, frames: int, timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while True:
-        st = ctl.status()
-        if st["rec_frames"] >= frames or st["rec_state"] == 3:
-            return
-        if time.monotonic() > deadline:
-            raise CliError("coupling evaluation: the recorder did not fill in time")
-        time.sleep(0.02)
-
-
-def periodic_rms(err, n_ticks: int) -> tuple[float, float]:
-    """What repeats with the other axis' period, and the noise, in an error record [um].
-
-    The record's whole periods are averaged; the mean's RMS still holds the
-    noise divided by the number of periods ``P``, so its square is corrected by
-    the noise variance (from the spread across periods) over ``P``: an unbiased
-    estimate of the coupling-induced error's RMS, which the sensor noise (2 nm
-    RMS on the SIL stages) does not floor.
-
-    Returns
-    -------
-    periodic : float
-        RMS of the error that repeats every period [um] (0 when the noise explains it all).
-    noise : float
-        RMS of what does not repeat [um].
-    """
-    e = np.asarray(err, dtype=float)
-    p = e.size // n_ticks
-    if p < 2:
-        raise ValueError(f"a periodic RMS needs at least 2 periods of {n_ticks} samples, not {e.size}")
-    e = e[:p * n_ticks].reshape(p, n_ticks)
-    var_noise = float(np.mean(np.var(e, axis=0, ddof=1)))
-    mean_sq = float(np.mean(e.mean(axis=0) ** 2))
-    return float(np.sqrt(max(0.0, mean_sq - var_noise / p))), float(np.sqrt(var_noise))
-
-
 def _u2_midlevel(ci, n_ticks: int) -> int:
     """The middle of the other axis' drive as axis i sees it (q15): the level its
     rising crossing marks the same phase of every period."""
     ci.configure_recorder(["u2"], trigger="immediate")
     ci.command("arm_recorder")
-    _wait_frames(ci, n_ticks, 5.0)
+    ci.wait_recorder(n_ticks, 5.0)
     u2 = ci.read_recording(1)[:n_ticks, 0]
     return int(round(0.5 * (int(u2.min()) + int(u2.max()))))
 
@@ -266,7 +227,7 @@ def _still_trial(ci, n_ticks: int, periods: int, settle: int, level_q15: int, pr
     ci.configure_recorder(["err"], trigger="rising", trigger_signal="u2", level_q15=level_q15)
     ci.command("arm_recorder")
     ci.command("start_wave_on_trigger")
-    _wait_frames(ci, frames, frames / ci.identity.tick_hz * 3 + 5)
+    ci.wait_recorder(frames, frames / ci.identity.tick_hz * 3 + 5)
     err = ci.to_physical("err", ci.read_recording(1)[:frames, 0])
     ci.command("stop_wave")
     e_all = err[settle * n_ticks:].reshape(periods, n_ticks)

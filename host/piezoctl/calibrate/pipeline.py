@@ -154,6 +154,15 @@ def _park(ctl, bottom_q15: int, seconds: float = 0.2, steps: int = 40) -> None:
     ctl.arm(False)
 
 
+def drive_path_raw(ctl) -> None:
+    """No input shaper, preview, dynamics inverse or learned feedforward (unit disarmed): they act on
+    the reference in DIRECT mode too, so an excitation read as the drive needs them off, and a
+    controller calibrated before keeps them (in its flash, or from an earlier session)."""
+    ctl.configure_shaper()
+    ctl.configure_dyninv()
+    ilc.switch_off(ctl)
+
+
 def _recover(ctl, faulted: list, label: str, say) -> None:
     """After a configuration's runs: a fault (a reference that rang the stage past
     its sensor's range) is recorded in ``faulted`` and said, cleared, and the
@@ -208,11 +217,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         ctl.arm(False)
         ctl.command("clear_faults")
         ctl.command("stop_wave")
-        # the excitation is read as the drive: the shaper, the preview, the dynamics inverse and a learned
-        # feedforward act on the reference in DIRECT mode too, and a controller calibrated before keeps them
-        ctl.configure_shaper()
-        ctl.configure_dyninv()
-        ilc.switch_off(ctl)
+        drive_path_raw(ctl)
         steps.result(row, f"axis {idn.axis + 1} of {idn.n_axes}, {idn.tick_hz} Hz, drive {sc.drive_min_v:g}.."
                           f"{sc.drive_max_v:g} V, position {sc.position_min_um:g}..{sc.position_max_um:g} um, "
                           f"active table {st['active_table_crc']:#010x}")
