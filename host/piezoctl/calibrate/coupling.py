@@ -206,6 +206,32 @@ def _hold_and_drive(ci, cj, comp_i: dict, comp_j: dict, f: float, bypass: int) -
     return mid_i
 
 
+def periodic_rms(err, n_ticks: int) -> tuple[float, float]:
+    """What repeats with the other axis' period, and the noise, in an error record [um].
+
+    The record's whole periods are averaged; the mean's RMS still holds the
+    noise divided by the number of periods ``P``, so its square is corrected by
+    the noise variance (from the spread across periods) over ``P``: an unbiased
+    estimate of the coupling-induced error's RMS, which the sensor noise (2 nm
+    RMS on the SIL stages) does not floor.
+
+    Returns
+    -------
+    periodic : float
+        RMS of the error that repeats every period [um] (0 when the noise explains it all).
+    noise : float
+        RMS of what does not repeat [um].
+    """
+    e = np.asarray(err, dtype=float)
+    p = e.size // n_ticks
+    if p < 2:
+        raise ValueError(f"a periodic RMS needs at least 2 periods of {n_ticks} samples, not {e.size}")
+    e = e[:p * n_ticks].reshape(p, n_ticks)
+    var_noise = float(np.mean(np.var(e, axis=0, ddof=1)))
+    mean_sq = float(np.mean(e.mean(axis=0) ** 2))
+    return float(np.sqrt(max(0.0, mean_sq - var_noise / p))), float(np.sqrt(var_noise))
+
+
 def _u2_midlevel(ci, n_ticks: int) -> int:
     """The middle of the other axis' drive as axis i sees it (q15): the level its
     rising crossing marks the same phase of every period."""
