@@ -209,15 +209,17 @@ static int check_running(void)
     return 0;
 }
 
-void piezo_bench_reference(void)
+/* The whole firmware tick counted, the stage stepped between ticks uncounted;
+ * -1 (and the failure counted) when the setup fails. */
+static int bench_full(const char *name)
 {
     char line[64];
     if (setup() != 0) {
         piezo_bench_failures++;
-        piezo_bench_run("reference", 0u, NULL);
-        return;
+        piezo_bench_run(name, 0u, NULL);
+        return -1;
     }
-    snprintf(line, sizeof line, "bench reference %u\n", PIEZO_BENCH_TICKS);
+    snprintf(line, sizeof line, "bench %s %u\n", name, PIEZO_BENCH_TICKS);
     piezo_sh_write0(line);
     for (uint32_t k = 0; k < PIEZO_BENCH_TICKS; k++) {
         if (k > 0u) {
@@ -230,6 +232,30 @@ void piezo_bench_reference(void)
     if (check_running() != 0) {
         piezo_bench_failures++;
     }
+    return 0;
+}
+
+/* One part of the reference tick (ref_part) counted alone. */
+static void bench_part(const char *name)
+{
+    char line[64];
+    if (setup() != 0) {
+        piezo_bench_failures++;
+        piezo_bench_run(name, 0u, NULL);
+        return;
+    }
+    snprintf(line, sizeof line, "bench %s %u\n", name, PIEZO_BENCH_TICKS);
+    piezo_sh_write0(line);
+    for (uint32_t k = 0; k < PIEZO_BENCH_TICKS; k++) {
+        reference_part_tick();
+    }
+}
+
+void piezo_bench_reference(void)
+{
+    if (bench_full("reference") != 0) {
+        return;
+    }
     if (setup() != 0) {
         piezo_bench_failures++;
         piezo_bench_run("reference_with_stage_model", 0u, NULL);
@@ -241,47 +267,12 @@ void piezo_bench_reference(void)
     }
     static const char *const part_name[3] = {"ref_control", "ref_eupi", "ref_eupi_inv"};
     for (ref_part = 0u; ref_part < 3u; ref_part++) {
-        if (setup() != 0) {
-            piezo_bench_failures++;
-            piezo_bench_run(part_name[ref_part], 0u, NULL);
-            continue;
-        }
-        snprintf(line, sizeof line, "bench %s %u\n", part_name[ref_part], PIEZO_BENCH_TICKS);
-        piezo_sh_write0(line);
-        for (uint32_t k = 0; k < PIEZO_BENCH_TICKS; k++) {
-            reference_part_tick();
-        }
+        bench_part(part_name[ref_part]);
     }
     /* the same with the dynamics-inverse FIR on, all its taps */
     with_dyninv = 1u;
-    if (setup() != 0) {
-        piezo_bench_failures++;
-        piezo_bench_run("reference_dyninv32", 0u, NULL);
-    } else {
-        snprintf(line, sizeof line, "bench reference_dyninv32 %u\n", PIEZO_BENCH_TICKS);
-        piezo_sh_write0(line);
-        for (uint32_t k = 0; k < PIEZO_BENCH_TICKS; k++) {
-            if (k > 0u) {
-                stage_step();
-            }
-            piezo_bench_begin();
-            firmware_tick();
-            piezo_bench_end();
-        }
-        if (check_running() != 0) {
-            piezo_bench_failures++;
-        }
-    }
+    (void)bench_full("reference_dyninv32");
     ref_part = 0u;
-    if (setup() != 0) {
-        piezo_bench_failures++;
-        piezo_bench_run("ref_control_dyninv32", 0u, NULL);
-    } else {
-        snprintf(line, sizeof line, "bench ref_control_dyninv32 %u\n", PIEZO_BENCH_TICKS);
-        piezo_sh_write0(line);
-        for (uint32_t k = 0; k < PIEZO_BENCH_TICKS; k++) {
-            reference_part_tick();
-        }
-    }
+    bench_part("ref_control_dyninv32");
     with_dyninv = 0u;
 }
