@@ -245,6 +245,7 @@ def gen_c(d: dict, crc: int) -> tuple[str, str]:
     h += ["", f"/* Controller parameters in flash: {pr['doc']} */",
           f"#define PIEZO_PARAMS_MAGIC 0x{pr['magic']:08X}u",
           f"#define PIEZO_PARAMS_SLOT_BYTES {pr['slot_bytes']}u",
+          f"#define PIEZO_PARAMS_MIN_SLOT_BYTES {pr['min_slot_bytes']}u  /* the block's words only */",
           f"#define PIEZO_PARAMS_FIRST 0x{first:04X}u  /* the configuration block */",
           f"#define PIEZO_PARAMS_WORDS {words}u"]
     reasons = sorted(pr["reasons"].items(), key=lambda kv: kv[1])
@@ -352,6 +353,7 @@ def gen_py(d: dict, crc: int) -> str:
     first, words, regs = param_block(d)
     lines.append(f"PARAMS_MAGIC = 0x{pr['magic']:08X}")
     lines.append(f"PARAMS_SLOT_BYTES = {pr['slot_bytes']}")
+    lines.append(f"PARAMS_MIN_SLOT_BYTES = {pr['min_slot_bytes']}")
     lines.append(f"PARAMS_FIRST = 0x{first:04X}")
     lines.append(f"PARAMS_WORDS = {words}")
     lines.append(f"PARAMS_REASONS = {json.dumps(pr['reasons'])}")

@@ -44,6 +44,7 @@ void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl)
     m->params_source = PIEZO_PARAMS_SRC_DEFAULTS;
     m->params_result = PIEZO_PARAMS_REASON_NONE_STORED;
     m->params_ignored = PIEZO_PARAMS_REASON_OK;
+    m->params_wave = PIEZO_PARAMS_WAVE_NONE;
 }
 
 void piezo_regmap_provision(piezo_regmap_t *m, uint32_t key)
@@ -139,6 +140,7 @@ static uint32_t input_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d, 
     case PIEZO_IREG_PARAMS_SOURCE: return m->params_source;
     case PIEZO_IREG_PARAMS_SEQ: return m->have_pstore ? piezo_pstore_seq(&m->pstore) : 0u;
     case PIEZO_IREG_PARAMS_IGNORED: return m->params_ignored;
+    case PIEZO_IREG_PARAMS_WAVE: return m->params_wave;
     case PIEZO_IREG_REC_WRITTEN: return piezo_rec_written(&c->rec);
     default: return 0u;
     }
@@ -505,18 +507,29 @@ static void rebind(piezo_ctl_t *c)
 }
 
 /* ---------------------------------------------------------------- parameters
- * The payload of a parameter record (param_store.h), little-endian:
- *   0 interface CRC (uint32): a record of another register map is refused
- *   4 word count (uint16) = PIEZO_PARAMS_WORDS, 6 reserved (0)
- *   8 the configuration block's register words, PIEZO_PARAMS_FIRST on */
-#define PARAMS_PAYLOAD_BYTES (8u + 2u * PIEZO_PARAMS_WORDS)
-
-/* The configuration block's words, as a read of the registers gives them. */
-static void params_words(const piezo_regmap_t *m, uint16_t *words)
-{
-    (void)read_space(m, piezo_holding_regs, PIEZO_HREG_N, holding_value, PIEZO_PARAMS_FIRST,
-                     (uint16_t)PIEZO_PARAMS_WORDS, words);
-}
+ * The payload of a parameter record (param_store.h) is 16-bit words,
+ * little-endian (word k at bytes 2k, 2k + 1):
+ *   0, 1  interface CRC, low word first: a record of another register map is refused
+ *   2     word count W = PIEZO_PARAMS_WORDS
+ *   3     sections: bit 0 = the wave section follows (PARAMS_SECTION_WAVE)
+ *   4 ..  the configuration block's register words, PIEZO_PARAMS_FIRST on (W)
+ * then the wave section, each register's words as a read gives them (32-bit
+ * values high word first):
+ *   15          wave_kind .. wave_hold_ticks (0x1100 ..)
+ *   40          wave_tones
+ *   L, 2 L      wave_levels and wave_durations [0, L), L = the wave_n_levels above
+ *   3           the learned feedforward being played: its entries n (0 = none)
+ *               and its freq word (high, low)
+ *   n           its entries (q15)
+ * The wave is saved with the parameters because its learned correction
+ * belongs to the settings it was learned with. It is left out (params_wave
+ * left_out) when the target's slot has no room for it. */
+#define PARAMS_HEAD_WORDS 4u
+#define PARAMS_SECTION_WAVE 1u
+#define WAVE_REG_WORDS (PIEZO_HOLDING_WAVE_HOLD_TICKS + 2u - PIEZO_HOLDING_WAVE_KIND)
+#define WAVE_FF_HEAD_WORDS 3u
+#define COMPOSE_WORDS 32u /* words checked or applied per pass (even: 32-bit values stay whole) */
+typedef char wave_reg_words_check[(WAVE_REG_WORDS == 15u) ? 1 : -1];
 
 /* The configuration the words give, checked as a register write checks it
  * (each value legal, the whole accepted by the modules). 0 or -1. */
@@ -552,61 +565,320 @@ static int params_config(const piezo_regmap_t *m, const uint16_t *words, piezo_c
     return 0;
 }
 
-/* Load the active record into the controller (boot, params load). */
-static uint16_t params_load(piezo_regmap_t *m)
+/* One holding register word as a read gives it. */
+static uint16_t holding_word(const piezo_regmap_t *m, uint16_t addr)
 {
-    uint8_t buf[PIEZO_PSTORE_MAX_PAYLOAD];
-    uint16_t words[PIEZO_PARAMS_WORDS];
-    piezo_ctl_cfg_t cfg;
-    uint32_t len;
-    if (!m->have_pstore) {
-        return PIEZO_PARAMS_REASON_STORAGE_FAILED;
+    uint16_t w = 0u;
+    (void)read_space(m, piezo_holding_regs, PIEZO_HREG_N, holding_value, addr, 1u, &w);
+    return w;
+}
+
+/* The learned feedforward the tick plays (or takes next), NULL = none. */
+static const piezo_ctl_wave_ff_t *played_ff(const piezo_ctl_t *c)
+{
+    int8_t a = c->wave_ff_pending >= 0 ? c->wave_ff_pending : c->wave_ff_active;
+    return (a >= 0 && a != PIEZO_CTL_WAVE_FF_OFF) ? &c->wave_ff[a] : NULL;
+}
+
+typedef struct {
+    const piezo_regmap_t *m;
+    uint16_t sections;
+    uint16_t n_levels;
+    const piezo_ctl_wave_ff_t *ff;
+    uint32_t last_k; /* the word computed last (each word serves two bytes) */
+    uint16_t last_w;
+} save_ctx_t;
+
+static uint16_t save_word(const save_ctx_t *s, uint32_t k)
+{
+    const piezo_regmap_t *m = s->m;
+    uint32_t nl = s->n_levels, n_ff = s->ff != NULL ? s->ff->n : 0u;
+    if (k < 2u) {
+        return (uint16_t)(PIEZO_INTERFACE_CRC32 >> (16u * k));
     }
-    len = piezo_pstore_load(&m->pstore, buf, sizeof buf);
-    if (len == 0u) {
-        return m->pstore.active < 0 ? PIEZO_PARAMS_REASON_NONE_STORED : PIEZO_PARAMS_REASON_STORAGE_FAILED;
+    if (k == 2u) {
+        return (uint16_t)PIEZO_PARAMS_WORDS;
     }
-    if (len < 8u || piezo_le32(buf) != PIEZO_INTERFACE_CRC32) {
-        return PIEZO_PARAMS_REASON_BAD_LAYOUT;
+    if (k == 3u) {
+        return s->sections;
     }
-    if (len != PARAMS_PAYLOAD_BYTES || ((uint32_t)buf[4] | (uint32_t)buf[5] << 8) != PIEZO_PARAMS_WORDS) {
-        return PIEZO_PARAMS_REASON_BAD_LENGTH;
+    k -= PARAMS_HEAD_WORDS;
+    if (k < PIEZO_PARAMS_WORDS) {
+        return holding_word(m, (uint16_t)(PIEZO_PARAMS_FIRST + k));
     }
-    for (uint32_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
-        words[i] = (uint16_t)(buf[8u + 2u * i] | (uint16_t)(buf[9u + 2u * i] << 8));
+    k -= PIEZO_PARAMS_WORDS;
+    if (k < WAVE_REG_WORDS) {
+        return holding_word(m, (uint16_t)(PIEZO_HOLDING_WAVE_KIND + k));
     }
-    if (params_config(m, words, &cfg) != 0) {
+    k -= WAVE_REG_WORDS;
+    if (k < PIEZO_HOLDING_WAVE_TONES_COUNT) {
+        return holding_word(m, (uint16_t)(PIEZO_HOLDING_WAVE_TONES + k));
+    }
+    k -= PIEZO_HOLDING_WAVE_TONES_COUNT;
+    if (k < nl) {
+        return holding_word(m, (uint16_t)(PIEZO_HOLDING_WAVE_LEVELS + k));
+    }
+    k -= nl;
+    if (k < 2u * nl) {
+        return holding_word(m, (uint16_t)(PIEZO_HOLDING_WAVE_DURATIONS + k));
+    }
+    k -= 2u * nl;
+    if (k == 0u) {
+        return (uint16_t)n_ff;
+    }
+    if (k < WAVE_FF_HEAD_WORDS) {
+        uint32_t f = s->ff != NULL ? s->ff->freq_word : 0u;
+        return (uint16_t)(k == 1u ? f >> 16 : f);
+    }
+    k -= WAVE_FF_HEAD_WORDS;
+    return k < n_ff ? (uint16_t)s->ff->c_q15[k] : 0u;
+}
+
+static int save_fill(void *ctx, uint32_t off, uint8_t *buf, uint32_t n)
+{
+    save_ctx_t *s = ctx;
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t k = (off + i) >> 1;
+        if (k != s->last_k) {
+            s->last_w = save_word(s, k);
+            s->last_k = k;
+        }
+        buf[i] = (uint8_t)(((off + i) & 1u) ? s->last_w >> 8 : s->last_w);
+    }
+    return 0;
+}
+
+/* Words of a stored record, read in order in chunks (no record-sized buffer). */
+typedef struct {
+    const piezo_pstore_t *ps;
+    uint32_t len, off; /* payload bytes; the next word's byte offset */
+    uint32_t buf_off, buf_n;
+    uint8_t buf[64];
+    int err;
+} reader_t;
+
+static void reader_at(reader_t *r, const piezo_pstore_t *ps, uint32_t word)
+{
+    r->ps = ps;
+    r->len = piezo_pstore_len(ps);
+    r->off = 2u * word;
+    r->buf_off = 0u;
+    r->buf_n = 0u;
+    r->err = 0;
+}
+
+static uint16_t next_word(reader_t *r)
+{
+    uint32_t i;
+    if (r->err || r->off + 2u > r->len) {
+        r->err = 1;
+        return 0u;
+    }
+    if (r->off < r->buf_off || r->off + 2u > r->buf_off + r->buf_n) {
+        uint32_t n = r->len - r->off < sizeof r->buf ? r->len - r->off : (uint32_t)sizeof r->buf;
+        if (piezo_pstore_read(r->ps, r->off, r->buf, n) != PIEZO_OK) {
+            r->err = 1;
+            return 0u;
+        }
+        r->buf_off = r->off;
+        r->buf_n = n;
+    }
+    i = r->off - r->buf_off;
+    r->off += 2u;
+    return (uint16_t)(r->buf[i] | (uint16_t)(r->buf[i + 1u] << 8));
+}
+
+/* Registers [addr, addr + n) from the record's next n words: each value
+ * checked as a register write checks it and, with apply_now, stored. A
+ * 32-bit register must lie whole in the n words. 0 or -1. */
+static int compose(piezo_regmap_t *m, reader_t *r, uint16_t addr, uint32_t n, int apply_now)
+{
+    uint16_t unused = 0u;
+    pending_t p = {NULL, 0u, 0u};
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t w;
+        uint16_t word = next_word(r);
+        const piezo_reg_desc_t *d = find(piezo_holding_regs, PIEZO_HREG_N, (uint16_t)(addr + i), &w);
+        if (r->err || d == NULL || (d->flags & PIEZO_REG_READONLY)) {
+            return -1;
+        }
+        p.d = d;
+        p.elem = d->words == 2u ? w >> 1 : w;
+        if (d->words == 1u) {
+            p.value = word;
+        } else if ((w & 1u) == 0u) {
+            p.value = (uint32_t)word << 16;
+            if (i + 1u == n) {
+                return -1; /* half a value */
+            }
+            continue; /* the low word completes it */
+        } else {
+            p.value |= word;
+        }
+        if (!legal(m, &p)) {
+            return -1;
+        }
+        if (apply_now) {
+            apply(m, &p, &unused, &unused, &unused);
+        }
+    }
+    return 0;
+}
+
+/* Registers [addr, addr + n) in passes of COMPOSE_WORDS. */
+static int compose_all(piezo_regmap_t *m, reader_t *r, uint16_t addr, uint32_t n, int apply_now)
+{
+    for (uint32_t i = 0; i < n; i += COMPOSE_WORDS) {
+        uint32_t k = n - i < COMPOSE_WORDS ? n - i : COMPOSE_WORDS;
+        if (compose(m, r, (uint16_t)(addr + i), k, apply_now) != 0) {
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* The wave section from r: checked (apply_now 0; nothing changes) or
+ * stored and its learned feedforward committed (apply_now 1, after a check
+ * passed). Returns a PIEZO_PARAMS_REASON_*. */
+static uint16_t wave_section(piezo_regmap_t *m, reader_t *r, int apply_now)
+{
+    piezo_ctl_t *c = m->ctl;
+    uint32_t start = r->off, nl, n_ff, freq;
+    if (compose(m, r, PIEZO_HOLDING_WAVE_KIND, WAVE_REG_WORDS, 0) != 0) {
         return PIEZO_PARAMS_REASON_OUT_OF_RANGE;
     }
-    m->ctl->cfg = cfg;
-    rebind(m->ctl);
-    m->params_source = PIEZO_PARAMS_SRC_FLASH;
+    /* wave_n_levels (checked against this target's capacity just now) */
+    {
+        reader_t again = *r;
+        again.off = start + 2u * (PIEZO_HOLDING_WAVE_N_LEVELS - PIEZO_HOLDING_WAVE_KIND);
+        nl = next_word(&again);
+    }
+    if (apply_now) {
+        r->off = start;
+        (void)compose(m, r, PIEZO_HOLDING_WAVE_KIND, WAVE_REG_WORDS, 1);
+    }
+    if (compose_all(m, r, PIEZO_HOLDING_WAVE_TONES, PIEZO_HOLDING_WAVE_TONES_COUNT, apply_now) != 0 ||
+        compose_all(m, r, PIEZO_HOLDING_WAVE_LEVELS, nl, apply_now) != 0 ||
+        compose_all(m, r, PIEZO_HOLDING_WAVE_DURATIONS, 2u * nl, apply_now) != 0) {
+        return PIEZO_PARAMS_REASON_OUT_OF_RANGE;
+    }
+    n_ff = next_word(r);
+    freq = (uint32_t)next_word(r) << 16;
+    freq |= next_word(r);
+    if (r->err) {
+        return PIEZO_PARAMS_REASON_BAD_LENGTH;
+    }
+    if (n_ff > PIEZO_CTL_WAVE_FF_MAX || (n_ff > 0u && freq == 0u)) {
+        return PIEZO_PARAMS_REASON_OUT_OF_RANGE; /* e.g. saved by a target that holds more */
+    }
+    for (uint32_t k = 0; k < n_ff; k++) {
+        uint16_t v = next_word(r);
+        if (apply_now) {
+            c->wave_ff_staged_q15[k] = (int16_t)v;
+        }
+    }
+    if (r->err || r->off != r->len) {
+        return PIEZO_PARAMS_REASON_BAD_LENGTH; /* the section must end the record */
+    }
+    if (c->wave_ff_pending >= 0) {
+        /* a swap the tick has not taken yet (it takes one every tick): nothing is changed */
+        return PIEZO_PARAMS_REASON_STORAGE_FAILED;
+    }
+    if (apply_now) {
+        m->wave_ff_n = (uint16_t)n_ff;
+        m->wave_ff_freq_word = freq;
+        if (n_ff > 0u) {
+            (void)piezo_ctl_wave_ff_commit(c, c->wave_ff_staged_q15, (uint16_t)n_ff, freq);
+        } else if (piezo_ctl_wave_ff_n(c) != 0u) {
+            (void)piezo_ctl_wave_ff_off(c);
+        }
+    }
     return PIEZO_PARAMS_REASON_OK;
 }
 
+/* Load the active record into the controller (boot, params load): every
+ * value is checked before anything changes. */
+static uint16_t params_load(piezo_regmap_t *m)
+{
+    piezo_ctl_t *c = m->ctl;
+    piezo_ctl_cfg_t cfg;
+    reader_t r;
+    uint16_t head[PARAMS_HEAD_WORDS], sections, reason;
+    uint32_t len, wave_start = PARAMS_HEAD_WORDS + PIEZO_PARAMS_WORDS;
+    if (!m->have_pstore) {
+        return PIEZO_PARAMS_REASON_STORAGE_FAILED;
+    }
+    len = piezo_pstore_len(&m->pstore);
+    if (len == 0u) {
+        return m->pstore.active < 0 ? PIEZO_PARAMS_REASON_NONE_STORED : PIEZO_PARAMS_REASON_STORAGE_FAILED;
+    }
+    reader_at(&r, &m->pstore, 0u);
+    for (uint32_t i = 0; i < PARAMS_HEAD_WORDS; i++) {
+        head[i] = next_word(&r);
+    }
+    if (r.err || ((uint32_t)head[0] | (uint32_t)head[1] << 16) != PIEZO_INTERFACE_CRC32) {
+        return PIEZO_PARAMS_REASON_BAD_LAYOUT;
+    }
+    sections = head[3];
+    if (head[2] != PIEZO_PARAMS_WORDS || (len & 1u) != 0u || (sections & ~PARAMS_SECTION_WAVE) != 0u ||
+        ((sections & PARAMS_SECTION_WAVE) == 0u && len != 2u * wave_start) || len < 2u * wave_start) {
+        return PIEZO_PARAMS_REASON_BAD_LENGTH;
+    }
+    {
+        uint16_t words[PIEZO_PARAMS_WORDS];
+        for (uint32_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
+            words[i] = next_word(&r);
+        }
+        if (r.err) {
+            return PIEZO_PARAMS_REASON_STORAGE_FAILED;
+        }
+        if (params_config(m, words, &cfg) != 0) {
+            return PIEZO_PARAMS_REASON_OUT_OF_RANGE;
+        }
+    }
+    if (sections & PARAMS_SECTION_WAVE) {
+        reader_at(&r, &m->pstore, wave_start);
+        reason = wave_section(m, &r, 0);
+        if (reason != PIEZO_PARAMS_REASON_OK) {
+            return reason;
+        }
+        reader_at(&r, &m->pstore, wave_start);
+        (void)wave_section(m, &r, 1);
+    }
+    c->cfg = cfg;
+    rebind(c);
+    m->params_source = PIEZO_PARAMS_SRC_FLASH;
+    m->params_wave = (sections & PARAMS_SECTION_WAVE) ? PIEZO_PARAMS_WAVE_SAVED : PIEZO_PARAMS_WAVE_NONE;
+    return PIEZO_PARAMS_REASON_OK;
+}
+
+/* Save the parameters, with the wave and its learned feedforward where the
+ * slot has room. */
 static uint16_t params_save(piezo_regmap_t *m)
 {
-    uint8_t buf[PARAMS_PAYLOAD_BYTES];
-    uint16_t words[PIEZO_PARAMS_WORDS];
+    const piezo_ctl_t *c = m->ctl;
+    save_ctx_t s;
+    uint32_t len, wave_len;
     uint16_t r;
     if (!m->have_pstore) {
         return PIEZO_PARAMS_REASON_STORAGE_FAILED;
     }
-    params_words(m, words);
-    for (uint32_t i = 0; i < 4u; i++) {
-        buf[i] = (uint8_t)(PIEZO_INTERFACE_CRC32 >> (8u * i));
+    s.m = m;
+    s.n_levels = c->wave_cfg.n_levels;
+    s.ff = played_ff(c);
+    s.last_k = UINT32_MAX;
+    s.last_w = 0u;
+    len = 2u * (PARAMS_HEAD_WORDS + PIEZO_PARAMS_WORDS);
+    wave_len = 2u * (WAVE_REG_WORDS + PIEZO_HOLDING_WAVE_TONES_COUNT + 3u * (uint32_t)s.n_levels +
+                     WAVE_FF_HEAD_WORDS + (s.ff != NULL ? s.ff->n : 0u));
+    s.sections = (len + wave_len <= piezo_pstore_capacity(&m->pstore)) ? PARAMS_SECTION_WAVE : 0u;
+    if (s.sections) {
+        len += wave_len;
     }
-    buf[4] = (uint8_t)PIEZO_PARAMS_WORDS;
-    buf[5] = (uint8_t)(PIEZO_PARAMS_WORDS >> 8);
-    buf[6] = 0u;
-    buf[7] = 0u;
-    for (uint32_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
-        buf[8u + 2u * i] = (uint8_t)words[i];
-        buf[9u + 2u * i] = (uint8_t)(words[i] >> 8);
-    }
-    r = piezo_pstore_save(&m->pstore, buf, sizeof buf);
+    r = piezo_pstore_save_stream(&m->pstore, len, save_fill, &s);
     if (r == PIEZO_PARAMS_REASON_OK) {
         m->params_source = PIEZO_PARAMS_SRC_FLASH;
+        m->params_wave = s.sections ? PIEZO_PARAMS_WAVE_SAVED : PIEZO_PARAMS_WAVE_LEFT_OUT;
     }
     return r;
 }

@@ -56,6 +56,7 @@ typedef struct {
     uint8_t params_source;                    /* enum piezo_enum_params_source */
     uint16_t params_result;                   /* PIEZO_PARAMS_REASON_* of the last command or boot */
     uint16_t params_ignored;                  /* why a stored record was ignored at boot */
+    uint16_t params_wave;                     /* PIEZO_PARAMS_WAVE_*: the active record's wave */
 } piezo_regmap_t;
 
 /** Bind a map to a controller; identity fields are set by the caller after. */
@@ -66,8 +67,10 @@ void piezo_regmap_init(piezo_regmap_t *m, piezo_ctl_t *ctl);
  *  Call before piezo_ctl_attach_store(), so a stored table is checked too. */
 void piezo_regmap_provision(piezo_regmap_t *m, uint32_t key);
 
-/** Attach the parameter storage (two slots of PIEZO_PARAMS_SLOT_BYTES or
- *  more) and load the active record, at boot, after provisioning. A record
+/** Attach the parameter storage (two slots of PIEZO_PARAMS_MIN_SLOT_BYTES or
+ *  more; PIEZO_PARAMS_SLOT_BYTES hold the wave too) and load the active
+ *  record, at boot, after provisioning: the parameters, and the wave and its
+ *  learned feedforward if the record holds them (not started). A record
  *  is used only if its CRC holds, it was written by this interface
  *  definition (its interface CRC) and every value passes the checks a
  *  register write makes; else the defaults run and the reason is reported

@@ -47,6 +47,7 @@ const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N] = {
     {0x012Du, 2u, 0u, 1u, PIEZO_IREG_REC_WRITTEN},
     {0x012Fu, 1u, 0u, 1u, PIEZO_IREG_WAVE_FF_N_LIVE},
     {0x0130u, 1u, 0u, 1u, PIEZO_IREG_WAVE_FF_CAPACITY},
+    {0x0131u, 1u, 0u, 1u, PIEZO_IREG_PARAMS_WAVE},
 };
 
 const piezo_reg_desc_t piezo_holding_regs[PIEZO_HREG_N] = {

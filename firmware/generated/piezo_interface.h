@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PIEZO_LAYOUT_VERSION 2u
-#define PIEZO_INTERFACE_CRC32 0x98EF59AEu
+#define PIEZO_INTERFACE_CRC32 0x9EF49E52u
 
 /* Q formats: value = integer / 2^FRAC */
 #define PIEZO_Q15_BITS 16  /* signals normalized to full scale: drive, displacement, operator outputs, thresholds; [-1, 1 - 2^-15] */
@@ -185,6 +185,7 @@ extern const piezo_range_t piezo_section_fields[PIEZO_SECTION_FIELD_N];
 #define PIEZO_INPUT_REC_WRITTEN 0x012Du  /* uint32 */
 #define PIEZO_INPUT_WAVE_FF_N_LIVE 0x012Fu  /* uint16 */
 #define PIEZO_INPUT_WAVE_FF_CAPACITY 0x0130u  /* uint16 */
+#define PIEZO_INPUT_PARAMS_WAVE 0x0131u  /* uint16 */
 #define PIEZO_HOLDING_UNLOCK 0x1000u  /* uint16 */
 #define PIEZO_HOLDING_MODE 0x1001u  /* uint16 */
 #define PIEZO_HOLDING_ARM 0x1002u  /* uint16 */
@@ -316,6 +317,7 @@ enum piezo_input_reg_id {
     PIEZO_IREG_REC_WRITTEN,
     PIEZO_IREG_WAVE_FF_N_LIVE,
     PIEZO_IREG_WAVE_FF_CAPACITY,
+    PIEZO_IREG_PARAMS_WAVE,
     PIEZO_IREG_N
 };
 extern const piezo_reg_desc_t piezo_input_regs[PIEZO_IREG_N];
@@ -423,10 +425,17 @@ enum piezo_enum_table_command {
 /* parameter actions (holding register params_command); they need the unlock and a disarmed unit */
 enum piezo_enum_params_command {
     PIEZO_PARAMS_CMD_NONE = 0,  /* reads 0; writing it is refused */
-    PIEZO_PARAMS_CMD_SAVE = 1,  /* write the running parameters to the inactive flash slot, then make it the active one */
-    PIEZO_PARAMS_CMD_LOAD = 2,  /* replace the running parameters by the active flash record */
+    PIEZO_PARAMS_CMD_SAVE = 1,  /* write the running parameters, the wave and the learned feedforward being played to the inactive flash slot, then make it the active one */
+    PIEZO_PARAMS_CMD_LOAD = 2,  /* replace the running parameters (and the wave and its learned feedforward, if saved) by the active flash record */
     PIEZO_PARAMS_CMD_DEFAULTS = 3,  /* replace the running parameters by the target's built-in defaults (flash unchanged) */
     PIEZO_PARAMS_CMD_N = 4
+};
+/* whether the active parameter record holds the wave and its learned feedforward (input register params_wave) */
+enum piezo_enum_params_wave {
+    PIEZO_PARAMS_WAVE_NONE = 0,  /* it holds the parameters only (nothing saved yet, or saved by a target without room) */
+    PIEZO_PARAMS_WAVE_SAVED = 1,  /* it holds the wave and the learned feedforward played with it: loaded at boot (not started) */
+    PIEZO_PARAMS_WAVE_LEFT_OUT = 2,  /* the last save left the wave out: this target's slot holds the parameters only */
+    PIEZO_PARAMS_WAVE_N = 3
 };
 /* where the running parameters came from (input register params_source) */
 enum piezo_enum_params_source {
@@ -488,9 +497,10 @@ enum piezo_enum_ref_source {
     PIEZO_REF_N = 2
 };
 
-/* Controller parameters in flash: record: magic, seq, payload bytes, CRC-32 over seq, length and payload; payload: interface CRC, word count, the block's words */
+/* Controller parameters in flash: record: magic, seq, payload bytes, CRC-32 over seq, length and payload; payload: interface CRC, word count, sections, the block's words, then the wave section (docs/operate.md) */
 #define PIEZO_PARAMS_MAGIC 0x5250505Au
-#define PIEZO_PARAMS_SLOT_BYTES 256u
+#define PIEZO_PARAMS_SLOT_BYTES 4096u
+#define PIEZO_PARAMS_MIN_SLOT_BYTES 256u  /* the block's words only */
 #define PIEZO_PARAMS_FIRST 0x3000u  /* the configuration block */
 #define PIEZO_PARAMS_WORDS 65u
 #define PIEZO_PARAMS_REASON_OK 0u

@@ -39,6 +39,7 @@ MODE_NAMES = {v: k for k, v in MODES.items()}
 REASON_NAMES = {v: k for k, v in interface.TABLE_REASONS.items()}
 PARAMS_REASON_NAMES = {v: k for k, v in interface.PARAMS_REASONS.items()}
 PARAMS_SOURCE_NAMES = {v: k for k, v in interface.ENUMS["params_source"].items()}
+PARAMS_WAVE_NAMES = {v: k for k, v in interface.ENUMS["params_wave"].items()}
 KIND_NAMES = {v: k for k, v in interface.TABLE_KINDS.items()}
 FAULT_NAMES = {1 << v: k for k, v in interface.FAULT_BITS.items()}
 WINDOW = interface.HOLDING_REGISTERS["table_window"][2]      # registers per table chunk
@@ -788,12 +789,15 @@ class Controller:
     def params_state(self) -> dict:
         """Where the running parameters came from: ``source`` (defaults,
         flash, changed), ``seq`` of the flash record, ``result`` of the last
-        params command or boot, ``ignored`` (why a stored record was not used)."""
+        params command or boot, ``ignored`` (why a stored record was not used),
+        ``wave``: whether the active record holds the wave and its learned
+        feedforward (``interface.ENUMS["params_wave"]``: none, saved, left_out)."""
         st = self.status()
         return {"source": PARAMS_SOURCE_NAMES.get(st["params_source"], str(st["params_source"])),
                 "seq": st["params_seq"],
                 "result": PARAMS_REASON_NAMES.get(st["params_result"], str(st["params_result"])),
-                "ignored": PARAMS_REASON_NAMES.get(st["params_ignored"], str(st["params_ignored"]))}
+                "ignored": PARAMS_REASON_NAMES.get(st["params_ignored"], str(st["params_ignored"])),
+                "wave": PARAMS_WAVE_NAMES.get(st["params_wave"], str(st["params_wave"]))}
 
 
 def connect(port: str, *, unit: int = interface.MODBUS_UNIT_ID, timeout: float = 1.0,

@@ -2,6 +2,8 @@
  * register map, firmware/control/regmap.c): boot with nothing stored, save
  * and reboot, A/B alternation, a power cut at every storage operation of a
  * save, corrupt and foreign records ignored with their reason, refusals;
+ * the wave and its learned feedforward saved with them (or left out where
+ * the slot has no room), and an absurd wave under a valid CRC refused whole;
  * and the servo switch (controller.c) without a drive jump. */
 #include <string.h>
 
@@ -21,6 +23,7 @@ static uint8_t rsp[PIEZO_MB_PDU_MAX];
 static uint8_t mem[2u * PIEZO_PARAMS_SLOT_BYTES];
 static nor_flash_t nor;
 static piezo_storage_t io;
+static uint32_t slot_bytes = PIEZO_PARAMS_SLOT_BYTES; /* the target's slot (a small one: the minimum) */
 
 /* A controller booting on the flash as it is (a power cycle). */
 static uint16_t boot(void)
@@ -32,12 +35,13 @@ static uint16_t boot(void)
     regs = piezo_regmap_regs(&map);
     nor.ops_left = -1;
     nor.dead = 0;
-    io = nor_flash_storage(&nor, PIEZO_PARAMS_SLOT_BYTES);
+    io = nor_flash_storage(&nor, slot_bytes);
     return piezo_regmap_attach_params(&map, &io);
 }
 
 static void erase_all(void)
 {
+    slot_bytes = PIEZO_PARAMS_SLOT_BYTES;
     nor_flash_init(&nor, mem, sizeof mem);
 }
 
@@ -245,6 +249,178 @@ static void test_params_commands_refused_locked_or_armed(void **state)
     assert_int_equal(write1(PIEZO_HOLDING_PARAMS_COMMAND, 0), PIEZO_MB_EX_ILLEGAL_DATA_VALUE);
 }
 
+/* A steps wave of 3 levels, a tone, and a learned feedforward of 5 entries
+ * committed (the tick has not taken it yet: it is what the tick plays next). */
+static const int16_t wave_levels[3] = {-1000, 2500, 700};
+static const uint32_t wave_durations[3] = {10, 70000, 3};
+static const int16_t ff_entries[5] = {11, -22, 33, -44, 32767};
+
+static void set_wave(void)
+{
+    uint16_t v[6];
+    unlock();
+    assert_int_equal(write1(PIEZO_HOLDING_WAVE_KIND, PIEZO_WAVE_KIND_STEPS), 0);
+    assert_int_equal(write1(PIEZO_HOLDING_WAVE_N_LEVELS, 3), 0);
+    assert_int_equal(write_regs(PIEZO_HOLDING_WAVE_LEVELS, 3, (const uint16_t *)wave_levels), 0);
+    for (int i = 0; i < 3; i++) {
+        v[2 * i] = (uint16_t)(wave_durations[i] >> 16);
+        v[2 * i + 1] = (uint16_t)wave_durations[i];
+    }
+    assert_int_equal(write_regs(PIEZO_HOLDING_WAVE_DURATIONS, 6, v), 0);
+    v[0] = 1234;   /* tone 2: amplitude, freq word 0x00012345, phase 0x40000000 */
+    v[1] = 0x0001;
+    v[2] = 0x2345;
+    v[3] = 0x4000;
+    v[4] = 0;
+    assert_int_equal(write_regs(PIEZO_HOLDING_WAVE_TONES + 5, 5, v), 0);
+    assert_int_equal(write_regs(PIEZO_HOLDING_WAVE_FF_LEVELS, 5, (const uint16_t *)ff_entries), 0);
+    v[0] = 5;
+    v[1] = 0x0006;
+    v[2] = 0x8DB9; /* 10 Hz at 10 kHz: 2^32 / 1000 */
+    v[3] = PIEZO_WAVE_FF_CMD_COMMIT;
+    assert_int_equal(write_regs(PIEZO_HOLDING_WAVE_FF_N, 4, v), 0);
+    assert_int_equal(piezo_ctl_wave_ff_n(&ctl), 5);
+}
+
+static void assert_wave_restored(void)
+{
+    const piezo_ctl_wave_ff_t *ff;
+    assert_int_equal(ctl.wave_cfg.kind, PIEZO_WAVE_KIND_STEPS);
+    assert_int_equal(ctl.wave_cfg.n_levels, 3);
+    assert_memory_equal(ctl.levels_q15, wave_levels, sizeof wave_levels);
+    assert_memory_equal(ctl.durations, wave_durations, sizeof wave_durations);
+    assert_int_equal(ctl.tones[1].amplitude_q15, 1234);
+    assert_int_equal(ctl.tones[1].freq_word, 0x00012345u);
+    assert_int_equal(ctl.tones[1].phase_word, 0x40000000u);
+    assert_int_equal(piezo_ctl_wave_ff_n(&ctl), 5); /* committed at boot: the tick plays it with the wave */
+    assert_true(ctl.wave_ff_pending >= 0);
+    ff = &ctl.wave_ff[ctl.wave_ff_pending];
+    assert_memory_equal(ff->c_q15, ff_entries, sizeof ff_entries);
+    assert_int_equal(ff->freq_word, 0x00068DB9u);
+    assert_int_equal(piezo_wave_running(&ctl.wave), 0); /* loaded, not started */
+}
+
+static void test_wave_and_learned_feedforward_saved_with_the_parameters(void **state)
+{
+    (void)state;
+    erase_all();
+    boot();
+    assert_int_equal(read_input(PIEZO_INPUT_PARAMS_WAVE, 1), PIEZO_PARAMS_WAVE_NONE);
+    set_params(3 << 22, 100);
+    set_wave();
+    assert_int_equal(save(), PIEZO_PARAMS_REASON_OK);
+    assert_int_equal(read_input(PIEZO_INPUT_PARAMS_WAVE, 1), PIEZO_PARAMS_WAVE_SAVED);
+    assert_int_equal(boot(), PIEZO_PARAMS_REASON_OK);
+    assert_int_equal(ctl.cfg.pid.kp_q24, 3 << 22);
+    assert_wave_restored();
+    assert_int_equal(read_input(PIEZO_INPUT_PARAMS_WAVE, 1), PIEZO_PARAMS_WAVE_SAVED);
+    /* the load command restores them too, over a changed wave */
+    unlock();
+    assert_int_equal(write1(PIEZO_HOLDING_WAVE_N_LEVELS, 1), 0);
+    ctl.wave_ff_active = ctl.wave_ff_pending; /* the tick took the swap */
+    ctl.wave_ff_pending = -1;
+    assert_int_equal(write1(PIEZO_HOLDING_WAVE_FF_COMMAND, PIEZO_WAVE_FF_CMD_OFF), 0);
+    ctl.wave_ff_active = -1;
+    ctl.wave_ff_pending = -1;
+    assert_int_equal(write1(PIEZO_HOLDING_PARAMS_COMMAND, PIEZO_PARAMS_CMD_LOAD), 0);
+    assert_int_equal(read_input(PIEZO_INPUT_PARAMS_RESULT, 1), PIEZO_PARAMS_REASON_OK);
+    assert_wave_restored();
+}
+
+/* A target whose slot holds the parameters only: they are saved, the wave
+ * is left out and said so; a boot restores the parameters alone. */
+static void test_wave_left_out_where_the_slot_has_no_room(void **state)
+{
+    (void)state;
+    erase_all();
+    slot_bytes = PIEZO_PARAMS_MIN_SLOT_BYTES;
+    boot();
+    set_params(3 << 22, 100);
+    set_wave();
+    assert_int_equal(save(), PIEZO_PARAMS_REASON_OK);
+    assert_int_equal(read_input(PIEZO_INPUT_PARAMS_WAVE, 1), PIEZO_PARAMS_WAVE_LEFT_OUT);
+    assert_int_equal(boot(), PIEZO_PARAMS_REASON_OK);
+    assert_int_equal(ctl.cfg.pid.kp_q24, 3 << 22);
+    assert_int_equal(ctl.wave_cfg.n_levels, 0);
+    assert_int_equal(piezo_ctl_wave_ff_n(&ctl), 0);
+    assert_int_equal(read_input(PIEZO_INPUT_PARAMS_WAVE, 1), PIEZO_PARAMS_WAVE_NONE);
+}
+
+/* Rewrite word j of slot A's wave section with a correct CRC. */
+static void forge_wave(uint16_t j, uint16_t word)
+{
+    uint8_t *s = mem, *pl = mem + PIEZO_PSTORE_HEADER_BYTES;
+    uint32_t len = s[8] | (uint32_t)s[9] << 8, crc, at = 2u * (4u + PIEZO_PARAMS_WORDS + j);
+    pl[at] = (uint8_t)word;
+    pl[at + 1u] = (uint8_t)(word >> 8);
+    crc = piezo_crc32(piezo_crc32(0u, s + 4, 8u), pl, len);
+    for (int i = 0; i < 4; i++) {
+        s[12 + i] = (uint8_t)(crc >> (8 * i));
+    }
+}
+
+/* A CRC-valid record with an absurd wave changes nothing: not the
+ * parameters, not the wave, not the learned feedforward. */
+static void test_out_of_range_wave_refuses_the_whole_record(void **state)
+{
+    static const uint16_t bad[][2] = {
+        {0, 99},                             /* wave_kind */
+        {PIEZO_HOLDING_WAVE_N_LEVELS - PIEZO_HOLDING_WAVE_KIND, 4}, /* 4 levels: the record holds 3 */
+        {PIEZO_HOLDING_WAVE_N_LEVELS - PIEZO_HOLDING_WAVE_KIND, PIEZO_CTL_WAVE_MAX_LEVELS + 1u},
+        {15 + 40 + 9, PIEZO_CTL_WAVE_FF_MAX + 1u}, /* the feedforward's entries */
+        {15 + 40 + 9 + 1, 0},                /* its freq word 0 (high, then low) */
+    };
+    (void)state;
+    for (unsigned k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        erase_all();
+        boot();
+        set_params(3 << 22, 100);
+        set_wave();
+        assert_int_equal(save(), PIEZO_PARAMS_REASON_OK);
+        forge_wave(bad[k][0], bad[k][1]);
+        if (k == 4) {
+            forge_wave(bad[k][0] + 1u, 0);
+        }
+        uint16_t r = boot();
+        assert_true(r == PIEZO_PARAMS_REASON_OUT_OF_RANGE || r == PIEZO_PARAMS_REASON_BAD_LENGTH);
+        assert_int_equal(ctl.cfg.pid.kp_q24, 0);
+        assert_int_equal(ctl.wave_cfg.kind, 0);
+        assert_int_equal(ctl.wave_cfg.n_levels, 0);
+        assert_int_equal(ctl.tones[1].amplitude_q15, 0);
+        assert_int_equal(piezo_ctl_wave_ff_n(&ctl), 0);
+        assert_int_equal(read_input(PIEZO_INPUT_PARAMS_IGNORED, 1), r);
+    }
+}
+
+/* A power cut at every storage operation of a save with the wave: the old
+ * record or the new one, whole. */
+static void test_power_cut_during_a_save_with_the_wave(void **state)
+{
+    (void)state;
+    for (long cut = 0;; cut++) {
+        erase_all();
+        boot();
+        set_params(3 << 22, 100);
+        assert_int_equal(save(), PIEZO_PARAMS_REASON_OK); /* parameters, no wave */
+        set_params(5 << 22, 200);
+        set_wave();
+        nor.ops_left = cut;
+        uint16_t r = save();
+        assert_int_equal(boot(), PIEZO_PARAMS_REASON_OK);
+        if (r == PIEZO_PARAMS_REASON_OK) {
+            assert_int_equal(ctl.cfg.pid.kp_q24, 5 << 22);
+            assert_wave_restored();
+            assert_true(cut > 3); /* an erase, payload chunks, the header */
+            break;
+        }
+        assert_int_equal(r, PIEZO_PARAMS_REASON_STORAGE_FAILED);
+        assert_int_equal(ctl.cfg.pid.kp_q24, 3 << 22);
+        assert_int_equal(ctl.wave_cfg.n_levels, 0);
+        assert_int_equal(piezo_ctl_wave_ff_n(&ctl), 0);
+        assert_true(cut < 100);
+    }
+}
+
 /* Servo off holds the applied drive open loop; servo on closes the loop at
  * the present position with the integrator preloaded: no tick's drive jumps. */
 static void test_servo_off_and_on_without_a_jump(void **state)
@@ -315,6 +491,10 @@ int main(void)
         cmocka_unit_test(test_corrupt_record_is_ignored_with_its_reason),
         cmocka_unit_test(test_foreign_or_out_of_range_record_runs_the_defaults),
         cmocka_unit_test(test_params_commands_refused_locked_or_armed),
+        cmocka_unit_test(test_wave_and_learned_feedforward_saved_with_the_parameters),
+        cmocka_unit_test(test_wave_left_out_where_the_slot_has_no_room),
+        cmocka_unit_test(test_out_of_range_wave_refuses_the_whole_record),
+        cmocka_unit_test(test_power_cut_during_a_save_with_the_wave),
         cmocka_unit_test(test_servo_off_and_on_without_a_jump),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

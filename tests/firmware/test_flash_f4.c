@@ -165,7 +165,7 @@ static void test_store_on_the_flash_driver(void **state)
 static void test_params_on_the_flash_driver(void **state)
 {
     (void)state;
-    uint8_t payload[40], back[PIEZO_PSTORE_MAX_PAYLOAD];
+    uint8_t payload[40], back[PIEZO_PARAMS_SLOT_BYTES];
     piezo_pstore_t ps;
     f4_model_reset(4u);
     piezo_storage_t io = piezo_f4_params_storage();

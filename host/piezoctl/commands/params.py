@@ -14,9 +14,14 @@ controller holds after quantization is what is reported.
 ``--from FILE.json``, the output of ``get --json``) writes them all in one
 request: the controller applies all or nothing, only while disarmed.
 ``save`` writes the running parameters to flash (the inactive slot, then the
-flip), ``load`` reads the saved ones back, ``defaults`` restores the
-target's built-in ones (flash unchanged). The controller loads the saved
-parameters at boot (docs/operate.md).
+flip), with the wave loaded in the generator and the learned feedforward
+played with it (they belong together: a correction is learned for one wave
+and one configuration), where the controller's slot has room for them
+(``state.wave``: ``saved``, or ``left_out`` on a target without room);
+``load`` reads the saved ones back, ``defaults`` restores the target's
+built-in parameters (flash and wave unchanged). The controller loads the
+saved record at boot, the wave not started: ``piezoctl wave --saved`` starts
+it (docs/operate.md).
 """
 
 from __future__ import annotations
@@ -162,6 +167,8 @@ def _lines(params: dict, state: dict) -> list[str]:
            "changed": "changed since the last load or save (not saved)"}[state["source"]]
     out = [f"  {n:18s} {_fmt(v['value']):>24s} {v['unit']:8s} {v['doc']}" for n, v in params.items()]
     out.append(f"running parameters: {src}")
+    if state.get("wave") == "saved":
+        out.append("the flash record holds the wave and its learned feedforward (piezoctl wave --saved plays them)")
     if state["ignored"] != "ok":
         out.append(f"note: a stored record was ignored at boot: {state['ignored']}")
     return out
@@ -219,6 +226,12 @@ def run(args) -> int:
         raise ControllerRefused(f"params {cmd} refused by the controller: {reason}"
                                 + (f" ({help_})" if help_ else "") + "; nothing changed")
     what = {"save": f"saved to flash as record {state['seq']}", "load": f"loaded flash record {state['seq']}",
-            "defaults": "built-in defaults restored (flash unchanged)"}[cmd]
+            "defaults": "built-in defaults restored (flash and wave unchanged)"}[cmd]
+    if cmd == "save":
+        what += {"saved": ", with the wave and its learned feedforward",
+                 "left_out": "; the wave and its learned feedforward were left out (this controller's "
+                             "slot holds the parameters only)"}.get(state["wave"], "")
+    elif cmd == "load" and state["wave"] == "saved":
+        what += ", with the wave and its learned feedforward (not started: piezoctl wave --saved)"
     emit(args, {"port": args.port, "result": reason, "state": state}, f"params {cmd}: {what}")
     return 0

@@ -98,12 +98,12 @@ const piezo_storage_t *piezo_control_storage(void)
 }
 
 /* The controller parameters likewise: two RAM slots, lost when QEMU exits. */
-static uint8_t pil_params[2u * PIEZO_PARAMS_SLOT_BYTES];
+static uint8_t pil_params[2u * PIEZO_PARAMS_MIN_SLOT_BYTES]; /* no room for the wave: params_wave left_out */
 static piezo_ram_store_t pil_params_store;
 
 const piezo_storage_t *piezo_control_params_storage(void)
 {
     static piezo_storage_t io;
-    io = piezo_ram_storage_in(&pil_params_store, pil_params, PIEZO_PARAMS_SLOT_BYTES);
+    io = piezo_ram_storage_in(&pil_params_store, pil_params, PIEZO_PARAMS_MIN_SLOT_BYTES);
     return &io;
 }
