@@ -8,7 +8,15 @@ frequency [Hz], amplitude and start phase [deg]), ``arbitrary`` (``--file
 X.csv``: the file resampled to ``--hold`` seconds per level) and ``steps``
 (``--file X.csv``: each row's value held until the next row's time).
 ``--record OUT.csv`` records the run from the wave's first sample;
-``--stop`` stops the generator. Contract: ``docs/wave-record.md``.
+``--stop`` stops the generator. ``--learn N`` learns, before starting a
+periodic wave, a feedforward correction for it over N trials (iterative
+learning control through the closed loop, ``calibrate/ilc.py``: the unit armed
+in ``ff_feedback`` or ``feedback``), which the firmware then plays in step
+with the wave; ``--learn-cut HZ`` is the band learned (default: twice the
+controller's notch frequency). ``--saved`` starts the wave the controller
+holds, as loaded at boot from its parameter record (``piezoctl params
+save`` keeps the wave and its learned feedforward), without writing a new
+one. Contract: ``docs/wave-record.md``.
 
 Values that make no sense are refused before anything is written to the
 controller: amplitude 0 or negative, a frequency not in (0, Nyquist), a
@@ -407,6 +415,9 @@ def add_parser(sub) -> None:
                                    "anything is written. --stop alone stops it.")
     add_port(w)
     w.add_argument("--stop", action="store_true", help="stop the wave generator (takes no wave options)")
+    w.add_argument("--saved", action="store_true",
+                   help="start the wave the controller holds (loaded at boot from its flash record, with its "
+                        "learned feedforward) without writing a new one; takes --mode and --record")
     w.add_argument("--kind", choices=KINDS, help="the wave (--tones implies multisine, --file arbitrary)")
     w.add_argument("--volts", action="store_true", help="amplitude and offset are drive [V] (open loop, no table)")
     w.add_argument("--amplitude", type=float, help="peak [um, or V with --volts], > 0")
@@ -424,19 +435,28 @@ def add_parser(sub) -> None:
     w.add_argument("--mode", choices=["idle", "open_loop", "feedforward", "ff_feedback", "feedback", "direct"],
                    help="set the control mode first (disarms and re-arms)")
     w.add_argument("--record", metavar="OUT.csv", help="record the run from the wave's first sample")
+    w.add_argument("--learn", type=int, metavar="N",
+                   help="periodic waves: learn a feedforward correction over N trials (1..50) before starting "
+                        "(armed in ff_feedback or feedback); piezoctl params save keeps it")
+    w.add_argument("--learn-cut", type=float, metavar="HZ",
+                   help="the band the learning corrects [Hz] (default: 2 x the notch frequency)")
     add_capture_options(w, duration_required=False)
     add_output(w)
     w.set_defaults(func=run_wave)
 
 
 _WAVE_OPTIONS = ("kind", "amplitude", "offset", "freq_end", "tones", "file", "hold", "mode", "record",
-                 "duration", "plot")
+                 "duration", "plot", "learn", "learn_cut")
+LEARN_MAX_TRIALS = 50
+LEARN_F_CUT = 2.0   # default band: a multiple of the notch frequency (calibrate's ILC_F_CUT)
 
 
 def run_wave(args) -> int:
     from .. import interface
     from ..device import connect
 
+    if args.saved:
+        return _run_saved(args)
     if args.stop:
         given = [o for o in _WAVE_OPTIONS if getattr(args, o) is not None] + \
                 [o for o in ("volts", "stream") if getattr(args, o)] + (["cycles"] if args.cycles else [])
@@ -454,12 +474,17 @@ def run_wave(args) -> int:
         if extra:
             raise CliError(f"{', '.join(extra)} appl{'ies' if len(extra) == 1 else 'y'} to --record"
                            + (" (a chirp's length is --duration)" if "--duration" in extra else ""))
+    if args.learn is not None and not 1 <= args.learn <= LEARN_MAX_TRIALS:
+        raise CliError(f"--learn {args.learn}: give 1..{LEARN_MAX_TRIALS} trials")
+    if args.learn_cut is not None and args.learn is None:
+        raise CliError("--learn-cut applies to --learn")
     sigs = parse_signals(args.signals)
     check_writable(args.record, "--record")
     check_writable(args.plot, "--plot", PLOT_SUFFIXES)
     ctl = connect(args.port)
     tick = float(ctl.identity.tick_hz)
     spec = plan_wave(args, tick, ctl.scale, interface.HOLDING_REGISTERS["wave_levels"][2])
+    f_cut = _learn_plan(args, spec, ctl, tick) if args.learn is not None else None
     rec_s = None
     if args.record:
         rec_s = args.duration if args.duration is not None else (spec.play_s() or 1.0)
@@ -474,7 +499,16 @@ def run_wave(args) -> int:
     spec.load(ctl)
     result = {"port": args.port, "kind": spec.kind, "summary": spec.summary, "cycles": spec.cycles,
               "play_s": spec.play_s(), **spec.info}
-    lines = [f"wave {spec.summary}: started on {args.port}"]
+    lines = []
+    if args.learn is not None:
+        result["learned"] = _learn(args, spec, ctl, f_cut)
+        spec.load(ctl)   # the trials changed its cycles
+        lr = result["learned"]
+        lines.append(f"learned feedforward: {lr['first_rms_um'] * 1e3:.1f} -> {lr['best_rms_um'] * 1e3:.1f} nm RMS "
+                     f"over one period in {lr['trials']} trials ({lr['refused']} refused), {lr['n_entries']} "
+                     f"entries, learned below {lr['f_cut_hz']:.0f} Hz; played with the wave "
+                     "(piezoctl params save keeps both)")
+    lines.insert(0, f"wave {spec.summary}: started on {args.port}")
     if args.record:
         res = record(args, ctl, sigs, rec_s, args.record, start_wave=True)
         result["record"] = res
@@ -489,6 +523,99 @@ def run_wave(args) -> int:
     # the controller refuses a wave it cannot play by not starting it
     if spec.play_s() is None and not ctl.status()["wave_running"]:
         raise ControllerRefused("the controller did not start the wave (wave_running 0)")
+    result["running"] = bool(ctl.status()["wave_running"])
+    emit(args, result, lines)
+    return 0
+
+
+def _learn_plan(args, spec: WaveSpec, ctl, tick_hz: float) -> float:
+    """Check that ``--learn`` can run on this wave and controller; returns the band [Hz].
+    Refuses (CliError, nothing written) a wave that does not repeat, or a
+    controller not armed in a mode with feedback."""
+    from .. import interface
+    if spec.period_s is None or spec.kind == "chirp":
+        raise CliError("--learn needs a periodic wave (sine, triangle, multisine, steps, arbitrary): "
+                       "a chirp does not repeat")
+    if spec.kind == "multisine":
+        lowest = 1.0 / spec.period_s
+        if any(abs(f / lowest - round(f / lowest)) > 1e-6 for _, f, _ in spec.tones):
+            raise CliError("--learn: the tones must be multiples of the lowest one (the correction repeats "
+                           "with one period)")
+    st = ctl.status()
+    mode = args.mode or {v: k for k, v in interface.ENUMS["mode"].items()}.get(st["mode"], "")
+    if mode not in ("ff_feedback", "feedback") or not (st["armed"] or args.mode):
+        raise CliError(f"--learn learns through the closed loop: arm the unit in ff_feedback or feedback "
+                       f"(now {mode or st['mode']}, {'armed' if st['armed'] else 'disarmed'}; --mode sets it)")
+    if args.learn_cut is not None:
+        if not 0.0 < args.learn_cut < tick_hz / 2:
+            raise CliError(f"--learn-cut {args.learn_cut:g} Hz: want (0, {tick_hz / 2:g}) Hz")
+        return float(args.learn_cut)
+    p = ctl.read_params()
+    if not p.get("notch_on"):
+        raise CliError("--learn needs --learn-cut HZ: the controller has no notch to take the stage's "
+                       "resonance from (the band learned is 2 x the notch frequency by default)")
+    b0, b1 = p["notch_b0_q24"] / 2.0**24, p["notch_b1_q24"] / 2.0**24
+    c = -b1 / (2.0 * b0) if b0 else 2.0
+    if not -1.0 <= c <= 1.0:
+        raise CliError("--learn needs --learn-cut HZ: the controller's notch has no frequency to read")
+    return min(LEARN_F_CUT * math.acos(c) * tick_hz / (2.0 * math.pi), 0.45 * tick_hz)
+
+
+def _learn(args, spec: WaveSpec, ctl, f_cut: float) -> dict:
+    """Learn the loaded wave's feedforward (``calibrate/ilc.py``); it is left committed."""
+    from ..calibrate import ilc
+    f0 = 1.0 / spec.period_s
+    preview = ctl.read_params().get("preview_ticks", 0)
+    periods = 1 if f0 < 10 else max(5, int(round(0.1 * f0)))
+    progress(args, f"learning the feedforward: {args.learn} trials of {periods} period(s) ...")
+    res = ilc.learn_on_controller(ctl, f0, preview_ticks=int(preview), f_cut_hz=f_cut, iterations=args.learn,
+                                  periods=periods, say=lambda m: progress(args, m))
+    return {"trials": len(res["history"]), "refused": res["refused"], "first_rms_um": res["first_rms_um"],
+            "best_rms_um": res["best_rms_um"], "n_entries": res["n_entries"], "f_cut_hz": res["f_cut_hz"],
+            "clipped": res["clipped"], "history_rms_um": [h["rms_um"] for h in res["history"]]}
+
+
+_DEFINING = ("kind", "amplitude", "offset", "freq_end", "tones", "file", "hold")
+
+
+def _run_saved(args) -> int:
+    """``--saved``: start the wave the controller holds (refused when it holds none)."""
+    from .. import interface
+    from ..device import PARAMS_WAVE_NAMES, connect
+
+    given = [o for o in _DEFINING if getattr(args, o) is not None] + (["volts"] if args.volts else []) + \
+        (["cycles"] if args.cycles else []) + (["stop"] if args.stop else [])
+    if given:
+        raise CliError(f"--saved starts the wave the controller holds: it takes no "
+                       f"--{', --'.join(g.replace('_', '-') for g in given)}")
+    if args.record is not None and args.duration is None:
+        raise CliError("--saved --record needs --duration (the saved wave's length is not known here)")
+    sigs = parse_signals(args.signals)
+    check_writable(args.record, "--record")
+    check_writable(args.plot, "--plot", PLOT_SUFFIXES)
+    ctl = connect(args.port)
+    st = ctl.status()
+    kind = ctl.client.read_holding(interface.HOLDING_REGISTERS["wave_kind"][0])[0]
+    if kind == 0:
+        raise ControllerRefused("the controller holds no wave (wave_kind off): nothing to start; "
+                                "piezoctl params save keeps a wave over a restart")
+    if args.mode:
+        ctl.arm(False)
+        ctl.set_mode(args.mode)
+        ctl.arm(True)
+    ctl.write("ref_source", 1)
+    names = {v: k for k, v in interface.ENUMS["wave_kind"].items()}
+    result = {"port": args.port, "kind": names.get(kind, str(kind)), "saved": True,
+              "learned_ff_entries": st["wave_ff_n_live"],
+              "params_wave": PARAMS_WAVE_NAMES.get(st["params_wave"], str(st["params_wave"]))}
+    lines = [f"saved {result['kind']} wave started on {args.port}"
+             + (f", with its learned feedforward ({st['wave_ff_n_live']} entries)" if st["wave_ff_n_live"] else "")]
+    if args.record:
+        res = record(args, ctl, sigs, args.duration, args.record, start_wave=True)
+        result["record"] = res
+        lines.append(f"{res['out']}: {res['frames']} samples of {', '.join(sigs)} at {res['sample_rate_hz']:g} Hz")
+    else:
+        ctl.command("start_wave")
     result["running"] = bool(ctl.status()["wave_running"])
     emit(args, result, lines)
     return 0
