@@ -531,40 +531,6 @@ static void rebind(piezo_ctl_t *c)
 #define COMPOSE_WORDS 32u /* words checked or applied per pass (even: 32-bit values stay whole) */
 typedef char wave_reg_words_check[(WAVE_REG_WORDS == 15u) ? 1 : -1];
 
-/* The configuration the words give, checked as a register write checks it
- * (each value legal, the whole accepted by the modules). 0 or -1. */
-static int params_config(const piezo_regmap_t *m, const uint16_t *words, piezo_ctl_cfg_t *out)
-{
-    piezo_ctl_cfg_t trial = m->ctl->cfg;
-    pending_t p = {NULL, 0u, 0u};
-    for (uint16_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
-        uint32_t w;
-        const piezo_reg_desc_t *d = find(piezo_holding_regs, PIEZO_HREG_N, (uint16_t)(PIEZO_PARAMS_FIRST + i), &w);
-        if (d == NULL || (d->flags & PIEZO_REG_CONFIG) == 0u) {
-            return -1;
-        }
-        p.d = d;
-        p.elem = d->words == 2u ? w >> 1 : w;
-        if (d->words == 1u) {
-            p.value = words[i];
-        } else if ((w & 1u) == 0u) {
-            p.value = (uint32_t)words[i] << 16;
-            continue; /* the low word completes it */
-        } else {
-            p.value |= words[i];
-        }
-        if (!legal(m, &p)) {
-            return -1;
-        }
-        (void)apply_config(&trial, &p);
-    }
-    if (!config_ok(&trial)) {
-        return -1;
-    }
-    *out = trial;
-    return 0;
-}
-
 /* One holding register word as a read gives it. */
 static uint16_t holding_word(const piezo_regmap_t *m, uint16_t addr)
 {
@@ -688,6 +654,29 @@ static uint16_t next_word(reader_t *r)
     return (uint16_t)(r->buf[i] | (uint16_t)(r->buf[i + 1u] << 8));
 }
 
+/* Adds holding register word `addr` (value `word`) to p: 1 when p holds a
+ * whole value (its low word was the last), 0 after the high word of a 32-bit
+ * value, -1 when addr is no register a write may set. */
+static int compose_word(pending_t *p, uint16_t addr, uint16_t word)
+{
+    uint32_t w;
+    const piezo_reg_desc_t *d = find(piezo_holding_regs, PIEZO_HREG_N, addr, &w);
+    if (d == NULL || (d->flags & PIEZO_REG_READONLY)) {
+        return -1;
+    }
+    p->d = d;
+    p->elem = d->words == 2u ? w >> 1 : w;
+    if (d->words == 1u) {
+        p->value = word;
+    } else if ((w & 1u) == 0u) {
+        p->value = (uint32_t)word << 16;
+        return 0; /* the low word completes it */
+    } else {
+        p->value |= word;
+    }
+    return 1;
+}
+
 /* Registers [addr, addr + n) from the record's next n words: each value
  * checked as a register write checks it and, with apply_now, stored. A
  * 32-bit register must lie whole in the n words. 0 or -1. */
@@ -695,25 +684,15 @@ static int compose(piezo_regmap_t *m, reader_t *r, uint16_t addr, uint32_t n, in
 {
     uint16_t unused = 0u;
     pending_t p = {NULL, 0u, 0u};
+    int whole = 1;
     for (uint32_t i = 0; i < n; i++) {
-        uint32_t w;
         uint16_t word = next_word(r);
-        const piezo_reg_desc_t *d = find(piezo_holding_regs, PIEZO_HREG_N, (uint16_t)(addr + i), &w);
-        if (r->err || d == NULL || (d->flags & PIEZO_REG_READONLY)) {
+        whole = compose_word(&p, (uint16_t)(addr + i), word);
+        if (r->err || whole < 0) {
             return -1;
         }
-        p.d = d;
-        p.elem = d->words == 2u ? w >> 1 : w;
-        if (d->words == 1u) {
-            p.value = word;
-        } else if ((w & 1u) == 0u) {
-            p.value = (uint32_t)word << 16;
-            if (i + 1u == n) {
-                return -1; /* half a value */
-            }
-            continue; /* the low word completes it */
-        } else {
-            p.value |= word;
+        if (whole == 0) {
+            continue;
         }
         if (!legal(m, &p)) {
             return -1;
@@ -722,6 +701,33 @@ static int compose(piezo_regmap_t *m, reader_t *r, uint16_t addr, uint32_t n, in
             apply(m, &p, &unused, &unused, &unused);
         }
     }
+    return whole == 1 ? 0 : -1; /* not half a value at the end */
+}
+
+/* The configuration the record's next PIEZO_PARAMS_WORDS words give, checked
+ * as a register write checks it (each value legal, the whole accepted by
+ * the modules), into out. 0 or -1. */
+static int params_config(const piezo_regmap_t *m, reader_t *r, piezo_ctl_cfg_t *out)
+{
+    piezo_ctl_cfg_t trial = m->ctl->cfg;
+    pending_t p = {NULL, 0u, 0u};
+    for (uint16_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
+        uint16_t word = next_word(r);
+        int whole = compose_word(&p, (uint16_t)(PIEZO_PARAMS_FIRST + i), word);
+        if (r->err || whole < 0 || (p.d->flags & PIEZO_REG_CONFIG) == 0u) {
+            return -1;
+        }
+        if (whole == 1 && !legal(m, &p)) {
+            return -1;
+        }
+        if (whole == 1) {
+            (void)apply_config(&trial, &p);
+        }
+    }
+    if (!config_ok(&trial)) {
+        return -1;
+    }
+    *out = trial;
     return 0;
 }
 
@@ -824,17 +830,8 @@ static uint16_t params_load(piezo_regmap_t *m)
         ((sections & PARAMS_SECTION_WAVE) == 0u && len != 2u * wave_start) || len < 2u * wave_start) {
         return PIEZO_PARAMS_REASON_BAD_LENGTH;
     }
-    {
-        uint16_t words[PIEZO_PARAMS_WORDS];
-        for (uint32_t i = 0; i < PIEZO_PARAMS_WORDS; i++) {
-            words[i] = next_word(&r);
-        }
-        if (r.err) {
-            return PIEZO_PARAMS_REASON_STORAGE_FAILED;
-        }
-        if (params_config(m, words, &cfg) != 0) {
-            return PIEZO_PARAMS_REASON_OUT_OF_RANGE;
-        }
+    if (params_config(m, &r, &cfg) != 0) {
+        return r.err ? PIEZO_PARAMS_REASON_STORAGE_FAILED : PIEZO_PARAMS_REASON_OUT_OF_RANGE;
     }
     if (sections & PARAMS_SECTION_WAVE) {
         reader_at(&r, &m->pstore, wave_start);

@@ -509,23 +509,29 @@ def run_wave(args) -> int:
                      f"entries, learned below {lr['f_cut_hz']:.0f} Hz; played with the wave "
                      "(piezoctl params save keeps both)")
     lines.insert(0, f"wave {spec.summary}: started on {args.port}")
-    if args.record:
-        res = record(args, ctl, sigs, rec_s, args.record, start_wave=True)
-        result["record"] = res
-        lines.append(f"{res['out']}: {res['frames']} samples of {', '.join(sigs)} at {res['sample_rate_hz']:g} Hz "
-                     f"(decimation {res['decimation']}{', chosen' if res['decimation_chosen'] else ''})")
-        if res["stream"]:
-            lines.append(f"lost frames: {res['lost_frames']} of {res['frames_wanted']}")
-        if res["plot"]:
-            lines.append(f"plot: {res['plot']}")
-    else:
-        ctl.command("start_wave")
+    _start(args, ctl, sigs, rec_s, result, lines)
     # the controller refuses a wave it cannot play by not starting it
     if spec.play_s() is None and not ctl.status()["wave_running"]:
         raise ControllerRefused("the controller did not start the wave (wave_running 0)")
     result["running"] = bool(ctl.status()["wave_running"])
     emit(args, result, lines)
     return 0
+
+
+def _start(args, ctl, sigs: list, rec_s, result: dict, lines: list) -> None:
+    """Start the loaded wave, recording ``rec_s`` seconds of it with ``--record``;
+    adds ``record`` to ``result`` and its lines to ``lines``."""
+    if not args.record:
+        ctl.command("start_wave")
+        return
+    res = record(args, ctl, sigs, rec_s, args.record, start_wave=True)
+    result["record"] = res
+    lines.append(f"{res['out']}: {res['frames']} samples of {', '.join(sigs)} at {res['sample_rate_hz']:g} Hz "
+                 f"(decimation {res['decimation']}{', chosen' if res['decimation_chosen'] else ''})")
+    if res["stream"]:
+        lines.append(f"lost frames: {res['lost_frames']} of {res['frames_wanted']}")
+    if res["plot"]:
+        lines.append(f"plot: {res['plot']}")
 
 
 def _learn_plan(args, spec: WaveSpec, ctl, tick_hz: float) -> float:
@@ -583,8 +589,8 @@ def _run_saved(args) -> int:
     from .. import interface
     from ..device import PARAMS_WAVE_NAMES, connect
 
-    given = [o for o in _DEFINING if getattr(args, o) is not None] + (["volts"] if args.volts else []) + \
-        (["cycles"] if args.cycles else []) + (["stop"] if args.stop else [])
+    given = [o for o in _DEFINING + ("learn", "learn_cut") if getattr(args, o) is not None] + \
+        (["volts"] if args.volts else []) + (["cycles"] if args.cycles else []) + (["stop"] if args.stop else [])
     if given:
         raise CliError(f"--saved starts the wave the controller holds: it takes no "
                        f"--{', --'.join(g.replace('_', '-') for g in given)}")
@@ -610,12 +616,7 @@ def _run_saved(args) -> int:
               "params_wave": PARAMS_WAVE_NAMES.get(st["params_wave"], str(st["params_wave"]))}
     lines = [f"saved {result['kind']} wave started on {args.port}"
              + (f", with its learned feedforward ({st['wave_ff_n_live']} entries)" if st["wave_ff_n_live"] else "")]
-    if args.record:
-        res = record(args, ctl, sigs, args.duration, args.record, start_wave=True)
-        result["record"] = res
-        lines.append(f"{res['out']}: {res['frames']} samples of {', '.join(sigs)} at {res['sample_rate_hz']:g} Hz")
-    else:
-        ctl.command("start_wave")
+    _start(args, ctl, sigs, args.duration, result, lines)
     result["running"] = bool(ctl.status()["wave_running"])
     emit(args, result, lines)
     return 0
