@@ -517,10 +517,16 @@ int piezo_ctl_wave_ff_off(piezo_ctl_t *c)
     return PIEZO_OK;
 }
 
-uint16_t piezo_ctl_wave_ff_n(const piezo_ctl_t *c)
+const piezo_ctl_wave_ff_t *piezo_ctl_wave_ff_played(const piezo_ctl_t *c)
 {
     int8_t a = c->wave_ff_pending >= 0 ? c->wave_ff_pending : c->wave_ff_active;
-    return (a >= 0 && a != PIEZO_CTL_WAVE_FF_OFF) ? c->wave_ff[a].n : 0u;
+    return (a >= 0 && a != PIEZO_CTL_WAVE_FF_OFF) ? &c->wave_ff[a] : NULL;
+}
+
+uint16_t piezo_ctl_wave_ff_n(const piezo_ctl_t *c)
+{
+    const piezo_ctl_wave_ff_t *ff = piezo_ctl_wave_ff_played(c);
+    return ff != NULL ? ff->n : 0u;
 }
 
 void piezo_ctl_set_key(piezo_ctl_t *c, uint32_t key)

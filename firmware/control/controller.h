@@ -279,6 +279,10 @@ int piezo_ctl_start_wave_on_trigger(piezo_ctl_t *c);
 int piezo_ctl_wave_ff_commit(piezo_ctl_t *c, const int16_t *staged_q15, uint16_t n, uint32_t freq_word);
 /** Stop playing the learned feedforward (from the next tick). PIEZO_EBUSY as above. */
 int piezo_ctl_wave_ff_off(piezo_ctl_t *c);
+/** The learned feedforward the tick plays, or takes at its next start (a
+ *  commit pending); NULL = none. */
+const piezo_ctl_wave_ff_t *piezo_ctl_wave_ff_played(const piezo_ctl_t *c);
+
 /** Entries of the learned feedforward played (0 = none; a pending commit counts). */
 uint16_t piezo_ctl_wave_ff_n(const piezo_ctl_t *c);
 void piezo_ctl_stop_wave(piezo_ctl_t *c);

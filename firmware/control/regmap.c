@@ -539,13 +539,6 @@ static uint16_t holding_word(const piezo_regmap_t *m, uint16_t addr)
     return w;
 }
 
-/* The learned feedforward the tick plays (or takes next), NULL = none. */
-static const piezo_ctl_wave_ff_t *played_ff(const piezo_ctl_t *c)
-{
-    int8_t a = c->wave_ff_pending >= 0 ? c->wave_ff_pending : c->wave_ff_active;
-    return (a >= 0 && a != PIEZO_CTL_WAVE_FF_OFF) ? &c->wave_ff[a] : NULL;
-}
-
 typedef struct {
     const piezo_regmap_t *m;
     uint16_t sections;
@@ -862,7 +855,7 @@ static uint16_t params_save(piezo_regmap_t *m)
     }
     s.m = m;
     s.n_levels = c->wave_cfg.n_levels;
-    s.ff = played_ff(c);
+    s.ff = piezo_ctl_wave_ff_played(c);
     s.last_k = UINT32_MAX;
     s.last_w = 0u;
     len = 2u * (PARAMS_HEAD_WORDS + PIEZO_PARAMS_WORDS);
