@@ -63,6 +63,7 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
     dcc->psi_q15 = psi_q15;
     dcc->order = order;
     dcc->const_w = 0u;
+    dcc->c_abs_31 = 0u;
     dcc->csum = 0;
     dcc->n1_sorted = 1u;
     dcc->n2_banded = 1u;
@@ -88,12 +89,16 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
 void piezo_dcc_const_weights(struct piezo_dcc *dcc)
 {
     const struct piezo_dcc_coeffs *c = dcc->coeffs;
-    int64_t csum = 0, kacc = 0;
+    int64_t csum = 0, kacc = 0, cabs = 0;
     for (uint16_t j = 0; j < c->grid.n_ops; j++) {
         csum += c->c_q24[j];
+        cabs += c->c_q24[j] < 0 ? -(int64_t)c->c_q24[j] : c->c_q24[j];
         kacc += (int64_t)dcc->psi_q15[j] * c->c_q24[j];
     }
     dcc->csum = csum;
+    /* the runs sum weights in int32: every partial sum of c is at most
+     * sum |c_j| in magnitude, so that bound below 2^31 proves it */
+    dcc->c_abs_31 = (uint8_t)(cabs <= INT32_MAX);
     dcc->kacc = kacc;
     dcc->const_w = 1u;
     dcc->n_run = 0u;
@@ -177,7 +182,7 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
             old++;
         }
         int32_t p = j, end;
-        int64_t csum = 0;
+        int32_t csum = 0;
         if (old < old_end && old->thr == n1) {
             /* the run moves as one, then its row's next operators join */
             end = old->end;
@@ -248,7 +253,7 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
             old++;
         }
         int32_t end, q;
-        int64_t csum = 0;
+        int32_t csum = 0;
         if (old < old_end && old->thr == n2) {
             end = old->end;
             csum = old->csum;
@@ -331,7 +336,7 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
         dcc->dir = dir;
         dcc->n_run = 0u; /* the runs are the other direction's */
     }
-    if (dcc->const_w && dcc->lex_sorted) {
+    if (dcc->const_w && dcc->lex_sorted && dcc->c_abs_31) {
         dk = dir > 0 ? dcc_rise_runs(dcc, v) : dcc_fall_runs(dcc, v, dv);
         dcc->v_prev_q15 = v_q15;
         return dk;

@@ -65,9 +65,12 @@ static void test_golden_cases(void **state)
         struct piezo_dcc d;
         assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
         run_block(&d, &cases[i], 0, cases[i].n);
-        /* the same with the weights declared constant (kept sums) */
+        /* the same with the weights declared constant (kept sums): the runs
+         * on the reference planes (sum |c| < 2^31), the band scan on the
+         * edge set's extreme weights */
         assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
         piezo_dcc_const_weights(&d);
+        assert_int_equal(d.c_abs_31, cases[i].c == &dcc_edge ? 0 : 1);
         run_block(&d, &cases[i], 0, cases[i].n);
     }
 }
