@@ -148,6 +148,32 @@ static uint16_t first_n2_above(const int32_t *order, uint16_t n, int32_t t)
     return lo;
 }
 
+/* Store r into [p, end): a run's operators taking its new level. On
+ * Thumb-2 two per instruction (strd of r twice; gcc splits it into two str
+ * and a loop of seven instructions per pair), elsewhere one by one. */
+static inline void fill_i32(int32_t *p, int32_t *end, int32_t r)
+{
+#if defined(__thumb2__)
+    if (end - p >= 2) {
+        int32_t *const last2 = end - 1; /* a pair fits while p < end - 1 */
+        __asm__ volatile("1:\n\t"
+                         "strd  %[r], %[r], [%[p]], #8\n\t"
+                         "cmp   %[p], %[l]\n\t"
+                         "blo   1b"
+                         : [p] "+r"(p)
+                         : [r] "r"(r), [l] "r"(last2)
+                         : "cc", "memory");
+    }
+    if (p < end) {
+        *p = r;
+    }
+#else
+    for (; p < end; p++) {
+        *p = r;
+    }
+#endif
+}
+
 /*
  * Falling to v with runs (const_w, lex_sorted; docs/kernels-kp.md, "DCC:
  * runs"). In a row (one n1, index order = n2 order) psi is non-increasing
@@ -190,9 +216,7 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
             const int32_t run_end = j + old->k;
             if (r != old->lvl) {
                 dk += (int64_t)(r - old->lvl) * csum;
-                for (; p < run_end; p++) {
-                    psi[p] = r;
-                }
+                fill_i32(psi + p, psi + run_end, r);
             }
             p = run_end;
             old++;
