@@ -82,6 +82,24 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
         }
     }
     sort_entries(order, g->n_ops);
+    /* the rows of a grid in (n1, n2) order, for the runs: their first
+     * indices (none when there are more than PIEZO_DCC_MAX_ROWS) */
+    dcc->n_rows = 0u;
+    if (dcc->lex_sorted) {
+        uint16_t nr = 0u;
+        for (uint16_t j = 0; j < g->n_ops && nr <= PIEZO_DCC_MAX_ROWS; j++) {
+            if (j == 0u || g->n1_q15[j] != g->n1_q15[j - 1u]) {
+                if (nr < PIEZO_DCC_MAX_ROWS) {
+                    dcc->row_start[nr] = j;
+                }
+                nr++;
+            }
+        }
+        if (nr <= PIEZO_DCC_MAX_ROWS) {
+            dcc->row_start[nr] = g->n_ops;
+            dcc->n_rows = (uint8_t)nr;
+        }
+    }
     piezo_dcc_reset(dcc);
     return PIEZO_OK;
 }
@@ -148,6 +166,21 @@ static uint16_t first_n2_above(const int32_t *order, uint16_t n, int32_t t)
     return lo;
 }
 
+/* First row in [0, n_rows) whose n1 (the key at its first index) exceeds t. */
+static int32_t first_row_above(const int16_t *key, const uint16_t *row_start, int32_t n_rows, int32_t t)
+{
+    int32_t lo = 0, hi = n_rows;
+    while (lo < hi) {
+        const int32_t mid = (lo + hi) >> 1;
+        if (key[row_start[mid]] > t) {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    return lo;
+}
+
 /* Store r into [p, end): a run's operators taking its new level. On
  * Thumb-2 two per instruction (strd of r twice; gcc splits it into two str
  * and a loop of seven instructions per pair), elsewhere one by one. */
@@ -175,29 +208,32 @@ static inline void fill_i32(int32_t *p, int32_t *end, int32_t r)
 }
 
 /*
- * Falling to v with runs (const_w, lex_sorted; docs/kernels-kp.md, "DCC:
+ * Falling to v with runs (const_w, n_rows, c_abs_31; docs/kernels-kp.md, "DCC:
  * runs"). In a row (one n1, index order = n2 order) psi is non-increasing
  * in n2, so the operators that move, psi > r(v - n1), are a prefix of the
  * row, and after the update they all hold r: a run. Next tick the run moves
  * as one, (r' - r) * csum, and the operators after it join while psi > r'.
  * Every psi is still written (one store per operator of the run), so
- * readers and the other direction see the state as it is.
+ * readers and the other direction see the state as it is. The rows come
+ * from init's row table (row_start): the band's first row by a binary search
+ * over the rows, each row's end without scanning its thresholds.
  */
 static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
 {
     const struct piezo_kp_grid *g = &dcc->coeffs->grid;
     const int32_t *c = dcc->coeffs->c_q24;
     const int16_t *th = g->n1_q15;
+    const uint16_t *rs = dcc->row_start;
     int32_t *psi = dcc->psi_q15;
-    const int32_t n = g->n_ops;
+    const int32_t n_rows = dcc->n_rows;
     const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
     const struct piezo_dcc_run *old = dcc->run[dcc->cur];
     const struct piezo_dcc_run *old_end = old + dcc->n_run;
     struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
-    int32_t j = first_n1_above(th, (uint16_t)n, v - xsat);
-    while (j < n) {
+    for (int32_t k = first_row_above(th, rs, n_rows, v - xsat); k < n_rows; k++) {
+        const int32_t j = rs[k], end = rs[k + 1];
         const int32_t n1 = th[j];
         const int32_t x = v - n1;
         if (x <= dv) {
@@ -207,38 +243,27 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
         while (old < old_end && old->thr < n1) {
             old++;
         }
-        int32_t p = j, end;
+        int32_t p = j;
         int32_t csum = 0;
         if (old < old_end && old->thr == n1) {
             /* the run moves as one, then its row's next operators join */
-            end = old->end;
             csum = old->csum;
-            const int32_t run_end = j + old->k;
+            p = j + old->k;
             if (r != old->lvl) {
                 dk += (int64_t)(r - old->lvl) * csum;
-                fill_i32(psi + p, psi + run_end, r);
+                fill_i32(psi + j, psi + p, r);
             }
-            p = run_end;
             old++;
-            for (; p < end && psi[p] > r; p++) {
-                dk += (int64_t)(r - psi[p]) * c[p];
-                csum += c[p];
-                psi[p] = r;
-            }
-        } else {
-            for (; p < n && th[p] == n1 && psi[p] > r; p++) {
-                dk += (int64_t)(r - psi[p]) * c[p];
-                csum += c[p];
-                psi[p] = r;
-            }
-            for (end = p; end < n && th[end] == n1; end++) {
-            }
+        }
+        for (; p < end && psi[p] > r; p++) {
+            dk += (int64_t)(r - psi[p]) * c[p];
+            csum += c[p];
+            psi[p] = r;
         }
         if (p > j && o < out_end) {
             *o++ = (struct piezo_dcc_run){csum, r, (int16_t)n1, (uint16_t)j, (uint16_t)end,
                                           (uint16_t)(p - j)};
         }
-        j = end;
     }
     dcc->cur ^= 1u;
     dcc->n_run = (uint8_t)(o - out);
@@ -360,7 +385,7 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
         dcc->dir = dir;
         dcc->n_run = 0u; /* the runs are the other direction's */
     }
-    if (dcc->const_w && dcc->lex_sorted && dcc->c_abs_31) {
+    if (dcc->const_w && dcc->n_rows != 0u && dcc->c_abs_31) {
         dk = dir > 0 ? dcc_rise_runs(dcc, v) : dcc_fall_runs(dcc, v, dv);
         dcc->v_prev_q15 = v_q15;
         return dk;

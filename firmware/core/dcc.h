@@ -29,7 +29,8 @@
  * (C = sum_j c_j) is kept incrementally when the caller declares the weights
  * constant (piezo_dcc_const_weights(), e.g. a kp_dcc table); otherwise (the
  * RKP density changes every tick) the sum is formed in full every tick.
- * With constant weights (sum_j |c_j| < 2^31) on a grid in (n1, n2) order the
+ * With constant weights (sum_j |c_j| < 2^31) on a grid in (n1, n2) order with
+ * at most PIEZO_DCC_MAX_ROWS rows (init keeps each row's first index) the
  * moving operators of a row (falling) or column (rising) hold one value and
  * move as one run, (r' - r) * csum (docs/kernels-kp.md, "DCC: runs"); every
  * psi is still written.
@@ -95,6 +96,10 @@ struct piezo_dcc_coeffs {
  * whose moving operators are tracked as one (docs/kernels-kp.md). */
 #define PIEZO_DCC_RUNS 4u
 
+/* Rows (distinct n1) of a grid in (n1, n2) order that the runs handle; a
+ * grid with more rows (a plane finer than L = 32) takes the band scan. */
+#define PIEZO_DCC_MAX_ROWS 32u
+
 /* A run: the operators of one row (falling, index order) or one column
  * (rising, order-array positions) that moved in the current monotone run of
  * the input. All of them hold the same value lvl = r(v_prev - thr): falling
@@ -127,6 +132,8 @@ struct piezo_dcc {
     uint8_t n_run;       /* runs of the current direction, in run[cur] by ascending thr */
     uint8_t cur;         /* which of the two run buffers is current */
     uint8_t c_abs_31;    /* sum_j |c_j| < 2^31: the runs' weight sums fit int32 */
+    uint8_t n_rows;      /* lex_sorted with at most PIEZO_DCC_MAX_ROWS rows: their count; else 0 */
+    uint16_t row_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first index of each row, then n_ops */
     struct piezo_dcc_run run[2][PIEZO_DCC_RUNS];
 };
 

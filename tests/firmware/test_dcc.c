@@ -71,6 +71,7 @@ static void test_golden_cases(void **state)
         assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
         piezo_dcc_const_weights(&d);
         assert_int_equal(d.c_abs_31, cases[i].c == &dcc_edge ? 0 : 1);
+        assert_true(cases[i].c == &dcc_edge || d.n_rows != 0u); /* the runs, with their row table */
         run_block(&d, &cases[i], 0, cases[i].n);
     }
 }
@@ -161,6 +162,47 @@ static void test_reset_restores_initial_state(void **state)
     run_block(&d, c, 0, c->n);
 }
 
+/* Planes of K rows, two operators each (n1 = n2 and n1 < n2), in (n1, n2)
+ * order: up to PIEZO_DCC_MAX_ROWS rows the runs take them (a row table),
+ * beyond it the band scan; either way psi + Psi == v against the KP kernel
+ * and the law's drive equals the one with the weights summed every tick. */
+static void test_row_table_limit(void **state)
+{
+    (void)state;
+    static int16_t n1[2 * (PIEZO_DCC_MAX_ROWS + 1u)], n2[2 * (PIEZO_DCC_MAX_ROWS + 1u)];
+    static int32_t c[2 * (PIEZO_DCC_MAX_ROWS + 1u)];
+    static const uint16_t rows[] = {PIEZO_DCC_MAX_ROWS - 1u, PIEZO_DCC_MAX_ROWS, PIEZO_DCC_MAX_ROWS + 1u};
+    for (size_t t = 0; t < N_OF(rows); t++) {
+        const uint16_t k = rows[t];
+        for (uint16_t i = 0; i < k; i++) {
+            const int32_t lvl = -32000 + (int32_t)i * (64000 / k);
+            n1[2 * i] = n2[2 * i] = n1[2 * i + 1] = (int16_t)lvl;
+            n2[2 * i + 1] = (int16_t)(lvl + 64000 / k / 2);
+            c[2 * i] = 40000 + 7 * i;
+            c[2 * i + 1] = 30000 - 5 * i;
+        }
+        struct piezo_dcc_coeffs dc = dcc_std;
+        dc.grid.n1_q15 = n1;
+        dc.grid.n2_q15 = n2;
+        dc.grid.n_ops = (uint16_t)(2u * k);
+        dc.grid.nmin_q15 = -32768;
+        dc.c_q24 = c;
+        struct piezo_dcc a, b;
+        assert_int_equal(piezo_dcc_init(&a, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+        assert_int_equal(piezo_dcc_init(&b, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
+        piezo_dcc_const_weights(&a);
+        assert_int_equal(a.n_rows, k <= PIEZO_DCC_MAX_ROWS ? k : 0u);
+        const struct dcc_case *rc = find_case("realistic");
+        for (size_t i = 0; i < rc->n; i++) {
+            assert_int_equal(piezo_dcc_process(&a, rc->yd[i]), piezo_dcc_process(&b, rc->yd[i]));
+        }
+        for (int cw = 0; cw <= 1; cw++) {
+            check_identity(&dc, dcc_ops_random_v, N_OF(dcc_ops_random_v), "rows random", cw);
+            check_identity(&dc, dcc_ops_realistic_v, N_OF(dcc_ops_realistic_v), "rows realistic", cw);
+        }
+    }
+}
+
 static enum piezo_err init_with(const struct piezo_dcc_coeffs *c, size_t n_state)
 {
     struct piezo_dcc d;
@@ -203,6 +245,7 @@ int main(void)
         cmocka_unit_test(test_split_run_and_shared_coeffs),
         cmocka_unit_test(test_reset_restores_initial_state),
         cmocka_unit_test(test_init_refuses_bad_coefficients),
+        cmocka_unit_test(test_row_table_limit),
     };
     return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);
 }
