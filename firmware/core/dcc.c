@@ -100,6 +100,23 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
             dcc->n_rows = (uint8_t)nr;
         }
     }
+    /* the columns (equal n2) of the order array alike, for the rising runs */
+    dcc->n_cols = 0u;
+    {
+        uint16_t nc = 0u;
+        for (uint16_t k = 0; k < g->n_ops && nc <= PIEZO_DCC_MAX_ROWS; k++) {
+            if (k == 0u || (order[k] >> 16) != (order[k - 1u] >> 16)) {
+                if (nc < PIEZO_DCC_MAX_ROWS) {
+                    dcc->col_start[nc] = k;
+                }
+                nc++;
+            }
+        }
+        if (nc <= PIEZO_DCC_MAX_ROWS) {
+            dcc->col_start[nc] = g->n_ops;
+            dcc->n_cols = (uint8_t)nc;
+        }
+    }
     piezo_dcc_reset(dcc);
     return PIEZO_OK;
 }
@@ -135,6 +152,8 @@ void piezo_dcc_reset(struct piezo_dcc *dcc)
     dcc->dir = -1;
     dcc->n_run = 0u;
     dcc->cur = 0u;
+    dcc->row_cur = 0u;
+    dcc->col_cur = 0u;
 }
 
 /* First index in [lo, n) of a non-decreasing key whose key exceeds t. */
@@ -166,19 +185,69 @@ static uint16_t first_n2_above(const int32_t *order, uint16_t n, int32_t t)
     return lo;
 }
 
-/* First row in [0, n_rows) whose n1 (the key at its first index) exceeds t. */
-static int32_t first_row_above(const int16_t *key, const uint16_t *row_start, int32_t n_rows, int32_t t)
+/* First row in [0, n_rows) whose n1 (the key at its first index) exceeds t.
+ * From the last tick's row *cur: the input moves less than a row's spacing
+ * per tick on a smooth drive, so that row or the one before or after it is
+ * the answer (two or three compares); otherwise a binary search over the
+ * rows. The same row either way. */
+static int32_t first_row_above(const int16_t *key, const uint16_t *row_start, int32_t n_rows, int32_t t,
+                               uint8_t *cur)
 {
-    int32_t lo = 0, hi = n_rows;
-    while (lo < hi) {
-        const int32_t mid = (lo + hi) >> 1;
-        if (key[row_start[mid]] > t) {
-            hi = mid;
-        } else {
-            lo = mid + 1;
-        }
+    int32_t k = *cur;
+    const int below_ok = k == 0 || key[row_start[k - 1]] <= t;
+    const int above_ok = k == n_rows || key[row_start[k]] > t;
+    if (below_ok && above_ok) {
+        return k;
     }
-    return lo;
+    if (!below_ok && (k == 1 || key[row_start[k - 2]] <= t)) {
+        k--; /* one row down: row k - 1 exceeds t, row k - 2 does not */
+    } else if (!above_ok && (k + 1 == n_rows || key[row_start[k + 1]] > t)) {
+        k++; /* one row up */
+    } else {
+        int32_t lo = 0, hi = n_rows;
+        while (lo < hi) {
+            const int32_t mid = (lo + hi) >> 1;
+            if (key[row_start[mid]] > t) {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        k = lo;
+    }
+    *cur = (uint8_t)k;
+    return k;
+}
+
+/* The same for the columns: the first column (a group of equal n2 in the
+ * order array) whose n2 exceeds t, from the last rising tick's column. */
+static int32_t first_col_above(const int32_t *order, const uint16_t *col_start, int32_t n_cols, int32_t t,
+                               uint8_t *cur)
+{
+    int32_t k = *cur;
+    const int below_ok = k == 0 || (order[col_start[k - 1]] >> 16) <= t;
+    const int above_ok = k == n_cols || (order[col_start[k]] >> 16) > t;
+    if (below_ok && above_ok) {
+        return k;
+    }
+    if (!below_ok && (k == 1 || (order[col_start[k - 2]] >> 16) <= t)) {
+        k--;
+    } else if (!above_ok && (k + 1 == n_cols || (order[col_start[k + 1]] >> 16) > t)) {
+        k++;
+    } else {
+        int32_t lo = 0, hi = n_cols;
+        while (lo < hi) {
+            const int32_t mid = (lo + hi) >> 1;
+            if ((order[col_start[mid]] >> 16) > t) {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        k = lo;
+    }
+    *cur = (uint8_t)k;
+    return k;
 }
 
 /* Store r into [p, end): a run's operators taking its new level. On
@@ -232,7 +301,7 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
     struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
-    for (int32_t k = first_row_above(th, rs, n_rows, v - xsat); k < n_rows; k++) {
+    for (int32_t k = first_row_above(th, rs, n_rows, v - xsat, &dcc->row_cur); k < n_rows; k++) {
         const int32_t j = rs[k], end = rs[k + 1];
         const int32_t n1 = th[j];
         const int32_t x = v - n1;
@@ -282,16 +351,18 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
     const struct piezo_kp_grid *g = &dcc->coeffs->grid;
     const int32_t *c = dcc->coeffs->c_q24;
     const int32_t *ord = dcc->order;
+    const uint16_t *cs = dcc->col_start;
     int32_t *psi = dcc->psi_q15;
-    const int32_t n = g->n_ops;
+    const int32_t n_cols = dcc->n_cols;
     const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
     const struct piezo_dcc_run *old = dcc->run[dcc->cur];
     const struct piezo_dcc_run *old_end = old + dcc->n_run;
     struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
-    int32_t pos = dcc->n2_banded ? first_n2_above(ord, (uint16_t)n, dcc->v_prev_q15 - xsat) : 0;
-    while (pos < n) {
+    int32_t k = dcc->n2_banded ? first_col_above(ord, cs, n_cols, dcc->v_prev_q15 - xsat, &dcc->col_cur) : 0;
+    for (; k < n_cols; k++) {
+        const int32_t pos = cs[k], end = cs[k + 1];
         const int32_t n2 = ord[pos] >> 16;
         const int32_t x = v - n2;
         if (x <= 0) {
@@ -301,10 +372,9 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
         while (old < old_end && old->thr < n2) {
             old++;
         }
-        int32_t end, q;
+        int32_t q;
         int32_t csum = 0;
         if (old < old_end && old->thr == n2) {
-            end = old->end;
             csum = old->csum;
             q = end - old->k; /* the run: positions q .. end-1 */
             if (r != old->lvl) {
@@ -328,22 +398,20 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
         } else {
             int32_t e = pos;
             /* operators that do not move, then (a suffix) all that do */
-            for (; e < n && (ord[e] >> 16) == n2 && psi[(uint16_t)ord[e]] >= r; e++) {
+            for (; e < end && psi[(uint16_t)ord[e]] >= r; e++) {
             }
             q = e;
-            for (; e < n && (ord[e] >> 16) == n2; e++) {
+            for (; e < end; e++) {
                 const int32_t jj = (uint16_t)ord[e];
                 dk += (int64_t)(r - psi[jj]) * c[jj];
                 csum += c[jj];
                 psi[jj] = r;
             }
-            end = e;
         }
         if (q < end && o < out_end) {
             *o++ = (struct piezo_dcc_run){csum, r, (int16_t)n2, (uint16_t)pos, (uint16_t)end,
                                           (uint16_t)(end - q)};
         }
-        pos = end;
     }
     dcc->cur ^= 1u;
     dcc->n_run = (uint8_t)(o - out);
@@ -385,7 +453,7 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
         dcc->dir = dir;
         dcc->n_run = 0u; /* the runs are the other direction's */
     }
-    if (dcc->const_w && dcc->n_rows != 0u && dcc->c_abs_31) {
+    if (dcc->const_w && dcc->n_rows != 0u && dcc->n_cols != 0u && dcc->c_abs_31) {
         dk = dir > 0 ? dcc_rise_runs(dcc, v) : dcc_fall_runs(dcc, v, dv);
         dcc->v_prev_q15 = v_q15;
         return dk;

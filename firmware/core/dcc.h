@@ -133,7 +133,11 @@ struct piezo_dcc {
     uint8_t cur;         /* which of the two run buffers is current */
     uint8_t c_abs_31;    /* sum_j |c_j| < 2^31: the runs' weight sums fit int32 */
     uint8_t n_rows;      /* lex_sorted with at most PIEZO_DCC_MAX_ROWS rows: their count; else 0 */
+    uint8_t row_cur;     /* the falling band's first row at the last falling tick (a hint) */
+    uint8_t n_cols;      /* columns (equal n2) in the order array, at most PIEZO_DCC_MAX_ROWS; else 0 */
+    uint8_t col_cur;     /* the rising band's first column at the last rising tick (a hint) */
     uint16_t row_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first index of each row, then n_ops */
+    uint16_t col_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first order position of each column, then n_ops */
     struct piezo_dcc_run run[2][PIEZO_DCC_RUNS];
 };
 
