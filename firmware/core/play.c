@@ -321,6 +321,112 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
 }
 #endif
 
+/*
+ * Rising, F = max(u - r_i, F) (the upper branch cannot bind while rising):
+ * for each of n_col columns of n_r outputs (column by column from f), from
+ * the column's first threshold to the first u - r_i <= F; the column's
+ * weights start at w + column and step by w_step entries (n_a, the
+ * unparallel bank's row-major weights). Returns acc plus the sum of
+ * w (F_new - F_old).
+ */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Cortex-M4: in Thumb-2, 11 instructions per moving operator (two per
+ * pass) against gcc's 13; test_play and the EUPI golden vectors under QEMU. */
+struct rise_args {
+    int32_t *f;          /* 0 */
+    const int32_t *w;    /* 4 */
+    const int32_t *r;    /* 8 */
+    uint32_t n_col;      /* 12: >= 1 */
+    uint32_t f_step;     /* 16: n_r * 4 */
+    uint32_t w_stride;   /* 20: w_step * 4 */
+    int32_t u;           /* 24 */
+};
+typedef char piezo_rise_args_layout_check_t[(offsetof(struct rise_args, u) == 24u) ? 1 : -1];
+
+static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *arg, int64_t acc)
+{
+    (void)arg;
+    (void)acc;
+    /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
+     * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
+     * r11 thresholds, r12 n_r * 4, lr u */
+    __asm__ volatile(
+        "    push   {r4-r11, lr}\n"
+        "    mov    r8, r2\n"
+        "    mov    r9, r3\n"
+        "    ldr    r2, [r0, #0]\n"
+        "    ldr    r4, [r0, #4]\n"
+        "    ldr    r11, [r0, #8]\n"
+        "    ldr    r10, [r0, #12]\n"
+        "    ldr    r12, [r0, #16]\n"
+        "    ldr    r5, [r0, #20]\n"
+        "    ldr    lr, [r0, #24]\n"
+        "    cmp    r12, #0\n"
+        "    beq    5f\n"
+        "1:  add    r3, r2, r12\n"             /* column */
+        "    mov    r1, r11\n"
+        "    mov    r0, r4\n"
+        "    tst    r12, #4\n"
+        "    bne    3f\n"
+        "2:  ldr    r6, [r1], #4\n"
+        "    ldr    r7, [r2]\n"
+        "    sub    r6, lr, r6\n"
+        "    cmp    r6, r7\n"
+        "    ble    4f\n"
+        "    str    r6, [r2], #4\n"
+        "    sub    r6, r6, r7\n"
+        "    ldr    r7, [r0]\n"
+        "    add    r0, r0, r5\n"
+        "    smlal  r8, r9, r7, r6\n"
+        "3:  ldr    r6, [r1], #4\n"
+        "    ldr    r7, [r2]\n"
+        "    sub    r6, lr, r6\n"
+        "    cmp    r6, r7\n"
+        "    ble    4f\n"
+        "    str    r6, [r2], #4\n"
+        "    sub    r6, r6, r7\n"
+        "    ldr    r7, [r0]\n"
+        "    add    r0, r0, r5\n"
+        "    smlal  r8, r9, r7, r6\n"
+        "    cmp    r2, r3\n"
+        "    bne    2b\n"
+        "4:  mov    r2, r3\n"                  /* the next column starts where this one ends */
+        "    add    r4, r4, #4\n"
+        "    subs   r10, r10, #1\n"
+        "    bne    1b\n"
+        "5:  mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    pop    {r4-r11, pc}\n");
+}
+
+static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
+                    int32_t u_q15, int64_t acc)
+{
+    const struct rise_args arg = {f, w, r, (uint32_t)n_col, (uint32_t)(n_r * sizeof *f),
+                                  (uint32_t)(w_step * sizeof *w), u_q15};
+    return rise_m4(&arg, acc);
+}
+#else
+static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
+                    int32_t u_q15, int64_t acc)
+{
+    for (size_t j = 0; j < n_col; j++) {
+        int32_t *fc = f + j * n_r;
+        const int32_t *wk = w + j;
+        for (size_t i = 0; i < n_r; i++, wk += w_step) {
+            const int32_t lo = u_q15 - r[i];
+            const int32_t y = fc[i];
+            if (lo <= y) {
+                break;
+            }
+            fc[i] = lo;
+            acc += (int64_t)*wk * (lo - y);
+        }
+    }
+    return acc;
+}
+#endif
+
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
 {
     if (!p->primed) {
@@ -377,19 +483,7 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
     const size_t n_a = c->n_a;
     if (u_q15 > u_prev) {
         /* F = max(u - r_i, F): the upper branch cannot bind while rising. */
-        for (size_t j = 0; j < n_a; j++) {
-            int32_t *fc = f + j * n_r;
-            const int32_t *wk = w + j;
-            for (size_t i = 0; i < n_r; i++, wk += n_a) {
-                const int32_t lo = u_q15 - r[i];
-                const int32_t y = fc[i];
-                if (lo <= y) {
-                    break;
-                }
-                fc[i] = lo;
-                acc += (int64_t)*wk * (lo - y);
-            }
-        }
+        acc = rise(f, w, r, n_r, n_a, n_a, u_q15, acc);
     } else {
         acc = upi_fall(c, p->off_q39, f, u_q15, acc);
     }
