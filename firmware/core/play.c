@@ -144,22 +144,22 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * gcc's C spends 14 instructions per moving operator on the upper branch
  * (it splits the constant's ldrd and counts separately) and 19 with the
  * lower one, and spills the column loop's pointers; here 12 (two operators
- * per pass) and 18, the column state in the caller's struct. A loop alone
+ * per pass) and 18, the column state in the caller's struct (the constants'
+ * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
 struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
-    const int64_t *off;  /* 0: the column's split branch constants (column by column) */
+    uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
     int32_t *f;          /* 4: the column's outputs (column by column) */
     const int32_t *w;    /* 8: the column's first weight (row-major) */
     const int32_t *r;    /* 12: thresholds */
     const int32_t *a;    /* 16: the column's slope */
     const int32_t *a_end;/* 20: one past the last slope */
     uint32_t f_step;     /* 24: n_r * 4, bytes of a column of outputs */
-    uint32_t off_step;   /* 28: n_r * 8, bytes of a column of constants */
-    uint32_t w_stride;   /* 32: n_a * 4, bytes between a column's weights */
-    int32_t u;           /* 36 */
+    uint32_t w_stride;   /* 28: n_a * 4, bytes between a column's weights */
+    int32_t u;           /* 32 */
 };
-typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_stride) == 32u &&
-                                                 offsetof(struct upi_fall_args, u) == 36u) ? 1 : -1];
+typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_stride) == 28u &&
+                                                 offsetof(struct upi_fall_args, u) == 32u) ? 1 : -1];
 
 static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args *arg, int64_t acc)
 {
@@ -172,8 +172,8 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    push   {r0, r4-r11, lr}\n"
         "    mov    r8, r2\n"
         "    mov    r9, r3\n"
-        "    ldr    r5, [r0, #32]\n"
-        "    ldr    lr, [r0, #36]\n"
+        "    ldr    r5, [r0, #28]\n"
+        "    ldr    lr, [r0, #32]\n"
         "    ldr    r1, [r0, #24]\n"
         "    cmp    r1, #0\n"
         "    beq    7f\n"
@@ -185,6 +185,7 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    orr    r7, r10, r7, lsl #8\n"
         "    lsl    r6, r6, #8\n"
         "    ldrd   r1, r2, [r0, #0]\n"
+        "    add    r1, r1, r2, lsl #1\n"
         "    ldr    r3, [r0, #24]\n"
         "    add    r3, r2, r3\n"
         "    ldr    r4, [r0, #8]\n"
@@ -243,10 +244,6 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    cmp    r2, r3\n"
         "    bne    51b\n"
         "6:  ldr    r0, [sp]\n"                /* next column: fp's starts where this one ends */
-        "    ldr    r10, [r0, #0]\n"
-        "    ldr    r12, [r0, #28]\n"
-        "    add    r10, r10, r12\n"
-        "    str    r10, [r0, #0]\n"
         "    str    r3, [r0, #4]\n"
         "    ldr    r12, [r0, #8]\n"
         "    add    r12, r12, #4\n"
@@ -263,14 +260,13 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
 static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
                         int64_t acc)
 {
-    struct upi_fall_args arg = {off,
+    struct upi_fall_args arg = {(uintptr_t)off - 2u * (uintptr_t)f,
                                 f,
                                 c->w_q24,
                                 c->r_q15,
                                 c->a_q24,
                                 c->a_q24 + c->n_a,
                                 (uint32_t)(c->n_r * sizeof *f),
-                                (uint32_t)(c->n_r * sizeof *off),
                                 (uint32_t)(c->n_a * sizeof *c->w_q24),
                                 u_q15};
     return upi_fall_m4(&arg, acc);
