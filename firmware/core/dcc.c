@@ -63,6 +63,7 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
     dcc->psi_q15 = psi_q15;
     dcc->order = order;
     dcc->const_w = 0u;
+    dcc->c_abs_31 = 0u;
     dcc->csum = 0;
     dcc->n1_sorted = 1u;
     dcc->n2_banded = 1u;
@@ -81,6 +82,41 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
         }
     }
     sort_entries(order, g->n_ops);
+    /* the rows of a grid in (n1, n2) order, for the runs: their first
+     * indices (none when there are more than PIEZO_DCC_MAX_ROWS) */
+    dcc->n_rows = 0u;
+    if (dcc->lex_sorted) {
+        uint16_t nr = 0u;
+        for (uint16_t j = 0; j < g->n_ops && nr <= PIEZO_DCC_MAX_ROWS; j++) {
+            if (j == 0u || g->n1_q15[j] != g->n1_q15[j - 1u]) {
+                if (nr < PIEZO_DCC_MAX_ROWS) {
+                    dcc->row_start[nr] = j;
+                }
+                nr++;
+            }
+        }
+        if (nr <= PIEZO_DCC_MAX_ROWS) {
+            dcc->row_start[nr] = g->n_ops;
+            dcc->n_rows = (uint8_t)nr;
+        }
+    }
+    /* the columns (equal n2) of the order array alike, for the rising runs */
+    dcc->n_cols = 0u;
+    {
+        uint16_t nc = 0u;
+        for (uint16_t k = 0; k < g->n_ops && nc <= PIEZO_DCC_MAX_ROWS; k++) {
+            if (k == 0u || (order[k] >> 16) != (order[k - 1u] >> 16)) {
+                if (nc < PIEZO_DCC_MAX_ROWS) {
+                    dcc->col_start[nc] = k;
+                }
+                nc++;
+            }
+        }
+        if (nc <= PIEZO_DCC_MAX_ROWS) {
+            dcc->col_start[nc] = g->n_ops;
+            dcc->n_cols = (uint8_t)nc;
+        }
+    }
     piezo_dcc_reset(dcc);
     return PIEZO_OK;
 }
@@ -88,12 +124,16 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
 void piezo_dcc_const_weights(struct piezo_dcc *dcc)
 {
     const struct piezo_dcc_coeffs *c = dcc->coeffs;
-    int64_t csum = 0, kacc = 0;
+    int64_t csum = 0, kacc = 0, cabs = 0;
     for (uint16_t j = 0; j < c->grid.n_ops; j++) {
         csum += c->c_q24[j];
+        cabs += c->c_q24[j] < 0 ? -(int64_t)c->c_q24[j] : c->c_q24[j];
         kacc += (int64_t)dcc->psi_q15[j] * c->c_q24[j];
     }
     dcc->csum = csum;
+    /* the runs sum weights in int32: every partial sum of c is at most
+     * sum |c_j| in magnitude, so that bound below 2^31 proves it */
+    dcc->c_abs_31 = (uint8_t)(cabs <= INT32_MAX);
     dcc->kacc = kacc;
     dcc->const_w = 1u;
     dcc->n_run = 0u;
@@ -112,6 +152,8 @@ void piezo_dcc_reset(struct piezo_dcc *dcc)
     dcc->dir = -1;
     dcc->n_run = 0u;
     dcc->cur = 0u;
+    dcc->row_cur = 0u;
+    dcc->col_cur = 0u;
 }
 
 /* First index in [lo, n) of a non-decreasing key whose key exceeds t. */
@@ -143,30 +185,124 @@ static uint16_t first_n2_above(const int32_t *order, uint16_t n, int32_t t)
     return lo;
 }
 
+/* First row in [0, n_rows) whose n1 (the key at its first index) exceeds t.
+ * From the last tick's row *cur: the input moves less than a row's spacing
+ * per tick on a smooth drive, so that row or the one before or after it is
+ * the answer (two or three compares); otherwise a binary search over the
+ * rows. The same row either way. */
+static int32_t first_row_above(const int16_t *key, const uint16_t *row_start, int32_t n_rows, int32_t t,
+                               uint8_t *cur)
+{
+    int32_t k = *cur;
+    const int below_ok = k == 0 || key[row_start[k - 1]] <= t;
+    const int above_ok = k == n_rows || key[row_start[k]] > t;
+    if (below_ok && above_ok) {
+        return k;
+    }
+    if (!below_ok && (k == 1 || key[row_start[k - 2]] <= t)) {
+        k--; /* one row down: row k - 1 exceeds t, row k - 2 does not */
+    } else if (!above_ok && (k + 1 == n_rows || key[row_start[k + 1]] > t)) {
+        k++; /* one row up */
+    } else {
+        int32_t lo = 0, hi = n_rows;
+        while (lo < hi) {
+            const int32_t mid = (lo + hi) >> 1;
+            if (key[row_start[mid]] > t) {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        k = lo;
+    }
+    *cur = (uint8_t)k;
+    return k;
+}
+
+/* The same for the columns: the first column (a group of equal n2 in the
+ * order array) whose n2 exceeds t, from the last rising tick's column. */
+static int32_t first_col_above(const int32_t *order, const uint16_t *col_start, int32_t n_cols, int32_t t,
+                               uint8_t *cur)
+{
+    int32_t k = *cur;
+    const int below_ok = k == 0 || (order[col_start[k - 1]] >> 16) <= t;
+    const int above_ok = k == n_cols || (order[col_start[k]] >> 16) > t;
+    if (below_ok && above_ok) {
+        return k;
+    }
+    if (!below_ok && (k == 1 || (order[col_start[k - 2]] >> 16) <= t)) {
+        k--;
+    } else if (!above_ok && (k + 1 == n_cols || (order[col_start[k + 1]] >> 16) > t)) {
+        k++;
+    } else {
+        int32_t lo = 0, hi = n_cols;
+        while (lo < hi) {
+            const int32_t mid = (lo + hi) >> 1;
+            if ((order[col_start[mid]] >> 16) > t) {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        k = lo;
+    }
+    *cur = (uint8_t)k;
+    return k;
+}
+
+/* Store r into [p, end): a run's operators taking its new level. On
+ * Thumb-2 two per instruction (strd of r twice; gcc splits it into two str
+ * and a loop of seven instructions per pair), elsewhere one by one. */
+static inline void fill_i32(int32_t *p, int32_t *end, int32_t r)
+{
+#if defined(__thumb2__)
+    if (end - p >= 2) {
+        int32_t *const last2 = end - 1; /* a pair fits while p < end - 1 */
+        __asm__ volatile("1:\n\t"
+                         "strd  %[r], %[r], [%[p]], #8\n\t"
+                         "cmp   %[p], %[l]\n\t"
+                         "blo   1b"
+                         : [p] "+r"(p)
+                         : [r] "r"(r), [l] "r"(last2)
+                         : "cc", "memory");
+    }
+    if (p < end) {
+        *p = r;
+    }
+#else
+    for (; p < end; p++) {
+        *p = r;
+    }
+#endif
+}
+
 /*
- * Falling to v with runs (const_w, lex_sorted; docs/kernels-kp.md, "DCC:
+ * Falling to v with runs (const_w, n_rows, c_abs_31; docs/kernels-kp.md, "DCC:
  * runs"). In a row (one n1, index order = n2 order) psi is non-increasing
  * in n2, so the operators that move, psi > r(v - n1), are a prefix of the
  * row, and after the update they all hold r: a run. Next tick the run moves
  * as one, (r' - r) * csum, and the operators after it join while psi > r'.
  * Every psi is still written (one store per operator of the run), so
- * readers and the other direction see the state as it is.
+ * readers and the other direction see the state as it is. The rows come
+ * from init's row table (row_start): the band's first row by a binary search
+ * over the rows, each row's end without scanning its thresholds.
  */
 static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
 {
     const struct piezo_kp_grid *g = &dcc->coeffs->grid;
     const int32_t *c = dcc->coeffs->c_q24;
     const int16_t *th = g->n1_q15;
+    const uint16_t *rs = dcc->row_start;
     int32_t *psi = dcc->psi_q15;
-    const int32_t n = g->n_ops;
+    const int32_t n_rows = dcc->n_rows;
     const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
     const struct piezo_dcc_run *old = dcc->run[dcc->cur];
     const struct piezo_dcc_run *old_end = old + dcc->n_run;
     struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
-    int32_t j = first_n1_above(th, (uint16_t)n, v - xsat);
-    while (j < n) {
+    for (int32_t k = first_row_above(th, rs, n_rows, v - xsat, &dcc->row_cur); k < n_rows; k++) {
+        const int32_t j = rs[k], end = rs[k + 1];
         const int32_t n1 = th[j];
         const int32_t x = v - n1;
         if (x <= dv) {
@@ -176,40 +312,27 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
         while (old < old_end && old->thr < n1) {
             old++;
         }
-        int32_t p = j, end;
-        int64_t csum = 0;
+        int32_t p = j;
+        int32_t csum = 0;
         if (old < old_end && old->thr == n1) {
             /* the run moves as one, then its row's next operators join */
-            end = old->end;
             csum = old->csum;
-            const int32_t run_end = j + old->k;
+            p = j + old->k;
             if (r != old->lvl) {
                 dk += (int64_t)(r - old->lvl) * csum;
-                for (; p < run_end; p++) {
-                    psi[p] = r;
-                }
+                fill_i32(psi + j, psi + p, r);
             }
-            p = run_end;
             old++;
-            for (; p < end && psi[p] > r; p++) {
-                dk += (int64_t)(r - psi[p]) * c[p];
-                csum += c[p];
-                psi[p] = r;
-            }
-        } else {
-            for (; p < n && th[p] == n1 && psi[p] > r; p++) {
-                dk += (int64_t)(r - psi[p]) * c[p];
-                csum += c[p];
-                psi[p] = r;
-            }
-            for (end = p; end < n && th[end] == n1; end++) {
-            }
+        }
+        for (; p < end && psi[p] > r; p++) {
+            dk += (int64_t)(r - psi[p]) * c[p];
+            csum += c[p];
+            psi[p] = r;
         }
         if (p > j && o < out_end) {
             *o++ = (struct piezo_dcc_run){csum, r, (int16_t)n1, (uint16_t)j, (uint16_t)end,
                                           (uint16_t)(p - j)};
         }
-        j = end;
     }
     dcc->cur ^= 1u;
     dcc->n_run = (uint8_t)(o - out);
@@ -228,16 +351,18 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
     const struct piezo_kp_grid *g = &dcc->coeffs->grid;
     const int32_t *c = dcc->coeffs->c_q24;
     const int32_t *ord = dcc->order;
+    const uint16_t *cs = dcc->col_start;
     int32_t *psi = dcc->psi_q15;
-    const int32_t n = g->n_ops;
+    const int32_t n_cols = dcc->n_cols;
     const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
     const struct piezo_dcc_run *old = dcc->run[dcc->cur];
     const struct piezo_dcc_run *old_end = old + dcc->n_run;
     struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
-    int32_t pos = dcc->n2_banded ? first_n2_above(ord, (uint16_t)n, dcc->v_prev_q15 - xsat) : 0;
-    while (pos < n) {
+    int32_t k = dcc->n2_banded ? first_col_above(ord, cs, n_cols, dcc->v_prev_q15 - xsat, &dcc->col_cur) : 0;
+    for (; k < n_cols; k++) {
+        const int32_t pos = cs[k], end = cs[k + 1];
         const int32_t n2 = ord[pos] >> 16;
         const int32_t x = v - n2;
         if (x <= 0) {
@@ -247,10 +372,9 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
         while (old < old_end && old->thr < n2) {
             old++;
         }
-        int32_t end, q;
-        int64_t csum = 0;
+        int32_t q;
+        int32_t csum = 0;
         if (old < old_end && old->thr == n2) {
-            end = old->end;
             csum = old->csum;
             q = end - old->k; /* the run: positions q .. end-1 */
             if (r != old->lvl) {
@@ -274,22 +398,20 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
         } else {
             int32_t e = pos;
             /* operators that do not move, then (a suffix) all that do */
-            for (; e < n && (ord[e] >> 16) == n2 && psi[(uint16_t)ord[e]] >= r; e++) {
+            for (; e < end && psi[(uint16_t)ord[e]] >= r; e++) {
             }
             q = e;
-            for (; e < n && (ord[e] >> 16) == n2; e++) {
+            for (; e < end; e++) {
                 const int32_t jj = (uint16_t)ord[e];
                 dk += (int64_t)(r - psi[jj]) * c[jj];
                 csum += c[jj];
                 psi[jj] = r;
             }
-            end = e;
         }
         if (q < end && o < out_end) {
             *o++ = (struct piezo_dcc_run){csum, r, (int16_t)n2, (uint16_t)pos, (uint16_t)end,
                                           (uint16_t)(end - q)};
         }
-        pos = end;
     }
     dcc->cur ^= 1u;
     dcc->n_run = (uint8_t)(o - out);
@@ -331,7 +453,7 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
         dcc->dir = dir;
         dcc->n_run = 0u; /* the runs are the other direction's */
     }
-    if (dcc->const_w && dcc->lex_sorted) {
+    if (dcc->const_w && dcc->n_rows != 0u && dcc->n_cols != 0u && dcc->c_abs_31) {
         dk = dir > 0 ? dcc_rise_runs(dcc, v) : dcc_fall_runs(dcc, v, dv);
         dcc->v_prev_q15 = v_q15;
         return dk;

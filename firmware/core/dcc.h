@@ -29,10 +29,11 @@
  * (C = sum_j c_j) is kept incrementally when the caller declares the weights
  * constant (piezo_dcc_const_weights(), e.g. a kp_dcc table); otherwise (the
  * RKP density changes every tick) the sum is formed in full every tick.
- * With constant weights on a grid in (n1, n2) order the moving operators of
- * a row (falling) or column (rising) hold one value and move as one run,
- * (r' - r) * csum (docs/kernels-kp.md, "DCC: runs"); every psi is still
- * written.
+ * With constant weights (sum_j |c_j| < 2^31) on a grid in (n1, n2) order with
+ * at most PIEZO_DCC_MAX_ROWS rows (init keeps each row's first index) the
+ * moving operators of a row (falling) or column (rising) hold one value and
+ * move as one run, (r' - r) * csum (docs/kernels-kp.md, "DCC: runs"); every
+ * psi is still written.
  *
  * Control law, one sample per tick (the operators see the previous drive, which
  * avoids an algebraic loop):
@@ -69,8 +70,11 @@
  * Incremental form: |C| <= 2^43 and |v| <= 2^15, so |v C| <= 2^58;
  * |sum psi_j c_j| < 2^15 * 2^31 * 2^12 = 2^58; their difference is the sum
  * above (exact in int64). The candidates v - r stay within +-2^17 in int32.
- * Runs: a run's csum is a sum of at most 2^12 weights, |csum| < 2^43, and
- * |(r' - r) * csum| < 2^15 * 2^43 = 2^58; the tick's change of the kept sum
+ * Runs: they are used only when sum_j |c_j| < 2^31 (piezo_dcc_const_weights
+ * checks it; any real table, whose weights sum to about 1.0 = 2^24, passes;
+ * otherwise the band scan below does the same work operator by operator), so
+ * a run's csum, a partial sum of the weights, fits int32, and
+ * |(r' - r) * csum| < 2^16 * 2^31 = 2^47; the tick's change of the kept sum
  * is the exact difference of two sums below 2^58 (int64).
  */
 #ifndef PIEZO_DCC_H
@@ -92,12 +96,16 @@ struct piezo_dcc_coeffs {
  * whose moving operators are tracked as one (docs/kernels-kp.md). */
 #define PIEZO_DCC_RUNS 4u
 
+/* Rows (distinct n1) of a grid in (n1, n2) order that the runs handle; a
+ * grid with more rows (a plane finer than L = 32) takes the band scan. */
+#define PIEZO_DCC_MAX_ROWS 32u
+
 /* A run: the operators of one row (falling, index order) or one column
  * (rising, order-array positions) that moved in the current monotone run of
  * the input. All of them hold the same value lvl = r(v_prev - thr): falling
  * the first k of the row, rising the last k of the column. */
 struct piezo_dcc_run {
-    int64_t csum;      /* sum of c_j over the k operators */
+    int32_t csum;      /* sum of c_j over the k operators (|.| <= sum |c_j| < 2^31) */
     int32_t lvl;       /* their common psi */
     int16_t thr;       /* the row's n1 / the column's n2 */
     uint16_t first;    /* falling: the row's first index; rising: the column's first position */
@@ -123,6 +131,13 @@ struct piezo_dcc {
                           * with n2 ascending, the runs apply (with const_w) */
     uint8_t n_run;       /* runs of the current direction, in run[cur] by ascending thr */
     uint8_t cur;         /* which of the two run buffers is current */
+    uint8_t c_abs_31;    /* sum_j |c_j| < 2^31: the runs' weight sums fit int32 */
+    uint8_t n_rows;      /* lex_sorted with at most PIEZO_DCC_MAX_ROWS rows: their count; else 0 */
+    uint8_t row_cur;     /* the falling band's first row at the last falling tick (a hint) */
+    uint8_t n_cols;      /* columns (equal n2) in the order array, at most PIEZO_DCC_MAX_ROWS; else 0 */
+    uint8_t col_cur;     /* the rising band's first column at the last rising tick (a hint) */
+    uint16_t row_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first index of each row, then n_ops */
+    uint16_t col_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first order position of each column, then n_ops */
     struct piezo_dcc_run run[2][PIEZO_DCC_RUNS];
 };
 

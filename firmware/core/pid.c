@@ -80,7 +80,13 @@ int16_t piezo_biquad_process(piezo_biquad_t *f, int16_t x_q15)
     f->x1_q15 = x_q15;
     f->y2_q31 = f->y1_q31;
     f->y1_q31 = y31;
-    return piezo_sat_q15(piezo_rshift_rnd64(y31, 16u));
+    /* rshift_rnd(y31, 16) in int32: floor((y + 2^15) / 2^16) is y >> 16 plus
+     * bit 15 of y (y31 + 2^15 itself could overflow int32); it lies in
+     * [-32768, 32768], so only the top can saturate */
+    {
+        const int32_t y = (y31 >> 16) + ((y31 >> 15) & 1);
+        return (int16_t)(y > PIEZO_Q15_MAX ? PIEZO_Q15_MAX : y);
+    }
 }
 
 int piezo_limit_init(piezo_limit_t *l, const piezo_limit_coef_t *coef, int16_t start_q15)

@@ -1,6 +1,8 @@
 /* A bank of CPI/UPI play operators and their weighted sum (see play.h). */
 #include "play.h"
 
+#include <stddef.h>
+
 #include "fixed_q.h"
 
 /*
@@ -124,6 +126,303 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
     return acc;
 }
 
+/*
+ * The unparallel bank falling: for each slope (column) a_j, from the
+ * column's first threshold, F moves iff F >= hi = rshift_rnd(a (u + r), 24)
+ * (formed as (off + a u) >> 24 from the split constants), to max(u - r, hi),
+ * or to hi where the lower branch cannot win (a <= 1 and u <= 0, or a >= 1
+ * and u >= 0: u - r - hi <= u (1 - a) - r (1 + a) + 1/2, an integer below
+ * 1); the scan stops at the first F < hi. Returns acc plus the sum of
+ * w (F_new - F_old). F == hi goes through the update too: F >= u - r while
+ * falling, so then max(hi, u - r) == F and nothing changes.
+ */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Cortex-M4: the column loop in Thumb-2 (upi_fall_m4 below), the same
+ * integers as the C loop that other targets compile; test_play (random
+ * banks of odd and even sizes against the formula on every operator) and
+ * the golden vectors of test_eupi and test_eupi_inv check it under QEMU.
+ * gcc's C spends 14 instructions per moving operator on the upper branch
+ * (it splits the constant's ldrd and counts separately) and 19 with the
+ * lower one, and spills the column loop's pointers; here 12 (two operators
+ * per pass) and 18, the column state in the caller's struct (the constants'
+ * column found from the outputs' by one add). A loop alone
+ * in assembly inside the C function costs more in spills than it saves. */
+struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
+    uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
+    int32_t *f;          /* 4: the column's outputs (column by column) */
+    const int32_t *w;    /* 8: the column's first weight (row-major) */
+    const int32_t *r;    /* 12: thresholds */
+    const int32_t *a;    /* 16: the column's slope */
+    const int32_t *a_end;/* 20: one past the last slope */
+    uint32_t f_step;     /* 24: n_r * 4, bytes of a column of outputs */
+    uint32_t w_stride;   /* 28: n_a * 4, bytes between a column's weights */
+    int32_t u;           /* 32 */
+};
+typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_stride) == 28u &&
+                                                 offsetof(struct upi_fall_args, u) == 32u) ? 1 : -1];
+
+static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args *arg, int64_t acc)
+{
+    (void)arg;
+    (void)acc;
+    /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
+     * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
+     * thresholds in the lower-branch loop (the state's address at [sp]) */
+    __asm__ volatile(
+        "    push   {r0, r4-r11, lr}\n"
+        "    mov    r8, r2\n"
+        "    mov    r9, r3\n"
+        "    ldr    r5, [r0, #28]\n"
+        "    ldr    lr, [r0, #32]\n"
+        "    ldr    r1, [r0, #24]\n"
+        "    cmp    r1, #0\n"
+        "    beq    7f\n"
+        "1:  ldr    r10, [r0, #16]\n"          /* column: a_j, the split a u */
+        "    ldr    r11, [r10], #4\n"
+        "    str    r10, [r0, #16]\n"
+        "    smull  r6, r7, r11, lr\n"
+        "    lsr    r10, r6, #24\n"
+        "    orr    r7, r10, r7, lsl #8\n"
+        "    lsl    r6, r6, #8\n"
+        "    ldrd   r1, r2, [r0, #0]\n"
+        "    add    r1, r1, r2, lsl #1\n"
+        "    ldr    r3, [r0, #24]\n"
+        "    add    r3, r2, r3\n"
+        "    ldr    r4, [r0, #8]\n"
+        "    cmp    r11, #0x1000000\n"
+        "    ble    2f\n"
+        "    cmp    lr, #0\n"
+        "    bge    3f\n"
+        "    b      5f\n"
+        "2:  cmp    lr, #0\n"
+        "    bgt    5f\n"
+        "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
+        "    tst    r12, #4\n"
+        "    bne    4f\n"
+        "31: ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r12, [r2]\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r7\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"
+        "    str    r11, [r2], #4\n"
+        "    sub    r11, r11, r12\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r11\n"
+        "4:  ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r12, [r2]\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r7\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"
+        "    str    r11, [r2], #4\n"
+        "    sub    r11, r11, r12\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r11\n"
+        "    cmp    r2, r3\n"
+        "    bne    31b\n"
+        "    b      6f\n"
+        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch */
+        "51: ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r12, [r2]\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r7\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"
+        "    ldr    r10, [r0], #4\n"
+        "    sub    r10, lr, r10\n"
+        "    cmp    r11, r10\n"
+        "    it     lt\n"
+        "    movlt  r11, r10\n"
+        "    str    r11, [r2], #4\n"
+        "    sub    r11, r11, r12\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r11\n"
+        "    cmp    r2, r3\n"
+        "    bne    51b\n"
+        "6:  ldr    r0, [sp]\n"                /* next column: fp's starts where this one ends */
+        "    str    r3, [r0, #4]\n"
+        "    ldr    r12, [r0, #8]\n"
+        "    add    r12, r12, #4\n"
+        "    str    r12, [r0, #8]\n"
+        "    ldrd   r10, r11, [r0, #16]\n"
+        "    cmp    r10, r11\n"
+        "    bne    1b\n"
+        "7:  mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    add    sp, #4\n"
+        "    pop    {r4-r11, pc}\n");
+}
+
+static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
+                        int64_t acc)
+{
+    struct upi_fall_args arg = {(uintptr_t)off - 2u * (uintptr_t)f,
+                                f,
+                                c->w_q24,
+                                c->r_q15,
+                                c->a_q24,
+                                c->a_q24 + c->n_a,
+                                (uint32_t)(c->n_r * sizeof *f),
+                                (uint32_t)(c->n_a * sizeof *c->w_q24),
+                                u_q15};
+    return upi_fall_m4(&arg, acc);
+}
+#else
+static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
+                        int64_t acc)
+{
+    const int32_t *r = c->r_q15;
+    const int32_t *w = c->w_q24;
+    const size_t n_r = c->n_r, n_a = c->n_a;
+    for (size_t j = 0; j < n_a; j++) {
+        const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
+        const uint32_t au_lo = (uint32_t)au;
+        const int32_t au_hi = (int32_t)(au >> 32);
+        const int64_t *op = off + j * n_r;
+        int32_t *fp = f + j * n_r;
+        const int32_t *rp = r;
+        const int32_t *wp = w + j;
+        const int32_t a_j = c->a_q24[j];
+        if (a_j <= PIEZO_Q24_ONE ? u_q15 <= 0 : u_q15 >= 0) {
+            for (size_t i = n_r; i != 0u; i--) {
+                const int32_t hi = upper(*op++, au_lo, au_hi);
+                const int32_t y = *fp;
+                if (y < hi) {
+                    break;
+                }
+                *fp++ = hi;
+                acc += (int64_t)*wp * (hi - y);
+                wp += n_a;
+            }
+            continue;
+        }
+        for (size_t i = n_r; i != 0u; i--) {
+            const int32_t hi = upper(*op++, au_lo, au_hi);
+            const int32_t y = *fp;
+            if (y < hi) {
+                break;
+            }
+            const int32_t lo = u_q15 - *rp++;
+            const int32_t v = hi > lo ? hi : lo;
+            *fp++ = v;
+            acc += (int64_t)*wp * (v - y);
+            wp += n_a;
+        }
+    }
+    return acc;
+}
+#endif
+
+/*
+ * Rising, F = max(u - r_i, F) (the upper branch cannot bind while rising):
+ * for each of n_col columns of n_r outputs (column by column from f), from
+ * the column's first threshold to the first u - r_i <= F; the column's
+ * weights start at w + column and step by w_step entries (n_a, the
+ * unparallel bank's row-major weights). Returns acc plus the sum of
+ * w (F_new - F_old).
+ */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Cortex-M4: in Thumb-2, 11 instructions per moving operator (two per
+ * pass) against gcc's 13; test_play and the EUPI golden vectors under QEMU. */
+struct rise_args {
+    int32_t *f;          /* 0 */
+    const int32_t *w;    /* 4 */
+    const int32_t *r;    /* 8 */
+    uint32_t n_col;      /* 12: >= 1 */
+    uint32_t f_step;     /* 16: n_r * 4 */
+    uint32_t w_stride;   /* 20: w_step * 4 */
+    int32_t u;           /* 24 */
+};
+typedef char piezo_rise_args_layout_check_t[(offsetof(struct rise_args, u) == 24u) ? 1 : -1];
+
+static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *arg, int64_t acc)
+{
+    (void)arg;
+    (void)acc;
+    /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
+     * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
+     * r11 thresholds, r12 n_r * 4, lr u */
+    __asm__ volatile(
+        "    push   {r4-r11, lr}\n"
+        "    mov    r8, r2\n"
+        "    mov    r9, r3\n"
+        "    ldr    r2, [r0, #0]\n"
+        "    ldr    r4, [r0, #4]\n"
+        "    ldr    r11, [r0, #8]\n"
+        "    ldr    r10, [r0, #12]\n"
+        "    ldr    r12, [r0, #16]\n"
+        "    ldr    r5, [r0, #20]\n"
+        "    ldr    lr, [r0, #24]\n"
+        "    cmp    r12, #0\n"
+        "    beq    5f\n"
+        "1:  add    r3, r2, r12\n"             /* column */
+        "    mov    r1, r11\n"
+        "    mov    r0, r4\n"
+        "    tst    r12, #4\n"
+        "    bne    3f\n"
+        "2:  ldr    r6, [r1], #4\n"
+        "    ldr    r7, [r2]\n"
+        "    sub    r6, lr, r6\n"
+        "    cmp    r6, r7\n"
+        "    ble    4f\n"
+        "    str    r6, [r2], #4\n"
+        "    sub    r6, r6, r7\n"
+        "    ldr    r7, [r0]\n"
+        "    add    r0, r0, r5\n"
+        "    smlal  r8, r9, r7, r6\n"
+        "3:  ldr    r6, [r1], #4\n"
+        "    ldr    r7, [r2]\n"
+        "    sub    r6, lr, r6\n"
+        "    cmp    r6, r7\n"
+        "    ble    4f\n"
+        "    str    r6, [r2], #4\n"
+        "    sub    r6, r6, r7\n"
+        "    ldr    r7, [r0]\n"
+        "    add    r0, r0, r5\n"
+        "    smlal  r8, r9, r7, r6\n"
+        "    cmp    r2, r3\n"
+        "    bne    2b\n"
+        "4:  mov    r2, r3\n"                  /* the next column starts where this one ends */
+        "    add    r4, r4, #4\n"
+        "    subs   r10, r10, #1\n"
+        "    bne    1b\n"
+        "5:  mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    pop    {r4-r11, pc}\n");
+}
+
+static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
+                    int32_t u_q15, int64_t acc)
+{
+    const struct rise_args arg = {f, w, r, (uint32_t)n_col, (uint32_t)(n_r * sizeof *f),
+                                  (uint32_t)(w_step * sizeof *w), u_q15};
+    return rise_m4(&arg, acc);
+}
+#else
+static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
+                    int32_t u_q15, int64_t acc)
+{
+    for (size_t j = 0; j < n_col; j++) {
+        int32_t *fc = f + j * n_r;
+        const int32_t *wk = w + j;
+        for (size_t i = 0; i < n_r; i++, wk += w_step) {
+            const int32_t lo = u_q15 - r[i];
+            const int32_t y = fc[i];
+            if (lo <= y) {
+                break;
+            }
+            fc[i] = lo;
+            acc += (int64_t)*wk * (lo - y);
+        }
+    }
+    return acc;
+}
+#endif
+
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
 {
     if (!p->primed) {
@@ -180,62 +479,9 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
     const size_t n_a = c->n_a;
     if (u_q15 > u_prev) {
         /* F = max(u - r_i, F): the upper branch cannot bind while rising. */
-        for (size_t j = 0; j < n_a; j++) {
-            int32_t *fc = f + j * n_r;
-            const int32_t *wk = w + j;
-            for (size_t i = 0; i < n_r; i++, wk += n_a) {
-                const int32_t lo = u_q15 - r[i];
-                const int32_t y = fc[i];
-                if (lo <= y) {
-                    break;
-                }
-                fc[i] = lo;
-                acc += (int64_t)*wk * (lo - y);
-            }
-        }
+        acc = rise(f, w, r, n_r, n_a, n_a, u_q15, acc);
     } else {
-        /* F moves iff F > hi, to max(u - r_i, hi); stop at F - hi <= -1. */
-        for (size_t j = 0; j < n_a; j++) {
-            const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
-            const uint32_t au_lo = (uint32_t)au;
-            const int32_t au_hi = (int32_t)(au >> 32);
-            const int64_t *op = p->off_q39 + j * n_r;
-            int32_t *fp = f + j * n_r;
-            const int32_t *rp = r;
-            const int32_t *wp = w + j;
-            /* F == hi goes through the update too: F >= u - r while
-             * falling, so then max(hi, u - r) == F and nothing changes.
-             * The lower branch cannot win when a <= 1 and u <= 0 or
-             * a >= 1 and u >= 0: u - r - hi <= u (1 - a) - r (1 + a) + 1/2
-             * (hi rounded half up), which is then below 1 (an integer <= 0);
-             * the scan then skips u - r and the max. */
-            const int32_t a_j = c->a_q24[j];
-            if (a_j <= PIEZO_Q24_ONE ? u_q15 <= 0 : u_q15 >= 0) {
-                for (size_t i = n_r; i != 0u; i--) {
-                    const int32_t hi = upper(*op++, au_lo, au_hi);
-                    const int32_t y = *fp;
-                    if (y < hi) {
-                        break;
-                    }
-                    *fp++ = hi;
-                    acc += (int64_t)*wp * (hi - y);
-                    wp += n_a;
-                }
-                continue;
-            }
-            for (size_t i = n_r; i != 0u; i--) {
-                const int32_t hi = upper(*op++, au_lo, au_hi);
-                const int32_t y = *fp;
-                if (y < hi) {
-                    break;
-                }
-                const int32_t lo = u_q15 - *rp++;
-                const int32_t v = hi > lo ? hi : lo;
-                *fp++ = v;
-                acc += (int64_t)*wp * (v - y);
-                wp += n_a;
-            }
-        }
+        acc = upi_fall(c, p->off_q39, f, u_q15, acc);
     }
     p->acc_q39 = acc;
     return acc;

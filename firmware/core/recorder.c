@@ -98,11 +98,23 @@ void piezo_rec_trigger(piezo_rec_t *r)
     r->state = PIEZO_REC_TRIGGERED;
 }
 
+/* store()'s switch copies up to 8 channels */
+typedef char piezo_rec_max_channels_check_t[(PIEZO_REC_MAX_CHANNELS == 8u) ? 1 : -1];
+
 static void store(piezo_rec_t *r, const int16_t *signals_q15)
 {
+    const uint8_t *sig = r->cfg.signal;
     int16_t *frame = r->buf_q15 + (size_t)r->write * r->cfg.n_channels;
-    for (uint8_t i = 0; i < r->cfg.n_channels; i++) {
-        frame[i] = signals_q15[r->cfg.signal[i]];
+    /* one copy per channel, without a loop (n_channels is 1..8, configure) */
+    switch (r->cfg.n_channels) {
+    case 8: frame[7] = signals_q15[sig[7]]; /* fall through */
+    case 7: frame[6] = signals_q15[sig[6]]; /* fall through */
+    case 6: frame[5] = signals_q15[sig[5]]; /* fall through */
+    case 5: frame[4] = signals_q15[sig[4]]; /* fall through */
+    case 4: frame[3] = signals_q15[sig[3]]; /* fall through */
+    case 3: frame[2] = signals_q15[sig[2]]; /* fall through */
+    case 2: frame[1] = signals_q15[sig[1]]; /* fall through */
+    default: frame[0] = signals_q15[sig[0]]; break;
     }
     if (++r->write == r->capacity) {
         r->write = 0u;

@@ -10,12 +10,24 @@ typedef char piezo_sine_lut_size_check_t[(PIEZO_SINE_LUT_N == 1025) ? 1 : -1];
 
 int16_t piezo_sine_q15(uint32_t phase)
 {
-    /* top 10 bits pick the segment, the next 16 interpolate inside it */
+    /* top 10 bits pick the segment, the next 16 interpolate inside it. In
+     * int32: adjacent entries of the table differ by at most 201 (test_wave
+     * checks < 2^8), so |(y1 - y0) * frac| < 2^8 * 2^16 = 2^24; the rounded
+     * interpolation lies between y0 and y1, a q15 value: no saturation. */
     uint32_t i = phase >> 22;
     int32_t frac = (int32_t)((phase >> 6) & 0xFFFFu);
     int32_t y0 = piezo_sine_lut_q15[i];
     int32_t y1 = piezo_sine_lut_q15[i + 1u];
-    return piezo_sat_q15(y0 + piezo_rshift_rnd64((int64_t)(y1 - y0) * frac, 16u));
+    return (int16_t)(y0 + (((y1 - y0) * frac + 32768) >> 16));
+}
+
+/* offset + rshift_rnd(amplitude * shape, 15), saturated, in int32:
+ * |amplitude * shape| <= 2^15 * 2^15 = 2^30 and the rounding half 2^14 keep
+ * the product inside int32; the sum is below 2^16 in magnitude. */
+static int16_t scale_q15(int32_t offset_q15, int32_t amplitude_q15, int32_t shape_q15)
+{
+    int32_t y = offset_q15 + ((amplitude_q15 * shape_q15 + (1 << 14)) >> 15);
+    return (int16_t)(y > PIEZO_Q15_MAX ? PIEZO_Q15_MAX : (y < PIEZO_Q15_MIN ? PIEZO_Q15_MIN : y));
 }
 
 static int16_t triangle_q15(uint32_t phase)
@@ -161,6 +173,5 @@ int16_t piezo_wave_process(piezo_wave_t *w)
     default:
         return c->offset_q15;
     }
-    return piezo_sat_q15((int64_t)c->offset_q15 +
-                         piezo_rshift_rnd64((int64_t)c->amplitude_q15 * shape, 15u));
+    return scale_q15(c->offset_q15, c->amplitude_q15, shape);
 }

@@ -22,8 +22,12 @@
  * through the level list (steps, arbitrary); a finished wave outputs offset_q15
  * and piezo_wave_running() turns 0. cycles = 0 runs until reset.
  *
- * Scaling and overflow: products are int32 (|amplitude * shape| < 2^30); the
- * multisine sum is int32 (< 8 * 2^15); every output passes piezo_sat_q15().
+ * Scaling and overflow: products are int32 (|amplitude * shape| <= 2^30, plus
+ * the rounding half 2^14); the sine's interpolation is int32 (the table's
+ * adjacent entries differ by less than 2^8, times a 16-bit fraction: < 2^24)
+ * and lies between two table entries, so it needs no saturation; the
+ * multisine sum is int32 (< 8 * 2^15); every output is saturated to q15
+ * (test_wave checks the int32 forms against the int64 formulas).
  */
 #ifndef PIEZO_WAVE_H
 #define PIEZO_WAVE_H

@@ -65,9 +65,13 @@ static void test_golden_cases(void **state)
         struct piezo_dcc d;
         assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
         run_block(&d, &cases[i], 0, cases[i].n);
-        /* the same with the weights declared constant (kept sums) */
+        /* the same with the weights declared constant (kept sums): the runs
+         * on the reference planes (sum |c| < 2^31), the band scan on the
+         * edge set's extreme weights */
         assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
         piezo_dcc_const_weights(&d);
+        assert_int_equal(d.c_abs_31, cases[i].c == &dcc_edge ? 0 : 1);
+        assert_true(cases[i].c == &dcc_edge || (d.n_rows != 0u && d.n_cols != 0u)); /* the runs, with their tables */
         run_block(&d, &cases[i], 0, cases[i].n);
     }
 }
@@ -158,6 +162,66 @@ static void test_reset_restores_initial_state(void **state)
     run_block(&d, c, 0, c->n);
 }
 
+/* Grids at the row and column tables' limit, in (n1, n2) order: K rows of
+ * two operators on two shared columns, and two rows over K columns. Up to
+ * PIEZO_DCC_MAX_ROWS rows and columns the runs take them (init's tables),
+ * beyond it the band scan; either way psi + Psi == v against the KP kernel
+ * and the law's drive equals the one with the weights summed every tick. */
+static void check_tables(const int16_t *n1, const int16_t *n2, const int32_t *c, uint16_t n_ops,
+                         uint16_t want_rows, uint16_t want_cols)
+{
+    struct piezo_dcc_coeffs dc = dcc_std;
+    dc.grid.n1_q15 = n1;
+    dc.grid.n2_q15 = n2;
+    dc.grid.n_ops = n_ops;
+    dc.grid.nmin_q15 = -32768;
+    dc.c_q24 = c;
+    struct piezo_dcc a, b;
+    assert_int_equal(piezo_dcc_init(&a, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_init(&b, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    piezo_dcc_const_weights(&a);
+    assert_int_equal(a.n_rows, want_rows);
+    assert_int_equal(a.n_cols, want_cols);
+    const struct dcc_case *rc = find_case("realistic");
+    for (size_t i = 0; i < rc->n; i++) {
+        assert_int_equal(piezo_dcc_process(&a, rc->yd[i]), piezo_dcc_process(&b, rc->yd[i]));
+    }
+    for (int cw = 0; cw <= 1; cw++) {
+        check_identity(&dc, dcc_ops_random_v, N_OF(dcc_ops_random_v), "tables random", cw);
+        check_identity(&dc, dcc_ops_realistic_v, N_OF(dcc_ops_realistic_v), "tables realistic", cw);
+    }
+}
+
+static void test_row_and_column_table_limits(void **state)
+{
+    (void)state;
+    static int16_t n1[2 * (PIEZO_DCC_MAX_ROWS + 1u)], n2[2 * (PIEZO_DCC_MAX_ROWS + 1u)];
+    static int32_t c[2 * (PIEZO_DCC_MAX_ROWS + 1u)];
+    static const uint16_t sizes[] = {PIEZO_DCC_MAX_ROWS - 1u, PIEZO_DCC_MAX_ROWS, PIEZO_DCC_MAX_ROWS + 1u};
+    for (size_t t = 0; t < N_OF(sizes); t++) {
+        const uint16_t k = sizes[t];
+        const uint16_t want = k <= PIEZO_DCC_MAX_ROWS ? k : 0u;
+        for (uint16_t i = 0; i < 2u * k; i++) {
+            c[i] = 40000 + 7 * (int32_t)i - 900 * (int32_t)(i & 1u);
+        }
+        /* K rows (n1 spread over the range), each on the columns 30000 and 31000 */
+        for (uint16_t i = 0; i < k; i++) {
+            n1[2 * i] = n1[2 * i + 1] = (int16_t)(-32000 + (int32_t)i * (61000 / k));
+            n2[2 * i] = 30000;
+            n2[2 * i + 1] = 31000;
+        }
+        check_tables(n1, n2, c, (uint16_t)(2u * k), want, 2u);
+        /* two rows (n1 -32000, -31000), each over K columns (n2 spread) */
+        for (uint16_t r = 0; r < 2u; r++) {
+            for (uint16_t i = 0; i < k; i++) {
+                n1[r * k + i] = (int16_t)(-32000 + 1000 * (int32_t)r);
+                n2[r * k + i] = (int16_t)(-31000 + (int32_t)i * (62000 / k));
+            }
+        }
+        check_tables(n1, n2, c, (uint16_t)(2u * k), 2u, want);
+    }
+}
+
 static enum piezo_err init_with(const struct piezo_dcc_coeffs *c, size_t n_state)
 {
     struct piezo_dcc d;
@@ -200,6 +264,7 @@ int main(void)
         cmocka_unit_test(test_split_run_and_shared_coeffs),
         cmocka_unit_test(test_reset_restores_initial_state),
         cmocka_unit_test(test_init_refuses_bad_coefficients),
+        cmocka_unit_test(test_row_and_column_table_limits),
     };
     return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);
 }

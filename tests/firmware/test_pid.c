@@ -2,6 +2,7 @@
 #include <math.h>
 
 #include "piezo_test.h"
+#include "fixed_q.h"
 #include "piezo_err.h"
 #include "pid.h"
 
@@ -69,6 +70,27 @@ static void test_notch_rejects_its_frequency_and_passes_dc(void **state)
     assert_signed_in_range(y, 9995, 10005);
 }
 
+/* The notch's output rounding, done in int32 (pid.c), against the int64
+ * formula sat_q15(rshift_rnd(y31, 16)) over the whole q31 range: with
+ * a1 = -1 and every other coefficient 0 the filter's y31 is its y1. */
+static void test_notch_output_rounding_matches_int64(void **state)
+{
+    (void)state;
+    const piezo_biquad_coef_t k = {.a1_q24 = -(int32_t)PIEZO_Q24_ONE};
+    static const int32_t edges[] = {INT32_MIN, INT32_MIN + 1, -65537, -65536, -32769, -32768, -32767, -1, 0, 1,
+                                    32767, 32768, 32769, 65535, 65536, 2147450879, 2147450880, 2147483647};
+    piezo_biquad_t f;
+    assert_int_equal(piezo_biquad_init(&f, &k), PIEZO_OK);
+    for (int32_t i = 0; i < 20000; i++) {
+        /* the edges, then a spread over the whole range with every low-bit pattern */
+        int32_t y = i < (int32_t)(sizeof edges / sizeof edges[0]) ? edges[i] : (int32_t)((uint32_t)i * 214735u + (uint32_t)i);
+        piezo_biquad_reset(&f);
+        f.y1_q31 = y;
+        assert_int_equal(piezo_biquad_process(&f, 0), piezo_sat_q15(piezo_rshift_rnd64(y, 16u)));
+        assert_int_equal(f.y1_q31, y); /* y31 = y1 exactly: the case tests the output step alone */
+    }
+}
+
 static void test_limiter_clamps_and_slews(void **state)
 {
     (void)state;
@@ -92,6 +114,7 @@ int main(void)
         cmocka_unit_test(test_anti_windup_recovers_at_once),
         cmocka_unit_test(test_notch_rejects_its_frequency_and_passes_dc),
         cmocka_unit_test(test_limiter_clamps_and_slews),
+        cmocka_unit_test(test_notch_output_rounding_matches_int64),
     };
     return cmocka_run_group_tests_name("pid", tests, NULL, NULL);
 }

@@ -180,6 +180,44 @@ static void test_written_counts_a_plain_capture(void **state)
     assert_int_equal(piezo_rec_written(&r), 4);
 }
 
+/* Every channel count, 1 to PIEZO_REC_MAX_CHANNELS: each channel holds its
+ * own signal, frame after frame, and nothing beyond the frame is written. */
+static void test_every_channel_count_stores_its_signals(void **state)
+{
+    (void)state;
+    enum { NS = 10, FRAMES = 3 };
+    for (uint8_t n = 1; n <= PIEZO_REC_MAX_CHANNELS; n++) {
+        int16_t buf[FRAMES * PIEZO_REC_MAX_CHANNELS + 1];
+        piezo_rec_t r;
+        piezo_rec_cfg_t c = {.n_channels = n, .decimation = 1, .trigger = PIEZO_REC_IMMEDIATE};
+        for (uint8_t i = 0; i < n; i++) {
+            c.signal[i] = (uint8_t)((3u * i + 1u) % NS); /* a permutation of distinct signals */
+        }
+        for (size_t i = 0; i < sizeof buf / sizeof buf[0]; i++) {
+            buf[i] = -1;
+        }
+        assert_int_equal(piezo_rec_init(&r, buf, (uint32_t)(FRAMES * n), NS), PIEZO_OK);
+        assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_OK);
+        piezo_rec_arm(&r);
+        for (int16_t k = 0; k < FRAMES; k++) {
+            int16_t sig[NS];
+            for (int16_t s = 0; s < NS; s++) {
+                sig[s] = (int16_t)(100 * k + s);
+            }
+            piezo_rec_process(&r, sig);
+        }
+        assert_int_equal(r.state, PIEZO_REC_DONE);
+        for (uint32_t k = 0; k < FRAMES; k++) {
+            int16_t f[PIEZO_REC_MAX_CHANNELS];
+            assert_int_equal(piezo_rec_read(&r, k, f), PIEZO_OK);
+            for (uint8_t i = 0; i < n; i++) {
+                assert_int_equal(f[i], (int)(100 * k + c.signal[i]));
+            }
+        }
+        assert_int_equal(buf[FRAMES * n], -1);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -190,6 +228,7 @@ int main(void)
         cmocka_unit_test(test_ring_keeps_recording_over_the_oldest_frames),
         cmocka_unit_test(test_ring_refuses_pretrigger),
         cmocka_unit_test(test_written_counts_a_plain_capture),
+        cmocka_unit_test(test_every_channel_count_stores_its_signals),
     };
     return cmocka_run_group_tests_name("recorder", tests, NULL, NULL);
 }

@@ -2,7 +2,9 @@
 #include <math.h>
 
 #include "piezo_test.h"
+#include "fixed_q.h"
 #include "piezo_err.h"
+#include "piezo_interface.h"
 #include "wave.h"
 
 #define TWO_PI 6.283185307179586
@@ -116,6 +118,49 @@ static void test_arbitrary_table_repeats_with_hold(void **state)
     assert_true(piezo_wave_running(&w)); /* cycles = 0: endless */
 }
 
+/* The int32 arithmetic of wave.c against the int64 formulas it replaced
+ * (wave.h, "Scaling and overflow"): the sine's interpolation on every segment
+ * at the fractions' extremes and a spread of others, and the output scaling
+ * at the extremes of amplitude, shape and offset. */
+static void test_int32_forms_match_the_int64_formulas(void **state)
+{
+    (void)state;
+    static const uint32_t fracs[] = {0u, 1u, 2u, 0x7FFFu, 0x8000u, 0x8001u, 0xFFFEu, 0xFFFFu, 12345u, 54321u};
+    int32_t max_step = 0;
+    for (uint32_t i = 0; i + 1u < PIEZO_SINE_LUT_N; i++) {
+        int32_t y0 = piezo_sine_lut_q15[i], y1 = piezo_sine_lut_q15[i + 1u];
+        int32_t step = y1 > y0 ? y1 - y0 : y0 - y1;
+        max_step = step > max_step ? step : max_step;
+        if (i >= 1024u) {
+            continue; /* the last entry closes the period: no segment starts there */
+        }
+        for (size_t f = 0; f < sizeof fracs / sizeof fracs[0]; f++) {
+            uint32_t phase = i << 22 | fracs[f] << 6 | (uint32_t)(f & 63u);
+            int16_t want = piezo_sat_q15(y0 + piezo_rshift_rnd64((int64_t)(y1 - y0) * (int32_t)fracs[f], 16u));
+            assert_int_equal(piezo_sine_q15(phase), want);
+        }
+    }
+    /* the int32 interpolation needs |step| < 2^15; the table's is about 201 */
+    assert_true(max_step < 256);
+
+    static const int16_t amps[] = {-32768, -32767, -1, 0, 1, 16384, 32767};
+    static const int16_t levels[] = {-32768, -32767, -16384, -1, 0, 1, 16383, 32767};
+    static const int16_t offsets[] = {-32768, -20000, 0, 20000, 32767};
+    for (size_t a = 0; a < sizeof amps / sizeof amps[0]; a++) {
+        for (size_t o = 0; o < sizeof offsets / sizeof offsets[0]; o++) {
+            piezo_wave_cfg_t c = {.kind = PIEZO_WAVE_ARBITRARY, .offset_q15 = offsets[o], .amplitude_q15 = amps[a],
+                                  .n_levels = sizeof levels / sizeof levels[0], .levels_q15 = levels, .hold_ticks = 1};
+            piezo_wave_t w;
+            assert_int_equal(piezo_wave_init(&w, &c), PIEZO_OK);
+            for (size_t k = 0; k < sizeof levels / sizeof levels[0]; k++) {
+                int16_t want = piezo_sat_q15((int64_t)offsets[o] +
+                                             piezo_rshift_rnd64((int64_t)amps[a] * levels[k], 15u));
+                assert_int_equal(piezo_wave_process(&w), want);
+            }
+        }
+    }
+}
+
 static void test_output_saturates_at_q15(void **state)
 {
     (void)state;
@@ -143,6 +188,7 @@ int main(void)
         cmocka_unit_test(test_steps_hold_each_level_for_its_duration),
         cmocka_unit_test(test_arbitrary_table_repeats_with_hold),
         cmocka_unit_test(test_output_saturates_at_q15),
+        cmocka_unit_test(test_int32_forms_match_the_int64_formulas),
     };
     return cmocka_run_group_tests_name("wave", tests, NULL, NULL);
 }
