@@ -69,7 +69,11 @@ EVAL_FREQS = (10.0, 50.0)     # the other axis' triangle [Hz]
 ILC_TRIALS = 20               # the held axis' learning (at 50 Hz still improving after 10)
 OTHER_STROKE = 0.6            # the other axis' triangle over this fraction of its stroke (0.8, with its shaper:
                               # the coupling table made 50 Hz worse, 62.8 -> 100.8 nm: beyond what it was fitted on)
-ILC_F_CUT = 3.0               # the held axis' learning band, a multiple of its resonance
+ILC_F_CUT_HZ = 1500.0         # the held axis' learning band [Hz] (3 x the resonance until 2026-11-26: the
+                              # coupling's lines near the 620 Hz mode were left, 9.7 of the 10.3 nm at 50 Hz)
+ILC_GAIN_MAX = 100.0          # largest |1 / T| of its learning filter (the loop falls to 0.03 near its antiresonance)
+PROBE_RMS_UM = 0.1            # the loop measurement's multisine [um RMS]
+PROBE_S = 2.0                 # ... recorded over this long [s] (as much as the recorder holds)
 EVAL_PERIODS = 20             # periods of the other axis' triangle each figure is measured over (the
                               # periodic figures' noise: 2 nm / sqrt(20) before the correction)
 
@@ -242,13 +246,19 @@ def _u2_midlevel(ci, n_ticks: int) -> int:
     return int(round(0.5 * (int(u2.min()) + int(u2.max()))))
 
 
-def _still_trial(ci, n_ticks: int, periods: int, settle: int, level_q15: int, preview: int,
-                 rms_all: list, periodic_all: list | None = None) -> np.ndarray:
-    """Start axis i's wave when the other axis' drive rises through ``level_q15``;
-    its error over ``periods`` periods after ``settle`` [um], averaged and
-    indexed by its wave's sample (recorded frame k is wave sample k - 1 - preview);
-    the RMS over all those periods goes to ``rms_all``, and (``periodic_all``)
-    :func:`periodic_rms`'s pair."""
+def _record_periods(ci, n_ticks: int, periods: int, settle: int, preview: int) -> np.ndarray:
+    """Start axis i's wave when the other axis' drive rises through its middle;
+    its error [um] over ``periods`` periods after ``settle``, ``periods x n_ticks``,
+    each indexed by its wave's sample (recorded frame k is wave sample k - 1 - preview:
+    the recorder triggers on the tick before the wave's first; shifted back exactly
+    in the period's DFT).
+
+    The middle is measured again for every record (:func:`_u2_midlevel`): the
+    other axis' drive drifts as its feedback takes up its creep (a 10 Hz run: by
+    215 LSB in 20 s, 2.3 ticks of its triangle's slope), and a level measured
+    once started the later trials ticks late against the coupling (the 10 Hz
+    learning's 0.3 nm came out 1.3 nm in the evaluation after it)."""
+    level_q15 = _u2_midlevel(ci, n_ticks)
     frames = n_ticks * (periods + settle)
     ci.configure_recorder(["err"], trigger="rising", trigger_signal="u2", level_q15=level_q15)
     ci.command("arm_recorder")
@@ -256,33 +266,50 @@ def _still_trial(ci, n_ticks: int, periods: int, settle: int, level_q15: int, pr
     ci.wait_recorder(frames, frames / ci.identity.tick_hz * 3 + 5)
     err = ci.to_physical("err", ci.read_recording(1)[:frames, 0])
     ci.command("stop_wave")
-    e_all = err[settle * n_ticks:].reshape(periods, n_ticks)
+    spec = np.fft.rfft(err[settle * n_ticks:].reshape(periods, n_ticks), axis=1)
+    spec *= np.exp(2j * np.pi * np.arange(n_ticks // 2 + 1) * (preview + 1) / n_ticks)
+    return np.fft.irfft(spec, n=n_ticks, axis=1)
+
+
+def _still_trial(ci, n_ticks: int, periods: int, settle: int, preview: int,
+                 rms_all: list, periodic_all: list | None = None) -> np.ndarray:
+    """:func:`_record_periods` averaged over its periods [um]; the RMS over all
+    those periods goes to ``rms_all``, and (``periodic_all``) :func:`periodic_rms`'s pair."""
+    e_all = _record_periods(ci, n_ticks, periods, settle, preview)
     rms_all.append(float(np.sqrt(np.mean(e_all ** 2))))
     if periodic_all is not None:
         periodic_all.append(periodic_rms(e_all.ravel(), n_ticks))
-    spec = np.fft.rfft(e_all.mean(axis=0)) * np.exp(2j * np.pi * np.arange(n_ticks // 2 + 1) * (preview + 1)
-                                                    / n_ticks)
-    return np.fft.irfft(spec, n=n_ticks)
+    return e_all.mean(axis=0)
 
 
-def _still_loop(ci, comp_i: dict, f: float, f_cut: float) -> np.ndarray:
-    """Axis i's closed loop at the harmonics of ``f`` [Hz], from a triangle of its
-    own over 10 % of its stroke around mid (the loop the learned correction goes through)."""
-    from .pipeline import _park
-    _configure_compensated(ci, comp_i)
-    lo, hi = comp_i["stroke"]
-    ci.set_setpoint_um(0.5 * (lo + hi))
-    _arm(ci)
-    n = int(round(ci.identity.tick_hz / f))
-    settle = settle_periods(f)
-    periods = max(2, int(round(0.1 * f)))
-    load_triangle(ci, f, 0.5 * (lo + hi), 0.05 * (hi - lo))
-    cols = ci.capture(["ref", "y"], n * (settle + periods), trigger="software", start_wave=True)
-    ci.command("stop_wave")
-    r = cols["ref"][settle * n:].reshape(periods, n).mean(axis=0)
-    y = cols["y"][settle * n:].reshape(periods, n).mean(axis=0)
-    _park(ci, ci.q15_position(lo))
-    return ilc.loop_response(r, y, f, f_cut)
+def _still_loop(ci, n_ticks: int, f: float, f_cut: float, settle: int,
+                preview: int) -> tuple[np.ndarray, np.ndarray]:
+    """Axis i's loop from its learned correction to its error at every harmonic of
+    ``f`` [Hz] up to ``f_cut``, and the standard deviation of each value
+    (:func:`ilc.loop_from_probe`), measured where the learning acts: the other
+    axis tracking its triangle, axis i's wave started in step with it, two
+    records of :data:`PROBE_S` each, one without a correction and one with a flat
+    multisine (:func:`ilc.probe`, :data:`PROBE_RMS_UM`); their difference is the
+    multisine's effect alone.
+
+    The other axis must be running: axis i's drive reaches it through its
+    coupling table (which reads axis i's drive), its position and acceleration
+    come back through the coupling (the acceleration term is 2.5 x the
+    displacement at 650 Hz), and with it parked the loop above 500 Hz measured
+    up to 90 degrees off: the learning grew the 650 Hz line 8.5 -> 27 nm.
+    (Until 2026-11-26: a triangle of axis i's own, 10 % of its stroke, the other
+    axis parked; its harmonics fall as 1/k^2, the even ones, which it lacks,
+    were interpolated across the 140 Hz mode, and the band stopped at 3 x the
+    resonance, below the 620 Hz mode: 9.7 of the 10.3 nm left at 50 Hz lay above it.)"""
+    periods = max(2, min(int(round(PROBE_S * f)), ci.rec_frames_capacity(1) // n_ticks - settle))
+    c = ilc.probe(n_ticks, f, f_cut, PROBE_RMS_UM)
+    ilc.switch_off(ci)
+    e0 = _record_periods(ci, n_ticks, periods, settle, preview)
+    ilc.upload(ci, c, f)
+    e1 = _record_periods(ci, n_ticks, periods, settle, preview)
+    ilc.switch_off(ci)
+    # the difference of two independent records: E1 - E0 per period pair
+    return ilc.loop_from_probe(e1 - e0, c)
 
 
 _CLEARED_AT_ARM: list = []   # faults found latched when arming during the evaluation (collected per frequency)
@@ -335,8 +362,7 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
         periods = max(5, int(round(0.1 * f)))   # a learning trial: 0.1 s at least, the sensor noise averaged down
         settle = settle_periods(f)
         p_eval = max(2, min(EVAL_PERIODS, ci.rec_frames_capacity(1) // n - settle))
-        f_cut = min(ILC_F_CUT * comp_i["notch_hz"], 0.4 * ilc.capacity(ci) * f)
-        loop = _still_loop(ci, comp_i, f, f_cut)
+        f_cut = min(ILC_F_CUT_HZ, 0.4 * ilc.capacity(ci) * f)
         res, per = {}, {}
         for bypass in (1, 0):
             _hold_and_drive(ci, cj, comp_i, comp_j, f, bypass)
@@ -351,9 +377,9 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
                                                       f"at {f:g} Hz")
         # the learned feedforward of the held axis: trials while the other axis keeps running
         _hold_and_drive(ci, cj, comp_i, comp_j, f, 0)
-        level = _u2_midlevel(ci, n)
+        loop, loop_sigma = _still_loop(ci, n, f, f_cut, settle, comp_i["preview_ticks"])
         rms_all: list = []
-        learner = ilc.ILC(n, f, f_cut, alpha=0.5, loop=loop)
+        learner = ilc.ILC(n, f, f_cut, alpha=0.5, loop=loop, loop_sigma=loop_sigma, gain_max=ILC_GAIN_MAX)
         ilc.switch_off(ci)
 
         def trial(c):
@@ -364,12 +390,12 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
                 ilc.upload(ci, c, f)
             else:
                 ilc.switch_off(ci)
-            return _still_trial(ci, n, periods, settle, level, comp_i["preview_ticks"], rms_all)
+            return _still_trial(ci, n, periods, settle, comp_i["preview_ticks"], rms_all)
 
         learned = ilc.learn(trial, learner, trials)
         ilc.upload(ci, learned["best"], f)
         per_learned: list = []
-        _still_trial(ci, n, p_eval, settle, level, comp_i["preview_ticks"], rms_all, per_learned)
+        _still_trial(ci, n, p_eval, settle, comp_i["preview_ticks"], rms_all, per_learned)
         ilc_rms = rms_all[-1]   # the best correction, played in step, measured like the others
         ilc.switch_off(ci)
         cj.command("stop_wave")

@@ -36,7 +36,7 @@ import numpy as np
 
 from .. import interface
 
-__all__ = ["ILC", "learn", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
+__all__ = ["ILC", "learn", "probe", "loop_from_probe", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
 
 FF_MAX = interface.HOLDING_REGISTERS["wave_ff_levels"][2]   # the register map's; a target may hold fewer
 
@@ -64,7 +64,13 @@ class ILC:
         where ``loop`` is not given.
     loop : array of complex, optional
         The closed loop ``T_hat`` at every harmonic ``0 .. n_samples // 2``
-        (:func:`loop_response`); the learning filter is ``alpha / T_hat``.
+        (:func:`loop_response` or :func:`loop_from_probe`); the learning filter
+        is ``alpha / T_hat``.
+    loop_sigma : array of float, optional
+        The standard deviation of each ``T_hat`` (:func:`loop_from_probe`): the
+        inverse is regularized, ``conj(T_hat) / (|T_hat|^2 + 4 sigma^2)``, so a
+        harmonic whose loop is not known better than its own size (near an
+        antiresonance) is learned slowly instead of with a wrong phase.
     gain_max : float
         Largest ``|1 / T_hat|`` the learning filter applies.
     grow : float
@@ -74,7 +80,7 @@ class ILC:
     """
 
     def __init__(self, n_samples: int, f0_hz: float, f_cut_hz: float, *, alpha: float = 0.5,
-                 lag_s: float = 0.0, loop=None, gain_max: float = 10.0, grow: float = 1.05,
+                 lag_s: float = 0.0, loop=None, loop_sigma=None, gain_max: float = 10.0, grow: float = 1.05,
                  alpha_min: float = 0.05):
         if n_samples < 4 or f0_hz <= 0 or f_cut_hz <= f0_hz or not 0 < alpha <= 1:
             raise ValueError("ILC needs >= 4 samples a period, f_cut above f0 and 0 < alpha <= 1")
@@ -94,7 +100,8 @@ class ILC:
             loop = np.asarray(loop, dtype=complex)
             if loop.shape != self.f_hz.shape:
                 raise ValueError(f"the loop response needs {self.f_hz.size} harmonics, not {loop.shape}")
-            mag = np.maximum(np.abs(loop), 1.0 / gain_max)
+            sig2 = 0.0 if loop_sigma is None else 4.0 * np.asarray(loop_sigma, dtype=float) ** 2
+            mag = np.maximum((np.abs(loop) ** 2 + sig2) / np.maximum(np.abs(loop), 1e-300), 1.0 / gain_max)
             self.inv = np.exp(-1j * np.angle(loop)) / mag
         self.c_spec = np.zeros(self.n // 2 + 1, dtype=complex)
         self.best_spec = self.c_spec.copy()
@@ -166,6 +173,49 @@ def loop_response(r: np.ndarray, y: np.ndarray, f0_hz: float, f_max_hz: float, *
     mag = np.interp(f, f[sel], np.abs(ratio))
     ph = np.interp(f, f[sel], np.unwrap(np.angle(ratio)))
     return model * mag * np.exp(1j * ph)
+
+
+def probe(n_samples: int, f0_hz: float, f_max_hz: float, rms_um: float) -> np.ndarray:
+    """One period of a flat multisine: every harmonic of ``f0_hz`` up to ``f_max_hz``
+    (the odd and the even ones, Nyquist excluded) with one amplitude, total RMS
+    ``rms_um`` [um], Schroeder's phases (``-pi k (k - 1) / K``: a low crest factor).
+
+    Played as the learned correction, it measures the loop the correction goes
+    through at every harmonic the learning acts on (:func:`loop_from_probe`);
+    a triangle's harmonics fall as ``1 / k^2`` and leave the even ones out.
+    """
+    k = np.arange(1, (n_samples - 1) // 2 + 1)
+    k = k[k * f0_hz <= f_max_hz]
+    if k.size == 0:
+        raise ValueError(f"no harmonic of {f0_hz:g} Hz up to {f_max_hz:g} Hz in {n_samples} samples")
+    spec = np.zeros(n_samples // 2 + 1, dtype=complex)
+    amp = rms_um * np.sqrt(2.0 / k.size)
+    spec[k] = 0.5 * n_samples * amp * np.exp(-1j * np.pi * k * (k - 1) / k.size)
+    return np.fft.irfft(spec, n=n_samples)
+
+
+def loop_from_probe(e_periods: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The loop ``T`` (correction -> position) at every harmonic, and its standard
+    deviation, from the error ``e = r - y`` [um] recorded over whole periods
+    (``P x n``, indexed by the wave's sample) while the correction ``c`` (one
+    period, [um], :func:`probe`) played and nothing else repeated: ``E = -T C``.
+
+    Harmonics ``c`` has no content at get ``T = 0`` and an infinite deviation
+    (the learning filter then leaves them alone).
+    """
+    e_periods = np.atleast_2d(np.asarray(e_periods, dtype=float))
+    p, n = e_periods.shape
+    if p < 2 or n != len(c):
+        raise ValueError(f"need at least 2 periods of {len(c)} samples, not {e_periods.shape}")
+    ep = np.fft.rfft(e_periods, axis=1)
+    cs = np.fft.rfft(np.asarray(c, dtype=float))
+    ok = np.abs(cs) > 1e-9 * np.abs(cs).max()
+    t = np.zeros(cs.size, dtype=complex)
+    sigma = np.full(cs.size, np.inf)
+    t[ok] = -ep.mean(axis=0)[ok] / cs[ok]
+    # the spread across periods: the noise of their mean
+    sigma[ok] = np.sqrt(np.var(ep[:, ok], axis=0, ddof=1) / p) / np.abs(cs[ok])
+    return t, sigma
 
 
 def learn(trial, ilc: ILC, iterations: int) -> dict:
