@@ -66,12 +66,15 @@ LEVELS = (0.3, 0.5, 0.7)       # axis i's drive levels (fractions of the range)
 CHIRP_S = 3.0
 SETTLE_S = 1.0
 EVAL_FREQS = (10.0, 50.0)     # the other axis' triangle [Hz]
-ILC_TRIALS = 20               # the held axis' learning (at 50 Hz still improving after 10)
+ILC_TRIALS = 15               # the held axis' learning (at its floor after 7 trials at 10 Hz, 9 at 50 Hz)
 OTHER_STROKE = 0.6            # the other axis' triangle over this fraction of its stroke (0.8, with its shaper:
                               # the coupling table made 50 Hz worse, 62.8 -> 100.8 nm: beyond what it was fitted on)
 ILC_F_CUT_HZ = 1500.0         # the held axis' learning band [Hz] (3 x the resonance until 2026-11-26: the
                               # coupling's lines near the 620 Hz mode were left, 9.7 of the 10.3 nm at 50 Hz)
 ILC_GAIN_MAX = 100.0          # largest |1 / T| of its learning filter (the loop falls to 0.03 near its antiresonance)
+TRIAL_S = 0.5                 # a learning trial's periods last this long [s], at least 5 (0.1 until 2026-11-26)
+STILL_SETTLE_S = 0.25         # the held axis' records start this long after its wave [s] (0.05 until 2026-11-26:
+                              # 2.6-4 nm of the start's ringing left in the 50 Hz trials' first period)
 PROBE_RMS_UM = 0.1            # the loop measurement's multisine [um RMS]
 PROBE_S = 2.0                 # ... recorded over this long [s] (as much as the recorder holds)
 EVAL_PERIODS = 20             # periods of the other axis' triangle each figure is measured over (the
@@ -237,13 +240,37 @@ def periodic_rms(err, n_ticks: int) -> tuple[float, float]:
 
 
 def _u2_midlevel(ci, n_ticks: int) -> int:
-    """The middle of the other axis' drive as axis i sees it (q15): the level its
-    rising crossing marks the same phase of every period."""
+    """The trigger level on the other axis' drive as axis i sees it (q15): halfway
+    between the two samples of its rising edge that straddle the middle of its
+    range, so the rising crossing marks the same tick of every period.
+
+    (At the middle itself the drive's noise, 3-4 LSB RMS against a 10 Hz
+    triangle's 92 LSB a tick, moved the crossing by a tick in about one trial of
+    ten, and the correction a tick off the coupling left 0.4 nm more.)"""
+    return midlevel(_record_u2(ci, n_ticks), n_ticks)
+
+
+def _record_u2(ci, n_ticks: int) -> np.ndarray:
     ci.configure_recorder(["u2"], trigger="immediate")
     ci.command("arm_recorder")
     ci.wait_recorder(n_ticks, 5.0)
-    u2 = ci.read_recording(1)[:n_ticks, 0]
-    return int(round(0.5 * (int(u2.min()) + int(u2.max()))))
+    return ci.read_recording(1)[:n_ticks, 0]
+
+
+def midlevel(u2, n_ticks: int) -> int:
+    """The trigger level of one period (at least) of a periodic signal ``u2`` [q15]:
+    halfway between the two consecutive samples of its steepest rising step
+    through the middle of its range (:func:`_u2_midlevel`)."""
+    u = np.asarray(u2, dtype=float)[:n_ticks]
+    if u.size < n_ticks or n_ticks < 3:
+        raise ValueError(f"need one period of {n_ticks} samples, not {u.size}")
+    mid = 0.5 * (u.min() + u.max())
+    nxt = np.roll(u, -1)
+    k = np.flatnonzero((u < mid) & (nxt >= mid))
+    if k.size == 0:
+        return int(round(mid))
+    k = k[np.argmax(nxt[k] - u[k])]
+    return int(round(0.5 * (u[k] + nxt[k])))
 
 
 def _record_periods(ci, n_ticks: int, periods: int, settle: int, preview: int) -> np.ndarray:
@@ -258,28 +285,40 @@ def _record_periods(ci, n_ticks: int, periods: int, settle: int, preview: int) -
     215 LSB in 20 s, 2.3 ticks of its triangle's slope), and a level measured
     once started the later trials ticks late against the coupling (the 10 Hz
     learning's 0.3 nm came out 1.3 nm in the evaluation after it)."""
-    level_q15 = _u2_midlevel(ci, n_ticks)
     frames = n_ticks * (periods + settle)
-    ci.configure_recorder(["err"], trigger="rising", trigger_signal="u2", level_q15=level_q15)
-    ci.command("arm_recorder")
-    ci.command("start_wave_on_trigger")
-    ci.wait_recorder(frames, frames / ci.identity.tick_hz * 3 + 5)
-    err = ci.to_physical("err", ci.read_recording(1)[:frames, 0])
-    ci.command("stop_wave")
+    for _ in range(3):
+        level_q15 = _u2_midlevel(ci, n_ticks)
+        ci.configure_recorder(["err"], trigger="rising", trigger_signal="u2", level_q15=level_q15)
+        # the wave's start first, then the recorder: armed first, it could trigger (every 20 ms at 50 Hz)
+        # before the start arrived, and the record ran without the wave or its correction (3 trials of 76)
+        ci.command("start_wave_on_trigger")
+        ci.command("arm_recorder")
+        ci.wait_recorder(frames, frames / ci.identity.tick_hz * 3 + 5)
+        running = ci.status()["wave_running"]
+        err = ci.to_physical("err", ci.read_recording(1)[:frames, 0])
+        ci.command("stop_wave")
+        if running:
+            break
+    else:
+        from ..device import DeviceError
+        raise DeviceError(f"axis {ci.identity.axis + 1}: its wave did not start on the other axis' drive")
     spec = np.fft.rfft(err[settle * n_ticks:].reshape(periods, n_ticks), axis=1)
     spec *= np.exp(2j * np.pi * np.arange(n_ticks // 2 + 1) * (preview + 1) / n_ticks)
     return np.fft.irfft(spec, n=n_ticks, axis=1)
 
 
 def _still_trial(ci, n_ticks: int, periods: int, settle: int, preview: int,
-                 rms_all: list, periodic_all: list | None = None) -> np.ndarray:
-    """:func:`_record_periods` averaged over its periods [um]; the RMS over all
+                 rms_all: list, periodic_all: list | None = None) -> tuple[np.ndarray, float, float]:
+    """:func:`_record_periods` averaged over its periods [um], with the RMS of what
+    repeats and its uncertainty (:func:`ilc.periodic_score`: the learning compares
+    trials by it; their RMS is mostly the sensor's noise); the RMS over all
     those periods goes to ``rms_all``, and (``periodic_all``) :func:`periodic_rms`'s pair."""
     e_all = _record_periods(ci, n_ticks, periods, settle, preview)
     rms_all.append(float(np.sqrt(np.mean(e_all ** 2))))
     if periodic_all is not None:
         periodic_all.append(periodic_rms(e_all.ravel(), n_ticks))
-    return e_all.mean(axis=0)
+    score, se = ilc.periodic_score(e_all)
+    return e_all.mean(axis=0), score, se
 
 
 def _still_loop(ci, n_ticks: int, f: float, f_cut: float, settle: int,
@@ -359,8 +398,10 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
         _CLEARED_AT_ARM.clear()
         faults = _clear_latched((ci, cj), args, f"before the {f:g} Hz evaluation")
         n = int(round(tick / f))
-        periods = max(5, int(round(0.1 * f)))   # a learning trial: 0.1 s at least, the sensor noise averaged down
-        settle = settle_periods(f)
+        periods = max(5, int(round(TRIAL_S * f)))   # a learning trial: the sensor noise averaged down
+        # a record starts with the held axis' wave, and its correction with it: the step rings the axis' mode
+        # (its shaper is off), 36-45 nm in the first 50 Hz period, halving every 20 ms
+        settle = max(settle_periods(f), int(np.ceil(STILL_SETTLE_S * f - 1e-9)))
         p_eval = max(2, min(EVAL_PERIODS, ci.rec_frames_capacity(1) // n - settle))
         f_cut = min(ILC_F_CUT_HZ, 0.4 * ilc.capacity(ci) * f)
         res, per = {}, {}
@@ -424,7 +465,10 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
                          "reduction_periodic": per[1][0] / per_com[0] if per_com[0] > 0 else float("inf"),
                          "reduction": res[1] / com if com > 0 else float("inf"),
                          "learned": {"trials": len(learned["history"]), "refused": learned["refused"],
-                                     "trial_rms_um": rms_all[:-1], "f_cut_hz": f_cut}}
+                                     "trial_rms_um": rms_all[:-1],
+                                     # what repeated in each trial (ilc.periodic_score: the learning's measure)
+                                     "trial_periodic_um": [h["score_um"] for h in learned["history"]],
+                                     "f_cut_hz": f_cut, "trial_periods": periods}}
         return entry
 
     for f in EVAL_FREQS:

@@ -36,7 +36,7 @@ import numpy as np
 
 from .. import interface
 
-__all__ = ["ILC", "learn", "probe", "loop_from_probe", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
+__all__ = ["ILC", "learn", "probe", "loop_from_probe", "periodic_score", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
 
 FF_MAX = interface.HOLDING_REGISTERS["wave_ff_levels"][2]   # the register map's; a target may hold fewer
 
@@ -106,6 +106,7 @@ class ILC:
         self.c_spec = np.zeros(self.n // 2 + 1, dtype=complex)
         self.best_spec = self.c_spec.copy()
         self.best_rms = np.inf
+        self.best_se = 0.0
         self.history: list[dict] = []
         self.stopped = False
 
@@ -117,24 +118,58 @@ class ILC:
         """The correction of the lowest RMS error measured [um]."""
         return np.fft.irfft(self.best_spec, n=self.n)
 
-    def update(self, e: np.ndarray) -> bool:
-        """Take the error ``e`` [um] measured with :meth:`correction` played; False if the trial is refused."""
+    def update(self, e: np.ndarray, score: float | None = None, score_se: float = 0.0) -> bool:
+        """Take the error ``e`` [um] measured with :meth:`correction` played; False if the trial is refused.
+
+        ``score`` [um] is what the trials are compared by (default the RMS of
+        ``e``; a caller whose ``e`` still carries noise passes the RMS of the
+        part that repeats, :func:`periodic_score`), ``score_se`` the standard
+        error of its square [um^2]: a trial is refused only when
+        ``score^2 > grow^2 best^2 + 3 hypot(score_se, best's score_se)`` (near
+        convergence a noisy score moves by more than ``grow`` from the noise alone).
+        """
         e = np.asarray(e, dtype=np.float64)
         if e.shape != (self.n,):
             raise ValueError(f"the error must have {self.n} samples a period, not {e.shape}")
         rms = float(np.sqrt(np.mean(e ** 2)))
-        accepted = rms <= self.grow * self.best_rms or not np.isfinite(self.best_rms)
-        self.history.append({"rms_um": rms, "alpha": self.alpha, "accepted": accepted})
+        score = rms if score is None else float(score)
+        margin = 3.0 * float(np.hypot(score_se, self.best_se))
+        accepted = score ** 2 <= (self.grow * self.best_rms) ** 2 + margin or not np.isfinite(self.best_rms)
+        self.history.append({"rms_um": rms, "score_um": score, "alpha": self.alpha, "accepted": accepted})
         if not accepted:
             # the error grew: back to the best correction, learn more gently
             self.c_spec = self.best_spec.copy()
             self.alpha *= 0.5
             self.stopped = self.alpha < self.alpha_min
             return False
-        if rms < self.best_rms:
-            self.best_rms, self.best_spec = rms, self.c_spec.copy()
+        if score < self.best_rms:
+            self.best_rms, self.best_se, self.best_spec = score, float(score_se), self.c_spec.copy()
         self.c_spec = self.q * (self.c_spec + self.alpha * self.inv * np.fft.rfft(e))
         return True
+
+
+def periodic_score(e_periods: np.ndarray) -> tuple[float, float]:
+    """The RMS of what repeats in a record of whole periods (``P x n``, [um]) without
+    the noise's bias, and the standard error of its square [um^2].
+
+    The period mean's mean square holds the noise variance over ``P``; that is
+    subtracted (the variance from the spread across periods). The standard
+    error is the jackknife's over the periods (leave one out), which needs no
+    assumption about the noise's spectrum.
+    """
+    e = np.asarray(e_periods, dtype=float)
+    p = e.shape[0]
+    if e.ndim != 2 or p < 3:
+        raise ValueError(f"a periodic score needs at least 3 periods, not {e.shape}")
+
+    def ms(x):
+        k = x.shape[0]
+        return float(np.mean(x.mean(axis=0) ** 2) - np.mean(np.var(x, axis=0, ddof=1)) / k)
+
+    full = ms(e)
+    jack = np.array([ms(np.delete(e, i, axis=0)) for i in range(p)])
+    se_ms = float(np.sqrt((p - 1) / p * np.sum((jack - jack.mean()) ** 2)))
+    return float(np.sqrt(max(full, 0.0))), se_ms
 
 
 def lag_from_trial(r: np.ndarray, y: np.ndarray, f0_hz: float, f_max_hz: float) -> float:
@@ -220,7 +255,8 @@ def loop_from_probe(e_periods: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, n
 
 def learn(trial, ilc: ILC, iterations: int) -> dict:
     """Run ``iterations`` trials: ``trial(c)`` plays the correction ``c`` [um, one
-    value per error sample] and returns the error ``e = r - y`` [um] over one period.
+    value per error sample] and returns the error ``e = r - y`` [um] over one period,
+    or ``(e, score, score_se)`` (:meth:`ILC.update`).
 
     Returns ``history`` (RMS [um], alpha, accepted per trial), ``best_rms_um``,
     ``first_rms_um``, ``best`` (the kept correction [um]) and ``refused`` (trials refused).
@@ -228,7 +264,8 @@ def learn(trial, ilc: ILC, iterations: int) -> dict:
     for _ in range(iterations):
         if ilc.stopped:
             break
-        ilc.update(trial(ilc.correction()))
+        res = trial(ilc.correction())
+        ilc.update(*res) if isinstance(res, tuple) else ilc.update(res)
     return {"history": ilc.history, "best_rms_um": ilc.best_rms, "first_rms_um": ilc.history[0]["rms_um"],
             "best": ilc.best(), "refused": sum(not h["accepted"] for h in ilc.history)}
 
