@@ -25,9 +25,11 @@ axis 2 into ``DIR/axis2/``), for each receiving axis i and the other axis j:
    and applied with axis i's learned feedforward: axis i's wave (a constant
    at mid stroke, at axis j's frequency) starts at the tick axis j's drive
    rises through its middle (``start_wave_on_trigger``, the recorder's
-   trigger on ``u2``), so its correction (``ilc.py``, learned over 10
-   trials while axis j keeps running, through axis i's loop measured with a
-   small triangle of its own) is in step with the coupling in every trial.
+   trigger on ``u2``, its level measured again for every record), so its
+   correction (``ilc.py``, learned over :data:`ILC_TRIALS` trials while axis j
+   keeps running, up to :data:`ILC_F_CUT_HZ`, through axis i's loop measured in
+   place with a flat multisine played as the correction) is in step with the
+   coupling in every trial.
 
 ``summary.json`` (axis 1's) gains ``coupling``: per axis (``"1"``, ``"2"``:
 the receiving axis) ``rmse_uncompensated_um``, ``rmse_compensated_um`` and
@@ -72,7 +74,8 @@ OTHER_STROKE = 0.6            # the other axis' triangle over this fraction of i
 ILC_F_CUT_HZ = 1500.0         # the held axis' learning band [Hz] (3 x the resonance until 2026-11-26: the
                               # coupling's lines near the 620 Hz mode were left, 9.7 of the 10.3 nm at 50 Hz)
 ILC_GAIN_MAX = 100.0          # largest |1 / T| of its learning filter (the loop falls to 0.03 near its antiresonance)
-TRIAL_S = 0.5                 # a learning trial's periods last this long [s], at least 5 (0.1 until 2026-11-26)
+TRIAL_S = 1.0                 # a learning trial's periods last this long [s], at least 5 (0.1 until 2026-11-26; 0.5 s left
+                              # 0.35-0.47 nm periodic at 10 Hz, 1 s 0.17-0.27 nm)
 STILL_SETTLE_S = 0.25         # the held axis' records start this long after its wave [s] (0.05 until 2026-11-26:
                               # 2.6-4 nm of the start's ringing left in the 50 Hz trials' first period)
 PROBE_RMS_UM = 0.1            # the loop measurement's multisine [um RMS]
