@@ -16,13 +16,18 @@ zero-phase in the period's DFT)::
   loop as measured in the first trial (``Y / R`` at the reference's own
   harmonics; between them interpolated, beyond them a pure lag fitted to
   their phase), ``|1 / T_hat|`` limited to ``gain_max``: a non-causal,
-  phase-leading filter that only a periodic, recorded error allows;
+  phase-leading filter that only a periodic, recorded error allows. Or
+  ``T_hat`` measured at every harmonic by playing a flat multisine as the
+  correction (:func:`probe`, :func:`loop_from_probe`, the held axis of a
+  two-axis stage), with its uncertainty ``sigma``: then the inverse is
+  regularized, ``conj(T_hat) / (|T_hat|^2 + 4 sigma^2)``;
 - ``Q``: a zero-phase low-pass, 1 up to ``0.8 f_cut`` and a raised cosine to 0
   at ``f_cut``, so the learning stays away from the resonance where ``T`` is
   not close to a delay; the correction has no content above ``f_cut``.
 
 The error then shrinks by ``|1 - alpha T / T_hat|`` per trial at each
-harmonic below ``f_cut``. Divergence guard: a trial whose RMS error grows more
+harmonic below ``f_cut``. Divergence guard: a trial whose RMS error (or the
+caller's score, e.g. :func:`periodic_score`, within its uncertainty) grows more
 than ``grow`` times the best so far is refused, the correction goes back to
 the best one and ``alpha`` is halved; below ``alpha_min`` the learning stops.
 The best correction is what is kept.
