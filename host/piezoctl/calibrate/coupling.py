@@ -248,8 +248,8 @@ def _u2_midlevel(ci, n_ticks: int) -> int:
     range, so the rising crossing marks the same tick of every period.
 
     (At the middle itself the drive's noise, 3-4 LSB RMS against a 10 Hz
-    triangle's 92 LSB a tick, moved the crossing by a tick in about one trial of
-    ten, and the correction a tick off the coupling left 0.4 nm more.)"""
+    triangle's 92 LSB a tick, can move the crossing by a tick when a sample lies
+    near the level; halfway, 46 LSB from both, it cannot.)"""
     return midlevel(_record_u2(ci, n_ticks), n_ticks)
 
 
@@ -337,8 +337,9 @@ def _still_loop(ci, n_ticks: int, f: float, f_cut: float, settle: int,
     The other axis must be running: axis i's drive reaches it through its
     coupling table (which reads axis i's drive), its position and acceleration
     come back through the coupling (the acceleration term is 2.5 x the
-    displacement at 650 Hz), and with it parked the loop above 500 Hz measured
-    up to 90 degrees off: the learning grew the 650 Hz line 8.5 -> 27 nm.
+    displacement at 650 Hz); with it parked the loop measured 2.4-3.2 x smaller
+    at 650-1150 Hz and 43-92 degrees apart, and the learning through it (that
+    measurement also a tick off) grew the 650 Hz line from 8.5 to 14.7 nm.
     (Until 2026-11-26: a triangle of axis i's own, 10 % of its stroke, the other
     axis parked; its harmonics fall as 1/k^2, the even ones, which it lacks,
     were interpolated across the 140 Hz mode, and the band stopped at 3 x the
