@@ -73,7 +73,8 @@ OTHER_STROKE = 0.6            # the other axis' triangle over this fraction of i
                               # the coupling table made 50 Hz worse, 62.8 -> 100.8 nm: beyond what it was fitted on)
 ILC_F_CUT_HZ = 1500.0         # the held axis' learning band [Hz] (3 x the resonance until 2026-11-26: the
                               # coupling's lines near the 620 Hz mode were left, 9.7 of the 10.3 nm at 50 Hz)
-ILC_GAIN_MAX = 100.0          # largest |1 / T| of its learning filter (the loop falls to 0.03 near its antiresonance)
+ILC_GAIN_MAX = 100.0          # largest |1 / T| of its learning filter (the loop falls to 0.1 near its antiresonance
+                              # at 550 Hz, to 0.05 above 1 kHz)
 TRIAL_S = 1.0                 # a learning trial's periods last this long [s], at least 5 (0.1 until 2026-11-26; 0.5 s left
                               # 0.35-0.47 nm periodic at 10 Hz, 1 s 0.17-0.27 nm)
 STILL_SETTLE_S = 0.25         # the held axis' records start this long after its wave [s] (0.05 until 2026-11-26:
