@@ -255,6 +255,7 @@ def _u2_midlevel(ci, n_ticks: int) -> int:
 
 
 def _record_u2(ci, n_ticks: int) -> np.ndarray:
+    """One period of the other axis' drive as axis i records it (q15 integers)."""
     ci.configure_recorder(["u2"], trigger="immediate")
     ci.command("arm_recorder")
     ci.wait_recorder(n_ticks, 5.0)
