@@ -100,7 +100,8 @@ def test_two_axis_coupling_is_reduced_and_reported(calibration):
 
 def test_two_axis_coupling_left_after_learning(calibration):
     # the issue's 10x on the part of the error that repeats with the other axis' period (the coupling's;
-    # noise-corrected): measured 16x-45x at 10 Hz and 49x-59x at 50 Hz (docs/cross-coupling.md, "Round 9").
+    # noise-corrected): measured 24x-35x at 10 Hz and 49x-63x at 50 Hz in 4 calibrations (docs/cross-coupling.md,
+    # "Round 9"; 16x and 22x at 10 Hz with trials of 0.5 s).
     # The RMS is floored by the 2 nm sensor noise: 7.9 nm at 10 Hz allows at most 3.8x; measured 2.0-2.3 nm
     # left at both frequencies (until round 9: at most 6 and 15 nm asserted, 2.4-3.9 and 7.3-10.6 measured)
     rc, out, _ = calibration
