@@ -7,8 +7,9 @@ calibration (DIR/axis2/) and ``coupling``: per receiving axis the RMS error
 holding mid stroke while the other axis tracks a 10 and a 50 Hz triangle,
 uncompensated, with the cross-coupling table applied, and with the held
 axis' learned feedforward on top. Goals (issue 15): the held axis' error
-reduced at least 10x (not met: see the assertions); the stage's own 50 Hz
-triangle at least 5x.
+reduced at least 10x (met by the part that repeats with the other axis'
+period; the RMS is floored by the 2 nm sensor noise: docs/cross-coupling.md,
+"Round 9"); the stage's own 50 Hz triangle at least 5x.
 """
 
 import json
@@ -81,8 +82,7 @@ def test_two_axis_coupling_is_reduced_and_reported(calibration):
         e = c[axis]
         assert e["from_axis"] == other
         assert set(e) >= {"rmse_uncompensated_um", "rmse_compensated_um", "reduction"}
-        # the other axis' 10 and 50 Hz triangles (60 % of its stroke), measured over 20 periods each.
-        # The issue's 10x is not met (docs/cross-coupling.md, "Since 2026-11-26"); what holds in every run:
+        # the other axis' 10 and 50 Hz triangles (60 % of its stroke), measured over 20 periods each:
         # valid figures, the learned correction never worse than the table alone, the stage's noise
         assert e["reduction"] == pytest.approx(e["rmse_uncompensated_um"] / e["rmse_compensated_um"])
         for f in ("10", "50"):
@@ -99,12 +99,17 @@ def test_two_axis_coupling_is_reduced_and_reported(calibration):
 
 
 def test_two_axis_coupling_left_after_learning(calibration):
-    # the coupling of 7.9 nm at 10 Hz and 49 nm at 50 Hz brought to at most 6 and 15 nm on both axes: measured
-    # 2.4-3.9 and 7.3-10.6 nm in 9 evaluations whose identification ran without the shaper (the issue's 10x is
-    # not met: the 2 nm sensor noise floors the RMS; docs/cross-coupling.md)
+    # the issue's 10x on the part of the error that repeats with the other axis' period (the coupling's;
+    # noise-corrected): measured 24x-35x at 10 Hz and 49x-63x at 50 Hz in 4 calibrations (docs/cross-coupling.md,
+    # "Round 9"; 16x and 22x at 10 Hz with trials of 0.5 s).
+    # The RMS is floored by the 2 nm sensor noise: 7.9 nm at 10 Hz allows at most 3.8x; measured 2.0-2.3 nm
+    # left at both frequencies (until round 9: at most 6 and 15 nm asserted, 2.4-3.9 and 7.3-10.6 measured)
     rc, out, _ = calibration
     c = json.loads((out / "summary.json").read_text())["coupling"]
     for axis in ("1", "2"):
         by_f = c[axis]["by_frequency"]
-        assert by_f["10"]["rmse_compensated_um"] <= 0.006, (axis, by_f["10"])
-        assert by_f["50"]["rmse_compensated_um"] <= 0.015, (axis, by_f["50"])
+        for f in ("10", "50"):
+            b = by_f[f]
+            assert b["compensation_used"] == "learned", (axis, f, b)
+            assert b["reduction_periodic"] >= 10.0, (axis, f, b)
+            assert b["rmse_compensated_um"] <= 0.003, (axis, f, b)

@@ -25,9 +25,11 @@ axis 2 into ``DIR/axis2/``), for each receiving axis i and the other axis j:
    and applied with axis i's learned feedforward: axis i's wave (a constant
    at mid stroke, at axis j's frequency) starts at the tick axis j's drive
    rises through its middle (``start_wave_on_trigger``, the recorder's
-   trigger on ``u2``), so its correction (``ilc.py``, learned over 10
-   trials while axis j keeps running, through axis i's loop measured with a
-   small triangle of its own) is in step with the coupling in every trial.
+   trigger on ``u2``, its level measured again for every record), so its
+   correction (``ilc.py``, learned over :data:`ILC_TRIALS` trials while axis j
+   keeps running, up to :data:`ILC_F_CUT_HZ`, through axis i's loop measured in
+   place with a flat multisine played as the correction) is in step with the
+   coupling in every trial.
 
 ``summary.json`` (axis 1's) gains ``coupling``: per axis (``"1"``, ``"2"``:
 the receiving axis) ``rmse_uncompensated_um``, ``rmse_compensated_um`` and
@@ -66,10 +68,19 @@ LEVELS = (0.3, 0.5, 0.7)       # axis i's drive levels (fractions of the range)
 CHIRP_S = 3.0
 SETTLE_S = 1.0
 EVAL_FREQS = (10.0, 50.0)     # the other axis' triangle [Hz]
-ILC_TRIALS = 20               # the held axis' learning (at 50 Hz still improving after 10)
+ILC_TRIALS = 15               # the held axis' learning (at its floor after 7 trials at 10 Hz, 9 at 50 Hz)
 OTHER_STROKE = 0.6            # the other axis' triangle over this fraction of its stroke (0.8, with its shaper:
                               # the coupling table made 50 Hz worse, 62.8 -> 100.8 nm: beyond what it was fitted on)
-ILC_F_CUT = 3.0               # the held axis' learning band, a multiple of its resonance
+ILC_F_CUT_HZ = 1500.0         # the held axis' learning band [Hz] (3 x the resonance until 2026-11-26: the
+                              # coupling's lines near the 620 Hz mode were left, 9.7 of the 10.3 nm at 50 Hz)
+ILC_GAIN_MAX = 100.0          # largest |1 / T| of its learning filter (the loop falls to 0.1 near its antiresonance
+                              # at 550 Hz, to 0.05 above 1 kHz)
+TRIAL_S = 1.0                 # a learning trial's periods last this long [s], at least 5 (0.1 until 2026-11-26; 0.5 s left
+                              # 0.35-0.47 nm periodic at 10 Hz, 1 s 0.17-0.27 nm)
+STILL_SETTLE_S = 0.25         # the held axis' records start this long after its wave [s] (0.05 until 2026-11-26:
+                              # 2.6-4 nm of the start's ringing left in the 50 Hz trials' first period)
+PROBE_RMS_UM = 0.1            # the loop measurement's multisine [um RMS]
+PROBE_S = 2.0                 # ... recorded over this long [s] (as much as the recorder holds)
 EVAL_PERIODS = 20             # periods of the other axis' triangle each figure is measured over (the
                               # periodic figures' noise: 2 nm / sqrt(20) before the correction)
 
@@ -233,56 +244,117 @@ def periodic_rms(err, n_ticks: int) -> tuple[float, float]:
 
 
 def _u2_midlevel(ci, n_ticks: int) -> int:
-    """The middle of the other axis' drive as axis i sees it (q15): the level its
-    rising crossing marks the same phase of every period."""
+    """The trigger level on the other axis' drive as axis i sees it (q15): halfway
+    between the two samples of its rising edge that straddle the middle of its
+    range, so the rising crossing marks the same tick of every period.
+
+    (At the middle itself the drive's noise, 3-4 LSB RMS against a 10 Hz
+    triangle's 92 LSB a tick, can move the crossing by a tick when a sample lies
+    near the level; halfway, 46 LSB from both, it cannot.)"""
+    return midlevel(_record_u2(ci, n_ticks), n_ticks)
+
+
+def _record_u2(ci, n_ticks: int) -> np.ndarray:
+    """One period of the other axis' drive as axis i records it (q15 integers)."""
     ci.configure_recorder(["u2"], trigger="immediate")
     ci.command("arm_recorder")
     ci.wait_recorder(n_ticks, 5.0)
-    u2 = ci.read_recording(1)[:n_ticks, 0]
-    return int(round(0.5 * (int(u2.min()) + int(u2.max()))))
+    return ci.read_recording(1)[:n_ticks, 0]
 
 
-def _still_trial(ci, n_ticks: int, periods: int, settle: int, level_q15: int, preview: int,
-                 rms_all: list, periodic_all: list | None = None) -> np.ndarray:
-    """Start axis i's wave when the other axis' drive rises through ``level_q15``;
-    its error over ``periods`` periods after ``settle`` [um], averaged and
-    indexed by its wave's sample (recorded frame k is wave sample k - 1 - preview);
-    the RMS over all those periods goes to ``rms_all``, and (``periodic_all``)
-    :func:`periodic_rms`'s pair."""
+def midlevel(u2, n_ticks: int) -> int:
+    """The trigger level of one period (at least) of a periodic signal ``u2`` [q15]:
+    halfway between the two consecutive samples of its steepest rising step
+    through the middle of its range (:func:`_u2_midlevel`)."""
+    u = np.asarray(u2, dtype=float)[:n_ticks]
+    if u.size < n_ticks or n_ticks < 3:
+        raise ValueError(f"need one period of {n_ticks} samples, not {u.size}")
+    mid = 0.5 * (u.min() + u.max())
+    nxt = np.roll(u, -1)
+    k = np.flatnonzero((u < mid) & (nxt >= mid))
+    if k.size == 0:
+        return int(round(mid))
+    k = k[np.argmax(nxt[k] - u[k])]
+    return int(round(0.5 * (u[k] + nxt[k])))
+
+
+def _record_periods(ci, n_ticks: int, periods: int, settle: int, preview: int) -> np.ndarray:
+    """Start axis i's wave when the other axis' drive rises through its middle;
+    its error [um] over ``periods`` periods after ``settle``, ``periods x n_ticks``,
+    each indexed by its wave's sample (recorded frame k is wave sample k - 1 - preview:
+    the recorder triggers on the tick before the wave's first; shifted back exactly
+    in the period's DFT).
+
+    The middle is measured again for every record (:func:`_u2_midlevel`): the
+    other axis' drive drifts as its feedback takes up its creep (a 10 Hz run: by
+    215 LSB in 20 s, 2.3 ticks of its triangle's slope), and a level measured
+    once started the later trials ticks late against the coupling (the 10 Hz
+    learning's 0.3 nm came out 1.3 nm in the evaluation after it)."""
     frames = n_ticks * (periods + settle)
-    ci.configure_recorder(["err"], trigger="rising", trigger_signal="u2", level_q15=level_q15)
-    ci.command("arm_recorder")
-    ci.command("start_wave_on_trigger")
-    ci.wait_recorder(frames, frames / ci.identity.tick_hz * 3 + 5)
-    err = ci.to_physical("err", ci.read_recording(1)[:frames, 0])
-    ci.command("stop_wave")
-    e_all = err[settle * n_ticks:].reshape(periods, n_ticks)
+    for _ in range(3):
+        level_q15 = _u2_midlevel(ci, n_ticks)
+        ci.configure_recorder(["err"], trigger="rising", trigger_signal="u2", level_q15=level_q15)
+        # the wave's start first, then the recorder: armed first, it could trigger (every 20 ms at 50 Hz)
+        # before the start arrived, and the record ran without the wave or its correction (3 trials of 76)
+        ci.command("start_wave_on_trigger")
+        ci.command("arm_recorder")
+        ci.wait_recorder(frames, frames / ci.identity.tick_hz * 3 + 5)
+        running = ci.status()["wave_running"]
+        err = ci.to_physical("err", ci.read_recording(1)[:frames, 0])
+        ci.command("stop_wave")
+        if running:
+            break
+    else:
+        from ..device import DeviceError
+        raise DeviceError(f"axis {ci.identity.axis + 1}: its wave did not start on the other axis' drive")
+    spec = np.fft.rfft(err[settle * n_ticks:].reshape(periods, n_ticks), axis=1)
+    spec *= np.exp(2j * np.pi * np.arange(n_ticks // 2 + 1) * (preview + 1) / n_ticks)
+    return np.fft.irfft(spec, n=n_ticks, axis=1)
+
+
+def _still_trial(ci, n_ticks: int, periods: int, settle: int, preview: int,
+                 rms_all: list, periodic_all: list | None = None) -> tuple[np.ndarray, float, float]:
+    """:func:`_record_periods` averaged over its periods [um], with the RMS of what
+    repeats and its uncertainty (:func:`ilc.periodic_score`: the learning compares
+    trials by it; their RMS is mostly the sensor's noise); the RMS over all
+    those periods goes to ``rms_all``, and (``periodic_all``) :func:`periodic_rms`'s pair."""
+    e_all = _record_periods(ci, n_ticks, periods, settle, preview)
     rms_all.append(float(np.sqrt(np.mean(e_all ** 2))))
     if periodic_all is not None:
         periodic_all.append(periodic_rms(e_all.ravel(), n_ticks))
-    spec = np.fft.rfft(e_all.mean(axis=0)) * np.exp(2j * np.pi * np.arange(n_ticks // 2 + 1) * (preview + 1)
-                                                    / n_ticks)
-    return np.fft.irfft(spec, n=n_ticks)
+    score, se = ilc.periodic_score(e_all)
+    return e_all.mean(axis=0), score, se
 
 
-def _still_loop(ci, comp_i: dict, f: float, f_cut: float) -> np.ndarray:
-    """Axis i's closed loop at the harmonics of ``f`` [Hz], from a triangle of its
-    own over 10 % of its stroke around mid (the loop the learned correction goes through)."""
-    from .pipeline import _park
-    _configure_compensated(ci, comp_i)
-    lo, hi = comp_i["stroke"]
-    ci.set_setpoint_um(0.5 * (lo + hi))
-    _arm(ci)
-    n = int(round(ci.identity.tick_hz / f))
-    settle = settle_periods(f)
-    periods = max(2, int(round(0.1 * f)))
-    load_triangle(ci, f, 0.5 * (lo + hi), 0.05 * (hi - lo))
-    cols = ci.capture(["ref", "y"], n * (settle + periods), trigger="software", start_wave=True)
-    ci.command("stop_wave")
-    r = cols["ref"][settle * n:].reshape(periods, n).mean(axis=0)
-    y = cols["y"][settle * n:].reshape(periods, n).mean(axis=0)
-    _park(ci, ci.q15_position(lo))
-    return ilc.loop_response(r, y, f, f_cut)
+def _still_loop(ci, n_ticks: int, f: float, f_cut: float, settle: int,
+                preview: int) -> tuple[np.ndarray, np.ndarray]:
+    """Axis i's loop from its learned correction to its error at every harmonic of
+    ``f`` [Hz] up to ``f_cut``, and the standard deviation of each value
+    (:func:`ilc.loop_from_probe`), measured where the learning acts: the other
+    axis tracking its triangle, axis i's wave started in step with it, two
+    records of :data:`PROBE_S` each, one without a correction and one with a flat
+    multisine (:func:`ilc.probe`, :data:`PROBE_RMS_UM`); their difference is the
+    multisine's effect alone.
+
+    The other axis must be running: axis i's drive reaches it through its
+    coupling table (which reads axis i's drive), its position and acceleration
+    come back through the coupling (the acceleration term is 2.5 x the
+    displacement at 650 Hz); with it parked the loop measured 2.4-3.2 x smaller
+    at 650-1150 Hz and 43-92 degrees apart, and the learning through it (that
+    measurement also a tick off) grew the 650 Hz line from 8.5 to 14.7 nm.
+    (Until 2026-11-26: a triangle of axis i's own, 10 % of its stroke, the other
+    axis parked; its harmonics fall as 1/k^2, the even ones, which it lacks,
+    were interpolated across the 140 Hz mode, and the band stopped at 3 x the
+    resonance, below the 620 Hz mode: 9.7 of the 10.3 nm left at 50 Hz lay above it.)"""
+    periods = max(2, min(int(round(PROBE_S * f)), ci.rec_frames_capacity(1) // n_ticks - settle))
+    c = ilc.probe(n_ticks, f, f_cut, PROBE_RMS_UM)
+    ilc.switch_off(ci)
+    e0 = _record_periods(ci, n_ticks, periods, settle, preview)
+    ilc.upload(ci, c, f)
+    e1 = _record_periods(ci, n_ticks, periods, settle, preview)
+    ilc.switch_off(ci)
+    # the difference of two independent records: E1 - E0 per period pair
+    return ilc.loop_from_probe(e1 - e0, c)
 
 
 _CLEARED_AT_ARM: list = []   # faults found latched when arming during the evaluation (collected per frequency)
@@ -332,11 +404,12 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
         _CLEARED_AT_ARM.clear()
         faults = _clear_latched((ci, cj), args, f"before the {f:g} Hz evaluation")
         n = int(round(tick / f))
-        periods = max(5, int(round(0.1 * f)))   # a learning trial: 0.1 s at least, the sensor noise averaged down
-        settle = settle_periods(f)
+        periods = max(5, int(round(TRIAL_S * f)))   # a learning trial: the sensor noise averaged down
+        # a record starts with the held axis' wave, and its correction with it: the step rings the axis' mode
+        # (its shaper is off), 36-45 nm in the first 50 Hz period, halving every 20 ms
+        settle = max(settle_periods(f), int(np.ceil(STILL_SETTLE_S * f - 1e-9)))
         p_eval = max(2, min(EVAL_PERIODS, ci.rec_frames_capacity(1) // n - settle))
-        f_cut = min(ILC_F_CUT * comp_i["notch_hz"], 0.4 * ilc.capacity(ci) * f)
-        loop = _still_loop(ci, comp_i, f, f_cut)
+        f_cut = min(ILC_F_CUT_HZ, 0.4 * ilc.capacity(ci) * f)
         res, per = {}, {}
         for bypass in (1, 0):
             _hold_and_drive(ci, cj, comp_i, comp_j, f, bypass)
@@ -351,9 +424,9 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
                                                       f"at {f:g} Hz")
         # the learned feedforward of the held axis: trials while the other axis keeps running
         _hold_and_drive(ci, cj, comp_i, comp_j, f, 0)
-        level = _u2_midlevel(ci, n)
+        loop, loop_sigma = _still_loop(ci, n, f, f_cut, settle, comp_i["preview_ticks"])
         rms_all: list = []
-        learner = ilc.ILC(n, f, f_cut, alpha=0.5, loop=loop)
+        learner = ilc.ILC(n, f, f_cut, alpha=0.5, loop=loop, loop_sigma=loop_sigma, gain_max=ILC_GAIN_MAX)
         ilc.switch_off(ci)
 
         def trial(c):
@@ -364,12 +437,12 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
                 ilc.upload(ci, c, f)
             else:
                 ilc.switch_off(ci)
-            return _still_trial(ci, n, periods, settle, level, comp_i["preview_ticks"], rms_all)
+            return _still_trial(ci, n, periods, settle, comp_i["preview_ticks"], rms_all)
 
         learned = ilc.learn(trial, learner, trials)
         ilc.upload(ci, learned["best"], f)
         per_learned: list = []
-        _still_trial(ci, n, p_eval, settle, level, comp_i["preview_ticks"], rms_all, per_learned)
+        _still_trial(ci, n, p_eval, settle, comp_i["preview_ticks"], rms_all, per_learned)
         ilc_rms = rms_all[-1]   # the best correction, played in step, measured like the others
         ilc.switch_off(ci)
         cj.command("stop_wave")
@@ -398,7 +471,10 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
                          "reduction_periodic": per[1][0] / per_com[0] if per_com[0] > 0 else float("inf"),
                          "reduction": res[1] / com if com > 0 else float("inf"),
                          "learned": {"trials": len(learned["history"]), "refused": learned["refused"],
-                                     "trial_rms_um": rms_all[:-1], "f_cut_hz": f_cut}}
+                                     "trial_rms_um": rms_all[:-1],
+                                     # what repeated in each trial (ilc.periodic_score: the learning's measure)
+                                     "trial_periodic_um": [h["score_um"] for h in learned["history"]],
+                                     "f_cut_hz": f_cut, "trial_periods": periods}}
         return entry
 
     for f in EVAL_FREQS:

@@ -16,13 +16,18 @@ zero-phase in the period's DFT)::
   loop as measured in the first trial (``Y / R`` at the reference's own
   harmonics; between them interpolated, beyond them a pure lag fitted to
   their phase), ``|1 / T_hat|`` limited to ``gain_max``: a non-causal,
-  phase-leading filter that only a periodic, recorded error allows;
+  phase-leading filter that only a periodic, recorded error allows. Or
+  ``T_hat`` measured at every harmonic by playing a flat multisine as the
+  correction (:func:`probe`, :func:`loop_from_probe`, the held axis of a
+  two-axis stage), with its uncertainty ``sigma``: then the inverse is
+  regularized, ``conj(T_hat) / (|T_hat|^2 + 4 sigma^2)``;
 - ``Q``: a zero-phase low-pass, 1 up to ``0.8 f_cut`` and a raised cosine to 0
   at ``f_cut``, so the learning stays away from the resonance where ``T`` is
   not close to a delay; the correction has no content above ``f_cut``.
 
 The error then shrinks by ``|1 - alpha T / T_hat|`` per trial at each
-harmonic below ``f_cut``. Divergence guard: a trial whose RMS error grows more
+harmonic below ``f_cut``. Divergence guard: a trial whose RMS error (or the
+caller's score, e.g. :func:`periodic_score`, within its uncertainty) grows more
 than ``grow`` times the best so far is refused, the correction goes back to
 the best one and ``alpha`` is halved; below ``alpha_min`` the learning stops.
 The best correction is what is kept.
@@ -36,7 +41,7 @@ import numpy as np
 
 from .. import interface
 
-__all__ = ["ILC", "learn", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
+__all__ = ["ILC", "learn", "probe", "loop_from_probe", "periodic_score", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
 
 FF_MAX = interface.HOLDING_REGISTERS["wave_ff_levels"][2]   # the register map's; a target may hold fewer
 
@@ -64,7 +69,13 @@ class ILC:
         where ``loop`` is not given.
     loop : array of complex, optional
         The closed loop ``T_hat`` at every harmonic ``0 .. n_samples // 2``
-        (:func:`loop_response`); the learning filter is ``alpha / T_hat``.
+        (:func:`loop_response` or :func:`loop_from_probe`); the learning filter
+        is ``alpha / T_hat``.
+    loop_sigma : array of float, optional
+        The standard deviation of each ``T_hat`` (:func:`loop_from_probe`): the
+        inverse is regularized, ``conj(T_hat) / (|T_hat|^2 + 4 sigma^2)``, so a
+        harmonic whose loop is not known better than its own size (near an
+        antiresonance) is learned slowly instead of with a wrong phase.
     gain_max : float
         Largest ``|1 / T_hat|`` the learning filter applies.
     grow : float
@@ -74,7 +85,7 @@ class ILC:
     """
 
     def __init__(self, n_samples: int, f0_hz: float, f_cut_hz: float, *, alpha: float = 0.5,
-                 lag_s: float = 0.0, loop=None, gain_max: float = 10.0, grow: float = 1.05,
+                 lag_s: float = 0.0, loop=None, loop_sigma=None, gain_max: float = 10.0, grow: float = 1.05,
                  alpha_min: float = 0.05):
         if n_samples < 4 or f0_hz <= 0 or f_cut_hz <= f0_hz or not 0 < alpha <= 1:
             raise ValueError("ILC needs >= 4 samples a period, f_cut above f0 and 0 < alpha <= 1")
@@ -94,11 +105,13 @@ class ILC:
             loop = np.asarray(loop, dtype=complex)
             if loop.shape != self.f_hz.shape:
                 raise ValueError(f"the loop response needs {self.f_hz.size} harmonics, not {loop.shape}")
-            mag = np.maximum(np.abs(loop), 1.0 / gain_max)
+            sig2 = 0.0 if loop_sigma is None else 4.0 * np.asarray(loop_sigma, dtype=float) ** 2
+            mag = np.maximum((np.abs(loop) ** 2 + sig2) / np.maximum(np.abs(loop), 1e-300), 1.0 / gain_max)
             self.inv = np.exp(-1j * np.angle(loop)) / mag
         self.c_spec = np.zeros(self.n // 2 + 1, dtype=complex)
         self.best_spec = self.c_spec.copy()
         self.best_rms = np.inf
+        self.best_se = 0.0
         self.history: list[dict] = []
         self.stopped = False
 
@@ -110,24 +123,58 @@ class ILC:
         """The correction of the lowest RMS error measured [um]."""
         return np.fft.irfft(self.best_spec, n=self.n)
 
-    def update(self, e: np.ndarray) -> bool:
-        """Take the error ``e`` [um] measured with :meth:`correction` played; False if the trial is refused."""
+    def update(self, e: np.ndarray, score: float | None = None, score_se: float = 0.0) -> bool:
+        """Take the error ``e`` [um] measured with :meth:`correction` played; False if the trial is refused.
+
+        ``score`` [um] is what the trials are compared by (default the RMS of
+        ``e``; a caller whose ``e`` still carries noise passes the RMS of the
+        part that repeats, :func:`periodic_score`), ``score_se`` the standard
+        error of its square [um^2]: a trial is refused only when
+        ``score^2 > grow^2 best^2 + 3 hypot(score_se, best's score_se)`` (near
+        convergence a noisy score moves by more than ``grow`` from the noise alone).
+        """
         e = np.asarray(e, dtype=np.float64)
         if e.shape != (self.n,):
             raise ValueError(f"the error must have {self.n} samples a period, not {e.shape}")
         rms = float(np.sqrt(np.mean(e ** 2)))
-        accepted = rms <= self.grow * self.best_rms or not np.isfinite(self.best_rms)
-        self.history.append({"rms_um": rms, "alpha": self.alpha, "accepted": accepted})
+        score = rms if score is None else float(score)
+        margin = 3.0 * float(np.hypot(score_se, self.best_se))
+        accepted = score ** 2 <= (self.grow * self.best_rms) ** 2 + margin or not np.isfinite(self.best_rms)
+        self.history.append({"rms_um": rms, "score_um": score, "alpha": self.alpha, "accepted": accepted})
         if not accepted:
             # the error grew: back to the best correction, learn more gently
             self.c_spec = self.best_spec.copy()
             self.alpha *= 0.5
             self.stopped = self.alpha < self.alpha_min
             return False
-        if rms < self.best_rms:
-            self.best_rms, self.best_spec = rms, self.c_spec.copy()
+        if score < self.best_rms:
+            self.best_rms, self.best_se, self.best_spec = score, float(score_se), self.c_spec.copy()
         self.c_spec = self.q * (self.c_spec + self.alpha * self.inv * np.fft.rfft(e))
         return True
+
+
+def periodic_score(e_periods: np.ndarray) -> tuple[float, float]:
+    """The RMS of what repeats in a record of whole periods (``P x n``, [um]) without
+    the noise's bias, and the standard error of its square [um^2].
+
+    The period mean's mean square holds the noise variance over ``P``; that is
+    subtracted (the variance from the spread across periods). The standard
+    error is the jackknife's over the periods (leave one out), which needs no
+    assumption about the noise's spectrum.
+    """
+    e = np.asarray(e_periods, dtype=float)
+    p = e.shape[0]
+    if e.ndim != 2 or p < 3:
+        raise ValueError(f"a periodic score needs at least 3 periods, not {e.shape}")
+
+    def ms(x):
+        k = x.shape[0]
+        return float(np.mean(x.mean(axis=0) ** 2) - np.mean(np.var(x, axis=0, ddof=1)) / k)
+
+    full = ms(e)
+    jack = np.array([ms(np.delete(e, i, axis=0)) for i in range(p)])
+    se_ms = float(np.sqrt((p - 1) / p * np.sum((jack - jack.mean()) ** 2)))
+    return float(np.sqrt(max(full, 0.0))), se_ms
 
 
 def lag_from_trial(r: np.ndarray, y: np.ndarray, f0_hz: float, f_max_hz: float) -> float:
@@ -168,9 +215,53 @@ def loop_response(r: np.ndarray, y: np.ndarray, f0_hz: float, f_max_hz: float, *
     return model * mag * np.exp(1j * ph)
 
 
+def probe(n_samples: int, f0_hz: float, f_max_hz: float, rms_um: float) -> np.ndarray:
+    """One period of a flat multisine: every harmonic of ``f0_hz`` up to ``f_max_hz``
+    (the odd and the even ones, Nyquist excluded) with one amplitude, total RMS
+    ``rms_um`` [um], Schroeder's phases (``-pi k (k - 1) / K``: a low crest factor).
+
+    Played as the learned correction, it measures the loop the correction goes
+    through at every harmonic the learning acts on (:func:`loop_from_probe`);
+    a triangle's harmonics fall as ``1 / k^2`` and leave the even ones out.
+    """
+    k = np.arange(1, (n_samples - 1) // 2 + 1)
+    k = k[k * f0_hz <= f_max_hz]
+    if k.size == 0:
+        raise ValueError(f"no harmonic of {f0_hz:g} Hz up to {f_max_hz:g} Hz in {n_samples} samples")
+    spec = np.zeros(n_samples // 2 + 1, dtype=complex)
+    amp = rms_um * np.sqrt(2.0 / k.size)
+    spec[k] = 0.5 * n_samples * amp * np.exp(-1j * np.pi * k * (k - 1) / k.size)
+    return np.fft.irfft(spec, n=n_samples)
+
+
+def loop_from_probe(e_periods: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The loop ``T`` (correction -> position) at every harmonic, and its standard
+    deviation, from the error ``e = r - y`` [um] recorded over whole periods
+    (``P x n``, indexed by the wave's sample) while the correction ``c`` (one
+    period, [um], :func:`probe`) played and nothing else repeated: ``E = -T C``.
+
+    Harmonics ``c`` has no content at get ``T = 0`` and an infinite deviation
+    (the learning filter then leaves them alone).
+    """
+    e_periods = np.atleast_2d(np.asarray(e_periods, dtype=float))
+    p, n = e_periods.shape
+    if p < 2 or n != len(c):
+        raise ValueError(f"need at least 2 periods of {len(c)} samples, not {e_periods.shape}")
+    ep = np.fft.rfft(e_periods, axis=1)
+    cs = np.fft.rfft(np.asarray(c, dtype=float))
+    ok = np.abs(cs) > 1e-9 * np.abs(cs).max()
+    t = np.zeros(cs.size, dtype=complex)
+    sigma = np.full(cs.size, np.inf)
+    t[ok] = -ep.mean(axis=0)[ok] / cs[ok]
+    # the spread across periods: the noise of their mean
+    sigma[ok] = np.sqrt(np.var(ep[:, ok], axis=0, ddof=1) / p) / np.abs(cs[ok])
+    return t, sigma
+
+
 def learn(trial, ilc: ILC, iterations: int) -> dict:
     """Run ``iterations`` trials: ``trial(c)`` plays the correction ``c`` [um, one
-    value per error sample] and returns the error ``e = r - y`` [um] over one period.
+    value per error sample] and returns the error ``e = r - y`` [um] over one period,
+    or ``(e, score, score_se)`` (:meth:`ILC.update`).
 
     Returns ``history`` (RMS [um], alpha, accepted per trial), ``best_rms_um``,
     ``first_rms_um``, ``best`` (the kept correction [um]) and ``refused`` (trials refused).
@@ -178,7 +269,8 @@ def learn(trial, ilc: ILC, iterations: int) -> dict:
     for _ in range(iterations):
         if ilc.stopped:
             break
-        ilc.update(trial(ilc.correction()))
+        res = trial(ilc.correction())
+        ilc.update(*res) if isinstance(res, tuple) else ilc.update(res)
     return {"history": ilc.history, "best_rms_um": ilc.best_rms, "first_rms_um": ilc.history[0]["rms_um"],
             "best": ilc.best(), "refused": sum(not h["accepted"] for h in ilc.history)}
 
