@@ -22,13 +22,14 @@ import numpy as np
 
 from ..errors import CliError
 from ..ident import refined
-from ..ident.base import fit_base
+from ..ident.base import fit_base, history_holdout
 from ..ident.terms import TERMS, VOCABULARY
 from ..io.modelfile import make_provenance, save_model
 from ..io.recording import load_recording, sensor_session, session_start
 from . import locate as loc
 from . import significance as sg
 from .discriminate import calibration_band_hz
+from .misfit import base_misfit
 from .select import Ctx, make_masks, make_signals, select, simulate_refined
 
 __all__ = ["diagnose", "DEFAULTS", "load", "fit_base_model", "locate", "refine", "document"]
@@ -54,18 +55,25 @@ def load(calibration, recordings):
     return cal, recs, names
 
 
-def fit_base_model(cal, calibration, settle_s, out, log, t_start):
-    """The base model fitted on the calibration, written as ``base_model.json``: (params, base_info)."""
-    base = fit_base(cal, settle_s=settle_s)
+def fit_base_model(cal, calibration, settle_s, out, log, t_start, block_s=DEFAULTS["block_s"]):
+    """The base model fitted on the calibration, written as ``base_model.json``: (params, base_info).
+    ``base_info["misfit"]``: the base's error on calibration histories it did not see (``misfit.py``)."""
+    base = fit_base(cal, settle_s=settle_s, holdout=True)
     base_info = base.pop("base_info")
+    held = history_holdout(base)
+    base_info["misfit"] = base_misfit(held, [os.path.basename(str(p)) for p in calibration], cal[0].dt, 1.0 / block_s)
     prov = make_provenance(list(calibration), {"settle_s": settle_s}, rows=[len(r) for r in cal],
                            metrics={"dynamics_order": base_info["dynamics_order"], "plane": {
                                k: v for k, v in base_info["plane"].items() if k != "cv_table"}})
     save_model(out / "base_model.json", "refined", base, prov)
     pl = base_info["plane"]
+    mf = base_info["misfit"]
     log(f"base model: plane {pl['plays']} plays x {pl['knots']} knots"
         f"{' + Bouc-Wen' if pl.get('bouc_wen') else ''}, dynamics order {base_info['dynamics_order']} "
-        f"({time.perf_counter() - t_start:.1f} s)")
+        f"({time.perf_counter() - t_start:.1f} s)" + (
+            f"; on held-out calibration histories {mf['rms_um']:.4f} um RMS (level "
+            f"{np.sqrt(mf['mse_um2']['level']):.4f}, slow {np.sqrt(mf['mse_um2']['slow']):.4f}, fast "
+            f"{np.sqrt(mf['mse_um2']['fast']):.4f} beyond noise {mf['noise_rms_um']:.4f})" if mf else ""))
     return base, base_info
 
 
@@ -88,7 +96,7 @@ def _cut(s, v):
                                v=s.v[v], h=s.h[v], hyst=s.hyst[v], yb=s.yb[v], ydyn=s.ydyn[v])
 
 
-def locate(base, cal, recs, names, settle_s, block_s):
+def locate(base, cal, recs, names, settle_s, block_s, misfit=None):
     """The context of the current model on the recordings and the residual analysis.
 
     Returns
@@ -121,7 +129,7 @@ def locate(base, cal, recs, names, settle_s, block_s):
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
               cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
               cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
-              **_drift_clock(cal, recs), **_offset_groups(cal, recs))
+              misfit=misfit, **_drift_clock(cal, recs), **_offset_groups(cal, recs))
     # samples where the drive is (or within OUT_GUARD_S was) outside the calibrated range: the base model
     # extrapolates there. They stay in the selection - saturation or a sensor's curvature may show only there -
     # and are reported on their own, so the user can weigh a finding that rests on them
@@ -344,8 +352,8 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cal, recs, names = load(calibration, recordings)
-    base, base_info = fit_base_model(cal, calibration, settle_s, out, log, t_start)
-    ctx, located, outside_doc = locate(base, cal, recs, names, settle_s, block_s)
+    base, base_info = fit_base_model(cal, calibration, settle_s, out, log, t_start, block_s)
+    ctx, located, outside_doc = locate(base, cal, recs, names, settle_s, block_s, base_info.get("misfit"))
     fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
     block_all = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
     e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
