@@ -86,3 +86,22 @@ def test_held_out_histories_cost_more_than_seen_ones_and_cancel_what_both_contai
     grew_excess = sum(md["mse_um2"].values()) - sum(m["mse_um2"].values())
     assert grew_seen > 0.003          # [um^2]: the vibration (0.005 um^2) is in the seen error
     assert grew_excess < 0.25 * grew_seen
+
+
+def test_none_reports_the_base_residual_and_its_misfit_by_band():
+    from types import SimpleNamespace
+
+    from piezoctl.diagnose.run import _none_entry, residual_bands
+    n = int(4 * FS)
+    t = np.arange(n) * DT
+    y = 0.2 + 0.05 * np.sin(2 * np.pi * 30 * t)
+    sig = SimpleNamespace(y=y, yb=np.zeros(n))
+    ctx = SimpleNamespace(signals=[sig], valid=[np.ones(n, bool)], dt=DT, misfit=_misfit(level=0.01 ** 2))
+    bands = residual_bands(ctx)
+    assert abs(bands["level_rms_um"] - 0.2) < 1e-6 and abs(bands["fast_rms_um"] - 0.05 / np.sqrt(2)) < 2e-3
+    mf = {**_misfit(level=0.01 ** 2, fast=0.02 ** 2), "rms_um": 0.05, "rms_seen_um": 0.04}
+    fit = {"base": {"nrmse": 0.01}}
+    e = _none_entry([], fit, None, {"misfit": mf}, bands)
+    assert e["name"] == "none" and e["where"]["residual"] is bands
+    assert abs(e["where"]["base_misfit"]["fast_rms_um"] - 0.02) < 1e-12
+    assert "did not see" in e["evidence"] and "0.0500 um RMS" in e["evidence"]
