@@ -22,13 +22,14 @@ import numpy as np
 
 from ..errors import CliError
 from ..ident import refined
-from ..ident.base import fit_base
+from ..ident.base import fit_base, history_holdout
 from ..ident.terms import TERMS, VOCABULARY
 from ..io.modelfile import make_provenance, save_model
 from ..io.recording import load_recording, sensor_session, session_start
 from . import locate as loc
 from . import significance as sg
 from .discriminate import calibration_band_hz
+from .misfit import BANDS, band_energy, base_misfit
 from .select import Ctx, make_masks, make_signals, select, simulate_refined
 
 __all__ = ["diagnose", "DEFAULTS", "load", "fit_base_model", "locate", "refine", "document"]
@@ -54,18 +55,25 @@ def load(calibration, recordings):
     return cal, recs, names
 
 
-def fit_base_model(cal, calibration, settle_s, out, log, t_start):
-    """The base model fitted on the calibration, written as ``base_model.json``: (params, base_info)."""
-    base = fit_base(cal, settle_s=settle_s)
+def fit_base_model(cal, calibration, settle_s, out, log, t_start, block_s=DEFAULTS["block_s"]):
+    """The base model fitted on the calibration, written as ``base_model.json``: (params, base_info).
+    ``base_info["misfit"]``: the base's error on calibration histories it did not see (``misfit.py``)."""
+    base = fit_base(cal, settle_s=settle_s, holdout=True)
     base_info = base.pop("base_info")
+    held = history_holdout(base)
+    base_info["misfit"] = base_misfit(held, [os.path.basename(str(p)) for p in calibration], cal[0].dt, 1.0 / block_s)
     prov = make_provenance(list(calibration), {"settle_s": settle_s}, rows=[len(r) for r in cal],
                            metrics={"dynamics_order": base_info["dynamics_order"], "plane": {
                                k: v for k, v in base_info["plane"].items() if k != "cv_table"}})
     save_model(out / "base_model.json", "refined", base, prov)
     pl = base_info["plane"]
+    mf = base_info["misfit"]
     log(f"base model: plane {pl['plays']} plays x {pl['knots']} knots"
         f"{' + Bouc-Wen' if pl.get('bouc_wen') else ''}, dynamics order {base_info['dynamics_order']} "
-        f"({time.perf_counter() - t_start:.1f} s)")
+        f"({time.perf_counter() - t_start:.1f} s)" + (
+            f"; on held-out calibration histories {mf['rms_um']:.4f} um RMS (level "
+            f"{np.sqrt(mf['mse_um2']['level']):.4f}, slow {np.sqrt(mf['mse_um2']['slow']):.4f}, fast "
+            f"{np.sqrt(mf['mse_um2']['fast']):.4f} beyond noise {mf['noise_rms_um']:.4f})" if mf else ""))
     return base, base_info
 
 
@@ -88,7 +96,7 @@ def _cut(s, v):
                                v=s.v[v], h=s.h[v], hyst=s.hyst[v], yb=s.yb[v], ydyn=s.ydyn[v])
 
 
-def locate(base, cal, recs, names, settle_s, block_s):
+def locate(base, cal, recs, names, settle_s, block_s, misfit=None):
     """The context of the current model on the recordings and the residual analysis.
 
     Returns
@@ -121,7 +129,7 @@ def locate(base, cal, recs, names, settle_s, block_s):
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
               cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
               cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
-              **_drift_clock(cal, recs), **_offset_groups(cal, recs))
+              misfit=misfit, **_drift_clock(cal, recs), **_offset_groups(cal, recs))
     # samples where the drive is (or within OUT_GUARD_S was) outside the calibrated range: the base model
     # extrapolates there. They stay in the selection - saturation or a sensor's curvature may show only there -
     # and are reported on their own, so the user can weigh a finding that rests on them
@@ -212,17 +220,42 @@ def refine(ctx, ctx_all, fctx, recs, names, calibration, recordings, cal, settle
     return fit, yr_all, held_pred
 
 
-def _none_entry(last, fit, outside_doc, base_info):
+def residual_bands(ctx) -> dict:
+    """The base residual on the recordings per band of ``misfit.py`` (RMS [um] over the settled samples), to
+    set beside the base's misfit on held-out calibration histories."""
+    e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])
+    f = ctx.misfit["slow_hz"] if ctx.misfit else 1.0 / DEFAULTS["block_s"]
+    en = band_energy(e, rec, ctx.dt, f) / max(e.size, 1)
+    return {"rms_um": float(np.sqrt(np.mean(e ** 2))) if e.size else 0.0,
+            **{f"{b}_rms_um": float(np.sqrt(x)) for b, x in zip(BANDS, en)}}
+
+
+def _none_entry(last, fit, outside_doc, base_info, bands=None):
     best = last[0] if last else None
     dyn = base_info.get("dynamics_note", "")
     text = ("No candidate term lowers the held-out error enough: the best, "
             f"{best.name}, changes the held-out NRMSE from {best.nrmse_before:.4f} to {best.nrmse_after:.4f} "
-            f"(p = {best.p:.1e}); what is left is the base model's own approximation error and noise "
-            f"(held-out NRMSE {fit['base']['nrmse']:.4f}; {dyn})." if best else "No candidate term applies.")
+            f"(p = {best.p:.1e}" + (f"; {best.veto}" if best.veto else "") + "); what is left is the base model's "
+            f"own approximation error and noise (held-out NRMSE {fit['base']['nrmse']:.4f}; {dyn})."
+            if best else "No candidate term applies.")
+    mf = base_info.get("misfit")
+    where = {}
+    if bands:
+        where["residual"] = bands
+        text += (f" The base's residual on the recordings: {bands['rms_um']:.4f} um RMS (level "
+                 f"{bands['level_rms_um']:.4f}, slow {bands['slow_rms_um']:.4f}, fast {bands['fast_rms_um']:.4f}).")
+    if mf:
+        where["base_misfit"] = {"rms_um": mf["rms_um"], "rms_seen_um": mf["rms_seen_um"],
+                                **{f"{b}_rms_um": float(np.sqrt(mf["mse_um2"][b])) for b in BANDS}}
+        text += (f" On calibration histories it did not see the base is off by {mf['rms_um']:.4f} um RMS against "
+                 f"{mf['rms_seen_um']:.4f} um on the same samples seen; the excess by band: level "
+                 f"{np.sqrt(mf['mse_um2']['level']):.4f}, slow {np.sqrt(mf['mse_um2']['slow']):.4f}, fast "
+                 f"{np.sqrt(mf['mse_um2']['fast']):.4f} um.")
     if outside_doc:
         text += " " + outside_doc["evidence"]
-    return {"name": "none", "significant": False, "evidence": text,
-            "where": {"outside_calibrated_range": outside_doc} if outside_doc else {}, "params": {},
+        where["outside_calibrated_range"] = outside_doc
+    return {"name": "none", "significant": False, "evidence": text, "where": where, "params": {},
             "improvement": {"nrmse_before": fit["base"]["nrmse"], "nrmse_after": fit["base"]["nrmse"]}}
 
 
@@ -247,13 +280,14 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             "exact_fold_ratios": a.exact_fold_ratios,
                             "linearized": {"nrmse_before": a.nrmse_before, "nrmse_after": a.nrmse_after},
                             "fold_ratios": a.fold_ratios, "p_value": a.p, "delta_bic": a.dbic,
+                            "credited_ratio": a.credited, "credited_bands": a.credited_bands,
                             "worse_on": ({"recording": a.worsened[0], "factor": a.worsened[1]}
                                          if a.worsened else None)},
             "signature": a.term.signature})
     last = rounds[-1] if rounds else []
     named = {x["name"] for x in effects}
     if not effects:
-        effects.append(_none_entry(last, fit, outside_doc, base_info))
+        effects.append(_none_entry(last, fit, outside_doc, base_info, residual_bands(ctx)))
     for c in last:
         if c.name in named:
             continue
@@ -267,6 +301,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                         "improvement": {"nrmse_before": c.nrmse_before, "nrmse_after": c.nrmse_before,
                                         "candidate": {"nrmse_after": c.nrmse_after,
                                                       "exact_fold_ratios": c.exact_fold_ratios},
+                                        "credited_ratio": c.credited, "credited_bands": c.credited_bands,
                                         "fold_ratios": c.fold_ratios, "p_value": c.p, "delta_bic": c.dbic},
                         "signature": c.term.signature})
     return {"format": "piezoctl-diagnosis", "version": 1,
@@ -290,7 +325,9 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                   "measurements) gives p < "
                                   f"{sg.ALPHA:g} / (number of candidates in the round) (Bonferroni: family-wise "
                                   "error 1 % per round); and the BIC with the autocorrelation-corrected sample size "
-                                  "decreases; and the refined model, simulated exactly with the term fitted on one "
+                                  "decreases; and its improvement, less per band (level, slow, fast) the base's "
+                                  "misfit on held-out calibration histories (base_info.misfit), still gives a ratio "
+                                  f"of at most {sg.RATIO_MAX}; and the refined model, simulated exactly with the term fitted on one "
                                   "fold, lowers the error on the other fold in each",
                      "ratio_max": sg.RATIO_MAX, "alpha_family": sg.ALPHA, "active_fraction": sg.ACTIVE_FRAC,
                      "unit_correlation_times": sg.UNIT_TAUS, "unit_min_s": sg.UNIT_MIN_S},
@@ -344,8 +381,8 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cal, recs, names = load(calibration, recordings)
-    base, base_info = fit_base_model(cal, calibration, settle_s, out, log, t_start)
-    ctx, located, outside_doc = locate(base, cal, recs, names, settle_s, block_s)
+    base, base_info = fit_base_model(cal, calibration, settle_s, out, log, t_start, block_s)
+    ctx, located, outside_doc = locate(base, cal, recs, names, settle_s, block_s, base_info.get("misfit"))
     fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
     block_all = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
     e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])

@@ -22,6 +22,7 @@ from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import hysteresis_groups, initial_state_span
 from . import significance as sg
+from .misfit import credited_ratio
 from .discriminate import discriminate_group, highpassed
 
 __all__ = ["Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
@@ -87,6 +88,7 @@ class Ctx:
     offset_group: list | None = None  # per recording: its sensor-zero column (-1: the calibration's session, no
     #                                   offset of its own); None: one per recording (sessions unknown)
     offset_sessions: list | None = None  # the session label of each column, when sessions are known
+    misfit: dict | None = None      # the base's error on held-out calibration histories (misfit.base_misfit)
 
     def offset_columns(self, s) -> np.ndarray:
         """The sensor-zero columns (n, m) of recording ``s``: a constant per sensor session other than the
@@ -133,6 +135,8 @@ class Candidate:
     described: tuple | None = None            # (params with units, phrase)
     contrib: list | None = None               # per recording: the term's own contribution [um]
     worsened: tuple | None = None             # (recording, factor): one whose held-out error the term raised
+    credited: float = 1.0                     # held-out ratio credited beyond the base's misfit (misfit.py)
+    credited_bands: dict | None = None        # per band: the improvement and the misfit energy [um^2/sample]
 
     @property
     def name(self) -> str:
@@ -417,9 +421,18 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
     neff = sg.effective_n(rb_res)
     dbic = sg.bic_delta(float(np.sum(rb_res ** 2)), float(np.sum(ra_res ** 2)), neff, k)
     significant = bool(max(fold_ratios) <= sg.RATIO_MAX and p < p_max and dbic < 0)
+    cr, bands = credited_ratio(rb_res, pred_after[used], rec, ctxs[0].dt, ctxs[0].misfit)
+    veto = None
+    if significant and cr > sg.RATIO_MAX:
+        significant = False
+        veto = (f"its held-out improvement lies within what the base's error on calibration histories it did not "
+                f"see explains: credited beyond that error, the ratio is {cr:.2f} (> {sg.RATIO_MAX}; "
+                + ", ".join(f"{b} {np.sqrt(max(x['improvement_um2'], 0)):.4f} um against "
+                            f"{np.sqrt(x['misfit_um2']):.4f} um" for b, x in bands.items()) + ")")
     return Candidate(term=term, ratio=na / nb if nb > 0 else 1.0, fold_ratios=fold_ratios, nrmse_before=nb,
                      nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
-                     significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen])
+                     significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
+                     veto=veto, credited=cr, credited_bands=bands)
 
 
 def model_with(base, terms):
@@ -586,7 +599,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
         rounds.append(evals)
         best = _first_exact(evals, fctx, fold_all, recs, span, log)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
-                             f"n{c.n_active}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"
+                             f"n{c.n_active} c{c.credited:.2f}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"
                              for c in evals[:6]))
         if best is None:
             break

@@ -66,7 +66,7 @@ from ..dsp import filt
 from ..models.hysteresis import hat_basis, play_states
 from .common import IdentError
 
-__all__ = ["fit_base", "fit_dynamics", "band_cps", "plausible", "block_masks", "plane_columns", "PlaneLayout",
+__all__ = ["fit_base", "history_holdout", "fit_dynamics", "band_cps", "plausible", "block_masks", "plane_columns", "PlaneLayout",
            "MAX_ROWS", "smoothness_penalty", "reversal_levels"]
 
 MAX_ROWS = 150_000       # samples entering the joint least-squares problem (evenly strided)
@@ -86,6 +86,7 @@ QS_GUARD_S = 0.02        # [s] after the drive was last fast
 QS_MIN_FRACTION = 0.5    # fewer quasi-static samples than this fraction of the settled ones: size on all of them
 MIN_PLAY_SPAN = 0.02     # a play whose output moved less than this [normalized drive] is left out
 TREND_ORDER = 3
+HOLDOUT_SEGMENTS = 4     # a single calibration recording is held out in this many contiguous segments
 G_OUT_MAX = 3.0          # largest |G| allowed above twice the calibration's band (where it has no evidence)
 
 
@@ -597,7 +598,73 @@ def _plane_output(Ps, vs, v_rest, layout, th):
     return out
 
 
-def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s: float = 0.5) -> dict:
+def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX_ROWS, sign=0.0) -> list:
+    """The base's error on calibration histories it did not see: each of ``HOLDOUT_SEGMENTS`` contiguous
+    quarters of every calibration recording's settled part is left out in turn (of all recordings at once), the
+    plane's knot values (size, ridge, Bouc-Wen shape and dynamics kept) are refitted on the rest and the
+    recordings are simulated from their start; the same estimator on all rows is the reference (the error on
+    histories it saw). Neither carries the calibration's trend columns. Only samples whose drive lies within
+    the range the refit saw are scored (beyond it the model extrapolates, which ``diagnose`` reports apart).
+
+    Returns
+    -------
+    list of dict
+        Per held-out history: ``recording`` (index), ``start``, ``stop`` (sample range held out), ``resid``
+        (measured - simulated over that range [um]), ``resid_in`` (the same with the reference fit) and
+        ``scored`` (bool mask over the range).
+    """
+    n_rec = len(ys)
+    # every play's columns through G once per recording (the refits only change which rows enter)
+    cols = []
+    for P, v in zip(Ps, vs):
+        C = [filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:]) for i, kn in zip(layout.index, layout.knots)]
+        if layout.bw:
+            C.append(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest))[:, None])
+        cols.append(np.hstack(C))
+    per = max(1000, max_rows // n_rec)
+    edges = [np.linspace(k0, y.size, HOLDOUT_SEGMENTS + 1).astype(int) for y, k0 in zip(ys, k0s)]
+
+    def refit(fit_mask):
+        # no trend columns here: a per-recording trend fitted on three quarters says nothing of the fourth, and
+        # the reference fit below must be the same estimator on all rows
+        blocks = []
+        for j in range(n_rec):
+            if np.any(fit_mask[j]):
+                rows = _strided(fit_mask[j], per)
+                blocks.append((np.column_stack([cols[j][rows], np.ones(rows.size)]), ys[j][rows]))
+        A, bb, _, _ = _gram(blocks)
+        th = _plane_solve(A, bb, ridge, smoothness_penalty(layout, A.shape[0] - layout.n_cols), layout, sign)
+        v_fit = np.concatenate([vs[j][fit_mask[j]] for j in range(n_rec)])
+        return th, v_fit.min(), v_fit.max()
+
+    th_ref, _, _ = refit([np.arange(y.size) >= k0 for y, k0 in zip(ys, k0s)])
+    out = []
+    for k in range(HOLDOUT_SEGMENTS):
+        fit_mask = [np.arange(y.size) >= k0 for y, k0 in zip(ys, k0s)]
+        for j, e in enumerate(edges):
+            fit_mask[j][e[k]:e[k + 1]] = False
+        if not any(np.any(m) for m in fit_mask):
+            continue
+        th, lo, hi = refit(fit_mask)
+        for i, e in enumerate(edges):
+            a, b = int(e[k]), int(e[k + 1])
+            if b - a < 16:
+                continue
+            yhat = cols[i][a:b] @ th[:layout.n_cols] + th[-1]
+            y_in = cols[i][a:b] @ th_ref[:layout.n_cols] + th_ref[-1]
+            v = vs[i][a:b]
+            out.append({"recording": i, "start": a, "stop": b, "resid": ys[i][a:b] - yhat,
+                        "resid_in": ys[i][a:b] - y_in, "scored": (v >= lo) & (v <= hi)})
+    return out
+
+
+def history_holdout(params: dict) -> list:
+    """The held-out-history residuals computed by :func:`fit_base` (``holdout=True``), popped from ``params``."""
+    return params.pop("_holdout", [])
+
+
+def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s: float = 0.5,
+             holdout: bool = False) -> dict:
     """Fit the base model (kind ``refined`` without terms) to calibration recordings.
 
     Parameters
@@ -611,6 +678,10 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
     settle_s : float
         The first ``settle_s`` seconds of each recording [s] (the stage settling
         from an unknown state) do not enter the fits.
+    holdout : bool
+        Also compute the base's error on calibration histories it did not see
+        (:func:`_holdout_histories`), returned under ``_holdout`` (not a model
+        parameter: take it with :func:`history_holdout` before saving the model).
 
     Returns
     -------
@@ -680,6 +751,9 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
                               "(twice the band holding 99 % of the calibration's H increments); above it the "
                               "calibration says nothing and |G| is only held at most "
                               f"{G_OUT_MAX:g}")}
-    return {"fs_hz": fs0, "u_mid": mid, "u_half": half, "hysteresis": hyst,
-            "dynamics": {"b": np.asarray(Gba[0]).tolist(), "a": np.asarray(Gba[1]).tolist()},
-            "terms": {}, "base_info": info}
+    out = {"fs_hz": fs0, "u_mid": mid, "u_half": half, "hysteresis": hyst,
+           "dynamics": {"b": np.asarray(Gba[0]).tolist(), "a": np.asarray(Gba[1]).tolist()},
+           "terms": {}, "base_info": info}
+    if holdout:
+        out["_holdout"] = _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows, sign)
+    return out

@@ -1,0 +1,133 @@
+"""The base's misfit on histories it did not see, as the nuisance every candidate must exceed (round 9).
+
+A term's held-out improvement on the recordings says that the term fits something the base does not; it
+does not say that this something is an effect rather than the base's own error on a drive history the
+calibration did not show (docs/diagnose.md, round 8: nulls named a rate dependence, a bandwidth, a sensor
+curve, an offset, creep). What such an error looks like is measured on the calibration itself
+(``ident.base._holdout_histories``): each quarter of every calibration recording left out in turn
+of the plane's fit and predicted. What counts is its energy *beyond* the full fit's error on the same
+samples: the generalization gap. An effect the calibration contains (a delay, creep) is in both and cancels;
+what remains is what a history the fit did not see adds. That excess is split into three bands a term
+can take:
+
+- *level*: the mean over the held-out history (an unknown initial state, a misfit of the loop's centre);
+- *slow*: the rest below ``1 / block_s`` (slower than the test's blocks: a misfit that follows the history
+  for seconds);
+- *fast*: the rest.
+
+A candidate is credited with its held-out improvement less, per band, the part the misfit there could
+explain: ``credited = dE - sum_b clip(dE_b, 0, M_b)`` (energies per sample), and its *credited ratio* ``sqrt(1 - credited / MSE_before)`` must
+meet the same ``RATIO_MAX`` as its held-out ratio. An effect the base's misfit could explain comes out
+``none``; the price is that an effect smaller than that misfit in the band where it acts is not named.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal as sig
+
+__all__ = ["BANDS", "split_bands", "band_energy", "base_misfit", "credited_ratio"]
+
+BANDS = ("level", "slow", "fast")
+
+
+def split_bands(r, dt: float, f_slow_hz: float) -> np.ndarray:
+    """(3, n) components of a contiguous residual ``r`` [um]: its mean, the rest low-passed (zero phase,
+    second order Butterworth) at ``f_slow_hz``, and what is left. They sum to ``r``."""
+    r = np.asarray(r, float)
+    out = np.zeros((3, r.size))
+    if r.size == 0:
+        return out
+    out[0] = r.mean()
+    d = r - out[0]
+    if r.size > 64 and f_slow_hz < 0.4 / dt:
+        sos = sig.butter(2, f_slow_hz, fs=1.0 / dt, output="sos")
+        out[1] = sig.sosfiltfilt(sos, d)
+    out[2] = d - out[1]
+    return out
+
+
+def band_energy(parts, rec, dt: float, f_slow_hz: float) -> np.ndarray:
+    """Summed squared band components (3,) [um^2] of the residual ``parts`` (1-d, concatenated recordings
+    labelled by ``rec``; each recording's samples contiguous)."""
+    e = np.zeros(3)
+    for i in np.unique(rec):
+        e += np.sum(split_bands(parts[rec == i], dt, f_slow_hz) ** 2, axis=1)
+    return e
+
+
+def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float) -> dict | None:
+    """The base's error on held-out calibration histories, pooled: per band its energy per sample
+    ``mse_um2`` (the fast band less the noise), the noise, and per history its RMS and its bands.
+
+    Parameters
+    ----------
+    holdout : list of dict
+        ``ident.base._holdout_histories``'s result.
+    names : list of str
+        The calibration recordings' names.
+    dt : float
+        Sample period [s].
+    f_slow_hz : float
+        The level/slow band's upper edge [Hz].
+
+    Returns
+    -------
+    dict or None
+        None when no history was scored.
+    """
+    tot, tot_in = np.zeros(3), np.zeros(3)
+    n_tot, d2, n_d = 0, 0.0, 0
+    rows = []
+    for h in holdout:
+        r, m = np.asarray(h["resid"], float), np.asarray(h["scored"], bool)
+        if np.sum(m) < 16:
+            continue
+        parts = split_bands(r, dt, f_slow_hz)
+        e = np.sum(parts[:, m] ** 2, axis=1)
+        e_in = np.sum(split_bands(h["resid_in"], dt, f_slow_hz)[:, m] ** 2, axis=1)
+        n = int(np.sum(m))
+        dd = np.diff(r)[m[1:] & m[:-1]]
+        d2 += float(np.sum(dd ** 2))
+        n_d += dd.size
+        tot += e
+        tot_in += e_in
+        n_tot += n
+        rows.append({"recording": names[h["recording"]], "samples": [int(h["start"]), int(h["stop"])],
+                     "scored_fraction": float(np.mean(m)), "rms_um": float(np.sqrt(np.mean(r[m] ** 2))),
+                     "rms_seen_um": float(np.sqrt(e_in.sum() / n)),
+                     "level_um": float(parts[0, 0]), "slow_rms_um": float(np.sqrt(e[1] / n)),
+                     "fast_rms_um": float(np.sqrt(e[2] / n))})
+    if n_tot == 0:
+        return None
+    noise2 = 0.5 * d2 / max(n_d, 1)
+    excess = np.maximum(tot - tot_in, 0.0) / n_tot
+    return {"method": ("each quarter of every calibration recording left out of the plane's fit in turn, the "
+                       "plane's knot values refitted on the rest (size and dynamics kept), the recordings simulated "
+                       "and scored on the left-out quarter where its drive lies within the range the refit saw; "
+                       "the misfit is the energy per sample beyond the full fit's on the same samples"),
+            "slow_hz": f_slow_hz, "rms_um": float(np.sqrt(tot.sum() / n_tot)),
+            "rms_seen_um": float(np.sqrt(tot_in.sum() / n_tot)), "noise_rms_um": float(np.sqrt(noise2)),
+            "mse_um2": dict(zip(BANDS, map(float, excess))), "histories": rows}
+
+
+def credited_ratio(e_before, correction, rec, dt: float, misfit: dict | None) -> tuple:
+    """(credited ratio, per band dict) of a candidate: its held-out improvement per band beyond the base's
+    misfit energy there (module docstring). ``e_before``: the residual before the term (nested), ``correction``:
+    the term's held-out predicted correction, both over the used samples, ``rec`` their recording labels.
+    Without a misfit estimate the ratio is the plain held-out ratio."""
+    n = max(e_before.size, 1)
+    mse_b = float(np.sum(e_before ** 2)) / n
+    if mse_b <= 0:
+        return 1.0, {}
+    f = misfit["slow_hz"] if misfit else 1.0
+    eb = band_energy(e_before, rec, dt, f) / n
+    ea = band_energy(e_before - correction, rec, dt, f) / n
+    m = np.array([misfit["mse_um2"][b] for b in BANDS]) if misfit else np.zeros(3)
+    gain = eb - ea
+    # the whole improvement less, per band, the part of it the misfit there could explain (a band the term
+    # makes worse counts against it in full)
+    total = mse_b - float(np.sum((e_before - correction) ** 2)) / n
+    credited = total - float(np.sum(np.clip(gain, 0.0, m)))
+    ratio = float(np.sqrt(max(1.0 - credited / mse_b, 0.0)))
+    return ratio, {b: {"improvement_um2": float(g), "misfit_um2": float(x)} for b, g, x in zip(BANDS, gain, m)}
