@@ -158,16 +158,20 @@ def test_play_order_refused():
 
 
 @pytest.mark.parametrize("seed", range(5))
-def test_plane_parts_match_reference(seed):
+def test_plane_parts_match_reference(seed, monkeypatch):
+    monkeypatch.setattr(hy, "_PLANE_BLOCK", 1000)   # many blocks, runs split across their boundaries
     rng = np.random.default_rng(100 + seed)
     v = _drive(rng, 12_000)
     for even, bw in ((True, True), (False, False)):
         hp = _plane(rng, even=even, bw=bw)
         hy._STATE_CACHE.clear()
-        h, hyst = hy.plane_parts(hp, v)
+        h, hyst = hy.plane_parts(hp, v)          # states computed block by block, not cached
         rh, rhyst = ref_plane_parts(hp, v)
         _close(h, rh)
         _close(hyst, rhyst)
+        hy.play_states(v, hp["r"], hp["v_rest"])   # states cached: plane_parts takes them from the cache
+        h2, hyst2 = hy.plane_parts(hp, v)
+        assert np.array_equal(h2, h) and np.array_equal(hyst2, hyst)
         # channels and groups sum to H
         _close(hy.hysteresis_channels(hp, v).sum(axis=1), rh)
         _close(hy.hysteresis_groups(hp, v).sum(axis=1), rh)
