@@ -15,7 +15,7 @@ from scipy import signal
 __all__ = ["filt", "lowpass", "lowpass_tau", "mode_filter", "slew_limit", "drive_rate", "RATE_CUTOFF_HZ"]
 
 RATE_CUTOFF_HZ = 50.0
-_SLEW_SCALAR = 12   # slew_limit: ramp steps taken one by one before the rest is taken as an array
+_SLEW_SCALAR = 32   # slew_limit: ramp steps taken one by one before the rest is taken as an array
 
 
 def filt(b, a, x) -> np.ndarray:
