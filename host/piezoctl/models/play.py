@@ -131,18 +131,19 @@ def _classical_by_runs(u, r, f, out):
         starts += (ch + 1).tolist()     # the first sample moved in the new direction starts the run
     starts.append(T)
     neg_r = -r
+    ul = u.tolist()
     for a0, b0 in zip(starts[:-1], starts[1:]):
-        first = np.maximum(u[a0] - r, np.minimum(u[a0] + r, f))
-        if b0 - a0 == 1:
-            out[a0] = first
+        # in a nondecreasing run u(k) - r >= u(i) - r, so max(u(k) - r, F(i)) = max(u(k) - r, min(u(i) + r, F(i-1)))
+        # exactly (rounding is monotone): the run's first output needs no separate max (and the mirror image
+        # for a nonincreasing run); the run's block of out holds u -/+ r, then the max/min in place
+        seg, ob = u[a0:b0, None], out[a0:b0]
+        if ul[b0 - 1] >= ul[a0]:
+            m = np.minimum(ul[a0] + r, f)
+            np.add(seg, neg_r, out=ob)
+            np.maximum(ob, m, out=ob)
         else:
-            # in place: the run's block of out holds u -/+ r, then its max/min with F(i) (no temporaries)
-            seg, ob = u[a0:b0, None], out[a0:b0]
-            if u[b0 - 1] >= u[a0]:
-                np.add(seg, neg_r, out=ob)
-                np.maximum(ob, first, out=ob)
-            else:
-                np.add(seg, r, out=ob)
-                np.minimum(ob, first, out=ob)
+            m = np.maximum(ul[a0] + neg_r, f)
+            np.add(seg, r, out=ob)
+            np.minimum(ob, m, out=ob)
         f = out[b0 - 1]
     return out
