@@ -130,20 +130,14 @@ def _classical_by_runs(u, r, f, out):
         ch = nz[np.flatnonzero(s_nz[1:] != s_nz[:-1]) + 1]
         starts += (ch + 1).tolist()     # the first sample moved in the new direction starts the run
     starts.append(T)
-    neg_r = -r
-    ul = u.tolist()
     for a0, b0 in zip(starts[:-1], starts[1:]):
         # in a nondecreasing run u(k) - r >= u(i) - r, so max(u(k) - r, F(i)) = max(u(k) - r, min(u(i) + r, F(i-1)))
         # exactly (rounding is monotone): the run's first output needs no separate max (and the mirror image
-        # for a nonincreasing run); the run's block of out holds u -/+ r, then the max/min in place
-        seg, ob = u[a0:b0, None], out[a0:b0]
-        if ul[b0 - 1] >= ul[a0]:
-            m = np.minimum(ul[a0] + r, f)
-            np.add(seg, neg_r, out=ob)
-            np.maximum(ob, m, out=ob)
+        # for a nonincreasing run)
+        seg, ua = u[a0:b0, None], u[a0]
+        if u[b0 - 1] >= ua:
+            np.maximum(seg - r, np.minimum(ua + r, f), out=out[a0:b0])
         else:
-            m = np.maximum(ul[a0] + neg_r, f)
-            np.add(seg, r, out=ob)
-            np.minimum(ob, m, out=ob)
+            np.minimum(seg + r, np.maximum(ua - r, f), out=out[a0:b0])
         f = out[b0 - 1]
     return out
