@@ -172,9 +172,16 @@ def test_plane_parts_match_reference(seed, monkeypatch):
         hy.play_states(v, hp["r"], hp["v_rest"])   # states cached: plane_parts takes them from the cache
         h2, hyst2 = hy.plane_parts(hp, v)
         assert np.array_equal(h2, h) and np.array_equal(hyst2, hyst)
-        # channels and groups sum to H
-        _close(hy.hysteresis_channels(hp, v).sum(axis=1), rh)
-        _close(hy.hysteresis_groups(hp, v).sum(axis=1), rh)
+        # channels and groups sum to H; the groups are the channels summed by group (the formula before round 9)
+        C = hy.hysteresis_channels(hp, v)
+        _close(C.sum(axis=1), rh)
+        r = np.asarray(hp["r"])
+        n = r.size
+        ref_groups = [C[:, np.flatnonzero(r == 0)].sum(axis=1), C[:, np.flatnonzero(r > 0)].sum(axis=1)] + ([C[:, n]] if bw else [])
+        G = hy.hysteresis_groups(hp, v)
+        assert G.shape == (v.size, len(ref_groups))
+        for g, rg in zip(G.T, ref_groups):
+            _close(g, rg)
 
 
 def test_state_cache_is_exact_under_crc_collisions(monkeypatch):

@@ -415,17 +415,24 @@ def hysteresis_groups(hp: dict, v) -> np.ndarray:
     refit of the base's own flexibility: the reversible gain and the loop width. A gain per play threshold
     (up to 16) is so flexible that it also stands in for a session offset over the drive range a recording
     covers."""
-    C = hysteresis_channels(hp, v)
     if hp.get("type", "pi") != "plane":
-        return C
-    n = len(hp["values"])
-    r0 = [j for j, r in enumerate(hp["r"]) if float(r) == 0.0]
-    rest = [j for j in range(n) if j not in r0]
-    cols = [C[:, r0].sum(axis=1)] if r0 else []
-    if rest:
-        cols.append(C[:, rest].sum(axis=1))
-    if hp.get("bw"):
-        cols.append(C[:, n])
+        return hysteresis_channels(hp, v)
+    # accumulated group by group (not the channels' (T, n) matrix summed by columns: a third of the time)
+    v = np.asarray(v, float)
+    r = np.asarray(hp["r"], float)
+    P = play_states(v, r, float(hp.get("v_rest", 0.0)))
+    rev = np.zeros(v.size) if np.any(r == 0.0) else None
+    hys = np.zeros(v.size) if np.any(r != 0.0) else None
+    for j, (kn, vals) in enumerate(zip(hp["knots"], hp["values"])):
+        fj = interp_linear_ext(P[:, j], kn, vals)
+        if r[j] == 0.0:
+            rev += fj
+        else:
+            hys += fj
+    cols = [c for c in (rev, hys) if c is not None]
+    bw = hp.get("bw")
+    if bw:
+        cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0))))
     return np.column_stack(cols)
 
 
