@@ -221,7 +221,7 @@ def kernel_timings(repeat: int = 3) -> list:
     rows.append(("interp_linear_ext, 17 uneven knots",
                  _median_time(lambda: hy.interp_linear_ext(v, kn_u, vals), repeat)))
     rows.append(("hat_basis, 17 even knots", _median_time(lambda: hy.hat_basis(v, kn), repeat)))
-    rows.append(("state cache key (blake2b of the drive)",
+    rows.append(("state cache key + store (old: BLAKE2b; new: CRC-32, copy)",
                  _median_time(lambda: hy._cached_state("bench", (), v, lambda x: x[:1].copy()), repeat)))
 
     # the operator per recording (the diagnosis' longest, rev0 of s0-017, has 444,865 samples; this stretch
