@@ -147,9 +147,10 @@ def _child(case_dir: str, out_dir: str, attribute: bool = False, evict: bool = F
                       "base_nrmse": h.get("base_nrmse"), "refined_nrmse": h.get("refined_nrmse")}))
 
 
-def _make_case(seed: int, index: int, scale: float, root: str) -> str:
+def _make_case(seed: int, index: int, scale: float, root: str, n: int = 20) -> str:
+    """Writes foreign case ``index`` of an ``n``-case plan (``tools/bench-diagnose --foreign --n n``)."""
     from ..foreign.cases import case_plan, draw_case, write_case
-    plan = case_plan(max(60, index + 1))
+    plan = case_plan(max(n, index + 1))
     case = draw_case(seed, index, plan[index], scale=scale)
     d = os.path.join(root, case.case_id)
     write_case(case, d)
@@ -253,6 +254,8 @@ def main(argv=None) -> int:
     ap.add_argument("--case", default=None, help="a case directory with cal*.csv and rev*.csv (default: generate)")
     ap.add_argument("--seed", type=int, default=0, help="foreign case seed (default 0)")
     ap.add_argument("--index", type=int, default=17, help="foreign case index (default 17: thermal drift)")
+    ap.add_argument("--n", type=int, default=20,
+                    help="cases in the plan the index refers to (default 20, as the development runs of round 5)")
     ap.add_argument("--scale", type=float, default=1.0, help="foreign case duration factor (default 1)")
     ap.add_argument("--keep", default=None, help="write the generated case and the output here")
     ap.add_argument("--repeat", type=int, default=3, help="runs per kernel timing (median; default 3)")
@@ -275,7 +278,7 @@ def main(argv=None) -> int:
     print(f"bench-diagnose-speed at {commit or '?'}, load average {load:.1f} on {os.cpu_count()} cores", flush=True)
     if not a.no_diagnose:
         root = a.keep or tempfile.mkdtemp(prefix="bench-diagnose-speed-")
-        d = a.case or _make_case(a.seed, a.index, a.scale, root)
+        d = a.case or _make_case(a.seed, a.index, a.scale, root, a.n)
         cal, rev = _case_files(d)
         n = 0
         for p in cal + rev:
