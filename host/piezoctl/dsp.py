@@ -15,6 +15,7 @@ from scipy import signal
 __all__ = ["filt", "lowpass", "lowpass_tau", "mode_filter", "slew_limit", "drive_rate", "RATE_CUTOFF_HZ"]
 
 RATE_CUTOFF_HZ = 50.0
+_SLEW_SCALAR = 32   # slew_limit: ramp steps taken one by one before the rest is taken as an array
 
 
 def filt(b, a, x) -> np.ndarray:
@@ -53,7 +54,10 @@ def mode_filter(freq_hz: float, damping: float, dt: float) -> tuple[np.ndarray, 
 def slew_limit(u, max_step: float) -> np.ndarray:
     """Limit the change of ``u`` per sample to ``max_step`` (the amplifier's slew rate times dt).
 
-    Only the stretches where the limit acts are stepped in Python; the rest is copied.
+    The recursion ``out[k] = out[k-1] + clip(u[k] - out[k-1], -max_step, max_step)``, evaluated by stretches:
+    samples where ``u`` moves by at most ``max_step`` are copied; where the limit acts, the output is a ramp,
+    computed in chunks as a cumulative sum of steps (``np.cumsum`` adds in order, so every ramp value is the
+    same float the sample-by-sample recursion gives) and cut where ``u`` comes back within one step of it.
     """
     u = np.asarray(u, dtype=float)
     out = u.copy()
@@ -65,23 +69,44 @@ def slew_limit(u, max_step: float) -> np.ndarray:
     n = u.size
     i = int(viol[0])
     prev = float(out[i - 1])
+    scalar = _SLEW_SCALAR       # steps left before a ramp is taken as an array
+    chunk = 16
     while i < n:
-        d = u[i] - prev
-        if d > max_step:
-            prev += max_step
-        elif d < -max_step:
-            prev -= max_step
-        else:
-            prev = float(u[i])
-            out[i] = prev
+        d = float(u[i]) - prev
+        up = d > max_step
+        if not (up or d < -max_step):
+            # caught up: the output follows u until the next sample where u itself jumps by more than a step
+            out[i] = u[i]
             k = int(np.searchsorted(viol, i, side="right"))
             if k >= viol.size:
                 break
             i = int(viol[k])
             prev = float(out[i - 1])
+            scalar, chunk = _SLEW_SCALAR, 16
             continue
-        out[i] = prev
-        i += 1
+        step = max_step if up else -max_step
+        if scalar > 0:          # a short ramp (a chirp's fast half-cycle): scalar steps cost less than array calls
+            prev += step
+            out[i] = prev
+            i += 1
+            scalar -= 1
+            continue
+        # a long ramp from prev: candidate values prev + step, prev + 2 step, ... (summed in order)
+        m = min(chunk, n - i)
+        ramp = np.full(m + 1, step)
+        ramp[0] = prev
+        np.cumsum(ramp, out=ramp)
+        # the ramp holds at sample i + q while u[i + q] is beyond a step from the value before it (ramp[q])
+        dq = u[i:i + m] - ramp[:m]
+        go = dq > max_step if up else dq < -max_step
+        stop = m if go.all() else int(np.argmin(go))
+        out[i:i + stop] = ramp[1:stop + 1]
+        prev = float(ramp[stop])
+        i += stop
+        if stop == m:
+            chunk = min(4 * chunk, 1 << 16)
+        else:
+            scalar, chunk = _SLEW_SCALAR, 16
     return out
 
 

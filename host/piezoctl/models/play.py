@@ -25,7 +25,7 @@ __all__ = ["play_outputs"]
 _BLOCK = 4096
 
 
-def play_outputs(u, r, a=1.0, y0=None) -> np.ndarray:
+def play_outputs(u, r, a=1.0, y0=None, order="C") -> np.ndarray:
     """Outputs of a bank of play operators at every sample.
 
     Parameters
@@ -42,6 +42,10 @@ def play_outputs(u, r, a=1.0, y0=None) -> np.ndarray:
         Operator outputs before the first sample, ``F(-1)`` [input unit].
         ``None`` (default) means 0 for every operator (relaxed, demagnetized
         state).
+    order : {"C", "F"}, optional
+        Memory layout of the result: ``"C"`` (default) keeps each sample's
+        outputs together, ``"F"`` each operator's (its column contiguous,
+        for kernels that read one operator at a time). Values are the same.
 
     Returns
     -------
@@ -83,9 +87,11 @@ def play_outputs(u, r, a=1.0, y0=None) -> np.ndarray:
     f = np.zeros(n) if y0 is None else np.array(y0, dtype=np.float64).reshape(-1)
     if f.shape != (n,):
         raise ValueError(f"y0 must have shape ({n},), got {f.shape}")
+    if order not in ("C", "F"):
+        raise ValueError(f"order must be 'C' or 'F', got {order!r}")
 
     T = u.size
-    out = np.empty((T, n))
+    out = np.empty((T, n), order=order)
     if T == 0:
         return out
     if np.all(a == 1.0):
@@ -125,14 +131,13 @@ def _classical_by_runs(u, r, f, out):
         starts += (ch + 1).tolist()     # the first sample moved in the new direction starts the run
     starts.append(T)
     for a0, b0 in zip(starts[:-1], starts[1:]):
-        first = np.maximum(u[a0] - r, np.minimum(u[a0] + r, f))
-        seg = u[a0:b0, None]
-        up = b0 - a0 > 1 and u[b0 - 1] >= u[a0]
-        if b0 - a0 == 1:
-            out[a0] = first
-        elif up:
-            np.maximum(seg - r, first, out=out[a0:b0])
+        # in a nondecreasing run u(k) - r >= u(i) - r, so max(u(k) - r, F(i)) = max(u(k) - r, min(u(i) + r, F(i-1)))
+        # exactly (rounding is monotone): the run's first output needs no separate max (and the mirror image
+        # for a nonincreasing run)
+        seg, ua = u[a0:b0, None], u[a0]
+        if u[b0 - 1] >= ua:
+            np.maximum(seg - r, np.minimum(ua + r, f), out=out[a0:b0])
         else:
-            np.minimum(seg + r, first, out=out[a0:b0])
+            np.minimum(seg + r, np.maximum(ua - r, f), out=out[a0:b0])
         f = out[b0 - 1]
     return out
