@@ -429,6 +429,8 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
                 f"see explains: credited beyond that error, the ratio is {cr:.2f} (> {sg.RATIO_MAX}; "
                 + ", ".join(f"{b} {np.sqrt(max(x['improvement_um2'], 0)):.4f} um against "
                             f"{np.sqrt(x['misfit_um2']):.4f} um" for b, x in bands.items()) + ")")
+    for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
+        c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
     return Candidate(term=term, ratio=na / nb if nb > 0 else 1.0, fold_ratios=fold_ratios, nrmse_before=nb,
                      nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
