@@ -105,3 +105,17 @@ def test_none_reports_the_base_residual_and_its_misfit_by_band():
     assert e["name"] == "none" and e["where"]["residual"] is bands
     assert abs(e["where"]["base_misfit"]["fast_rms_um"] - 0.02) < 1e-12
     assert "did not see" in e["evidence"] and "0.0500 um RMS" in e["evidence"]
+
+
+def test_peak_frequencies_with_a_recording_shorter_than_a_segment():
+    """Residuals of different lengths (one shorter than 4096 samples) share one frequency grid: the
+    mode's line is found, not a crash on spectra of different lengths."""
+    import numpy as np
+    from piezoctl.diagnose.locate import peak_frequencies
+    dt = 1e-4
+    rng = np.random.default_rng(3)
+    t = np.arange(20000) * dt
+    long_e = 1e-3 * rng.standard_normal(t.size) + 0.05 * np.sin(2 * np.pi * 1500.0 * t)
+    short_e = 1e-3 * rng.standard_normal(1000) + 0.05 * np.sin(2 * np.pi * 1500.0 * t[:1000])
+    peaks = peak_frequencies([long_e, short_e], dt)
+    assert peaks and abs(peaks[0] - 1500.0) < 20.0, peaks

@@ -63,15 +63,16 @@ def _bands(e, dt, n_top=2):
 def peak_frequencies(es, dt, f_min: float = 80.0, n_peaks: int = 3) -> list[float]:
     """Frequencies [Hz] of narrow peaks of the residual spectrum above ``f_min``."""
     fs = 1.0 / dt
-    ps = []
-    f = None
-    for e in es:
-        if e.size < 256:
-            continue
-        f, p = sig.welch(e, fs=fs, nperseg=min(e.size, 4096))
-        ps.append(p)
-    if not ps:
+    long_enough = [e for e in es if e.size >= 256]
+    if not long_enough:
         return []
+    # one segment length for all: a recording shorter than 4096 samples would give another frequency grid
+    nper = min(4096, min(e.size for e in long_enough))
+    f = None
+    ps = []
+    for e in long_enough:
+        f, p = sig.welch(e, fs=fs, nperseg=nper)
+        ps.append(p)
     p = np.mean(ps, axis=0)
     m = (f > f_min) & (f < 0.45 * fs)
     if np.sum(m) < 8:
