@@ -478,10 +478,7 @@ def run_wave(args) -> int:
         raise CliError(f"--learn {args.learn}: give 1..{LEARN_MAX_TRIALS} trials")
     if args.learn_cut is not None and args.learn is None:
         raise CliError("--learn-cut applies to --learn")
-    sigs = parse_signals(args.signals)
-    check_writable(args.record, "--record")
-    check_writable(args.plot, "--plot", PLOT_SUFFIXES)
-    ctl = connect(args.port)
+    sigs, ctl = _capture_checked(args)
     tick = float(ctl.identity.tick_hz)
     spec = plan_wave(args, tick, ctl.scale, interface.HOLDING_REGISTERS["wave_levels"][2])
     f_cut = _learn_plan(args, spec, ctl, tick) if args.learn is not None else None
@@ -516,6 +513,16 @@ def run_wave(args) -> int:
     result["running"] = bool(ctl.status()["wave_running"])
     emit(args, result, lines)
     return 0
+
+
+def _capture_checked(args):
+    """The signals to record and the connected controller, once the output files are known writable
+    (checked before anything is written to the controller)."""
+    from ..device import connect
+    sigs = parse_signals(args.signals)
+    check_writable(args.record, "--record")
+    check_writable(args.plot, "--plot", PLOT_SUFFIXES)
+    return sigs, connect(args.port)
 
 
 def _start(args, ctl, sigs: list, rec_s, result: dict, lines: list) -> None:
@@ -587,7 +594,7 @@ _DEFINING = ("kind", "amplitude", "offset", "freq_end", "tones", "file", "hold")
 def _run_saved(args) -> int:
     """``--saved``: start the wave the controller holds (refused when it holds none)."""
     from .. import interface
-    from ..device import PARAMS_WAVE_NAMES, connect
+    from ..device import PARAMS_WAVE_NAMES
 
     given = [o for o in _DEFINING + ("learn", "learn_cut") if getattr(args, o) is not None] + \
         (["volts"] if args.volts else []) + (["cycles"] if args.cycles else []) + (["stop"] if args.stop else [])
@@ -596,10 +603,7 @@ def _run_saved(args) -> int:
                        f"--{', --'.join(g.replace('_', '-') for g in given)}")
     if args.record is not None and args.duration is None:
         raise CliError("--saved --record needs --duration (the saved wave's length is not known here)")
-    sigs = parse_signals(args.signals)
-    check_writable(args.record, "--record")
-    check_writable(args.plot, "--plot", PLOT_SUFFIXES)
-    ctl = connect(args.port)
+    sigs, ctl = _capture_checked(args)
     st = ctl.status()
     kind = ctl.client.read_holding(interface.HOLDING_REGISTERS["wave_kind"][0])[0]
     if kind == 0:
