@@ -539,10 +539,40 @@ static uint16_t holding_word(const piezo_regmap_t *m, uint16_t addr)
     return w;
 }
 
+/* The wave section's registers, in record order, for a wave of nl levels:
+ * the one layout the save, its length and the load walk. */
+typedef struct {
+    uint16_t addr;
+    uint32_t words;
+} reg_span_t;
+#define WAVE_SPANS 4u
+
+static void wave_spans(uint32_t nl, reg_span_t *sp)
+{
+    sp[0].addr = PIEZO_HOLDING_WAVE_KIND;
+    sp[0].words = WAVE_REG_WORDS; /* holds wave_n_levels: nl of the spans below */
+    sp[1].addr = PIEZO_HOLDING_WAVE_TONES;
+    sp[1].words = PIEZO_HOLDING_WAVE_TONES_COUNT;
+    sp[2].addr = PIEZO_HOLDING_WAVE_LEVELS;
+    sp[2].words = nl;
+    sp[3].addr = PIEZO_HOLDING_WAVE_DURATIONS;
+    sp[3].words = 2u * nl;
+}
+
+/* Words of the wave's register spans (without the learned feedforward). */
+static uint32_t wave_span_words(const reg_span_t *sp)
+{
+    uint32_t n = 0u;
+    for (unsigned i = 0; i < WAVE_SPANS; i++) {
+        n += sp[i].words;
+    }
+    return n;
+}
+
 typedef struct {
     const piezo_regmap_t *m;
     uint16_t sections;
-    uint16_t n_levels;
+    reg_span_t spans[WAVE_SPANS];
     const piezo_ctl_wave_ff_t *ff;
     uint32_t last_k; /* the word computed last (each word serves two bytes) */
     uint16_t last_w;
@@ -551,7 +581,7 @@ typedef struct {
 static uint16_t save_word(const save_ctx_t *s, uint32_t k)
 {
     const piezo_regmap_t *m = s->m;
-    uint32_t nl = s->n_levels, n_ff = s->ff != NULL ? s->ff->n : 0u;
+    uint32_t n_ff = s->ff != NULL ? s->ff->n : 0u;
     if (k < 2u) {
         return (uint16_t)(PIEZO_INTERFACE_CRC32 >> (16u * k));
     }
@@ -566,22 +596,12 @@ static uint16_t save_word(const save_ctx_t *s, uint32_t k)
         return holding_word(m, (uint16_t)(PIEZO_PARAMS_FIRST + k));
     }
     k -= PIEZO_PARAMS_WORDS;
-    if (k < WAVE_REG_WORDS) {
-        return holding_word(m, (uint16_t)(PIEZO_HOLDING_WAVE_KIND + k));
+    for (unsigned i = 0; i < WAVE_SPANS; i++) {
+        if (k < s->spans[i].words) {
+            return holding_word(m, (uint16_t)(s->spans[i].addr + k));
+        }
+        k -= s->spans[i].words;
     }
-    k -= WAVE_REG_WORDS;
-    if (k < PIEZO_HOLDING_WAVE_TONES_COUNT) {
-        return holding_word(m, (uint16_t)(PIEZO_HOLDING_WAVE_TONES + k));
-    }
-    k -= PIEZO_HOLDING_WAVE_TONES_COUNT;
-    if (k < nl) {
-        return holding_word(m, (uint16_t)(PIEZO_HOLDING_WAVE_LEVELS + k));
-    }
-    k -= nl;
-    if (k < 2u * nl) {
-        return holding_word(m, (uint16_t)(PIEZO_HOLDING_WAVE_DURATIONS + k));
-    }
-    k -= 2u * nl;
     if (k == 0u) {
         return (uint16_t)n_ff;
     }
@@ -742,6 +762,7 @@ static int compose_all(piezo_regmap_t *m, reader_t *r, uint16_t addr, uint32_t n
 static uint16_t wave_section(piezo_regmap_t *m, reader_t *r, int apply_now)
 {
     piezo_ctl_t *c = m->ctl;
+    reg_span_t sp[WAVE_SPANS];
     uint32_t start = r->off, nl, n_ff, freq;
     if (compose(m, r, PIEZO_HOLDING_WAVE_KIND, WAVE_REG_WORDS, 0) != 0) {
         return PIEZO_PARAMS_REASON_OUT_OF_RANGE;
@@ -752,14 +773,15 @@ static uint16_t wave_section(piezo_regmap_t *m, reader_t *r, int apply_now)
         again.off = start + 2u * (PIEZO_HOLDING_WAVE_N_LEVELS - PIEZO_HOLDING_WAVE_KIND);
         nl = next_word(&again);
     }
+    wave_spans(nl, sp);
     if (apply_now) {
         r->off = start;
-        (void)compose(m, r, PIEZO_HOLDING_WAVE_KIND, WAVE_REG_WORDS, 1);
+        (void)compose(m, r, sp[0].addr, sp[0].words, 1);
     }
-    if (compose_all(m, r, PIEZO_HOLDING_WAVE_TONES, PIEZO_HOLDING_WAVE_TONES_COUNT, apply_now) != 0 ||
-        compose_all(m, r, PIEZO_HOLDING_WAVE_LEVELS, nl, apply_now) != 0 ||
-        compose_all(m, r, PIEZO_HOLDING_WAVE_DURATIONS, 2u * nl, apply_now) != 0) {
-        return PIEZO_PARAMS_REASON_OUT_OF_RANGE;
+    for (unsigned i = 1; i < WAVE_SPANS; i++) {
+        if (compose_all(m, r, sp[i].addr, sp[i].words, apply_now) != 0) {
+            return PIEZO_PARAMS_REASON_OUT_OF_RANGE;
+        }
     }
     n_ff = next_word(r);
     freq = (uint32_t)next_word(r) << 16;
@@ -854,13 +876,12 @@ static uint16_t params_save(piezo_regmap_t *m)
         return PIEZO_PARAMS_REASON_STORAGE_FAILED;
     }
     s.m = m;
-    s.n_levels = c->wave_cfg.n_levels;
+    wave_spans(c->wave_cfg.n_levels, s.spans);
     s.ff = piezo_ctl_wave_ff_played(c);
     s.last_k = UINT32_MAX;
     s.last_w = 0u;
     len = 2u * (PARAMS_HEAD_WORDS + PIEZO_PARAMS_WORDS);
-    wave_len = 2u * (WAVE_REG_WORDS + PIEZO_HOLDING_WAVE_TONES_COUNT + 3u * (uint32_t)s.n_levels +
-                     WAVE_FF_HEAD_WORDS + (s.ff != NULL ? s.ff->n : 0u));
+    wave_len = 2u * (wave_span_words(s.spans) + WAVE_FF_HEAD_WORDS + (s.ff != NULL ? s.ff->n : 0u));
     s.sections = (len + wave_len <= piezo_pstore_capacity(&m->pstore)) ? PARAMS_SECTION_WAVE : 0u;
     if (s.sections) {
         len += wave_len;
