@@ -57,15 +57,9 @@
 #ifndef PIEZO_CS_MAX_RBF
 #define PIEZO_CS_MAX_RBF 16u
 #endif
-#ifndef PIEZO_CS_MAX_CPI
 #define PIEZO_CS_MAX_CPI 32u
-#endif
-#ifndef PIEZO_CS_MAX_UPI_R
 #define PIEZO_CS_MAX_UPI_R 16u
-#endif
-#ifndef PIEZO_CS_MAX_UPI_A
 #define PIEZO_CS_MAX_UPI_A 8u
-#endif
 #define PIEZO_CS_MAX_POLY PIEZO_EUPI_MAX_POLY
 
 typedef struct {
@@ -113,8 +107,8 @@ typedef struct {
     int32_t zo_q15[PIEZO_CS_MAX_KP_OPS];
     int16_t psi_q15[PIEZO_CS_MAX_RKP_OPS];
     int32_t w_q24[PIEZO_CS_MAX_RKP_OPS];
-    int32_t inv_state_q15[PIEZO_EUPI_INV_STATE_LEN(PIEZO_CS_MAX_CPI, PIEZO_CS_MAX_UPI_R, PIEZO_CS_MAX_UPI_A)];
-    int64_t inv_work_q39[PIEZO_EUPI_INV_WORK_LEN(PIEZO_CS_MAX_CPI, PIEZO_CS_MAX_UPI_R, PIEZO_CS_MAX_UPI_A)];
+    int32_t inv_state_q15[PIEZO_CS_MAX_CPI + PIEZO_CS_MAX_UPI_R * PIEZO_CS_MAX_UPI_A];
+    int64_t inv_work_q39[PIEZO_CS_MAX_UPI_R * PIEZO_CS_MAX_UPI_A];
 } piezo_ff_state_t;
 
 /* The commit sweep (see above). */

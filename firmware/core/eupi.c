@@ -81,19 +81,13 @@ int piezo_eupi_bind_banks(struct piezo_play *cpi, const struct piezo_play_coef *
     const size_t n_cpi = cpi_coef->n_r;
     struct piezo_play c, u;
     int rc;
-    if (n_cpi > PIEZO_PLAY_MAX_OPS) {
+    if (n_cpi > PIEZO_PLAY_MAX_OPS || state_len < n_cpi) {
         return PIEZO_ERANGE;
     }
-    const size_t cs = PIEZO_PLAY_STATE_LEN(n_cpi, 0u), cw = PIEZO_PLAY_WORK_LEN(n_cpi, 0u);
-    if (state_q15 == NULL || work_q39 == NULL) {
-        return PIEZO_EINVAL;
-    }
-    if (state_len < cs || work_len < cw) {
-        return PIEZO_ERANGE;
-    }
-    rc = piezo_play_init(&c, cpi_coef, state_q15, cs, work_q39, cw);
+    rc = piezo_play_init(&c, cpi_coef, state_q15, n_cpi, NULL, 0u);
     if (rc == PIEZO_OK) {
-        rc = piezo_play_init(&u, upi_coef, state_q15 + cs, state_len - cs, work_q39 + cw, work_len - cw);
+        rc = piezo_play_init(&u, upi_coef, state_q15 + n_cpi, state_len - n_cpi, work_q39,
+                             work_q39 == NULL ? 0u : work_len);
     }
     if (rc != PIEZO_OK) {
         return rc;

@@ -52,9 +52,8 @@
 
 /* Entries of the caller's state (int32) and work (int64) arrays. */
 #define PIEZO_EUPI_STATE_LEN(n_cpi, n_upi_r, n_upi_a) \
-    (PIEZO_PLAY_STATE_LEN(n_cpi, 0u) + PIEZO_PLAY_STATE_LEN(n_upi_r, n_upi_a))
-#define PIEZO_EUPI_WORK_LEN(n_cpi, n_upi_r, n_upi_a) \
-    (PIEZO_PLAY_WORK_LEN(n_cpi, 0u) + PIEZO_PLAY_WORK_LEN(n_upi_r, n_upi_a))
+    ((size_t)(n_cpi) + (size_t)(n_upi_r) * (size_t)(n_upi_a))
+#define PIEZO_EUPI_WORK_LEN(n_upi_r, n_upi_a) ((size_t)(n_upi_r) * (size_t)(n_upi_a))
 
 /* Coefficients: constant, may be shared. */
 struct piezo_eupi_coef {
@@ -75,7 +74,7 @@ struct piezo_eupi {
 /*
  * Check the coefficients, bind the caller's arrays and reset.
  * state_q15: PIEZO_EUPI_STATE_LEN(cpi.n_r, upi.n_r, upi.n_a) entries;
- * work_q39: PIEZO_EUPI_WORK_LEN(cpi.n_r, upi.n_r, upi.n_a) entries.
+ * work_q39: PIEZO_EUPI_WORK_LEN(upi.n_r, upi.n_a) entries (may be NULL if 0).
  * Returns PIEZO_OK, PIEZO_EINVAL, PIEZO_EORDER or PIEZO_ERANGE (play.h, plus:
  * a0 <= 0, a threshold >= 1, a negative weight, sum |p_m| > 64, a classical
  * bank with slopes or a UPI grid without, n_p > PIEZO_EUPI_MAX_POLY).
@@ -99,8 +98,8 @@ int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
 int piezo_eupi_check_upi_poly(const struct piezo_play_coef *upi,
                               const int32_t *p_q24, uint16_t n_p);
 
-/* Binds a classical bank (the start of state_q15 and work_q39) and a UPI
- * bank (the rest of both) on the caller's arrays; neither
+/* Binds a classical bank (its n_r operators at the start of state_q15) and a
+ * UPI bank (the rest of state_q15, work_q39) on the caller's arrays; neither
  * instance is written unless both bind. Returns the play.h codes. */
 int piezo_eupi_bind_banks(struct piezo_play *cpi, const struct piezo_play_coef *cpi_coef,
                           struct piezo_play *upi, const struct piezo_play_coef *upi_coef,

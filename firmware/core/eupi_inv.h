@@ -66,7 +66,7 @@
 /* Entries of the caller's state (int32) and work (int64) arrays. */
 #define PIEZO_EUPI_INV_STATE_LEN(n_cpi, n_upi_r, n_upi_a) \
     PIEZO_EUPI_STATE_LEN(n_cpi, n_upi_r, n_upi_a)
-#define PIEZO_EUPI_INV_WORK_LEN(n_cpi, n_upi_r, n_upi_a) PIEZO_EUPI_WORK_LEN(n_cpi, n_upi_r, n_upi_a)
+#define PIEZO_EUPI_INV_WORK_LEN(n_upi_r, n_upi_a) PIEZO_EUPI_WORK_LEN(n_upi_r, n_upi_a)
 
 /* Coefficients: constant, may be shared. */
 struct piezo_eupi_inv_coef {
@@ -89,7 +89,7 @@ struct piezo_eupi_inv {
 /*
  * Check the coefficients, bind the caller's arrays and reset. Array sizes as
  * PIEZO_EUPI_INV_STATE_LEN(cpi_inv.n_r, upi.n_r, upi.n_a) and
- * PIEZO_EUPI_INV_WORK_LEN(cpi_inv.n_r, upi.n_r, upi.n_a). Returns PIEZO_OK, PIEZO_EINVAL,
+ * PIEZO_EUPI_INV_WORK_LEN(upi.n_r, upi.n_a). Returns PIEZO_OK, PIEZO_EINVAL,
  * PIEZO_EORDER or PIEZO_ERANGE (see play.h and eupi.h, plus: a0' <= 0,
  * the bound on G2 exceeded).
  */

@@ -1,220 +1,50 @@
-/* A bank of CPI/UPI play operators and their weighted sum, kept as a memory
- * stack of segments per column (see play.h). */
+/* A bank of CPI/UPI play operators and their weighted sum (see play.h). */
 #include "play.h"
 
 #include <stddef.h>
 
 #include "fixed_q.h"
 
-/* Segment kinds (the segment word's bits 16 and up; bits 0-15: its first
- * operator). A segment runs from its first operator to the next deeper
- * segment's first (or n_r); the stack's bottom (index 0) holds the largest
- * thresholds. */
-#define SEG_LO 0u    /* F_i = v - r_i  (v: a past input) */
-#define SEG_HI 1u    /* F_i = v + c_i  (v: A(e) of a past input e) */
-#define SEG_ZERO 2u  /* F_i = 0 (reset) */
-#define SEG_WORD(first, kind) ((uint32_t)(first) | ((uint32_t)(kind) << 16))
-
-#define HALF24 ((int64_t)1 << 23)
-
-/* A column's block in the int32 state: segment values [n_r], segment words
- * [n_r], keys r_i + c_i [n_r], prefix sums of w [n_r + 1]; in the int64
- * work: the column words, then the prefix sums of w r and (unparallel) w c. */
-#define COL_BELOW 0 /* sum_i w_i F_i over the segments below the fresh ones (modulo 2^64) */
-#define COL_TOP 1   /* the same over the fresh ones (the last sample's) */
-#define COL_PACK 2  /* segments | LO/HI edge << 16 | fresh << 32 | last rising << 40 */
-#define COL_WORDS 3u
-
-/* c = rshift_rnd(a r, 24): the per-operator half of the upper branch. */
-static inline int32_t c_of(int32_t a_q24, int32_t r_q15)
-{
-    return (int32_t)(((int64_t)a_q24 * r_q15 + HALF24) >> 24);
-}
-
-/* A column's constants. */
-struct col {
-    const int32_t *r;
-    const int32_t *key;     /* r_i + c_i, non-decreasing */
-    const int32_t *W;       /* prefix sums of w: |W| < 2^31 (checked by init) */
-    const int64_t *WR, *WC; /* prefix sums of w r, w c (classical: WC = WR) */
-    int32_t a;
-    uint32_t n_r;
-};
-
-/* sum_i w_i F_i over operators [b, e) of a segment, modulo 2^64. */
-static inline uint64_t seg_sum(const struct col *k, uint32_t kind, int32_t v, uint32_t b, uint32_t e)
-{
-    if (kind == SEG_ZERO) {
-        return 0u;
-    }
-    const uint64_t s = (uint64_t)((int64_t)v * (k->W[e] - k->W[b]));
-    return kind == SEG_LO ? s - ((uint64_t)k->WR[e] - (uint64_t)k->WR[b])
-                          : s + ((uint64_t)k->WC[e] - (uint64_t)k->WC[b]);
-}
-
 /*
- * One sample on one column: pop the segments the input wipes out, trim the
- * one it stops in, push the new top; returns the column's new sum. Rising
- * (u > u_prev) an operator moves iff F_i + r_i < u, falling iff
- * F_i - c_i > A(u); both are monotone in i (F + r non-decreasing, F - c
- * non-increasing along the column), so the movers are a prefix.
- *
- * The segments the last sample pushed (fresh: LO(u_prev), or LO(u_prev) and
- * HI(A(u_prev))) keep their sum apart (COL_TOP). A sample that goes on in
- * the same direction re-describes all of them (each of their operators
- * either moves or already equals the new formula: rising u - r_i > u_prev -
- * r_i; falling u_prev - r_i and A(u_prev) + c_i are >= the new branch, equal
- * only where the new formula gives the same value), so they are dropped
- * without a sum; a reversal adds their sum to the rest (COL_BELOW) and walks
- * them as any other segment.
+ * The upper branch (off + a u) >> 24 in three instructions: a value x is
+ * split into its high part x >> 24 (int32) and its low 24 bits shifted to the
+ * top of a word, stored as one int64 (high part in the upper word). Then
+ * (x + y) >> 24 = xh + yh + carry of the 32-bit sum xl + yl.
  */
-static inline __attribute__((always_inline)) int64_t col_step(const struct col *k, int32_t *v, uint32_t *m,
-                                                              int64_t *cw, int32_t u, int rising,
-                                                              int classical)
+static int64_t split24(int64_t x)
 {
-    uint64_t below = (uint64_t)cw[COL_BELOW];
-    const uint64_t pack = (uint64_t)cw[COL_PACK];
-    uint32_t n = (uint32_t)pack & 0xFFFFu;
-    uint32_t q = (uint32_t)(pack >> 16) & 0xFFFFu;
-    const uint32_t nf = (uint32_t)(pack >> 32) & 0xFFu;
-    const uint32_t last_rising = (uint32_t)(pack >> 40) & 1u;
-    const uint32_t n_r = k->n_r;
-    const int32_t au = rising ? 0 : classical ? u : (int32_t)piezo_rshift_rnd64((int64_t)k->a * u, 24u);
-    if (nf != 0u) {
-        if ((uint32_t)rising == last_rising) {
-            n -= nf; /* re-described by the new top */
-        } else {
-            below += (uint64_t)cw[COL_TOP];
-        }
-    }
-    uint32_t stop; /* first operator that does not move */
-    for (;;) {
-        if (n == 0u) {
-            stop = n_r;
-            break;
-        }
-        const uint32_t s = n - 1u;
-        const uint32_t b = m[s] & 0xFFFFu, kind = m[s] >> 16;
-        const uint32_t e = s ? (m[s - 1u] & 0xFFFFu) : n_r;
-        const int32_t val = v[s];
-        uint32_t i = b;
-        if (rising) {
-            if (kind == SEG_LO) {
-                i = val < u ? e : b;
-            } else if (kind == SEG_HI) {
-                const int32_t lim = u - val;
-                while (i < e && k->key[i] < lim) {
-                    i++;
-                }
-            } else {
-                while (i < e && k->r[i] < u) {
-                    i++;
-                }
-            }
-        } else {
-            if (kind == SEG_HI) {
-                i = val > au ? e : b;
-            } else if (kind == SEG_LO) {
-                const int32_t lim = val - au;
-                while (i < e && k->key[i] < lim) {
-                    i++;
-                }
-            } else {
-                while (i < e && k->key[i] - k->r[i] < -au) { /* c_i */
-                    i++;
-                }
-            }
-        }
-        if (i == e) { /* wiped out */
-            below -= seg_sum(k, kind, val, b, e);
-            n--;
-            continue;
-        }
-        if (i > b) { /* its first operators move */
-            below -= seg_sum(k, kind, val, b, i);
-            m[s] = SEG_WORD(i, kind);
-        }
-        stop = i;
-        break;
-    }
-    uint64_t top;
-    uint32_t n_new = 0u;
-    if (rising) {
-        /* LO(u) on [0, stop) */
-        top = (uint64_t)((int64_t)u * k->W[stop]) - (uint64_t)k->WR[stop];
-        if (stop > 0u) {
-            v[n] = u;
-            m[n] = SEG_WORD(0u, SEG_LO);
-            n_new = 1u;
-        }
-    } else {
-        /* LO(u) where r_i + c_i <= u - A(u), HI(A(u)) after: the edge from
-         * the last fall's */
-        const int32_t lim = u - au;
-        q = q < stop ? q : stop;
-        while (q > 0u && k->key[q - 1u] > lim) {
-            q--;
-        }
-        while (q < stop && k->key[q] <= lim) {
-            q++;
-        }
-        const int32_t wq = k->W[q];
-        top = (uint64_t)((int64_t)u * wq + (int64_t)au * (k->W[stop] - wq)) - (uint64_t)k->WR[q] +
-              ((uint64_t)k->WC[stop] - (uint64_t)k->WC[q]);
-        if (q < stop) {
-            v[n] = au;
-            m[n] = SEG_WORD(q, SEG_HI);
-            n_new = 1u;
-        }
-        if (q > 0u) {
-            v[n + n_new] = u;
-            m[n + n_new] = SEG_WORD(0u, SEG_LO);
-            n_new++;
-        }
-    }
-    cw[COL_BELOW] = (int64_t)below;
-    cw[COL_TOP] = (int64_t)top;
-    cw[COL_PACK] = (int64_t)((uint64_t)(n + n_new) | ((uint64_t)q << 16) | ((uint64_t)n_new << 32) |
-                             ((uint64_t)(rising != 0) << 40));
-    return (int64_t)(below + top);
+    const uint32_t lo = ((uint32_t)x & 0xFFFFFFu) << 8;
+    const int32_t hi = (int32_t)(x >> 24);
+    return (int64_t)(((uint64_t)(uint32_t)hi << 32) | lo);
 }
 
-static inline __attribute__((always_inline)) void col_bind(const struct piezo_play *p, size_t j, struct col *k,
-                                                          int32_t **v, uint32_t **m, int64_t **cw)
+static inline int32_t upper(int64_t off_split, uint32_t au_lo, int32_t au_hi)
 {
-    const struct piezo_play_coef *c = p->coef;
-    const size_t n_r = c->n_r;
-    int32_t *b32 = p->state + j * p->stride32;
-    int64_t *b64 = p->work + j * p->stride64;
-    k->r = c->r_q15;
-    k->n_r = (uint32_t)n_r;
-    k->a = c->n_a ? c->a_q24[j] : PIEZO_Q24_ONE;
-    k->key = b32 + 2u * n_r;
-    k->W = b32 + 3u * n_r;
-    k->WR = b64 + COL_WORDS;
-    k->WC = c->n_a ? k->WR + n_r + 1u : k->WR; /* classical: c = r */
-    *v = b32;
-    *m = (uint32_t *)(void *)(b32 + n_r);
-    *cw = b64;
+    const uint32_t ol = (uint32_t)off_split;
+    const int32_t oh = (int32_t)(off_split >> 32);
+    const uint32_t sum = ol + au_lo;
+    return oh + au_hi + (int32_t)(sum < ol);
 }
 
 int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
-                    int32_t *state, size_t state_len, int64_t *work, size_t work_len)
+                    int32_t *f_q15, size_t f_len, int64_t *off_q39, size_t off_len)
 {
-    if (p == NULL || coef == NULL || state == NULL || work == NULL) {
+    if (p == NULL || coef == NULL || f_q15 == NULL) {
         return PIEZO_EINVAL;
     }
     const size_t n_ops = PIEZO_PLAY_N_OPS(coef->n_r, coef->n_a);
-    if (n_ops > PIEZO_PLAY_MAX_OPS || state_len < PIEZO_PLAY_STATE_LEN(coef->n_r, coef->n_a) ||
-        work_len < PIEZO_PLAY_WORK_LEN(coef->n_r, coef->n_a)) {
+    if (n_ops > PIEZO_PLAY_MAX_OPS || f_len < n_ops) {
         return PIEZO_ERANGE;
     }
     if (n_ops > 0u && (coef->r_q15 == NULL || coef->w_q24 == NULL)) {
         return PIEZO_EINVAL;
     }
     if (coef->n_a > 0u) {
-        if (coef->a_q24 == NULL) {
+        if (coef->a_q24 == NULL || off_q39 == NULL) {
             return PIEZO_EINVAL;
+        }
+        if (off_len < n_ops) {
+            return PIEZO_ERANGE;
         }
         for (size_t j = 0; j < coef->n_a; j++) {
             if (coef->a_q24[j] <= 0) {
@@ -231,46 +61,17 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
             return PIEZO_EORDER;
         }
     }
-    /* The prefix sums of w are int32: every column's sum of |w| < 2^31. */
-    const size_t n_a = coef->n_a, n_cols = PIEZO_PLAY_N_COLS(n_a);
-    for (size_t j = 0; j < n_cols; j++) {
-        int64_t sum = 0;
-        for (size_t i = 0; i < coef->n_r; i++) {
-            const int64_t w = coef->w_q24[n_a ? i * n_a + j : i];
-            sum += w < 0 ? -w : w;
-        }
-        if (sum > INT32_MAX) {
-            return PIEZO_ERANGE;
-        }
-    }
     p->coef = coef;
-    p->state = state;
-    p->work = work;
+    p->f_q15 = f_q15;
+    p->off_q39 = coef->n_a > 0u ? off_q39 : NULL;
     p->n_ops = n_ops;
-    p->stride32 = (uint32_t)(PIEZO_PLAY_STATE_LEN(coef->n_r, 0u));
-    p->stride64 = (uint32_t)(PIEZO_PLAY_WORK_LEN(coef->n_r, 1u) - (n_a ? 0u : coef->n_r + 1u));
-    /* Keys and prefix sums of w, w r and w c per column (the last two
-     * modulo 2^64, see play.h). */
-    for (size_t j = 0; j < n_cols; j++) {
-        struct col k;
-        int32_t *v;
-        uint32_t *m;
-        int64_t *cw;
-        col_bind(p, j, &k, &v, &m, &cw);
-        int32_t *key = (int32_t *)(uintptr_t)k.key, *W = (int32_t *)(uintptr_t)k.W;
-        int64_t *WR = (int64_t *)(uintptr_t)k.WR, *WC = (int64_t *)(uintptr_t)k.WC;
-        W[0] = 0;
-        WR[0] = WC[0] = 0;
-        for (size_t i = 0; i < coef->n_r; i++) {
-            const int64_t w = coef->w_q24[n_a ? i * n_a + j : i];
-            const int32_t r = coef->r_q15[i];
-            const int32_t cc = n_a ? c_of(k.a, r) : r;
-            key[i] = r + cc;
-            W[i + 1u] = (int32_t)(W[i] + w);
-            WR[i + 1u] = (int64_t)((uint64_t)WR[i] + (uint64_t)(w * r));
-            if (n_a) {
-                WC[i + 1u] = (int64_t)((uint64_t)WC[i] + (uint64_t)(w * cc));
-            }
+    /* Constants of the upper branch: off = a_j * r_i with the rounding half
+     * folded in, so that (off + a * u) >> 24 == piezo_rshift_rnd64(a * (u + r), 24),
+     * stored split (see upper()) and column by column: slot j * n_r + i. */
+    for (size_t i = 0; i < coef->n_r && coef->n_a > 0u; i++) {
+        for (size_t j = 0; j < coef->n_a; j++) {
+            off_q39[j * coef->n_r + i] =
+                split24((int64_t)coef->a_q24[j] * coef->r_q15[i] + ((int64_t)1 << 23));
         }
     }
     piezo_play_reset(p);
@@ -279,96 +80,409 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
 
 void piezo_play_reset(struct piezo_play *p)
 {
-    const size_t n_cols = PIEZO_PLAY_N_COLS(p->coef->n_a);
-    for (size_t j = 0; j < n_cols; j++) {
-        struct col k;
-        int32_t *v;
-        uint32_t *m;
-        int64_t *cw;
-        col_bind(p, j, &k, &v, &m, &cw);
-        if (k.n_r > 0u) { /* one segment: every operator at 0 */
-            v[0] = 0;
-            m[0] = SEG_WORD(0u, SEG_ZERO);
-        }
-        cw[COL_BELOW] = 0;
-        cw[COL_TOP] = 0;
-        cw[COL_PACK] = k.n_r > 0u ? 1 : 0;
+    for (size_t k = 0; k < p->n_ops; k++) {
+        p->f_q15[k] = 0;
     }
     p->acc_q39 = 0;
     p->u_prev_q15 = 0;
+    p->primed = 0u;
 }
 
-int32_t piezo_play_output(const struct piezo_play *p, size_t k_op)
+/* The formula on every operator, the sum from scratch (first sample). */
+static int64_t play_full(struct piezo_play *p, int32_t u_q15)
 {
     const struct piezo_play_coef *c = p->coef;
-    const size_t n_cols = PIEZO_PLAY_N_COLS(c->n_a);
-    size_t j = k_op; /* k_op = i n_cols + j, without a division (none in the core) */
-    uint32_t i = 0;
-    while (j >= n_cols) {
-        j -= n_cols;
-        i++;
-    }
-    struct col k;
-    int32_t *v;
-    uint32_t *m;
-    int64_t *cw;
-    col_bind(p, j, &k, &v, &m, &cw);
-    const uint32_t n = (uint32_t)((uint64_t)cw[COL_PACK] & 0xFFFFu);
-    uint32_t s = 0;
-    while (s + 1u < n && (m[s] & 0xFFFFu) > i) { /* from the bottom: first segment starting at or before i */
-        s++;
-    }
-    const uint32_t kind = m[s] >> 16;
-    return kind == SEG_ZERO ? 0 : kind == SEG_LO ? v[s] - k.r[i] : v[s] + (k.key[i] - k.r[i]);
-}
-
-/* The columns in turn, the column's constants walked by pointer (the
- * direction and the bank's kind are constants of each loop). */
-static inline __attribute__((always_inline)) int64_t cols_step(const struct piezo_play *p, int32_t u, int rising,
-                                                               int classical)
-{
-    const struct piezo_play_coef *c = p->coef;
-    const uint32_t n_r = c->n_r;
-    const size_t n_cols = PIEZO_PLAY_N_COLS(c->n_a);
-    const uint32_t s32 = p->stride32, s64 = p->stride64;
-    const int32_t *a = c->a_q24;
-    int32_t *b32 = p->state;
-    int64_t *b64 = p->work;
-    uint64_t acc = 0u;
-    struct col k;
-    k.r = c->r_q15;
-    k.n_r = n_r;
-    k.a = PIEZO_Q24_ONE;
-    for (size_t j = n_cols; j != 0u; j--) {
-        if (!classical) {
-            k.a = *a++;
+    const int32_t *r = c->r_q15;
+    const int32_t *w = c->w_q24;
+    int32_t *f = p->f_q15;
+    const size_t n_a = c->n_a, n_r = c->n_r;
+    int64_t acc = 0;
+    if (n_a == 0u) {
+        for (size_t i = 0; i < n_r; i++) {
+            const int32_t lo = u_q15 - r[i];
+            const int32_t hi = u_q15 + r[i];
+            int32_t y = f[i];
+            y = y < hi ? y : hi;
+            y = y > lo ? y : lo;
+            f[i] = y;
+            acc += (int64_t)w[i] * y;
         }
-        k.key = b32 + 2u * n_r;
-        k.W = b32 + 3u * n_r;
-        k.WR = b64 + COL_WORDS;
-        k.WC = classical ? k.WR : k.WR + n_r + 1u;
-        acc += (uint64_t)col_step(&k, b32, (uint32_t *)(void *)(b32 + n_r), b64, u, rising, classical);
-        b32 += s32;
-        b64 += s64;
+        return acc;
     }
-    return (int64_t)acc;
+    for (size_t j = 0; j < n_a; j++) {
+        const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
+        const int64_t *off = p->off_q39 + j * n_r;
+        int32_t *fc = f + j * n_r; /* column j, outputs column by column */
+        for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
+            const int32_t hi = upper(off[i], (uint32_t)au, (int32_t)(au >> 32));
+            const int32_t lo = u_q15 - r[i];
+            int32_t y = fc[i];
+            y = y < hi ? y : hi;
+            y = y > lo ? y : lo;
+            fc[i] = y;
+            acc += (int64_t)w[k] * y;
+        }
+    }
+    return acc;
 }
 
-static __attribute__((noinline)) int64_t bank_step(struct piezo_play *p, int32_t u, int rising)
+/*
+ * The unparallel bank falling: for each slope (column) a_j, from the
+ * column's first threshold, F moves iff F >= hi = rshift_rnd(a (u + r), 24)
+ * (formed as (off + a u) >> 24 from the split constants), to max(u - r, hi),
+ * or to hi where the lower branch cannot win (a <= 1 and u <= 0, or a >= 1
+ * and u >= 0: u - r - hi <= u (1 - a) - r (1 + a) + 1/2, an integer below
+ * 1); the scan stops at the first F < hi. Returns acc plus the sum of
+ * w (F_new - F_old). F == hi goes through the update too: F >= u - r while
+ * falling, so then max(hi, u - r) == F and nothing changes.
+ */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Cortex-M4: the column loop in Thumb-2 (upi_fall_m4 below), the same
+ * integers as the C loop that other targets compile; test_play (random
+ * banks of odd and even sizes against the formula on every operator) and
+ * the golden vectors of test_eupi and test_eupi_inv check it under QEMU.
+ * gcc's C spends 14 instructions per moving operator on the upper branch
+ * (it splits the constant's ldrd and counts separately) and 19 with the
+ * lower one, and spills the column loop's pointers; here 12 (two operators
+ * per pass) and 18, the column state in the caller's struct (the constants'
+ * column found from the outputs' by one add). A loop alone
+ * in assembly inside the C function costs more in spills than it saves. */
+struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
+    uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
+    int32_t *f;          /* 4: the column's outputs (column by column) */
+    const int32_t *w;    /* 8: the column's first weight (row-major) */
+    const int32_t *r;    /* 12: thresholds */
+    const int32_t *a;    /* 16: the column's slope */
+    const int32_t *a_end;/* 20: one past the last slope */
+    uint32_t f_step;     /* 24: n_r * 4, bytes of a column of outputs */
+    uint32_t w_stride;   /* 28: n_a * 4, bytes between a column's weights */
+    int32_t u;           /* 32 */
+};
+typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_stride) == 28u &&
+                                                 offsetof(struct upi_fall_args, u) == 32u) ? 1 : -1];
+
+static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args *arg, int64_t acc)
 {
-    if (p->coef->n_a == 0u) {
-        return rising ? cols_step(p, u, 1, 1) : cols_step(p, u, 0, 1);
-    }
-    return rising ? cols_step(p, u, 1, 0) : cols_step(p, u, 0, 0);
+    (void)arg;
+    (void)acc;
+    /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
+     * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
+     * thresholds in the lower-branch loop (the state's address at [sp]) */
+    __asm__ volatile(
+        "    push   {r0, r4-r11, lr}\n"
+        "    mov    r8, r2\n"
+        "    mov    r9, r3\n"
+        "    ldr    r5, [r0, #28]\n"
+        "    ldr    lr, [r0, #32]\n"
+        "    ldr    r1, [r0, #24]\n"
+        "    cmp    r1, #0\n"
+        "    beq    7f\n"
+        "1:  ldr    r10, [r0, #16]\n"          /* column: a_j, the split a u */
+        "    ldr    r11, [r10], #4\n"
+        "    str    r10, [r0, #16]\n"
+        "    smull  r6, r7, r11, lr\n"
+        "    lsr    r10, r6, #24\n"
+        "    orr    r7, r10, r7, lsl #8\n"
+        "    lsl    r6, r6, #8\n"
+        "    ldrd   r1, r2, [r0, #0]\n"
+        "    add    r1, r1, r2, lsl #1\n"
+        "    ldr    r3, [r0, #24]\n"
+        "    add    r3, r2, r3\n"
+        "    ldr    r4, [r0, #8]\n"
+        "    cmp    r11, #0x1000000\n"
+        "    ble    2f\n"
+        "    cmp    lr, #0\n"
+        "    bge    3f\n"
+        "    b      5f\n"
+        "2:  cmp    lr, #0\n"
+        "    bgt    5f\n"
+        "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
+        "    tst    r12, #4\n"
+        "    bne    4f\n"
+        "31: ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r12, [r2]\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r7\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"
+        "    str    r11, [r2], #4\n"
+        "    sub    r11, r11, r12\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r11\n"
+        "4:  ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r12, [r2]\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r7\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"
+        "    str    r11, [r2], #4\n"
+        "    sub    r11, r11, r12\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r11\n"
+        "    cmp    r2, r3\n"
+        "    bne    31b\n"
+        "    b      6f\n"
+        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch */
+        "51: ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r12, [r2]\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r7\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"
+        "    ldr    r10, [r0], #4\n"
+        "    sub    r10, lr, r10\n"
+        "    cmp    r11, r10\n"
+        "    it     lt\n"
+        "    movlt  r11, r10\n"
+        "    str    r11, [r2], #4\n"
+        "    sub    r11, r11, r12\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r11\n"
+        "    cmp    r2, r3\n"
+        "    bne    51b\n"
+        "6:  ldr    r0, [sp]\n"                /* next column: fp's starts where this one ends */
+        "    str    r3, [r0, #4]\n"
+        "    ldr    r12, [r0, #8]\n"
+        "    add    r12, r12, #4\n"
+        "    str    r12, [r0, #8]\n"
+        "    ldrd   r10, r11, [r0, #16]\n"
+        "    cmp    r10, r11\n"
+        "    bne    1b\n"
+        "7:  mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    add    sp, #4\n"
+        "    pop    {r4-r11, pc}\n");
 }
+
+static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
+                        int64_t acc)
+{
+    struct upi_fall_args arg = {(uintptr_t)off - 2u * (uintptr_t)f,
+                                f,
+                                c->w_q24,
+                                c->r_q15,
+                                c->a_q24,
+                                c->a_q24 + c->n_a,
+                                (uint32_t)(c->n_r * sizeof *f),
+                                (uint32_t)(c->n_a * sizeof *c->w_q24),
+                                u_q15};
+    return upi_fall_m4(&arg, acc);
+}
+#else
+static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
+                        int64_t acc)
+{
+    const int32_t *r = c->r_q15;
+    const int32_t *w = c->w_q24;
+    const size_t n_r = c->n_r, n_a = c->n_a;
+    for (size_t j = 0; j < n_a; j++) {
+        const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
+        const uint32_t au_lo = (uint32_t)au;
+        const int32_t au_hi = (int32_t)(au >> 32);
+        const int64_t *op = off + j * n_r;
+        int32_t *fp = f + j * n_r;
+        const int32_t *rp = r;
+        const int32_t *wp = w + j;
+        const int32_t a_j = c->a_q24[j];
+        if (a_j <= PIEZO_Q24_ONE ? u_q15 <= 0 : u_q15 >= 0) {
+            for (size_t i = n_r; i != 0u; i--) {
+                const int32_t hi = upper(*op++, au_lo, au_hi);
+                const int32_t y = *fp;
+                if (y < hi) {
+                    break;
+                }
+                *fp++ = hi;
+                acc += (int64_t)*wp * (hi - y);
+                wp += n_a;
+            }
+            continue;
+        }
+        for (size_t i = n_r; i != 0u; i--) {
+            const int32_t hi = upper(*op++, au_lo, au_hi);
+            const int32_t y = *fp;
+            if (y < hi) {
+                break;
+            }
+            const int32_t lo = u_q15 - *rp++;
+            const int32_t v = hi > lo ? hi : lo;
+            *fp++ = v;
+            acc += (int64_t)*wp * (v - y);
+            wp += n_a;
+        }
+    }
+    return acc;
+}
+#endif
+
+/*
+ * Rising, F = max(u - r_i, F) (the upper branch cannot bind while rising):
+ * for each of n_col columns of n_r outputs (column by column from f), from
+ * the column's first threshold to the first u - r_i <= F; the column's
+ * weights start at w + column and step by w_step entries (n_a, the
+ * unparallel bank's row-major weights). Returns acc plus the sum of
+ * w (F_new - F_old).
+ */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Cortex-M4: in Thumb-2, 11 instructions per moving operator (two per
+ * pass) against gcc's 13; test_play and the EUPI golden vectors under QEMU. */
+struct rise_args {
+    int32_t *f;          /* 0 */
+    const int32_t *w;    /* 4 */
+    const int32_t *r;    /* 8 */
+    uint32_t n_col;      /* 12: >= 1 */
+    uint32_t f_step;     /* 16: n_r * 4 */
+    uint32_t w_stride;   /* 20: w_step * 4 */
+    int32_t u;           /* 24 */
+};
+typedef char piezo_rise_args_layout_check_t[(offsetof(struct rise_args, u) == 24u) ? 1 : -1];
+
+static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *arg, int64_t acc)
+{
+    (void)arg;
+    (void)acc;
+    /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
+     * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
+     * r11 thresholds, r12 n_r * 4, lr u */
+    __asm__ volatile(
+        "    push   {r4-r11, lr}\n"
+        "    mov    r8, r2\n"
+        "    mov    r9, r3\n"
+        "    ldr    r2, [r0, #0]\n"
+        "    ldr    r4, [r0, #4]\n"
+        "    ldr    r11, [r0, #8]\n"
+        "    ldr    r10, [r0, #12]\n"
+        "    ldr    r12, [r0, #16]\n"
+        "    ldr    r5, [r0, #20]\n"
+        "    ldr    lr, [r0, #24]\n"
+        "    cmp    r12, #0\n"
+        "    beq    5f\n"
+        "1:  add    r3, r2, r12\n"             /* column */
+        "    mov    r1, r11\n"
+        "    mov    r0, r4\n"
+        "    tst    r12, #4\n"
+        "    bne    3f\n"
+        "2:  ldr    r6, [r1], #4\n"
+        "    ldr    r7, [r2]\n"
+        "    sub    r6, lr, r6\n"
+        "    cmp    r6, r7\n"
+        "    ble    4f\n"
+        "    str    r6, [r2], #4\n"
+        "    sub    r6, r6, r7\n"
+        "    ldr    r7, [r0]\n"
+        "    add    r0, r0, r5\n"
+        "    smlal  r8, r9, r7, r6\n"
+        "3:  ldr    r6, [r1], #4\n"
+        "    ldr    r7, [r2]\n"
+        "    sub    r6, lr, r6\n"
+        "    cmp    r6, r7\n"
+        "    ble    4f\n"
+        "    str    r6, [r2], #4\n"
+        "    sub    r6, r6, r7\n"
+        "    ldr    r7, [r0]\n"
+        "    add    r0, r0, r5\n"
+        "    smlal  r8, r9, r7, r6\n"
+        "    cmp    r2, r3\n"
+        "    bne    2b\n"
+        "4:  mov    r2, r3\n"                  /* the next column starts where this one ends */
+        "    add    r4, r4, #4\n"
+        "    subs   r10, r10, #1\n"
+        "    bne    1b\n"
+        "5:  mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    pop    {r4-r11, pc}\n");
+}
+
+static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
+                    int32_t u_q15, int64_t acc)
+{
+    const struct rise_args arg = {f, w, r, (uint32_t)n_col, (uint32_t)(n_r * sizeof *f),
+                                  (uint32_t)(w_step * sizeof *w), u_q15};
+    return rise_m4(&arg, acc);
+}
+#else
+static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
+                    int32_t u_q15, int64_t acc)
+{
+    for (size_t j = 0; j < n_col; j++) {
+        int32_t *fc = f + j * n_r;
+        const int32_t *wk = w + j;
+        for (size_t i = 0; i < n_r; i++, wk += w_step) {
+            const int32_t lo = u_q15 - r[i];
+            const int32_t y = fc[i];
+            if (lo <= y) {
+                break;
+            }
+            fc[i] = lo;
+            acc += (int64_t)*wk * (lo - y);
+        }
+    }
+    return acc;
+}
+#endif
 
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
 {
+    if (!p->primed) {
+        p->primed = 1u;
+        p->u_prev_q15 = u_q15;
+        p->acc_q39 = play_full(p, u_q15);
+        return p->acc_q39;
+    }
     const int32_t u_prev = p->u_prev_q15;
     if (u_q15 == u_prev) {
         return p->acc_q39; /* the update is idempotent */
     }
     p->u_prev_q15 = u_q15;
-    p->acc_q39 = bank_step(p, u_q15, u_q15 > u_prev);
-    return p->acc_q39;
+
+    const struct piezo_play_coef *c = p->coef;
+    const int32_t *r = c->r_q15;
+    const int32_t *w = c->w_q24;
+    int32_t *f = p->f_q15;
+    const size_t n_r = c->n_r;
+    int64_t acc = p->acc_q39;
+
+    if (c->n_a == 0u) {
+        /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
+         * the operators that move are a prefix in both directions. */
+        if (u_q15 > u_prev) {
+            for (size_t i = 0; i < n_r; i++) {
+                const int32_t lo = u_q15 - r[i];
+                const int32_t y = f[i];
+                if (lo <= y) {
+                    break;
+                }
+                f[i] = lo;
+                acc += (int64_t)w[i] * (lo - y);
+            }
+        } else {
+            for (size_t i = 0; i < n_r; i++) {
+                const int32_t hi = u_q15 + r[i];
+                const int32_t y = f[i];
+                if (hi >= y) {
+                    break;
+                }
+                f[i] = hi;
+                acc += (int64_t)w[i] * (hi - y);
+            }
+        }
+        p->acc_q39 = acc;
+        return acc;
+    }
+
+    /* Unparallel, column by column (slope a_j, thresholds ascending); the
+     * outputs are stored column by column too (slot j * n_r + i), so that a
+     * column's outputs, thresholds and branch constants are walked in step;
+     * only the weights (row-major, as given) are read with a stride. */
+    const size_t n_a = c->n_a;
+    if (u_q15 > u_prev) {
+        /* F = max(u - r_i, F): the upper branch cannot bind while rising. */
+        acc = rise(f, w, r, n_r, n_a, n_a, u_q15, acc);
+    } else {
+        acc = upi_fall(c, p->off_q39, f, u_q15, acc);
+    }
+    p->acc_q39 = acc;
+    return acc;
 }

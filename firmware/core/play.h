@@ -24,35 +24,27 @@
  *   a_q24, w_q24         int32_t Q7.24; a > 0, w any sign.
  *   return value         int64_t Q39 (q15 * q24), not rounded.
  *
- * Rounding: the upper branch a * (u + r) is rounded in two separable halves,
- *     hi = piezo_rshift_rnd64(a * u, 24) + c,   c = piezo_rshift_rnd64(a * r, 24),
- * within one LSB of rounding a (u + r) once (docs/fixed-point.md, "Play
- * operators"); the golden model does the same. A classical operator's
- * upper branch u + r is exact (a = 1: A(u) = u, c = r). The lower branch is
- * exact. The weighted sum is exact.
+ * Rounding: the upper branch a * (u + r) is rounded to q15 with the one rule,
+ * piezo_rshift_rnd64(a * (u + r), 24). init precomputes
+ * off_q39 = a_q24 * r_q15 + 2^23 per operator, so that process() forms
+ * (off_q39 + a_q24 * u_q15) >> 24, which is the same integer with one
+ * product per slope and tick and an add per operator. The lower branch and the
+ * classical upper branch u +- r are exact. The weighted sum is exact.
  *
  * Saturation: none; nothing can overflow within the documented ranges.
  *
- * Work per sample: the memory stack (docs/kernels-pi.md, "Play banks by their
- * memory stack"). The results are those of the formula applied to every
- * operator, but the bank keeps, per slope (column, thresholds ascending), its
- * outputs as a stack of segments of consecutive operators, each given by one
- * past input e in closed form: LO(e), F_i = e - r_i; HI(h), F_i = h + c_i
- * with h = A(e); ZERO, F_i = 0 (after reset). This is the wiping-out property:
- * the newest segment holds the smallest thresholds, and a sample replaces the
- * top segments it wipes out (rising: F_i + r_i < u; falling: F_i - c_i > A(u),
- * both monotone in i within a segment) with at most two new ones (rising:
- * LO(u); falling: LO(u) where r_i + c_i <= u - A(u), then HI(A(u))). The
- * column's weighted sum is kept and each segment's share is a closed form on
- * prefix sums of w, w r and w c (computed by init, int64 modulo 2^64: every
- * true sum fits int64, so the modular differences are exact):
- *     LO(e) on [b, e'): e (W[e'] - W[b]) - (WR[e'] - WR[b])
- *     HI(h) on [b, e'): h (W[e'] - W[b]) + (WC[e'] - WC[b]).
- * A sample costs O(1 + segments popped + operators that cross a segment's
- * edge + the move of the LO/HI edge) per column. Worst case, a jump across
- * the whole range after a history with a segment per operator: every segment
- * popped, O(n_r) per column, O(n_ops) in all (measured: tools/bench-target,
- * docs/target-cortex-m4.md "Round 10").
+ * Work per sample (docs/kernels-pi.md, "Operators that move"): the results
+ * are those of the formula applied to every operator, but process() touches
+ * only the operators that can change and keeps the weighted sum up to date
+ * by w_k * (F_new - F_old). With the thresholds non-decreasing, for each
+ * slope (column) the operators that move form a prefix in threshold order:
+ * rising input, F = max(u - r, F) moves iff u - r > F, and F + r is
+ * non-decreasing in r; falling input, F moves iff F > hi = a (u + r) rounded
+ * (then F = max(u - r, hi)), and F - hi is non-increasing in r up to one LSB
+ * of the rounding, so the scan stops at the first F - hi <= -1. An unchanged
+ * input changes nothing (the update is idempotent). The first sample after
+ * init or reset updates every operator. Worst case (every operator moves):
+ * linear in the operator count.
  *
  * Initial state: every operator output is 0 after init and reset (relaxed,
  * demagnetized actuator at u = 0).
@@ -89,39 +81,30 @@ struct piezo_play_coef {
     uint16_t n_a;          /* slopes; 0 = classical play operators (a = 1) */
 };
 
-/* Columns of a bank: its slopes, or one for a classical bank. */
-#define PIEZO_PLAY_N_COLS(n_a) ((n_a) ? (size_t)(n_a) : 1u)
-
-/* Entries of the caller's int32 state (per column: n_r segment values, n_r
- * segment words, n_r keys r_i + c_i, the n_r + 1 prefix sums of w) and
- * int64 work array (per column: three column words, the n_r + 1 prefix
- * sums of w r and, unparallel, of w c). */
-#define PIEZO_PLAY_STATE_LEN(n_r, n_a) (PIEZO_PLAY_N_COLS(n_a) * (4u * (size_t)(n_r) + 1u))
-#define PIEZO_PLAY_WORK_LEN(n_r, n_a) \
-    (PIEZO_PLAY_N_COLS(n_a) * (((n_a) ? 2u : 1u) * ((size_t)(n_r) + 1u) + 3u))
-
 /* Instance: caller-owned; the arrays are the caller's too. */
 struct piezo_play {
     const struct piezo_play_coef *coef;
-    int32_t *state;        /* per column: segments (stack, bottom first), keys, sums of w */
-    int64_t *work;         /* per column: column words, sums of w r and w c */
+    int32_t *f_q15;        /* [n_ops] operator outputs (state); UPI banks store
+                            * them column by column: read them with
+                            * piezo_play_output() */
+    int64_t *off_q39;      /* [n_ops] a_j * r_i + 2^23 (UPI banks only), column by
+                            * column and split for a carry add (play.c) */
     size_t n_ops;
-    uint32_t stride32;     /* int32 entries per column in state */
-    uint32_t stride64;     /* int64 entries per column in work */
     int64_t acc_q39;       /* sum_k w_k F_k of the current outputs */
     int32_t u_prev_q15;    /* input of the last sample */
+    uint8_t primed;        /* 0 after reset: the next sample updates every operator */
 };
 
 /*
- * Check the coefficients, bind the caller's arrays, compute the prefix sums
- * and reset. state needs PIEZO_PLAY_STATE_LEN(n_r, n_a) entries, work
- * PIEZO_PLAY_WORK_LEN(n_r, n_a).
+ * Check the coefficients, bind the caller's arrays and reset.
+ * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; off_q39 needs as
+ * many for an unparallel bank and may be NULL (off_len 0) for a classical one.
  * Returns PIEZO_OK, PIEZO_EINVAL (NULL pointer, r < 0 or r > WIDE_MAX,
  * a <= 0), PIEZO_EORDER (thresholds decreasing) or PIEZO_ERANGE (more than
  * PIEZO_PLAY_MAX_OPS operators, or an array too short).
  */
 int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
-                    int32_t *state, size_t state_len, int64_t *work, size_t work_len);
+                    int32_t *f_q15, size_t f_len, int64_t *off_q39, size_t off_len);
 
 /* Every operator output back to 0. */
 void piezo_play_reset(struct piezo_play *p);
@@ -133,8 +116,11 @@ void piezo_play_reset(struct piezo_play *p);
  */
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15);
 
-/* Output F_k of operator k = i * n_a + j (row-major, as the weights), from
- * the column's segments (a walk of its stack: for tests and inspection). */
-int32_t piezo_play_output(const struct piezo_play *p, size_t k);
+/* Output F_k of operator k = i * n_a + j (row-major, as the weights). */
+static inline int32_t piezo_play_output(const struct piezo_play *p, size_t k)
+{
+    const size_t n_a = p->coef->n_a;
+    return n_a == 0u ? p->f_q15[k] : p->f_q15[(k % n_a) * p->coef->n_r + k / n_a];
+}
 
 #endif /* PIEZO_PLAY_H */

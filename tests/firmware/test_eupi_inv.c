@@ -15,16 +15,14 @@ static const struct piezo_eupi_inv_coef ref_coef = {
     GOLDEN_EUPI_INV_P0_Q24, GOLDEN_EUPI_INV_NP,
 };
 
-#define ST_LEN PIEZO_EUPI_INV_STATE_LEN(PIEZO_PLAY_MAX_OPS, PIEZO_PLAY_MAX_OPS, 1u)
-#define WK_LEN PIEZO_EUPI_INV_WORK_LEN(PIEZO_PLAY_MAX_OPS, PIEZO_PLAY_MAX_OPS, 1u)
-static int32_t state_buf[ST_LEN];
-static int64_t work_buf[WK_LEN];
+static int32_t state_buf[NCPI + NUPI];
+static int64_t work_buf[NUPI];
 
 static void run_case(const char *name, const int16_t *yr, const int16_t *u, size_t n)
 {
     struct piezo_eupi_inv c;
-    assert_int_equal(piezo_eupi_inv_init(&c, &ref_coef, state_buf, ST_LEN,
-                                         work_buf, WK_LEN), PIEZO_OK);
+    assert_int_equal(piezo_eupi_inv_init(&c, &ref_coef, state_buf, NCPI + NUPI,
+                                         work_buf, NUPI), PIEZO_OK);
     for (size_t k = 0; k < n; k++) {
         assert_golden_i32(name, k, piezo_eupi_inv_process(&c, yr[k]), u[k]);
     }
@@ -58,13 +56,13 @@ static void test_edges_clamp_like_golden(void **state)
 static void test_split_run_carries_state(void **state)
 {
     (void)state;
-    static int32_t st2[ST_LEN];
-    static int64_t wk2[WK_LEN];
+    static int32_t st2[NCPI + NUPI];
+    static int64_t wk2[NUPI];
     struct piezo_eupi_inv a;
     struct piezo_eupi_inv b;
-    assert_int_equal(piezo_eupi_inv_init(&a, &ref_coef, state_buf, ST_LEN, work_buf, WK_LEN),
+    assert_int_equal(piezo_eupi_inv_init(&a, &ref_coef, state_buf, NCPI + NUPI, work_buf, NUPI),
                      PIEZO_OK);
-    assert_int_equal(piezo_eupi_inv_init(&b, &ref_coef, st2, ST_LEN, wk2, WK_LEN), PIEZO_OK);
+    assert_int_equal(piezo_eupi_inv_init(&b, &ref_coef, st2, NCPI + NUPI, wk2, NUPI), PIEZO_OK);
     for (size_t k = 0; k < GOLDEN_EUPI_INV_SPLIT_HALF; k++) {
         assert_golden_i32("split block 1", k,
                           piezo_eupi_inv_process(&a, golden_eupi_inv_realistic_yr[k]),
@@ -96,9 +94,8 @@ static void test_linear_by_hand(void **state)
         2 * PIEZO_Q24_ONE, 0, PIEZO_Q24_ONE / 4, 0,
     };
     struct piezo_eupi_inv inv;
-    int32_t st[PIEZO_EUPI_INV_STATE_LEN(0, 0, 0)];
-    int64_t wk[PIEZO_EUPI_INV_WORK_LEN(0, 0, 0)]; /* empty banks keep their column words */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, PIEZO_EUPI_INV_STATE_LEN(0, 0, 0), wk, PIEZO_EUPI_INV_WORK_LEN(0, 0, 0)), PIEZO_OK);
+    int32_t st[1];
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 1, NULL, 0), PIEZO_OK);
     assert_int_equal(piezo_eupi_inv_process(&inv, 16384), 16384);   /* 2 (0.5 - 0.25) */
     assert_int_equal(piezo_eupi_inv_process(&inv, -4096), -24576);  /* 2 (-0.125 - 0.25) */
     assert_int_equal(piezo_eupi_inv_process(&inv, 32767), 32767);   /* 1.5: clamped */
@@ -118,36 +115,35 @@ static void test_init_refuses_bad_coefficients(void **state)
         {ri, NULL, bi, 2, 0}, {ru, au, d, 1, 2}, p, 2 * PIEZO_Q24_ONE, PIEZO_Q24_ONE / 10, 0, 1,
     };
     struct piezo_eupi_inv inv;
-    enum { SL = PIEZO_EUPI_INV_STATE_LEN(2, 1, 2), WL = PIEZO_EUPI_INV_WORK_LEN(2, 1, 2) };
-    int32_t st[SL];
-    int64_t wk[WL];
+    int32_t st[4];
+    int64_t wk[2];
 
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_OK);
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL - 1, wk, WL), PIEZO_ERANGE);
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL - 1), PIEZO_ERANGE);
-    assert_int_equal(piezo_eupi_inv_init(&inv, NULL, st, SL, wk, WL), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_OK);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 3, wk, 2), PIEZO_ERANGE);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 1), PIEZO_ERANGE);
+    assert_int_equal(piezo_eupi_inv_init(&inv, NULL, st, 4, wk, 2), PIEZO_EINVAL);
     c.a0_inv_q24 = 0;
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
     c.a0_inv_q24 = 2 * PIEZO_Q24_ONE;
     ri[1] = PIEZO_PLAY_WIDE_MAX_Q15 + 1; /* beyond the wide range */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
     ri[1] = 0;
     ri[0] = 5; /* descending */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_EORDER);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EORDER);
     ri[0] = 0;
     d[0] = -1; /* UPI weights stay >= 0 */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
     d[0] = PIEZO_Q24_ONE / 100;
     au[0] = -1;
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
     au[0] = PIEZO_Q24_ONE / 2;
     ru[0] = 32768; /* UPI threshold not below 1 */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
     ru[0] = 1000;
     c.kex_q24 = 16 * PIEZO_Q24_ONE; /* |G2| bound above 16 FS */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
     c.kex_q24 = -PIEZO_Q24_ONE; /* k_ex of either sign is fine */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, SL, wk, WL), PIEZO_OK);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_OK);
 }
 
 int main(void)

@@ -109,9 +109,8 @@ class PlayBankSim:
         self.bank = bank
         self.r, self.a = bank.per_op()
         n = self.r.size
-        # init: c = rshift_rnd(a_j r_i, 24); the upper branch is
-        # rshift_rnd(a u, 24) + c, rounded in two separable halves (play.h)
-        self.c = None if self.a is None else (self.a * self.r + _HALF24) >> 24
+        # init: a_j r_i + 2^23, so that (off + a u) >> 24 == rshift_rnd(a (u + r), 24)
+        self.off = None if self.a is None else self.a * self.r + _HALF24
         self.f = np.zeros(n, dtype=np.int64) if f0 is None else np.array(f0, dtype=np.int64).reshape(n)
 
     def step(self, u: int) -> int:
@@ -119,7 +118,7 @@ class PlayBankSim:
         u = int(u)
         if abs(u) > WIDE_MAX:
             raise ValueError("input beyond the bank's wide range")
-        hi = u + self.r if self.a is None else ((self.a * u + _HALF24) >> 24) + self.c
+        hi = u + self.r if self.a is None else (self.off + self.a * u) >> 24
         self.f = np.maximum(u - self.r, np.minimum(hi, self.f))
         return int(self.f @ self.bank.w_q24) if self.f.size else 0
 

@@ -65,8 +65,8 @@ static const struct piezo_play_coef cpi_coef = {bench_eupi_r_cpi_q15, NULL, benc
 static const struct piezo_play_coef upi_coef = {bench_eupi_r_upi_q15, bench_eupi_a_upi_q24, bench_eupi_d_q24,
                                                 BENCH_EUPI_NUR, BENCH_EUPI_NUA};
 static struct piezo_play play;
-static int32_t play_f[PIEZO_PLAY_STATE_LEN(BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
-static int64_t play_off[PIEZO_PLAY_WORK_LEN(BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
+static int32_t play_f[BENCH_EUPI_NUR * BENCH_EUPI_NUA];
+static int64_t play_off[BENCH_EUPI_NUR * BENCH_EUPI_NUA];
 static void play_tick(uint32_t k)
 {
     piezo_bench_sink = (int32_t)(piezo_play_process(&play, piezo_bench_u[k]) >> 24);
@@ -79,7 +79,7 @@ static const struct piezo_eupi_coef eupi_coef = {
     .p_q24 = bench_eupi_p_q24, .a0_q24 = BENCH_EUPI_A0_Q24, .p0_q24 = BENCH_EUPI_P0_Q24, .n_p = BENCH_EUPI_NP};
 static struct piezo_eupi eupi;
 static int32_t eupi_state[PIEZO_EUPI_STATE_LEN(BENCH_EUPI_NCPI, BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
-static int64_t eupi_work[PIEZO_EUPI_WORK_LEN(BENCH_EUPI_NCPI, BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
+static int64_t eupi_work[PIEZO_EUPI_WORK_LEN(BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
 static void eupi_tick(uint32_t k)
 {
     piezo_bench_sink = piezo_eupi_process(&eupi, piezo_bench_u[k]);
@@ -120,12 +120,11 @@ void piezo_bench_models(void)
     }
     run_or_fail("dcc_L10_varying_w",
                 piezo_dcc_init(&dcc, &dcc_coeffs[0], dcc_cpsi, dcc_zo, bench_dcc30_NOPS) == PIEZO_OK, dcc_tick);
-    run_or_fail("play_cpi10", piezo_play_init(&play, &cpi_coef, play_f, sizeof play_f / sizeof play_f[0], play_off,
-                                                sizeof play_off / sizeof play_off[0]) == PIEZO_OK,
+    run_or_fail("play_cpi10", piezo_play_init(&play, &cpi_coef, play_f, BENCH_EUPI_NCPI, NULL, 0u) == PIEZO_OK,
                 play_tick);
     run_or_fail("play_upi10x3",
-                piezo_play_init(&play, &upi_coef, play_f, sizeof play_f / sizeof play_f[0], play_off,
-                                sizeof play_off / sizeof play_off[0]) == PIEZO_OK,
+                piezo_play_init(&play, &upi_coef, play_f, BENCH_EUPI_NUR * BENCH_EUPI_NUA, play_off,
+                                BENCH_EUPI_NUR * BENCH_EUPI_NUA) == PIEZO_OK,
                 play_tick);
     run_or_fail("eupi",
                 piezo_eupi_init(&eupi, &eupi_coef, eupi_state, sizeof eupi_state / sizeof eupi_state[0],

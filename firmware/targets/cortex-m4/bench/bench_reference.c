@@ -72,7 +72,7 @@ static const struct piezo_eupi_coef eupi_coef = {
 };
 static struct piezo_eupi eupi;
 static int32_t eupi_state[PIEZO_EUPI_STATE_LEN(BENCH_EUPI_NCPI, BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
-static int64_t eupi_work[PIEZO_EUPI_WORK_LEN(BENCH_EUPI_NCPI, BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
+static int64_t eupi_work[PIEZO_EUPI_WORK_LEN(BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
 
 /* The EUPI inverse, loaded from its table image as a commit would. */
 piezo_coefset_t bench_inv_set;
