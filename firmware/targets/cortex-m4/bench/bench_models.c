@@ -3,7 +3,8 @@
  * alone, one call per tick: RKP, the DCC law, the CPI and UPI play banks,
  * the EUPI model and its inverse. Coefficients from bench_tables.h (the host
  * golden models' reference sizes: KP planes L = 10, 20, 30, 10 CPI, 10 x 3 UPI,
- * u^2..u^4, RKP with 13 Gaussians).
+ * u^2..u^4, RKP with 13 Gaussians); play banks of 40 thresholds per column
+ * made here (their cost against the column's length).
  */
 #include <stddef.h>
 
@@ -72,6 +73,31 @@ static void play_tick(uint32_t k)
     piezo_bench_sink = (int32_t)(piezo_play_process(&play, piezo_bench_u[k]) >> 24);
 }
 
+/* --- longer play banks: the cost against the thresholds per column (40
+ * thresholds in [0, 0.9) FS, slopes 0.6, 1.0, 1.45, weights 0.001-0.004) --- */
+#define LONG_NR 40u
+#define LONG_NA 3u
+static int32_t long_r[LONG_NR], long_a[LONG_NA], long_w[LONG_NR * LONG_NA];
+static const struct piezo_play_coef long_cpi_coef = {long_r, NULL, long_w, LONG_NR, 0};
+static const struct piezo_play_coef long_upi_coef = {long_r, long_a, long_w, LONG_NR, LONG_NA};
+#define LONG_F_LEN (LONG_NR * LONG_NA)
+#define LONG_OFF_LEN (LONG_NR * LONG_NA)
+static int32_t long_f[LONG_F_LEN];
+static int64_t long_off[LONG_OFF_LEN];
+
+static void long_banks_fill(void)
+{
+    for (uint32_t i = 0; i < LONG_NR; i++) {
+        long_r[i] = (int32_t)((i * 29491u) / LONG_NR); /* 0.9 FS i / n */
+    }
+    long_a[0] = 10066330;  /* 0.6 */
+    long_a[1] = 16777216;  /* 1.0 */
+    long_a[2] = 24326963;  /* 1.45 */
+    for (uint32_t k = 0; k < LONG_NR * LONG_NA; k++) {
+        long_w[k] = 16777 + (int32_t)((k * 2654435761u) >> 16) % 50331; /* 0.001 .. 0.004 */
+    }
+}
+
 /* --- EUPI model and its inverse --- */
 static const struct piezo_eupi_coef eupi_coef = {
     .cpi = {bench_eupi_r_cpi_q15, NULL, bench_eupi_b_q24, BENCH_EUPI_NCPI, 0},
@@ -125,6 +151,13 @@ void piezo_bench_models(void)
     run_or_fail("play_upi10x3",
                 piezo_play_init(&play, &upi_coef, play_f, BENCH_EUPI_NUR * BENCH_EUPI_NUA, play_off,
                                 BENCH_EUPI_NUR * BENCH_EUPI_NUA) == PIEZO_OK,
+                play_tick);
+    long_banks_fill();
+    run_or_fail("play_cpi40",
+                piezo_play_init(&play, &long_cpi_coef, long_f, LONG_F_LEN, long_off, LONG_OFF_LEN) == PIEZO_OK,
+                play_tick);
+    run_or_fail("play_upi40x3",
+                piezo_play_init(&play, &long_upi_coef, long_f, LONG_F_LEN, long_off, LONG_OFF_LEN) == PIEZO_OK,
                 play_tick);
     run_or_fail("eupi",
                 piezo_eupi_init(&eupi, &eupi_coef, eupi_state, sizeof eupi_state / sizeof eupi_state[0],
