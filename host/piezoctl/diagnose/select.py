@@ -24,6 +24,7 @@ from ..models.hysteresis import hysteresis_groups, initial_state_span
 from . import significance as sg
 from .misfit import credited_ratio
 from .discriminate import discriminate_group, highpassed
+from .slow_signature import SIGNATURES, attribute, signature_tests
 
 __all__ = ["Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
            "simulate_refined", "hysteresis_nuisance", "dynamics_nuisance", "initial_state_nuisance", "term_nuisance", "best_setting", "train_rows"]
@@ -137,6 +138,7 @@ class Candidate:
     worsened: tuple | None = None             # (recording, factor): one whose held-out error the term raised
     credited: float = 1.0                     # held-out ratio credited beyond the base's misfit (misfit.py)
     credited_bands: dict | None = None        # per band: the improvement and the misfit energy [um^2/sample]
+    slow_signature: dict | None = None        # creep, drift, offset: its signature's unique contribution
 
     @property
     def name(self) -> str:
@@ -598,6 +600,8 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
                        key=lambda c: c.ratio)
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
         _supersede(evals)
+        if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term
+            log("    slow signatures: " + attribute(evals, signature_tests(fctx, es, fold_all, block_all, rows)))
         rounds.append(evals)
         best = _first_exact(evals, fctx, fold_all, recs, span, log)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
