@@ -7,7 +7,7 @@ import pytest
 from scipy.signal import fftconvolve
 
 from piezoctl.diagnose import significance as sg
-from piezoctl.diagnose.select import Ctx, Signals, make_masks
+from piezoctl.diagnose.select import Ctx, Signals, make_masks, slow_nuisance
 from piezoctl.diagnose.slow_signature import ALPHA_SIGNATURE, SignatureTest, attribute, signature_tests
 from piezoctl.models.hysteresis import hysteresis_parts
 
@@ -69,7 +69,7 @@ def _run(ctx, effect, rng):
     e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
     fold = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
     block = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
-    return {t.name: t for t in signature_tests([ctx, ctx], [e, e], fold, block, rows=200000)}
+    return {t.name: t for t in signature_tests([ctx, ctx], [e, e], [slow_nuisance(ctx)] * 2, fold, block, rows=200000)}
 
 
 @pytest.mark.parametrize("effect,name", [(_creep, "creep"), (_drift, "thermal_drift"),

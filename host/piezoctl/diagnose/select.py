@@ -27,7 +27,8 @@ from .discriminate import discriminate_group, highpassed
 from .slow_signature import SIGNATURES, attribute, signature_tests
 
 __all__ = ["Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
-           "simulate_refined", "hysteresis_nuisance", "dynamics_nuisance", "initial_state_nuisance", "term_nuisance", "best_setting", "train_rows"]
+           "simulate_refined", "hysteresis_nuisance", "slow_nuisance", "dynamics_nuisance", "initial_state_nuisance",
+           "term_nuisance", "best_setting", "train_rows"]
 
 
 @dataclasses.dataclass
@@ -339,6 +340,14 @@ def initial_state_nuisance(ctx):
     return ctx.init_nuisance
 
 
+def slow_nuisance(ctx):
+    """The nuisance of the slow signatures' joint test (``slow_signature.py``): the hysteresis groups (free) and
+    the initial state's gains (within [-1, 1]), as (columns, lower bounds, upper bounds)."""
+    Nh, Ni = hysteresis_nuisance(ctx), initial_state_nuisance(ctx)
+    lo = np.concatenate([np.full(Nh.shape[1], -np.inf), np.full(Ni.shape[1], -1.0)])
+    return np.hstack([Nh, Ni]), lo, -lo
+
+
 def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True):
     """The nested test's nuisance columns for ``term`` (None: not nested); ``dynamics=False`` leaves out the
     dynamics corrections (the term's setting for the model is chosen without them: they would take part of a
@@ -601,7 +610,8 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
         _supersede(evals)
         if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term
-            log("    slow signatures: " + attribute(evals, signature_tests(fctx, es, fold_all, block_all, rows)))
+            tests = signature_tests(fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows)
+            log("    slow signatures: " + attribute(evals, tests))
         rounds.append(evals)
         best = _first_exact(evals, fctx, fold_all, recs, span, log)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "

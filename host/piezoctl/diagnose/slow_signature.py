@@ -116,30 +116,31 @@ def signature_groups(ctx) -> dict:
 
 
 def _fit(X, e, lo, hi, train, test, rows):
-    from .select import _lstsq_box, train_rows
-    idx = train_rows(train, rows)
-    th = _lstsq_box(X[idx], e[idx], lo, hi)
-    return X[test] @ th
+    """Box-bounded least squares of ``e`` on ``X`` over the training rows (strided to at most ``rows``), on
+    unit-RMS columns; the prediction on the test rows."""
+    from scipy.optimize import lsq_linear
+    idx = np.flatnonzero(train)
+    if idx.size > rows:
+        idx = idx[:: int(np.ceil(idx.size / rows))]
+    sc = np.sqrt(np.mean(X[idx] ** 2, axis=0))
+    sc[sc == 0] = 1.0
+    sol = lsq_linear(X[idx] / sc, e[idx], bounds=(lo * sc, hi * sc), method="bvls", lsq_solver="exact")
+    return X[test] @ (sol.x / sc)
 
 
-def signature_tests(ctxs, es, fold_all, block_all, rows) -> list:
+def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
     """The unique-contribution test of each signature (module docstring). ``ctxs[f]``, ``es[f]``: the model
     fitted on fold f (terms accepted so far) and its residual (settled samples, stacked); the signatures are
-    fitted on fold f of it and scored on fold 1 - f. ``fold_all``, ``block_all``: fold and block of each sample.
+    fitted on fold f of it and scored on fold 1 - f. ``nuisances[f]``: (columns, lower, upper bounds) of the
+    nuisance fitted with every signature set (``select.slow_nuisance``). ``fold_all``, ``block_all``: fold and
+    block of each sample; ``rows``: the most training rows a fit uses.
 
     Returns
     -------
     list of SignatureTest
         One per signature present, in ``SIGNATURES`` order.
     """
-    from .select import hysteresis_nuisance, initial_state_nuisance
-    designs = []
-    for ctx in ctxs:
-        groups = signature_groups(ctx)
-        Nh, Ni = hysteresis_nuisance(ctx), initial_state_nuisance(ctx)
-        n_lo = np.concatenate([np.full(Nh.shape[1], -np.inf), np.full(Ni.shape[1], -1.0)])
-        n_hi = np.concatenate([np.full(Nh.shape[1], np.inf), np.full(Ni.shape[1], 1.0)])
-        designs.append((np.hstack([Nh, Ni]), n_lo, n_hi, groups))
+    designs = [(N, n_lo, n_hi, signature_groups(ctx)) for ctx, (N, n_lo, n_hi) in zip(ctxs, nuisances)]
     names = [n for n in SIGNATURES if n in designs[0][3]]
 
     rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctxs[0].valid)])
