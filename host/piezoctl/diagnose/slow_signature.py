@@ -15,7 +15,8 @@ test (``select._evaluate``) takes whatever level it can: round 9's held-out seed
   one curve through all of them);
 - **creep**: the drive's history: after each change of the drive, a transient in proportion to its size that
   relaxes in log/exponential time and starts again at the next change: the Kelvin-Voigt deviations
-  ``G[lp_tau(h) - h]`` of :class:`piezoctl.ident.terms.Creep` (gains >= 0).
+  ``G[lp_tau(h) - h]`` of :class:`piezoctl.ident.terms.Creep` (gains >= 0), centred per recording: with a
+  time constant long against the recording the deviation from the starting equilibrium is a level over it.
 
 The residual of the current model is regressed on the three groups *jointly*, together with the nuisance the
 terms' own tests carry (free gains on the model's hysteresis channels, and the bounded gain per recording on
@@ -85,6 +86,10 @@ def _session_time(ctx, s) -> np.ndarray:
     return t
 
 
+def _centred(X) -> np.ndarray:
+    return X - X.mean(axis=0) if X.shape[0] else X
+
+
 def signature_groups(ctx) -> dict:
     """The three signatures' regressors over the settled samples, stacked: ``{name: (X, lower bounds)}``.
 
@@ -93,7 +98,8 @@ def signature_groups(ctx) -> dict:
     span), each centred on its mean over the settled samples of each sensor-zero column (a session, or a
     recording), so that it holds what changes with the clock within a session and not the session's level;
     recordings of the calibration's own session have no free level and keep it uncentred. ``creep``: the
-    Kelvin-Voigt deviations through G at the creep term's time constants, gains >= 0.
+    Kelvin-Voigt deviations through G at the creep term's time constants, gains >= 0, each centred on its mean
+    over the recording's settled samples (a level is the offset's column's).
     """
     out = {}
     if ctx.n_offset() > 0:
@@ -110,7 +116,10 @@ def signature_groups(ctx) -> dict:
     creep = TERMS["creep"]
     taus = creep.taus(ctx)
     if taus:
-        C = np.vstack([G(ctx.base, creep.basis(s.h, taus, s.dt))[v] for s, v in zip(ctx.signals, ctx.valid)])
+        # centred per recording: a time constant long against the recording makes the deviation from its
+        # starting equilibrium a level over it, which is any level's (the micromanipulator's -0.85 um session
+        # offset was taken by creep's 30 s element); creep's signature is the transients' shape
+        C = np.vstack([_centred(G(ctx.base, creep.basis(s.h, taus, s.dt))[v]) for s, v in zip(ctx.signals, ctx.valid)])
         out["creep"] = (C, np.zeros(len(taus)))
     return out
 
