@@ -122,9 +122,24 @@ def _cand(name, significant, ratio, p=1e-6):
                                  credited=ratio, dbic=-10.0, p=p, discrimination=None, slow_signature=None)
 
 
-def _test(name, holds, ratio):
-    return SignatureTest(name=name, unique_ratio=ratio, fold_ratios=[ratio, ratio], credited=ratio,
-                         p=1e-6 if holds else 0.5, n_active=20, holds=holds)
+def _test(name, holds, ratio, p=None):
+    p = (1e-6 if holds else 0.5) if p is None else p
+    return SignatureTest(name=name, unique_ratio=ratio, fold_ratios=[ratio, ratio], credited=ratio, p=p,
+                         n_active=20, holds=p < ALPHA_SIGNATURE, confirms=p < sg.ALPHA)
+
+
+def test_a_passed_terms_own_signature_needs_only_the_family_level():
+    """The passed term's own signature is one hypothesis (level ALPHA); switching the name to another is a search
+    over three (ALPHA / 3)."""
+    tests = [_test("creep", False, 0.63, p=5e-3), _test("thermal_drift", False, 1.1), _test("sensor_offset", False, 0.8)]
+    evals = [_cand("creep", True, 0.33), _cand("sensor_offset", False, 0.7)]
+    attribute(evals, tests)
+    assert evals[0].name == "creep" and evals[0].significant and not evals[0].veto
+    # the same p on a term that did not pass its own test does not take the name from the one that did
+    tests = [_test("creep", False, 0.63, p=5e-3), _test("thermal_drift", False, 1.1), _test("sensor_offset", False, 0.8)]
+    evals = [_cand("sensor_offset", True, 0.5), _cand("creep", False, 0.7)]
+    attribute(evals, tests)
+    assert not any(c.significant for c in evals) and evals[0].veto
 
 
 def test_attribute_vetoes_a_slow_term_whose_signature_does_not_hold():
