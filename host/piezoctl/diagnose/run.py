@@ -282,7 +282,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             "fold_ratios": a.fold_ratios, "p_value": a.p, "delta_bic": a.dbic,
                             "credited_ratio": a.credited, "credited_bands": a.credited_bands,
                             "worse_on": ({"recording": a.worsened[0], "factor": a.worsened[1]}
-                                         if a.worsened else None)},
+                                         if a.worsened else None),
+                            **({"slow_signature": a.slow_signature} if a.slow_signature else {})},
             "signature": a.term.signature})
     last = rounds[-1] if rounds else []
     named = {x["name"] for x in effects}
@@ -302,7 +303,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                         "candidate": {"nrmse_after": c.nrmse_after,
                                                       "exact_fold_ratios": c.exact_fold_ratios},
                                         "credited_ratio": c.credited, "credited_bands": c.credited_bands,
-                                        "fold_ratios": c.fold_ratios, "p_value": c.p, "delta_bic": c.dbic},
+                                        "fold_ratios": c.fold_ratios, "p_value": c.p, "delta_bic": c.dbic,
+                                        **({"slow_signature": c.slow_signature} if c.slow_signature else {})},
                         "signature": c.term.signature})
     return {"format": "piezoctl-diagnosis", "version": 1,
             "named": [x["name"] for x in effects if x["significant"]] or ["none"],

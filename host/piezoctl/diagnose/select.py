@@ -24,9 +24,11 @@ from ..models.hysteresis import hysteresis_groups, initial_state_span
 from . import significance as sg
 from .misfit import credited_ratio
 from .discriminate import discriminate_group, highpassed
+from .slow_signature import SIGNATURES, attribute, signature_tests
 
 __all__ = ["Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
-           "simulate_refined", "hysteresis_nuisance", "dynamics_nuisance", "initial_state_nuisance", "term_nuisance", "best_setting", "train_rows"]
+           "simulate_refined", "hysteresis_nuisance", "slow_nuisance", "dynamics_nuisance", "initial_state_nuisance",
+           "term_nuisance", "best_setting", "train_rows"]
 
 
 @dataclasses.dataclass
@@ -137,6 +139,7 @@ class Candidate:
     worsened: tuple | None = None             # (recording, factor): one whose held-out error the term raised
     credited: float = 1.0                     # held-out ratio credited beyond the base's misfit (misfit.py)
     credited_bands: dict | None = None        # per band: the improvement and the misfit energy [um^2/sample]
+    slow_signature: dict | None = None        # creep, drift, offset: its signature's unique contribution
 
     @property
     def name(self) -> str:
@@ -335,6 +338,14 @@ def initial_state_nuisance(ctx):
             cols.append(d)
         ctx.init_nuisance = np.vstack([c[v] for c, v in zip(cols, ctx.valid)])
     return ctx.init_nuisance
+
+
+def slow_nuisance(ctx):
+    """The nuisance of the slow signatures' joint test (``slow_signature.py``): the hysteresis groups (free) and
+    the initial state's gains (within [-1, 1]), as (columns, lower bounds, upper bounds)."""
+    Nh, Ni = hysteresis_nuisance(ctx), initial_state_nuisance(ctx)
+    lo = np.concatenate([np.full(Nh.shape[1], -np.inf), np.full(Ni.shape[1], -1.0)])
+    return np.hstack([Nh, Ni]), lo, -lo
 
 
 def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True):
@@ -598,6 +609,9 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
                        key=lambda c: c.ratio)
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
         _supersede(evals)
+        if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term
+            tests = signature_tests(fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows)
+            log("    slow signatures: " + attribute(evals, tests))
         rounds.append(evals)
         best = _first_exact(evals, fctx, fold_all, recs, span, log)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
