@@ -1,0 +1,312 @@
+"""Frequency-domain signature checks of the drive-side terms (docs/diagnose.md, "Round 10").
+
+The selection (``select.py``) says whether a term lowers the held-out error; it does not say whether the
+residual it takes has the term's *shape*. Above the band the calibration identified the dynamics in, the data
+say nothing about G, and any drive-side term can take a misfit of G there. This module measures the shape:
+
+1. :func:`transfer` estimates ``T(f) = S_xy / S_xx``, the measured output ``y`` over the current model's output
+   ``x`` (the residual's transfer is ``T - 1``), pooled over the recordings by Welch averaging (Hann segments,
+   no overlap, so the ``n_d`` segments are independent), with the coherence ``g2`` per bin. A bin is
+   *informative* when its coherence exceeds the level a zero true coherence's estimate exceeds with
+   probability ``ALPHA`` (``1 - ALPHA^(1 / (n_d - 1))``). The variance of each of the real and imaginary
+   parts of the estimate is ``|T|^2 (1 - g2) / (2 n_d g2)`` (Bendat and Piersol's first-order expression).
+2. The *dispersion* ``s2``: the estimate's variance holds noise and what the model misses incoherently, not the
+   base's systematic misfit. In the band the dynamics were identified in (the calibration's band) every term
+   predicts ``T = 1`` (G was fitted there), so ``|T - 1|^2 / var`` there follows ``chi2(2)`` up to the
+   misfit's factor; when their sum rejects ``chi2(2 K)`` at ``ALPHA``, ``s2`` = their mean / 2, else 1.
+   Every chi-square below is divided by ``s2``.
+3. Each term's shape is fitted to ``T`` by weighted least squares over the informative bins and tested twice
+   at level ``ALPHA``: it must *explain* the deviation from 1 (likelihood ratio against a flat ``T = a``, the
+   same free gain, chi-square with 1 degree of freedom: the setting) and *fit* (goodness of fit, chi-square with ``2 K - p`` degrees of
+   freedom, K bins). Shapes: a delay ``a e^{-j w d}`` (phase linear through zero, magnitude flat); a
+   bandwidth ``a / (1 + j f / fc)`` (magnitude falling and phase lagging as one pole).
+4. A mode's check: the largest ``|T - 1|`` among the bins where it deviates significantly from 0 (chi-square,
+   level ``ALPHA`` over the number of bins) must lie within the candidate mode's half-power band (``f0 (1 +- zeta)``, at least one bin and the 3 % of the
+   candidate's frequency grid).
+5. A slew limit's check: its residual is present only where the drive's rate exceeds its limit. ``T`` is
+   estimated again on the segments whose drive rate stays below the limit throughout and for one segment's
+   length before (the dynamics still ring after a burst); there the term predicts
+   nothing, so the residual must not deviate from ``T = 1`` (chi-square against ``T = 1``, level ``ALPHA``).
+
+A check with no informative bin to test on says so and does not refuse the term (``testable`` False).
+Every threshold is a test level (``ALPHA``), a coherence level derived from it, or the estimate's own
+variance; nothing is specific to a stage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import stats
+
+__all__ = ["ALPHA", "Transfer", "transfer", "dispersion", "check_delay", "check_bandwidth", "check_mode",
+           "check_slew", "check_candidate", "DRIVE_TERMS"]
+
+ALPHA = 0.01                 # level of every test here
+SEG_S = 0.1                  # [s] segment length aimed at (10 Hz bins); shortened so each recording gives 4
+MIN_SEGMENTS = 4             # segments per recording at least (fewer: the recording is not used)
+DRIVE_TERMS = ("delay", "amplifier_bandwidth", "unmodeled_resonance", "amplifier_slew_limit")
+
+
+@dataclasses.dataclass
+class Transfer:
+    """The measured output over the model's output per frequency bin (informative bins only).
+
+    f : [Hz]; T : complex, measured / model; g2 : coherence; var : variance of each of Re T, Im T;
+    n_d : the number of independent segments averaged; df : bin spacing [Hz]; segments : segments used.
+    """
+
+    f: np.ndarray
+    T: np.ndarray
+    g2: np.ndarray
+    var: np.ndarray
+    n_d: int
+    df: float
+    segments: int
+
+    @property
+    def k(self) -> int:
+        return int(self.f.size)
+
+
+def _nperseg(lengths, dt) -> int:
+    n = int(round(SEG_S / dt))
+    usable = [m for m in lengths if m >= MIN_SEGMENTS * 16]
+    if usable:
+        n = min(n, min(usable) // MIN_SEGMENTS)
+    return max(16, n)
+
+
+def transfer(xs, ys, dt, keep=None, nperseg=None) -> Transfer | None:
+    """Welch estimate of ``T = S_xy / S_xx`` pooled over recordings, on the informative bins.
+
+    Parameters
+    ----------
+    xs, ys : list of ndarray
+        Per recording, the model's output and the measured output [um] (settled samples, contiguous).
+    dt : float
+        Sample period [s].
+    keep : list of ndarray of bool, optional
+        Per recording, the samples a segment may contain (a segment is used only when all of its samples are
+        kept); default all.
+    nperseg : int, optional
+        Segment length [samples]; default ``SEG_S`` shortened so that every recording gives ``MIN_SEGMENTS``.
+
+    Returns
+    -------
+    Transfer or None
+        None when fewer than ``MIN_SEGMENTS`` segments or no informative bin.
+    """
+    n = nperseg or _nperseg([x.size for x in xs], dt)
+    w = np.hanning(n)
+    sxx = syy = sxy = 0.0
+    nd = 0
+    for i, (x, y) in enumerate(zip(xs, ys)):
+        x = np.asarray(x, float)
+        y = np.asarray(y, float)
+        for k0 in range(0, x.size - n + 1, n):
+            if keep is not None and not np.all(keep[i][k0:k0 + n]):
+                continue
+            xa = x[k0:k0 + n]
+            ya = y[k0:k0 + n]
+            X = np.fft.rfft(w * (xa - xa.mean()))
+            Y = np.fft.rfft(w * (ya - ya.mean()))
+            sxx = sxx + np.abs(X) ** 2
+            syy = syy + np.abs(Y) ** 2
+            sxy = sxy + np.conj(X) * Y
+            nd += 1
+    if nd < MIN_SEGMENTS:
+        return None
+    f = np.fft.rfftfreq(n, dt)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        T = sxy / sxx
+        g2 = np.abs(sxy) ** 2 / (sxx * syy)
+    g2_min = 1.0 - ALPHA ** (1.0 / (nd - 1))   # a zero coherence's estimate exceeds this with probability ALPHA
+    ok = np.isfinite(T) & np.isfinite(g2) & (g2 > g2_min) & (f > 0) & (f < 0.5 / dt)
+    if not np.any(ok):
+        return None
+    g2o = np.minimum(g2[ok], 1.0 - 1e-12)
+    var = np.abs(T[ok]) ** 2 * (1.0 - g2o) / (2.0 * nd * g2o)
+    return Transfer(f=f[ok], T=T[ok], g2=g2o, var=np.maximum(var, 1e-300), n_d=nd, df=float(f[1]),
+                    segments=nd)
+
+
+def dispersion(tr: Transfer, f_band: float) -> tuple[float, int]:
+    """(s2, bins): the factor by which ``|T - 1|^2 / var`` exceeds ``chi2(2)`` in the band the dynamics were
+    identified in (``f <= f_band``, where every term predicts ``T = 1``): its mean over 2 when the sum rejects
+    ``chi2(2 K)`` at ``ALPHA``, else 1 (the variance model stands); 1 when no bin."""
+    m = tr.f <= f_band
+    if not np.any(m):
+        return 1.0, 0
+    q = np.abs(tr.T[m] - 1.0) ** 2 / tr.var[m]
+    k = int(np.sum(m))
+    if stats.chi2.sf(float(np.sum(q)), 2 * k) >= ALPHA:
+        return 1.0, k
+    return max(1.0, float(np.mean(q)) / 2.0), k
+
+
+def _chi2(tr, model):
+    return float(np.sum(np.abs(tr.T - model) ** 2 / tr.var))
+
+
+def _scaled_fit(tr, shape):
+    """Best complex-free real gain ``a`` for ``T ~ a shape`` (weighted least squares) and its chi-square."""
+    w = 1.0 / tr.var
+    a = float(np.sum(w * np.real(np.conj(shape) * tr.T)) / max(np.sum(w * np.abs(shape) ** 2), 1e-300))
+    return a, _chi2(tr, a * shape)
+
+
+def _shape_test(tr, s2, f_band, name, grid, shape_of, label):
+    """Fit ``a shape_of(theta)`` over ``grid`` and test it (explains, fits) at ``ALPHA``. The flat model it is
+    tested against has the same free gain ``a``: what is credited to the shape is its setting, not a gain."""
+    chi0 = _scaled_fit(tr, np.ones(tr.k, complex))[1] / s2
+    best = None
+    for th in grid:
+        a, c = _scaled_fit(tr, shape_of(th))
+        if a > 0 and (best is None or c < best[2]):
+            best = (th, a, c)
+    th, a, c = best
+    c /= s2
+    dof = max(2 * tr.k - 2, 1)   # the gain and the setting
+    p_explain = float(stats.chi2.sf(max(chi0 - c, 0.0), 1))
+    p_fit = float(stats.chi2.sf(c, dof))
+    above = tr.f > f_band
+    q = np.abs(tr.T - 1.0) ** 2 / tr.var / s2
+    share_above = float(np.sum(q[above]) / max(np.sum(q), 1e-300))
+    passed = p_explain < ALPHA and p_fit >= ALPHA
+    reason = None
+    if not passed:
+        reason = (f"the residual's transfer (measured over model output, {tr.k} informative bins "
+                  f"{tr.f.min():.0f}..{tr.f.max():.0f} Hz) does not have the {label}: "
+                  + ("the shape does not explain its deviation from 1" if p_explain >= ALPHA else
+                     "the shape explains part of it but does not fit it")
+                  + f" (explains p = {p_explain:.1e}, fit p = {p_fit:.1e}, level {ALPHA:g})")
+    return {"term": name, "testable": True, "passed": bool(passed), "reason": reason,
+            "figures": {"bins": tr.k, "segments": tr.n_d, "f_min_hz": float(tr.f.min()),
+                        "f_max_hz": float(tr.f.max()), "identified_band_hz": float(f_band),
+                        "dispersion": float(s2), "chi2_flat": chi0, "chi2_shape": c, "dof": dof,
+                        "p_explains": p_explain, "p_fit": p_fit, "gain": a, "setting": float(th),
+                        "deviation_share_above_band": share_above}}
+
+
+def check_delay(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
+    """A delay's shape: ``T = a exp(-j 2 pi f d)``, ``d`` from 0 to 64 samples (quarter-sample steps)."""
+    grid = np.arange(0.0, 64.25, 0.25) * dt
+    r = _shape_test(tr, s2, f_band, "delay", grid, lambda d: np.exp(-2j * np.pi * tr.f * d),
+                    "phase linear in frequency through zero with a flat magnitude of a delay")
+    r["figures"]["delay_s"] = r["figures"].pop("setting")
+    return r
+
+
+def check_bandwidth(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
+    """A first-order bandwidth's shape: ``T = a / (1 + j f / fc)``, fc geometric from fs/2000 to fs/2."""
+    grid = np.geomspace(0.0005 / dt, 0.5 / dt, 200)
+    r = _shape_test(tr, s2, f_band, "amplifier_bandwidth", grid, lambda fc: 1.0 / (1.0 + 1j * tr.f / fc),
+                    "magnitude falling and phase lagging together as one pole")
+    r["figures"]["fc_hz"] = r["figures"].pop("setting")
+    return r
+
+
+def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: float) -> dict:
+    """A mode's shape: the residual's transfer ``|T - 1|`` peaks (most significant bin) within the candidate
+    mode's half-power band. Not testable when no informative bin lies near the mode."""
+    half = max(float(damping) * freq_hz, 0.03 * freq_hz, tr.df)
+    near = np.abs(tr.f - freq_hz) <= half
+    q = np.abs(tr.T - 1.0) ** 2 / tr.var / s2
+    sig = stats.chi2.sf(q, 2) < ALPHA / max(tr.k, 1)      # Bonferroni over the bins
+    fig = {"bins": tr.k, "segments": tr.n_d, "mode_hz": float(freq_hz), "half_band_hz": half,
+           "identified_band_hz": float(f_band), "dispersion": float(s2)}
+    if not np.any(near):
+        return {"term": "unmodeled_resonance", "testable": False, "passed": True, "figures": fig,
+                "reason": f"no informative bin of the residual's transfer within {half:.0f} Hz of {freq_hz:.0f} Hz"}
+    dev = np.abs(tr.T - 1.0)
+    i = int(np.argmax(np.where(sig, dev, -1.0))) if np.any(sig) else int(np.argmax(q))
+    fig.update({"peak_hz": float(tr.f[i]), "peak_chi2": float(q[i]), "peak_significant": bool(np.any(sig))})
+    passed = bool(np.any(sig) and near[i])
+    reason = None if passed else (
+        f"the residual's transfer peaks at {tr.f[i]:.0f} Hz, not within {half:.0f} Hz of the mode's {freq_hz:.0f} Hz"
+        if np.any(sig) else "the residual's transfer does not deviate significantly from 1 at any frequency")
+    return {"term": "unmodeled_resonance", "testable": True, "passed": passed, "reason": reason, "figures": fig}
+
+
+def check_slew(xs, ys, us, dt, limit_v_per_s, f_band, nperseg=None) -> dict:
+    """A slew limit's shape: no residual where the drive's rate stays below the limit. ``T`` on the segments
+    whose |du/dt| stays below ``limit_v_per_s`` must not deviate from 1 (chi-square, level ``ALPHA``, with the
+    dispersion of the same segments' identified band)."""
+    n = nperseg or _nperseg([x.size for x in xs], dt)
+    keep = []
+    for u in us:   # below the limit, and for a segment's length before (the dynamics still ring after a burst)
+        fast = (np.abs(np.diff(np.asarray(u, float), prepend=u[0])) / dt >= limit_v_per_s).astype(float)
+        keep.append(np.convolve(fast, np.ones(n), "full")[:fast.size] == 0)
+    tr = transfer(xs, ys, dt, keep=keep, nperseg=n)
+    fig = {"limit_v_per_s": float(limit_v_per_s), "identified_band_hz": float(f_band)}
+    if tr is None:
+        return {"term": "amplifier_slew_limit", "testable": False, "passed": True, "figures": fig,
+                "reason": "too few segments with the drive's rate below the limit to test"}
+    s2, nb = dispersion(tr, f_band)
+    chi0 = _chi2(tr, 1.0) / s2
+    p = float(stats.chi2.sf(chi0, 2 * tr.k))
+    fig.update({"bins": tr.k, "segments": tr.n_d, "dispersion": s2, "chi2_flat": chi0, "dof": 2 * tr.k,
+                "p_flat": p})
+    passed = p >= ALPHA
+    reason = None if passed else (
+        f"the residual is present where the drive's rate stays below the limit ({limit_v_per_s / 1000:.1f} V/ms; "
+        f"{tr.n_d} segments, {tr.k} informative bins {tr.f.min():.0f}..{tr.f.max():.0f} Hz, "
+        f"chi-square against T = 1 p = {p:.1e} < {ALPHA:g})")
+    return {"term": "amplifier_slew_limit", "testable": True, "passed": bool(passed), "reason": reason,
+            "figures": fig}
+
+
+def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None) -> dict | None:
+    """The signature check of one candidate (None: the term has none here).
+
+    Parameters
+    ----------
+    name : str
+        The term's name (``DRIVE_TERMS``).
+    setting : float or tuple
+        Its setting: delay [samples], bandwidth [Hz], slew limit [V/s], mode (freq [Hz], damping).
+    xs, ys, us : list of ndarray
+        Per recording (settled samples): the current model's output [um], the measured output [um], the
+        drive [V].
+    dt : float
+        Sample period [s].
+    f_band : float
+        The band the base's dynamics were identified in [Hz] (the calibration's).
+    tr : Transfer, optional
+        :func:`transfer` of ``xs``, ``ys`` when already computed.
+    """
+    if name not in DRIVE_TERMS:
+        return None
+    if name == "amplifier_slew_limit":
+        return check_slew(xs, ys, us, dt, float(setting), f_band)
+    tr = tr if tr is not None else transfer(xs, ys, dt)
+    if tr is None:
+        return {"term": name, "testable": False, "passed": True, "figures": {"identified_band_hz": float(f_band)},
+                "reason": "the recordings give no informative bin of the residual's transfer"}
+    s2, _ = dispersion(tr, f_band)
+    if name == "delay":
+        return check_delay(tr, s2, f_band, dt)
+    if name == "amplifier_bandwidth":
+        return check_bandwidth(tr, s2, f_band, dt)
+    return check_mode(tr, s2, f_band, float(setting[0]), float(setting[1]))
+
+
+def check_in_context(ctx, name, setting, f_band, cache=None) -> dict | None:
+    """:func:`check_candidate` on the current model of a selection context (``select.Ctx``): its output, the
+    measurements and the drives of the settled samples. ``cache`` (a dict) keeps the transfer for the round."""
+    if name not in DRIVE_TERMS:
+        return None
+    xs = [np.asarray(s.yb, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    ys = [np.asarray(s.y, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    us = [np.asarray(s.u, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    tr = None
+    if name != "amplifier_slew_limit":
+        if cache is not None and "transfer" in cache:
+            tr = cache["transfer"]
+        else:
+            tr = transfer(xs, ys, ctx.dt)
+            if cache is not None:
+                cache["transfer"] = tr
+    return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr)
