@@ -567,7 +567,8 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
             c.signature_check = check(c)
             if c.signature_check is not None:
                 log(f"    signature {c.name}: " + ("passed" if c.signature_check["passed"] else "failed") + " "
-                    + ", ".join(f"{k} {v:.3g}" for k, v in c.signature_check["figures"].items()))
+                    + ", ".join(f"{k} {v:.3g}" for k, v in c.signature_check["figures"].items()
+                                if isinstance(v, (int, float))))
             if c.signature_check is not None and not c.signature_check["passed"]:
                 c.veto = "its signature check fails: " + c.signature_check["reason"]
                 log(f"    signature {c.name}: {c.veto}")
