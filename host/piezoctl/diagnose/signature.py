@@ -257,11 +257,15 @@ def check_bandwidth(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
 
 
 def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: float) -> dict:
-    """A mode's shape: the residual's transfer ``|T - 1|`` peaks (most significant bin) within the candidate
-    mode's half-power band. Not testable when no informative bin lies near the mode."""
+    """A mode's shape: the residual's transfer ``|T - 1|`` peaks within the candidate mode's half-power band.
+
+    The peak is the largest ``|T - 1|`` over the informative bins where it deviates from 0 beyond the estimate's
+    own variance (chi-square with 2 degrees of freedom, level ``ALPHA`` over the number of bins; where it lies
+    is the question, not how well a model fits, so ``s2`` is not applied). Not testable when no informative bin
+    lies within the mode's half-power band."""
     half = max(float(damping) * freq_hz, 0.03 * freq_hz, tr.df)
     near = np.abs(tr.f - freq_hz) <= half
-    q = np.abs(tr.T - 1.0) ** 2 / tr.var / s2
+    q = np.abs(tr.T - 1.0) ** 2 / tr.var
     sig = stats.chi2.sf(q, 2) < ALPHA / max(tr.k, 1)      # Bonferroni over the bins
     fig = {"bins": tr.k, "segments": tr.n_d, "mode_hz": float(freq_hz), "half_band_hz": half,
            "identified_band_hz": float(f_band), "dispersion": float(s2)}
@@ -270,10 +274,13 @@ def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: 
                 "reason": f"no informative bin of the residual's transfer within {half:.0f} Hz of {freq_hz:.0f} Hz"}
     dev = np.abs(tr.T - 1.0)
     i = int(np.argmax(np.where(sig, dev, -1.0))) if np.any(sig) else int(np.argmax(q))
-    fig.update({"peak_hz": float(tr.f[i]), "peak_chi2": float(q[i]), "peak_significant": bool(np.any(sig))})
+    j = int(np.argmax(np.where(near, dev, -1.0)))
+    fig.update({"peak_hz": float(tr.f[i]), "peak_deviation": float(dev[i]), "peak_significant": bool(np.any(sig)),
+                "deviation_at_mode": float(dev[j]), "deviation_at_mode_hz": float(tr.f[j])})
     passed = bool(np.any(sig) and near[i])
     reason = None if passed else (
-        f"the residual's transfer peaks at {tr.f[i]:.0f} Hz, not within {half:.0f} Hz of the mode's {freq_hz:.0f} Hz"
+        f"the residual's transfer peaks at {tr.f[i]:.0f} Hz (|T - 1| = {dev[i]:.3g}), not within {half:.0f} Hz of "
+        f"the mode's {freq_hz:.0f} Hz (there at most {dev[j]:.3g})"
         if np.any(sig) else "the residual's transfer does not deviate significantly from 1 at any frequency")
     return {"term": "unmodeled_resonance", "testable": True, "passed": passed, "reason": reason, "figures": fig}
 
