@@ -164,10 +164,10 @@ def _scaled_fit(tr, shape):
 
 
 def _best(tr, grid, shape_of):
-    """(theta, gain, chi2) of the best ``a shape_of(theta)``, a >= 0, over ``grid``."""
+    """(theta, gain, chi2) of the best ``a shape_of(theta, f)``, a >= 0, over ``grid``."""
     best = None
     for th in grid:
-        a, c = _scaled_fit(tr, shape_of(th))
+        a, c = _scaled_fit(tr, shape_of(th, tr.f))
         if best is None or c < best[2]:
             best = (th, a, c)
     return best
@@ -178,7 +178,7 @@ def latency_fit(tr, dt):
     (``ident.terms``: what a sampled loop adds and a calibration cannot identify), the alternative every
     drive-side shape is tested against."""
     grid = np.linspace(0.0, LATENCY_SAMPLES, int(round(10 * LATENCY_SAMPLES)) + 1) * dt
-    return _best(tr, grid, lambda d: np.exp(-2j * np.pi * tr.f * d))
+    return _best(tr, grid, lambda d, f: np.exp(-2j * np.pi * f * d))
 
 
 def mode_response(f, f0, zeta):
@@ -205,12 +205,26 @@ def unidentified_fit(tr, dt, f_band):
     return best
 
 
+def below_unity(tr: Transfer) -> Transfer:
+    """The bins where ``|T|`` is not above 1 beyond the estimate's spread (one-sided, level ``ALPHA``): a delay
+    or a first-order pole multiplies the transfer by a magnitude of at most 1, so a bin where the measurement is
+    larger than the model is unidentified dynamics (a mode of the stage that the model lacks), whatever the drive
+    side does; the drive-side shapes are tested on the others."""
+    keep = np.abs(tr.T) - 1.0 <= stats.norm.isf(ALPHA) * np.sqrt(tr.var)
+    return dataclasses.replace(tr, f=tr.f[keep], T=tr.T[keep], g2=tr.g2[keep], var=tr.var[keep])
+
+
 def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label):
     """Fit ``a shape_of(theta)`` over ``grid`` and test it against the loop's latency (:func:`latency_fit`, the
     same free gain): F = chi2_latency / chi2_shape on (2 K - 2, 2 K - 2) degrees of freedom, level ``ALPHA``.
     Both chi-squares carry the same misfit of the unidentified dynamics; only a shape that explains the
     residual's transfer clearly better than a latency passes. ``s2`` (dispersion) cancels in F; it scales the
     reported chi-squares."""
+    full = tr
+    tr = below_unity(tr)
+    if tr.k < 2:
+        return {"term": name, "testable": False, "passed": True, "figures": {"bins": 0, "identified_band_hz": f_band},
+                "reason": f"no informative bin of the residual's transfer where |T| is not above 1 ({full.k} bins)"}
     th, a, c = _best(tr, grid, shape_of)
     (d_lat, f0, z), a_lat, c_lat = unidentified_fit(tr, dt, f_band)
     chi0 = _scaled_fit(tr, np.ones(tr.k, complex))[1]
@@ -230,7 +244,7 @@ def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label):
                   f"unidentified dynamics have it: {alt} (weighted misfit {c / s2:.3g} against {c_lat / s2:.3g}, "
                   f"F = {F:.2f}, p = {p:.1e}, level {ALPHA:g})")
     return {"term": name, "testable": True, "passed": bool(passed), "reason": reason,
-            "figures": {"bins": tr.k, "segments": tr.n_d, "f_min_hz": float(tr.f.min()),
+            "figures": {"bins": tr.k, "bins_informative": full.k, "segments": tr.n_d, "f_min_hz": float(tr.f.min()),
                         "f_max_hz": float(tr.f.max()), "identified_band_hz": float(f_band),
                         "dispersion": float(s2), "chi2_flat": chi0 / s2, "chi2_unidentified": c_lat / s2,
                         "chi2_shape": c / s2, "dof": dof, "F": F, "p": p, "gain": a,
@@ -241,7 +255,7 @@ def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label):
 def check_delay(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
     """A delay's shape: ``T = a exp(-j 2 pi f d)``, ``d`` from 0 to 64 samples (quarter-sample steps)."""
     grid = np.arange(0.0, 64.25, 0.25) * dt
-    r = _shape_test(tr, s2, f_band, dt, "delay", grid, lambda d: np.exp(-2j * np.pi * tr.f * d),
+    r = _shape_test(tr, s2, f_band, dt, "delay", grid, lambda d, f: np.exp(-2j * np.pi * f * d),
                     "phase linear in frequency through zero with a flat magnitude of a delay")
     r["figures"]["delay_s"] = r["figures"].pop("setting")
     return r
@@ -250,7 +264,7 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
 def check_bandwidth(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
     """A first-order bandwidth's shape: ``T = a / (1 + j f / fc)``, fc geometric from fs/2000 to fs/2."""
     grid = np.geomspace(0.0005 / dt, 0.5 / dt, 200)
-    r = _shape_test(tr, s2, f_band, dt, "amplifier_bandwidth", grid, lambda fc: 1.0 / (1.0 + 1j * tr.f / fc),
+    r = _shape_test(tr, s2, f_band, dt, "amplifier_bandwidth", grid, lambda fc, f: 1.0 / (1.0 + 1j * f / fc),
                     "magnitude falling and phase lagging together as one pole")
     r["figures"]["fc_hz"] = r["figures"].pop("setting")
     return r
