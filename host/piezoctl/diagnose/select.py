@@ -554,7 +554,9 @@ def _setting_of(c):
     """The candidate's setting for its signature check: a mode's (freq, damping) of fold 0, else the mean of the
     folds' scalar settings."""
     st = c.setting[0]
-    return st if isinstance(st, tuple) else float(np.mean([float(x) for x in c.setting]))
+    if isinstance(st, (int, float, np.number)) and all(isinstance(x, (int, float, np.number)) for x in c.setting):
+        return float(np.mean([float(x) for x in c.setting]))
+    return st   # a mode's tuple, or a setting of a term without a signature check (not read)
 
 
 def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
