@@ -125,3 +125,46 @@ def test_check_candidate_dispatch_and_untestable():
     short = [x[:50] for x in xs]
     r = sig.check_candidate("delay", 8.0, short, short, short, DT, F_BAND)
     assert not r["testable"] and r["passed"]
+
+
+def test_below_unity_drops_the_bins_a_drive_side_term_cannot_explain():
+    xs, ys, tr, s2 = _case(lambda x: _mode(x, 600.0, 0.05))
+    kept = sig.below_unity(tr)
+    assert 0 < kept.k < tr.k
+    assert np.all(np.abs(kept.T) - 1.0 <= 2.33 * np.sqrt(kept.var) + 1e-12)
+    assert np.any(np.abs(tr.f - 600.0) < 30.0) and not np.any(np.abs(kept.f - 600.0) < 30.0)
+
+
+class _Sig:
+    def __init__(self, u, yb, y):
+        self.u, self.yb, self.y = u, yb, y
+
+
+class _Ctx:
+    def __init__(self, sigs):
+        self.signals = sigs
+        self.valid = [np.ones(s.u.size, bool) for s in sigs]
+        self.dt = DT
+
+
+def test_check_in_context_reads_the_current_model_and_caches_the_transfer():
+    xs = [_drive(s) for s in (1, 2)]
+    ctx = _Ctx([_Sig(x, x, _noisy(_pole(x, 150.0), i)) for i, x in enumerate(xs)])
+    cache = {}
+    b = sig.check_in_context(ctx, "amplifier_bandwidth", 150.0, F_BAND, cache)
+    assert b["passed"] and "transfer" in cache
+    d = sig.check_in_context(ctx, "delay", 8.0, F_BAND, cache)
+    assert d["figures"]["bins_informative"] == cache["transfer"].k
+    assert sig.check_in_context(ctx, "creep", None, F_BAND, cache) is None
+
+
+def test_setting_of_a_candidate_without_a_numeric_setting():
+    from piezoctl.diagnose.select import _setting_of
+
+    class C:
+        setting = [None, None]
+    assert _setting_of(C()) is None
+    C.setting = [3.0, np.float64(5.0)]
+    assert _setting_of(C()) == 4.0
+    C.setting = [(300.0, 0.01), (310.0, 0.02)]
+    assert _setting_of(C()) == (300.0, 0.01)
