@@ -10,30 +10,32 @@ say nothing about G, and any drive-side term can take a misfit of G there. This 
    *informative* when its coherence exceeds the level a zero true coherence's estimate exceeds with
    probability ``ALPHA`` (``1 - ALPHA^(1 / (n_d - 1))``). The variance of each of the real and imaginary
    parts of the estimate is ``|T|^2 (1 - g2) / (2 n_d g2)`` (Bendat and Piersol's first-order expression).
-2. The *dispersion* ``s2``: the estimate's variance holds noise and what the model misses incoherently, not the
-   base's systematic misfit. In the band the dynamics were identified in (the calibration's band) every term
-   predicts ``T = 1`` (G was fitted there), so ``|T - 1|^2 / var`` there follows ``chi2(2)`` up to the
-   misfit's factor; when their sum rejects ``chi2(2 K)`` at ``ALPHA``, ``s2`` = their mean / 2, else 1.
-   Every chi-square below is divided by ``s2``.
-3. Each term's shape is fitted to ``T`` by weighted least squares (weights 1 / var) over the informative bins
-   and tested against the loop's own latency ``a e^{-j w d}``, ``d`` up to ``LATENCY_SAMPLES`` (what a sampled
-   loop adds and a calibration below a few hundred Hz cannot identify; the same free gain): F = the latency's
-   weighted misfit over the shape's, on (2 K - 2, 2 K - 2) degrees of freedom, K bins, at level ``ALPHA``.
-   An absolute goodness of fit is not used: above the identified band the stage's own modes leave a misfit no
-   drive-side shape fits (on development null s101-004 and true bandwidth s101-010 alike), and both sides of
-   F carry it. Shapes: a delay ``a e^{-j w d}`` (phase linear through zero, magnitude flat); a
-   bandwidth ``a / (1 + j f / fc)`` (magnitude falling and phase lagging as one pole).
-4. A mode's check: the largest ``|T - 1|`` among the bins where it deviates significantly from 0 (chi-square,
-   level ``ALPHA`` over the number of bins) must lie within the candidate mode's half-power band (``f0 (1 +- zeta)``, at least one bin and the 3 % of the
-   candidate's frequency grid).
+2. The *dispersion* ``s2`` (reported, ``figures.dispersion``): the estimate's variance holds noise and what
+   the model misses incoherently, not the base's systematic misfit. In the band the dynamics were identified
+   in every term predicts ``T = 1`` (G was fitted there), so ``|T - 1|^2 / var`` there follows ``chi2(2)`` up
+   to the misfit's factor; when their sum rejects ``chi2(2 K)`` at ``ALPHA``, ``s2`` = their mean / 2, else
+   1. It scales the reported chi-squares and cancels in the F ratio of check 3.
+3. The delay's and the bandwidth's shapes are fitted to ``T`` by weighted least squares (weights 1 / var) on
+   the informative bins where ``|T|`` is not above 1 beyond the estimate's spread (:func:`below_unity`), and
+   tested against unidentified dynamics (:func:`unidentified_fit`: the loop's own latency ``a e^{-j w d}``,
+   ``d`` up to ``LATENCY_SAMPLES``, or that latency times one lightly damped mode): F = the alternative's
+   weighted misfit per degree of freedom over the shape's, on (2 K - 4, 2 K - 2) degrees of freedom, K bins,
+   passes when its p value is below ``ALPHA``. An absolute goodness of fit is not used: above the identified
+   band the stage's own modes leave a misfit no drive-side shape fits (development null s101-004 and true
+   bandwidth s101-010 alike), and both sides of F carry it. Shapes: a delay ``a e^{-j w d}`` (phase linear
+   through zero, magnitude flat); a bandwidth ``a / (1 + j f / fc)`` (magnitude falling and phase lagging as
+   one pole).
+4. A mode's check: the largest ``|T - 1|`` among the bins where it deviates from 0 beyond the estimate's own
+   variance (chi-square, level ``ALPHA`` over the number of bins) must lie within the candidate mode's
+   half-power band (``f0 (1 +- zeta)``, at least one bin and the 3 % of the candidate's frequency grid).
 5. A slew limit's check: its residual is present only where the drive's rate exceeds its limit. ``T`` is
    estimated again on the segments whose drive rate stays below the limit throughout and for one segment's
    length before (the dynamics still ring after a burst); there the term predicts nothing, so neither a
    delay's nor a pole's shape may pass check 3 there: a lag below the limit is not the rate's.
 
 A check with no informative bin to test on says so and does not refuse the term (``testable`` False).
-Every threshold is a test level (``ALPHA``), a coherence level derived from it, or the estimate's own
-variance; nothing is specific to a stage.
+Every threshold is a test level (``ALPHA``), a coherence level derived from it, the estimate's own variance,
+or the vocabulary's own bounds (``LATENCY_SAMPLES``, the mode dampings); nothing is specific to a stage.
 """
 
 from __future__ import annotations
