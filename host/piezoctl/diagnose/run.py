@@ -231,6 +231,25 @@ def residual_bands(ctx) -> dict:
             **{f"{b}_rms_um": float(np.sqrt(x)) for b, x in zip(BANDS, en)}}
 
 
+def _unidentified_text(last, base_info, where) -> str:
+    """The band the base's dynamics were not identified in (above the calibration's), and the candidates whose
+    signature check failed, for the `none` verdict; fills ``where["unidentified_band_hz"]`` and
+    ``where["signature_failed"]``."""
+    fb = base_info.get("identified_band_hz")
+    if fb is None:
+        return ""
+    where["unidentified_band_hz"] = [fb, base_info.get("nyquist_hz")]
+    text = (f" The base's dynamics were identified below {fb:.0f} Hz (the calibration's band); above it the data "
+            "say nothing about them, and a drive-side term whose evidence lies there is named only when the "
+            "residual's transfer has its shape.")
+    failed = [c for c in last if c.signature_check is not None and not c.signature_check["passed"]]
+    if failed:
+        where["signature_failed"] = [{"name": c.name, **c.signature_check} for c in failed]
+        text += " Refused by their signature check: " + "; ".join(
+            f"{c.name} ({c.signature_check['reason']})" for c in failed) + "."
+    return text
+
+
 def _none_entry(last, fit, outside_doc, base_info, bands=None):
     best = last[0] if last else None
     dyn = base_info.get("dynamics_note", "")
@@ -255,6 +274,7 @@ def _none_entry(last, fit, outside_doc, base_info, bands=None):
     if outside_doc:
         text += " " + outside_doc["evidence"]
         where["outside_calibrated_range"] = outside_doc
+    text += _unidentified_text(last, base_info, where)
     return {"name": "none", "significant": False, "evidence": text, "where": where, "params": {},
             "improvement": {"nrmse_before": fit["base"]["nrmse"], "nrmse_after": fit["base"]["nrmse"]}}
 
@@ -284,7 +304,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             "worse_on": ({"recording": a.worsened[0], "factor": a.worsened[1]}
                                          if a.worsened else None),
                             **({"slow_signature": a.slow_signature} if a.slow_signature else {})},
-            "signature": a.term.signature})
+            "signature": a.term.signature, "signature_check": a.signature_check})
     last = rounds[-1] if rounds else []
     named = {x["name"] for x in effects}
     if not effects:
@@ -305,7 +325,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                         "credited_ratio": c.credited, "credited_bands": c.credited_bands,
                                         "fold_ratios": c.fold_ratios, "p_value": c.p, "delta_bic": c.dbic,
                                         **({"slow_signature": c.slow_signature} if c.slow_signature else {})},
-                        "signature": c.term.signature})
+                        "signature": c.term.signature, "signature_check": c.signature_check})
     return {"format": "piezoctl-diagnosis", "version": 1,
             "named": [x["name"] for x in effects if x["significant"]] or ["none"],
             "effects": effects,
@@ -390,9 +410,12 @@ def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], ma
     e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
     log(f"residual analysis done ({time.perf_counter() - t_start:.1f} s); base held-out NRMSE "
         f"{np.sqrt(np.mean(e ** 2)) / ctx.y_span:.4f}")
-    fc_hp = min(3.0 * calibration_band_hz(cal, ctx.cal_k0), 0.1 / ctx.dt)
+    f_band = calibration_band_hz(cal, ctx.cal_k0)   # the band the base's dynamics were identified in [Hz]
+    fc_hp = min(3.0 * f_band, 0.1 / ctx.dt)
     accepted, rounds, ctx_all, fctx = select(ctx, [TERMS[n] for n in VOCABULARY], recs, fold_all, block_all,
-                                             max_terms, DEFAULTS["max_rows"], fc_hp, log)
+                                             max_terms, DEFAULTS["max_rows"], fc_hp, log, f_band=f_band)
+    base_info["identified_band_hz"] = f_band
+    base_info["nyquist_hz"] = 0.5 / ctx.dt
     log(f"selection done ({time.perf_counter() - t_start:.1f} s): {[a.name for a in accepted] or ['none']}")
     fit, yr_all, held_pred = refine(ctx, ctx_all, fctx, recs, names, calibration, recordings, cal, settle_s, out)
     doc = document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibration, recordings)

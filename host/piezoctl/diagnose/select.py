@@ -140,6 +140,7 @@ class Candidate:
     credited: float = 1.0                     # held-out ratio credited beyond the base's misfit (misfit.py)
     credited_bands: dict | None = None        # per band: the improvement and the misfit energy [um^2/sample]
     slow_signature: dict | None = None        # creep, drift, offset: its signature's unique contribution
+    signature_check: dict | None = None       # the frequency-domain shape check (signature.py), drive-side terms
 
     @property
     def name(self) -> str:
@@ -560,11 +561,31 @@ def _worsened(ex, names):
     return worst
 
 
-def _first_exact(evals, fctx, fold_all, recs, span, log):
-    """The first significant candidate whose exact refined model lowers the held-out error in each fold."""
+def _setting_of(c):
+    """The candidate's setting for its signature check: a mode's (freq, damping) of fold 0, else the mean of the
+    folds' scalar settings."""
+    st = c.setting[0]
+    if isinstance(st, (int, float, np.number)) and all(isinstance(x, (int, float, np.number)) for x in c.setting):
+        return float(np.mean([float(x) for x in c.setting]))
+    return st   # a mode's tuple, or a setting of a term without a signature check (not read)
+
+
+def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
+    """The first significant candidate whose exact refined model lowers the held-out error in each fold (and,
+    with ``check``, whose shape passes its signature check: ``check(candidate)`` -> dict or None)."""
     for c in evals:
         if not c.significant or c.veto:
             continue
+        if check is not None:
+            c.signature_check = check(c)
+            if c.signature_check is not None:
+                log(f"    signature {c.name}: " + ("passed" if c.signature_check["passed"] else "failed") + " "
+                    + ", ".join(f"{k} {v:.3g}" for k, v in c.signature_check["figures"].items()
+                                if isinstance(v, (int, float))))
+            if c.signature_check is not None and not c.signature_check["passed"]:
+                c.veto = "its signature check fails: " + c.signature_check["reason"]
+                log(f"    signature {c.name}: {c.veto}")
+                continue
         ex = c.exact or [_exact_fold(fctx[f], c, f, fold_all, recs) for f in (0, 1)]
         c.exact_fold_ratios = [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0 else 1.0
                                for x in ex]
@@ -581,7 +602,7 @@ def _first_exact(evals, fctx, fold_all, recs, span, log):
     return None
 
 
-def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
+def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f_band=None):
     """Forward selection: per round every remaining term is evaluated (cross-validated, nested), the drive-side
     group discriminated, and the first significant candidate whose exact model improves each fold accepted;
     then the term is fitted on all settled samples and every context is re-derived by exact simulation.
@@ -613,7 +634,12 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
             tests = signature_tests(fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows)
             log("    slow signatures: " + attribute(evals, tests))
         rounds.append(evals)
-        best = _first_exact(evals, fctx, fold_all, recs, span, log)
+        check = None
+        if f_band is not None:   # the drive-side terms' frequency-domain shape on the current model (signature.py)
+            from .signature import check_in_context
+            cache = {}
+            check = (lambda c, _x=ctx_all, _k=cache: check_in_context(_x, c.name, _setting_of(c), f_band, _k))
+        best = _first_exact(evals, fctx, fold_all, recs, span, log, check)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
                              f"n{c.n_active} c{c.credited:.2f}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"
                              for c in evals[:6]))

@@ -1,0 +1,384 @@
+"""Frequency-domain signature checks of the drive-side terms (docs/diagnose.md, "Round 10").
+
+The selection (``select.py``) says whether a term lowers the held-out error; it does not say whether the
+residual it takes has the term's *shape*. Above the band the calibration identified the dynamics in, the data
+say nothing about G, and any drive-side term can take a misfit of G there. This module measures the shape:
+
+1. :func:`transfer` estimates ``T(f) = S_xy / S_xx``, the measured output ``y`` over the current model's output
+   ``x`` (the residual's transfer is ``T - 1``), pooled over the recordings by Welch averaging (Hann segments,
+   no overlap, so the ``n_d`` segments are independent), with the coherence ``g2`` per bin. A bin is
+   *informative* when its coherence exceeds the level a zero true coherence's estimate exceeds with
+   probability ``ALPHA`` (``1 - ALPHA^(1 / (n_d - 1))``). The variance of each of the real and imaginary
+   parts of the estimate is ``|T|^2 (1 - g2) / (2 n_d g2)`` (Bendat and Piersol's first-order expression).
+2. The *dispersion* ``s2`` (reported, ``figures.dispersion``): the estimate's variance holds noise and what
+   the model misses incoherently, not the base's systematic misfit. In the band the dynamics were identified
+   in every term predicts ``T = 1`` (G was fitted there), so ``|T - 1|^2 / var`` there follows ``chi2(2)`` up
+   to the misfit's factor; when their sum rejects ``chi2(2 K)`` at ``ALPHA``, ``s2`` = their mean / 2, else
+   1. It scales the reported chi-squares and cancels in the F ratio of check 3.
+3. The delay's and the bandwidth's shapes are fitted to ``T`` by weighted least squares (weights 1 / var) on
+   the informative bins where ``|T|`` is not above 1 beyond the estimate's spread (:func:`below_unity`), and
+   tested against unidentified dynamics (:func:`unidentified_fit`: the loop's own latency ``a e^{-j w d}``,
+   ``d`` up to ``LATENCY_SAMPLES``, or that latency times one lightly damped mode): F = the alternative's
+   weighted misfit per degree of freedom over the shape's, on (2 K - 4, 2 K - 2) degrees of freedom, K bins,
+   passes when its p value is below ``ALPHA``. An absolute goodness of fit is not used: above the identified
+   band the stage's own modes leave a misfit no drive-side shape fits (development null s101-004 and true
+   bandwidth s101-010 alike), and both sides of F carry it. Shapes: a delay ``a e^{-j w d}`` (phase linear
+   through zero, magnitude flat); a bandwidth ``a / (1 + j f / fc)`` (magnitude falling and phase lagging as
+   one pole).
+4. A mode's check: the largest ``|T - 1|`` among the bins where it deviates from 0 beyond the estimate's own
+   variance (chi-square, level ``ALPHA`` over the number of bins) must lie within the candidate mode's
+   half-power band (``f0 (1 +- zeta)``, at least one bin and the 3 % of the candidate's frequency grid).
+5. A slew limit's check: its residual is present only where the drive's rate exceeds its limit. ``T`` is
+   estimated again on the segments whose drive rate stays below the limit throughout and for one segment's
+   length before (the dynamics still ring after a burst); there the term predicts nothing, so neither a
+   delay's nor a pole's shape may pass check 3 there: a lag below the limit is not the rate's.
+
+A check with no informative bin to test on says so and does not refuse the term (``testable`` False).
+Every threshold is a test level (``ALPHA``), a coherence level derived from it, the estimate's own variance,
+or the vocabulary's own bounds (``LATENCY_SAMPLES``, the mode dampings); nothing is specific to a stage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import stats
+
+from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
+
+__all__ = ["ALPHA", "Transfer", "transfer", "dispersion", "check_delay", "check_bandwidth", "check_mode",
+           "check_slew", "check_candidate", "DRIVE_TERMS"]
+
+ALPHA = 0.01                 # level of every test here
+SEG_S = 0.1                  # [s] segment length aimed at (10 Hz bins); shortened so each recording gives 4
+MIN_SEGMENTS = 4             # segments per recording at least (fewer: the recording is not used)
+DRIVE_TERMS = ("delay", "amplifier_bandwidth", "unmodeled_resonance", "amplifier_slew_limit")
+
+
+@dataclasses.dataclass
+class Transfer:
+    """The measured output over the model's output per frequency bin (informative bins only).
+
+    f : [Hz]; T : complex, measured / model; g2 : coherence; var : variance of each of Re T, Im T;
+    n_d : the number of independent segments averaged; df : bin spacing [Hz]; segments : segments used.
+    """
+
+    f: np.ndarray
+    T: np.ndarray
+    g2: np.ndarray
+    var: np.ndarray
+    n_d: int
+    df: float
+    segments: int
+
+    @property
+    def k(self) -> int:
+        return int(self.f.size)
+
+
+def _nperseg(lengths, dt) -> int:
+    n = int(round(SEG_S / dt))
+    usable = [m for m in lengths if m >= MIN_SEGMENTS * 16]
+    if usable:
+        n = min(n, min(usable) // MIN_SEGMENTS)
+    return max(16, n)
+
+
+def transfer(xs, ys, dt, keep=None, nperseg=None) -> Transfer | None:
+    """Welch estimate of ``T = S_xy / S_xx`` pooled over recordings, on the informative bins.
+
+    Parameters
+    ----------
+    xs, ys : list of ndarray
+        Per recording, the model's output and the measured output [um] (settled samples, contiguous).
+    dt : float
+        Sample period [s].
+    keep : list of ndarray of bool, optional
+        Per recording, the samples a segment may contain (a segment is used only when all of its samples are
+        kept); default all.
+    nperseg : int, optional
+        Segment length [samples]; default ``SEG_S`` shortened so that every recording gives ``MIN_SEGMENTS``.
+
+    Returns
+    -------
+    Transfer or None
+        None when fewer than ``MIN_SEGMENTS`` segments or no informative bin.
+    """
+    n = nperseg or _nperseg([x.size for x in xs], dt)
+    w = np.hanning(n)
+    sxx = syy = sxy = 0.0
+    nd = 0
+    for i, (x, y) in enumerate(zip(xs, ys)):
+        x = np.asarray(x, float)
+        y = np.asarray(y, float)
+        for k0 in range(0, x.size - n + 1, n):
+            if keep is not None and not np.all(keep[i][k0:k0 + n]):
+                continue
+            xa = x[k0:k0 + n]
+            ya = y[k0:k0 + n]
+            X = np.fft.rfft(w * (xa - xa.mean()))
+            Y = np.fft.rfft(w * (ya - ya.mean()))
+            sxx = sxx + np.abs(X) ** 2
+            syy = syy + np.abs(Y) ** 2
+            sxy = sxy + np.conj(X) * Y
+            nd += 1
+    if nd < MIN_SEGMENTS:
+        return None
+    f = np.fft.rfftfreq(n, dt)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        T = sxy / sxx
+        g2 = np.abs(sxy) ** 2 / (sxx * syy)
+    g2_min = 1.0 - ALPHA ** (1.0 / (nd - 1))   # a zero coherence's estimate exceeds this with probability ALPHA
+    ok = np.isfinite(T) & np.isfinite(g2) & (g2 > g2_min) & (f > 0) & (f < 0.5 / dt)
+    if not np.any(ok):
+        return None
+    g2o = np.minimum(g2[ok], 1.0 - 1e-12)
+    var = np.abs(T[ok]) ** 2 * (1.0 - g2o) / (2.0 * nd * g2o)
+    return Transfer(f=f[ok], T=T[ok], g2=g2o, var=np.maximum(var, 1e-300), n_d=nd, df=float(f[1]),
+                    segments=nd)
+
+
+def dispersion(tr: Transfer, f_band: float) -> tuple[float, int]:
+    """(s2, bins): the factor by which ``|T - 1|^2 / var`` exceeds ``chi2(2)`` in the band the dynamics were
+    identified in (``f <= f_band``, where every term predicts ``T = 1``): its mean over 2 when the sum rejects
+    ``chi2(2 K)`` at ``ALPHA``, else 1 (the variance model stands); 1 when no bin."""
+    m = tr.f <= f_band
+    if not np.any(m):
+        return 1.0, 0
+    q = np.abs(tr.T[m] - 1.0) ** 2 / tr.var[m]
+    k = int(np.sum(m))
+    if stats.chi2.sf(float(np.sum(q)), 2 * k) >= ALPHA:
+        return 1.0, k
+    return max(1.0, float(np.mean(q)) / 2.0), k
+
+
+def _chi2(tr, model):
+    return float(np.sum(np.abs(tr.T - model) ** 2 / tr.var))
+
+
+def _scaled_fit(tr, shape):
+    """Best real gain ``a >= 0`` for ``T ~ a shape`` (weighted least squares) and its chi-square."""
+    w = 1.0 / tr.var
+    a = float(np.sum(w * np.real(np.conj(shape) * tr.T)) / max(np.sum(w * np.abs(shape) ** 2), 1e-300))
+    a = max(a, 0.0)
+    return a, _chi2(tr, a * shape)
+
+
+def _best(tr, grid, shape_of):
+    """(theta, gain, chi2) of the best ``a shape_of(theta, f)``, a >= 0, over ``grid``."""
+    best = None
+    for th in grid:
+        a, c = _scaled_fit(tr, shape_of(th, tr.f))
+        if best is None or c < best[2]:
+            best = (th, a, c)
+    return best
+
+
+def latency_fit(tr, dt):
+    """(d [s], gain, chi2): the loop's own latency ``a e^{-j w d}``, ``d`` up to ``LATENCY_SAMPLES`` samples
+    (``ident.terms``: what a sampled loop adds and a calibration cannot identify), the alternative every
+    drive-side shape is tested against."""
+    grid = np.linspace(0.0, LATENCY_SAMPLES, int(round(10 * LATENCY_SAMPLES)) + 1) * dt
+    return _best(tr, grid, lambda d, f: np.exp(-2j * np.pi * f * d))
+
+
+def mode_response(f, f0, zeta):
+    """A unit-static-gain lightly damped mode's frequency response at ``f`` [Hz]."""
+    r = np.asarray(f, float) / f0
+    return 1.0 / (1.0 - r * r + 2j * zeta * r)
+
+
+def unidentified_fit(tr, dt, f_band):
+    """(setting, gain, chi2) of the best unidentified dynamics: the loop's latency (:func:`latency_fit`), or the
+    latency times one mode of the stage not in the model (``mode_response``; frequency geometric from the
+    identified band to Nyquist, 64 values; the vocabulary's mode dampings, ``UnmodeledResonance.DAMPINGS``).
+    Setting: (d [s], f0 [Hz] or None, zeta or None)."""
+    d_l, a_l, c_l = latency_fit(tr, dt)
+    best = ((d_l, None, None), a_l, c_l)
+    lat = np.linspace(0.0, LATENCY_SAMPLES, 5) * dt
+    for f0 in np.geomspace(max(f_band, tr.df), 0.5 / dt, 64):
+        for z in UnmodeledResonance.DAMPINGS:
+            m = mode_response(tr.f, f0, z)
+            for d in lat:
+                a, c = _scaled_fit(tr, m * np.exp(-2j * np.pi * tr.f * d))
+                if c < best[2]:
+                    best = ((d, f0, z), a, c)
+    return best
+
+
+def below_unity(tr: Transfer) -> Transfer:
+    """The bins where ``|T|`` is not above 1 beyond the estimate's spread (one-sided, level ``ALPHA``): a delay
+    or a first-order pole multiplies the transfer by a magnitude of at most 1, so a bin where the measurement is
+    larger than the model is unidentified dynamics (a mode of the stage that the model lacks), whatever the drive
+    side does; the drive-side shapes are tested on the others."""
+    keep = np.abs(tr.T) - 1.0 <= stats.norm.isf(ALPHA) * np.sqrt(tr.var)
+    return dataclasses.replace(tr, f=tr.f[keep], T=tr.T[keep], g2=tr.g2[keep], var=tr.var[keep])
+
+
+def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label):
+    """Fit ``a shape_of(theta)`` over ``grid`` and test it against the loop's latency (:func:`latency_fit`, the
+    same free gain): F = chi2_latency / chi2_shape on (2 K - 2, 2 K - 2) degrees of freedom, level ``ALPHA``.
+    Both chi-squares carry the same misfit of the unidentified dynamics; only a shape that explains the
+    residual's transfer clearly better than a latency passes. ``s2`` (dispersion) cancels in F; it scales the
+    reported chi-squares."""
+    full = tr
+    tr = below_unity(tr)
+    if tr.k < 2:
+        return {"term": name, "testable": False, "passed": True, "figures": {"bins": 0, "identified_band_hz": f_band},
+                "reason": f"no informative bin of the residual's transfer where |T| is not above 1 ({full.k} bins)"}
+    th, a, c = _best(tr, grid, shape_of)
+    (d_lat, f0, z), a_lat, c_lat = unidentified_fit(tr, dt, f_band)
+    chi0 = _scaled_fit(tr, np.ones(tr.k, complex))[1]
+    dof, dof_alt = max(2 * tr.k - 2, 1), max(2 * tr.k - 4, 1)   # gain and setting; gain, latency, mode
+    F = (c_lat / dof_alt) / max(c / dof, 1e-300)
+    p = float(stats.f.sf(F, dof_alt, dof))
+    q = np.abs(tr.T - 1.0) ** 2 / tr.var
+    share_above = float(np.sum(q[tr.f > f_band]) / max(np.sum(q), 1e-300))
+    passed = p < ALPHA
+    alt = (f"the loop's own latency ({d_lat / dt:.1f} samples)" if f0 is None else
+           f"the loop's latency ({d_lat / dt:.1f} samples) with a mode of the stage at {f0:.0f} Hz (damping {z:g})")
+    reason = None
+    if not passed:
+        reason = (f"the residual's transfer (measured over model output, {tr.k} informative bins "
+                  f"{tr.f.min():.0f}..{tr.f.max():.0f} Hz, {100 * share_above:.0f} % of its deviation above the "
+                  f"{f_band:.0f} Hz the dynamics were identified in) does not have the {label} more than "
+                  f"unidentified dynamics have it: {alt} (weighted misfit {c / s2:.3g} against {c_lat / s2:.3g}, "
+                  f"F = {F:.2f}, p = {p:.1e}, level {ALPHA:g})")
+    return {"term": name, "testable": True, "passed": bool(passed), "reason": reason,
+            "figures": {"bins": tr.k, "bins_informative": full.k, "segments": tr.n_d, "f_min_hz": float(tr.f.min()),
+                        "f_max_hz": float(tr.f.max()), "identified_band_hz": float(f_band),
+                        "dispersion": float(s2), "chi2_flat": chi0 / s2, "chi2_unidentified": c_lat / s2,
+                        "chi2_shape": c / s2, "dof": dof, "F": F, "p": p, "gain": a,
+                        "latency_samples": d_lat / dt, "unidentified_mode_hz": f0, "unidentified_damping": z,
+                        "setting": float(th), "deviation_share_above_band": share_above}}
+
+
+def check_delay(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
+    """A delay's shape: ``T = a exp(-j 2 pi f d)``, ``d`` from 0 to 64 samples (quarter-sample steps)."""
+    grid = np.arange(0.0, 64.25, 0.25) * dt
+    r = _shape_test(tr, s2, f_band, dt, "delay", grid, lambda d, f: np.exp(-2j * np.pi * f * d),
+                    "phase linear in frequency through zero with a flat magnitude of a delay")
+    r["figures"]["delay_s"] = r["figures"].pop("setting")
+    return r
+
+
+def check_bandwidth(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
+    """A first-order bandwidth's shape: ``T = a / (1 + j f / fc)``, fc geometric from fs/2000 to fs/2."""
+    grid = np.geomspace(0.0005 / dt, 0.5 / dt, 200)
+    r = _shape_test(tr, s2, f_band, dt, "amplifier_bandwidth", grid, lambda fc, f: 1.0 / (1.0 + 1j * f / fc),
+                    "magnitude falling and phase lagging together as one pole")
+    r["figures"]["fc_hz"] = r["figures"].pop("setting")
+    return r
+
+
+def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: float) -> dict:
+    """A mode's shape: the residual's transfer ``|T - 1|`` peaks within the candidate mode's half-power band.
+
+    The peak is the largest ``|T - 1|`` over the informative bins where it deviates from 0 beyond the estimate's
+    own variance (chi-square with 2 degrees of freedom, level ``ALPHA`` over the number of bins; where it lies
+    is the question, not how well a model fits, so ``s2`` is not applied). Not testable when no informative bin
+    lies within the mode's half-power band."""
+    half = max(float(damping) * freq_hz, 0.03 * freq_hz, tr.df)
+    near = np.abs(tr.f - freq_hz) <= half
+    q = np.abs(tr.T - 1.0) ** 2 / tr.var
+    sig = stats.chi2.sf(q, 2) < ALPHA / max(tr.k, 1)      # Bonferroni over the bins
+    fig = {"bins": tr.k, "segments": tr.n_d, "mode_hz": float(freq_hz), "half_band_hz": half,
+           "identified_band_hz": float(f_band), "dispersion": float(s2)}
+    if not np.any(near):
+        return {"term": "unmodeled_resonance", "testable": False, "passed": True, "figures": fig,
+                "reason": f"no informative bin of the residual's transfer within {half:.0f} Hz of {freq_hz:.0f} Hz"}
+    dev = np.abs(tr.T - 1.0)
+    i = int(np.argmax(np.where(sig, dev, -1.0))) if np.any(sig) else int(np.argmax(q))
+    j = int(np.argmax(np.where(near, dev, -1.0)))
+    fig.update({"peak_hz": float(tr.f[i]), "peak_deviation": float(dev[i]), "peak_significant": bool(np.any(sig)),
+                "deviation_at_mode": float(dev[j]), "deviation_at_mode_hz": float(tr.f[j])})
+    passed = bool(np.any(sig) and near[i])
+    reason = None if passed else (
+        f"the residual's transfer peaks at {tr.f[i]:.0f} Hz (|T - 1| = {dev[i]:.3g}), not within {half:.0f} Hz of "
+        f"the mode's {freq_hz:.0f} Hz (there at most {dev[j]:.3g})"
+        if np.any(sig) else "the residual's transfer does not deviate significantly from 1 at any frequency")
+    return {"term": "unmodeled_resonance", "testable": True, "passed": passed, "reason": reason, "figures": fig}
+
+
+def check_slew(xs, ys, us, dt, limit_v_per_s, f_band, nperseg=None) -> dict:
+    """A slew limit's shape: no lag where the drive's rate stays below the limit. On the segments whose |du/dt|
+    stays below ``limit_v_per_s`` (and did for one segment before), neither a delay's nor a pole's shape may
+    explain the residual's transfer beyond the loop's latency (:func:`check_delay`, :func:`check_bandwidth`)."""
+    n = nperseg or _nperseg([x.size for x in xs], dt)
+    keep = []
+    for u in us:   # below the limit, and for a segment's length before (the dynamics still ring after a burst)
+        fast = (np.abs(np.diff(np.asarray(u, float), prepend=u[0])) / dt >= limit_v_per_s).astype(float)
+        keep.append(np.convolve(fast, np.ones(n), "full")[:fast.size] == 0)
+    tr = transfer(xs, ys, dt, keep=keep, nperseg=n)
+    fig = {"limit_v_per_s": float(limit_v_per_s), "identified_band_hz": float(f_band)}
+    if tr is None:
+        return {"term": "amplifier_slew_limit", "testable": False, "passed": True, "figures": fig,
+                "reason": "too few segments with the drive's rate below the limit to test"}
+    s2, _ = dispersion(tr, f_band)
+    lag = [check_delay(tr, s2, f_band, dt), check_bandwidth(tr, s2, f_band, dt)]
+    fig.update({"bins": tr.k, "segments": tr.n_d, "dispersion": s2,
+                "p_delay_below": lag[0]["figures"]["p"], "p_bandwidth_below": lag[1]["figures"]["p"]})
+    found = [r for r in lag if r["passed"]]
+    passed = not found
+    reason = None if passed else (
+        f"where the drive's rate stays below the limit ({limit_v_per_s / 1000:.1f} V/ms; {tr.n_d} segments, "
+        f"{tr.k} informative bins {tr.f.min():.0f}..{tr.f.max():.0f} Hz) the residual's transfer already has "
+        + " and ".join(("a delay's" if r["term"] == "delay" else "a pole's") + f" shape (p = {r['figures']['p']:.1e})"
+                       for r in found) + f" beyond the loop's latency, level {ALPHA:g}: the lag is not the rate's")
+    return {"term": "amplifier_slew_limit", "testable": True, "passed": bool(passed), "reason": reason,
+            "figures": fig}
+
+
+def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None) -> dict | None:
+    """The signature check of one candidate (None: the term has none here).
+
+    Parameters
+    ----------
+    name : str
+        The term's name (``DRIVE_TERMS``).
+    setting : float or tuple
+        Its setting: delay [samples], bandwidth [Hz], slew limit [V/s], mode (freq [Hz], damping).
+    xs, ys, us : list of ndarray
+        Per recording (settled samples): the current model's output [um], the measured output [um], the
+        drive [V].
+    dt : float
+        Sample period [s].
+    f_band : float
+        The band the base's dynamics were identified in [Hz] (the calibration's).
+    tr : Transfer, optional
+        :func:`transfer` of ``xs``, ``ys`` when already computed.
+    """
+    if name not in DRIVE_TERMS:
+        return None
+    if name == "amplifier_slew_limit":
+        return check_slew(xs, ys, us, dt, float(setting), f_band)
+    tr = tr if tr is not None else transfer(xs, ys, dt)
+    if tr is None:
+        return {"term": name, "testable": False, "passed": True, "figures": {"identified_band_hz": float(f_band)},
+                "reason": "the recordings give no informative bin of the residual's transfer"}
+    s2, _ = dispersion(tr, f_band)
+    if name == "delay":
+        return check_delay(tr, s2, f_band, dt)
+    if name == "amplifier_bandwidth":
+        return check_bandwidth(tr, s2, f_band, dt)
+    return check_mode(tr, s2, f_band, float(setting[0]), float(setting[1]))
+
+
+def check_in_context(ctx, name, setting, f_band, cache=None) -> dict | None:
+    """:func:`check_candidate` on the current model of a selection context (``select.Ctx``): its output, the
+    measurements and the drives of the settled samples. ``cache`` (a dict) keeps the transfer for the round."""
+    if name not in DRIVE_TERMS:
+        return None
+    xs = [np.asarray(s.yb, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    ys = [np.asarray(s.y, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    us = [np.asarray(s.u, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    tr = None
+    if name != "amplifier_slew_limit":
+        if cache is not None and "transfer" in cache:
+            tr = cache["transfer"]
+        else:
+            tr = transfer(xs, ys, ctx.dt)
+            if cache is not None:
+                cache["transfer"] = tr
+    return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr)

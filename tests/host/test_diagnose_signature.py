@@ -1,0 +1,170 @@
+"""Signature checks of the drive-side terms (piezoctl.diagnose.signature): synthetic model outputs x and
+measurements y = (a known shape applied to x) + noise; each check must pass on its own shape and fail on the
+others, on a residual of unidentified dynamics, and on a residual that is only noise."""
+
+import numpy as np
+import pytest
+from scipy import signal as sps
+
+from piezoctl.diagnose import signature as sig
+
+DT = 1e-4          # 10 kHz
+F_BAND = 20.0      # [Hz] the band "the calibration identified"
+N = 60_000         # 6 s per recording
+
+
+def _drive(seed, n=N):
+    """A broadband model output [um]: white noise low-passed at 1 kHz plus a slow sine."""
+    rng = np.random.default_rng(seed)
+    b, a = sps.butter(2, 1000.0, fs=1.0 / DT)
+    t = np.arange(n) * DT
+    return 2.0 * np.sin(2 * np.pi * 2.0 * t) + sps.lfilter(b, a, rng.standard_normal(n))
+
+
+def _noisy(y, seed, rms=0.02):
+    return y + rms * np.random.default_rng(seed + 100).standard_normal(y.size)
+
+
+def _delay(x, d):
+    return np.concatenate([np.full(d, x[0]), x[:-d]])
+
+
+def _pole(x, fc):
+    b, a = sps.butter(1, fc, fs=1.0 / DT)
+    return sps.lfilter(b, a, x)
+
+
+def _mode(x, f0, zeta):
+    """x through a unit-static-gain second-order mode at f0 (discretized by the bilinear transform)."""
+    w = 2 * np.pi * f0
+    b, a = sps.bilinear([w * w], [1.0, 2 * zeta * w, w * w], fs=1.0 / DT)
+    return sps.lfilter(b, a, x)
+
+
+def _case(shape, seeds=(1, 2)):
+    xs = [_drive(s) for s in seeds]
+    ys = [_noisy(shape(x), s) for x, s in zip(xs, seeds)]
+    tr = sig.transfer(xs, ys, DT)
+    s2, _ = sig.dispersion(tr, F_BAND)
+    return xs, ys, tr, s2
+
+
+def test_transfer_of_identity_is_one_with_its_variance():
+    xs, ys, tr, s2 = _case(lambda x: x)
+    assert tr.k > 100
+    z = np.abs(tr.T - 1.0) ** 2 / tr.var          # chi2(2) per bin when the variance is right
+    assert 1.0 < np.mean(z) < 3.0
+    assert s2 == 1.0   # in the identified band the variance model stands
+
+
+def test_pure_delay_passes_delay_and_fails_bandwidth_and_mode():
+    xs, ys, tr, s2 = _case(lambda x: _delay(x, 8))
+    d = sig.check_delay(tr, s2, F_BAND, DT)
+    assert d["passed"], d
+    assert abs(d["figures"]["delay_s"] - 8 * DT) <= 0.25 * DT
+    assert not sig.check_bandwidth(tr, s2, F_BAND, DT)["passed"]
+    m = sig.check_mode(tr, s2, F_BAND, 300.0, 0.02)
+    assert m["testable"] and not m["passed"], m
+
+
+def test_first_order_bandwidth_passes_bandwidth_and_fails_delay():
+    xs, ys, tr, s2 = _case(lambda x: _pole(x, 150.0))
+    b = sig.check_bandwidth(tr, s2, F_BAND, DT)
+    assert b["passed"], b
+    assert 130.0 < b["figures"]["fc_hz"] < 170.0
+    assert not sig.check_delay(tr, s2, F_BAND, DT)["passed"]
+
+
+def test_unidentified_mode_fails_delay_and_bandwidth_and_mode_check_finds_its_peak():
+    xs, ys, tr, s2 = _case(lambda x: _mode(x, 600.0, 0.05))
+    assert not sig.check_delay(tr, s2, F_BAND, DT)["passed"]
+    assert not sig.check_bandwidth(tr, s2, F_BAND, DT)["passed"]
+    assert sig.check_mode(tr, s2, F_BAND, 600.0, 0.05)["passed"]
+    assert not sig.check_mode(tr, s2, F_BAND, 200.0, 0.05)["passed"]
+
+
+def test_noise_alone_explains_nothing():
+    xs, ys, tr, s2 = _case(lambda x: x)
+    for r in (sig.check_delay(tr, s2, F_BAND, DT), sig.check_bandwidth(tr, s2, F_BAND, DT)):
+        assert not r["passed"], r
+        assert r["figures"]["p"] >= sig.ALPHA
+
+
+def _bursts(seed):
+    """A drive with fast bursts (rate up to ~2000 V/s) between slow stretches (below ~100 V/s)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(N) * DT
+    u = 10.0 * np.sin(2 * np.pi * 1.0 * t)
+    fast = (np.floor(t / 0.5) % 2) == 1
+    u = u + np.where(fast, 1.0 * np.sin(2 * np.pi * 300.0 * t), 0.0)
+    b, a = sps.butter(2, 1000.0, fs=1.0 / DT)   # a small broadband part, its rate below ~100 V/s
+    u = u + 0.01 * sps.lfilter(b, a, rng.standard_normal(N))
+    return u + 0.001 * rng.standard_normal(N)
+
+
+def test_slew_residual_only_above_the_limit_passes_and_below_fails():
+    us = [_bursts(s) for s in (1, 2)]
+    xs = [0.1 * u for u in us]
+    limit = 500.0   # [V/s]
+    fast = [np.abs(np.diff(u, prepend=u[0])) / DT >= limit for u in us]
+    # residual only where the rate exceeds the limit: a share of the model output there
+    ys_ok = [_noisy(x + 0.3 * np.where(np.convolve(f, np.ones(50), "same") > 0, x - np.mean(x), 0.0), i, 1e-5)
+             for i, (x, f) in enumerate(zip(xs, fast))]
+    ok = sig.check_slew(xs, ys_ok, us, DT, limit, F_BAND, nperseg=1000)
+    assert ok["testable"] and ok["passed"], ok
+    # a lag everywhere (a bandwidth): present below the limit too
+    ys_bad = [_noisy(_pole(x, 100.0), i, 1e-5) for i, x in enumerate(xs)]
+    bad = sig.check_slew(xs, ys_bad, us, DT, limit, F_BAND, nperseg=1000)
+    assert bad["testable"] and not bad["passed"], bad
+
+
+def test_check_candidate_dispatch_and_untestable():
+    xs, ys, tr, s2 = _case(lambda x: _delay(x, 8))
+    assert sig.check_candidate("creep", 1.0, xs, ys, xs, DT, F_BAND) is None
+    assert sig.check_candidate("delay", 8.0, xs, ys, xs, DT, F_BAND)["passed"]
+    short = [x[:50] for x in xs]
+    r = sig.check_candidate("delay", 8.0, short, short, short, DT, F_BAND)
+    assert not r["testable"] and r["passed"]
+
+
+def test_below_unity_drops_the_bins_a_drive_side_term_cannot_explain():
+    xs, ys, tr, s2 = _case(lambda x: _mode(x, 600.0, 0.05))
+    kept = sig.below_unity(tr)
+    assert 0 < kept.k < tr.k
+    assert np.all(np.abs(kept.T) - 1.0 <= 2.33 * np.sqrt(kept.var) + 1e-12)
+    assert np.any(np.abs(tr.f - 600.0) < 30.0) and not np.any(np.abs(kept.f - 600.0) < 30.0)
+
+
+class _Sig:
+    def __init__(self, u, yb, y):
+        self.u, self.yb, self.y = u, yb, y
+
+
+class _Ctx:
+    def __init__(self, sigs):
+        self.signals = sigs
+        self.valid = [np.ones(s.u.size, bool) for s in sigs]
+        self.dt = DT
+
+
+def test_check_in_context_reads_the_current_model_and_caches_the_transfer():
+    xs = [_drive(s) for s in (1, 2)]
+    ctx = _Ctx([_Sig(x, x, _noisy(_pole(x, 150.0), i)) for i, x in enumerate(xs)])
+    cache = {}
+    b = sig.check_in_context(ctx, "amplifier_bandwidth", 150.0, F_BAND, cache)
+    assert b["passed"] and "transfer" in cache
+    d = sig.check_in_context(ctx, "delay", 8.0, F_BAND, cache)
+    assert d["figures"]["bins_informative"] == cache["transfer"].k
+    assert sig.check_in_context(ctx, "creep", None, F_BAND, cache) is None
+
+
+def test_setting_of_a_candidate_without_a_numeric_setting():
+    from piezoctl.diagnose.select import _setting_of
+
+    class C:
+        setting = [None, None]
+    assert _setting_of(C()) is None
+    C.setting = [3.0, np.float64(5.0)]
+    assert _setting_of(C()) == 4.0
+    C.setting = [(300.0, 0.01), (310.0, 0.02)]
+    assert _setting_of(C()) == (300.0, 0.01)
