@@ -20,7 +20,7 @@ from ..dsp import filt
 from ..ident import refined
 from ..ident.terms import Term
 from ..io.recording import session_start
-from ..models.hysteresis import hysteresis_groups, initial_state_span
+from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg
 from .misfit import credited_ratio
 from .discriminate import discriminate_group, highpassed
@@ -619,4 +619,5 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
         ctx_all = rebase(ctx_all, model_with(ctx_all.base, {term.name: term.term(ctx_all, st, th)}), recs)
         fctx = [rebase(fctx[f], best.exact[f]["params"], recs) for f in (0, 1)]
         accepted.append(best)
+    clear_output_cache()   # the drive-side settings' H outputs (up to 380 MB) serve the selection only
     return accepted, rounds, ctx_all, fctx
