@@ -140,10 +140,18 @@ def test_output_cache_is_exact(monkeypatch):
     for hh, vv in ((hp, v2), (hp2, v), (hp3, v), (hp4, v)):
         assert np.array_equal(hy.hysteresis_output(hh, vv), compute(hh, vv)[0])
     assert len(calls) == 5
-    # bounded: the oldest outputs go first
+    # bounded; when full of one operator's outputs a new one of it is not stored, another operator's evicts
+    hy.clear_output_cache()
     monkeypatch.setattr(hy, "_OUTPUT_CACHE_MAX_SAMPLES", 3 * v.size)
-    hy.hysteresis_output(hp, v + 0.01)
-    assert sum(a.size for a in hy._OUTPUT_CACHE.values()) <= 3 * v.size
+    for d in (0.0, 0.01, 0.02, 0.03):
+        hy.hysteresis_output(hp, v + d)
+    assert [k[1] for k in hy._OUTPUT_CACHE] == [v.size] * 3
+    n = len(calls)
+    assert np.array_equal(hy.hysteresis_output(hp, v + 0.03), compute(hp, v + 0.03)[0])   # not stored: again
+    assert hy.hysteresis_output(hp, v + 0.01) is hy.hysteresis_output(hp, v + 0.01) and len(calls) == n + 1
+    hy.hysteresis_output(hp2, v)
+    assert len(hy._OUTPUT_CACHE) == 3 and sum(a.size for a in hy._OUTPUT_CACHE.values()) <= 3 * v.size
+    assert next(reversed(hy._OUTPUT_CACHE))[0] == hy._output_key(hp2, v)[0]
     hy.clear_output_cache()
     assert not hy._OUTPUT_CACHE
 

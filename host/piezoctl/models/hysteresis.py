@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import collections
 import hashlib
+import json
 import math
 import zlib
 
@@ -319,15 +320,11 @@ _OUTPUT_CACHE_MAX_SAMPLES = 48_000_000   # H outputs kept: about 380 MB of float
 
 
 def _output_key(hp: dict, v: np.ndarray) -> tuple:
-    """What H[v] depends on: the operator (without its offset) and the drive (its size and BLAKE2b-128 digest: a
-    collision has probability 2^-128; about 12 ms per 9 MB)."""
-    def frozen(x):
-        if isinstance(x, dict):
-            return tuple(sorted((k, frozen(v)) for k, v in x.items() if k != "offset"))
-        if isinstance(x, (list, tuple, np.ndarray)):
-            return tuple(frozen(v) for v in x)
-        return float(x) if isinstance(x, (int, float, np.floating, np.integer)) and not isinstance(x, bool) else x
-    return frozen(hp), v.size, hashlib.blake2b(v.view(np.uint8), digest_size=16).digest()
+    """What H[v] depends on: the operator without its offset (its JSON text, floats written exactly) and the
+    drive (its size and SHA-256 digest: a collision has probability 2^-256; about 5 ms per 9 MB)."""
+    op = json.dumps({k: x for k, x in hp.items() if k != "offset"}, sort_keys=True,
+                    default=lambda o: o.tolist() if hasattr(o, "tolist") else repr(o))
+    return op, v.size, hashlib.sha256(v.view(np.uint8)).digest()
 
 
 def hysteresis_output(hp: dict, v) -> np.ndarray:
@@ -337,9 +334,12 @@ def hysteresis_output(hp: dict, v) -> np.ndarray:
     The diagnosis runs the current hysteresis on a changed drive for every setting of a drive-side term
     (bandwidth, slew limit, saturation) on every recording, and again for each fold's model, each selection
     round and the all-data model; those models share the base's operator unless an accepted term refitted it
-    (an intercept only moves the offset, which is not part of the key). On case s0-017 that was 1711 runs of
-    the plane for about 300 distinct drives. Kept in an LRU cache of at most ``_OUTPUT_CACHE_MAX_SAMPLES``
-    samples (only H: the hysteretic part is not asked for there); :func:`clear_output_cache` empties it."""
+    (an intercept only moves the offset, which is not part of the key). On case s0-017 that was 1708 runs of
+    the plane. At most ``_OUTPUT_CACHE_MAX_SAMPLES`` samples are kept (only H: the hysteretic part is not asked
+    for there). When full, a new output of the operator the oldest entry belongs to is not stored (the settings
+    recur in the same order every round: evicting the oldest would evict each one just before it is asked for
+    again), while an output of another operator (a term refitted the hysteresis) evicts the oldest entries.
+    :func:`clear_output_cache` empties it."""
     v = np.ascontiguousarray(v, dtype=float)
     key = _output_key(hp, v)
     hit = _OUTPUT_CACHE.get(key)
@@ -350,11 +350,13 @@ def hysteresis_output(hp: dict, v) -> np.ndarray:
     if not h.flags.owndata:     # never keep a view of a cached state
         h = h.copy()
     h.setflags(write=False)
-    if v.size <= _OUTPUT_CACHE_MAX_SAMPLES:
+    total = sum(x.size for x in _OUTPUT_CACHE.values())
+    while _OUTPUT_CACHE and total + v.size > _OUTPUT_CACHE_MAX_SAMPLES:
+        if next(iter(_OUTPUT_CACHE))[0] == key[0]:
+            return h            # full of this operator's outputs: keep them
+        total -= _OUTPUT_CACHE.popitem(last=False)[1].size
+    if total + v.size <= _OUTPUT_CACHE_MAX_SAMPLES:
         _OUTPUT_CACHE[key] = h
-        total = sum(x.size for x in _OUTPUT_CACHE.values())
-        while total > _OUTPUT_CACHE_MAX_SAMPLES:
-            total -= _OUTPUT_CACHE.popitem(last=False)[1].size
     return h
 
 
