@@ -164,3 +164,33 @@ def test_prediction_on_test_rows_is_the_same_floats(k):
     th = rng.normal(size=k)
     test = (np.arange(X.shape[0]) // 997) % 2 == 1
     assert np.array_equal((X @ th)[test], X[test] @ th)
+
+
+def test_blas_threads_limits_and_restores(tmp_path):
+    """``dsp.blas_threads`` sets every loaded OpenBLAS to n threads inside the block and restores it after, also
+    when the block raises; ``diagnose`` runs inside it."""
+    import scipy.linalg  # noqa: F401  (loads scipy's own OpenBLAS besides numpy's)
+    from piezoctl import dsp
+    from piezoctl.diagnose import run
+    ctl = dsp._openblas_controls()
+    if not ctl:
+        pytest.skip("no OpenBLAS loaded (another BLAS): nothing to limit")
+    before = [g() for _, g in ctl]
+    with pytest.raises(RuntimeError):
+        with dsp.blas_threads(1):
+            assert [g() for _, g in ctl] == [1] * len(ctl)
+            raise RuntimeError("inside")
+    assert [g() for _, g in ctl] == before
+    seen = []
+
+    def load(*a, **k):
+        seen.append([g() for _, g in ctl])
+        raise RuntimeError("stop")
+    orig = run.load
+    run.load = load
+    try:
+        with pytest.raises(RuntimeError):
+            run.diagnose(["cal.csv"], ["rec.csv"], str(tmp_path / "out"))
+    finally:
+        run.load = orig
+    assert seen == [[1] * len(ctl)] and [g() for _, g in ctl] == before
