@@ -8,6 +8,8 @@
   (``ident.base.fit_dynamics``): a hit returns exactly what the computation returns, a changed input misses.
 """
 
+import types
+
 import numpy as np
 import pytest
 from scipy import signal as sig
@@ -166,12 +168,12 @@ def test_prediction_on_test_rows_is_the_same_floats(k):
     assert np.array_equal((X @ th)[test], X[test] @ th)
 
 
-def test_blas_threads_limits_and_restores(tmp_path):
+def test_blas_threads_limits_and_restores():
     """``dsp.blas_threads`` sets every loaded OpenBLAS to n threads inside the block and restores it after, also
-    when the block raises; ``diagnose`` runs inside it."""
+    when the block raises; the selection runs inside it."""
     import scipy.linalg  # noqa: F401  (loads scipy's own OpenBLAS besides numpy's)
     from piezoctl import dsp
-    from piezoctl.diagnose import run
+    from piezoctl.diagnose import select as S
     ctl = dsp._openblas_controls()
     if not ctl:
         pytest.skip("no OpenBLAS loaded (another BLAS): nothing to limit")
@@ -183,14 +185,11 @@ def test_blas_threads_limits_and_restores(tmp_path):
     assert [g() for _, g in ctl] == before
     seen = []
 
-    def load(*a, **k):
-        seen.append([g() for _, g in ctl])
-        raise RuntimeError("stop")
-    orig = run.load
-    run.load = load
-    try:
-        with pytest.raises(RuntimeError):
-            run.diagnose(["cal.csv"], ["rec.csv"], str(tmp_path / "out"))
-    finally:
-        run.load = orig
+    class Probe:
+        name = "probe"
+
+        def applicable(self, ctx):
+            seen.append([g() for _, g in ctl])
+            return False
+    S.select(types.SimpleNamespace(y_span=1.0), [Probe()], [], np.zeros(0), np.zeros(0), 0, 1000, 0.0, lambda *a: None)
     assert seen == [[1] * len(ctl)] and [g() for _, g in ctl] == before

@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dsp import blas_threads
 from ..errors import CliError
 from ..ident import refined
 from ..ident.base import fit_base, history_holdout
@@ -351,7 +350,6 @@ def write_outputs(doc, out, ctx, yr_all, held_pred, report, png, t_start):
         json.dump(_jsonable(doc), fh, indent=1, allow_nan=False)
 
 
-@blas_threads(1)   # small BLAS calls: a second thread only waits for a busy core (dsp.blas_threads)
 def diagnose(calibration, recordings, out_dir, settle_s=DEFAULTS["settle_s"], max_terms=DEFAULTS["max_terms"],
              block_s=DEFAULTS["block_s"], report=True, log=print, png=False) -> dict:
     """Run the whole diagnosis and write ``diagnosis.json``, the model files and ``report.html``.

@@ -16,7 +16,7 @@ import dataclasses
 
 import numpy as np
 
-from ..dsp import filt
+from ..dsp import blas_threads, filt
 from ..ident import refined
 from ..ident.terms import Term
 from ..io.recording import session_start
@@ -572,6 +572,7 @@ def _first_exact(evals, fctx, fold_all, recs, span, log):
     return None
 
 
+@blas_threads(1)   # small BLAS calls: a second thread only waits for a busy core (dsp.blas_threads)
 def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log):
     """Forward selection: per round every remaining term is evaluated (cross-validated, nested), the drive-side
     group discriminated, and the first significant candidate whose exact model improves each fold accepted;
