@@ -9,10 +9,14 @@ unit of their input.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+
 import numpy as np
 from scipy import signal
 
-__all__ = ["filt", "lowpass", "lowpass_tau", "mode_filter", "slew_limit", "drive_rate", "RATE_CUTOFF_HZ"]
+__all__ = ["filt", "lowpass", "lowpass_tau", "mode_filter", "slew_limit", "drive_rate", "RATE_CUTOFF_HZ",
+           "blas_threads"]
 
 RATE_CUTOFF_HZ = 50.0
 _SLEW_SCALAR = 32   # slew_limit: ramp steps taken one by one before the rest is taken as an array
@@ -114,3 +118,53 @@ def drive_rate(v, dt: float, cutoff_hz: float = RATE_CUTOFF_HZ) -> np.ndarray:
     """Magnitude of the drive rate [FS/s], low-passed at ``cutoff_hz`` [Hz]."""
     r = np.abs(np.gradient(np.asarray(v, float), dt)) if len(v) > 1 else np.zeros(len(v))
     return lowpass(r, cutoff_hz, dt)
+
+
+# (set, get) entry points of the OpenBLAS builds numpy and scipy load (their wheels rename the symbols)
+_BLAS_THREAD_SYMBOLS = (("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),
+                        ("scipy_openblas_set_num_threads", "scipy_openblas_get_num_threads"),
+                        ("openblas_set_num_threads64_", "openblas_get_num_threads64_"),
+                        ("openblas_set_num_threads", "openblas_get_num_threads"))
+
+
+def _openblas_controls() -> list:
+    """(set, get) functions of every OpenBLAS library loaded in this process (numpy's and scipy's are two
+    separate libraries, each with its own threads); empty when none is found (another BLAS: nothing to do)."""
+    try:
+        with open("/proc/self/maps") as f:
+            paths = sorted({ln.split()[-1] for ln in f if "openblas" in ln.lower() and ".so" in ln})
+    except OSError:
+        return []
+    out = []
+    for path in paths:
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for set_name, get_name in _BLAS_THREAD_SYMBOLS:
+            if hasattr(lib, set_name) and hasattr(lib, get_name):
+                st, gt = getattr(lib, set_name), getattr(lib, get_name)
+                st.argtypes, st.restype, gt.argtypes, gt.restype = [ctypes.c_int], None, [], ctypes.c_int
+                out.append((st, gt))
+                break
+    return out
+
+
+@contextlib.contextmanager
+def blas_threads(n: int = 1):
+    """Run the block with the loaded OpenBLAS libraries limited to ``n`` threads [count], restored after.
+
+    Why: the diagnosis' BLAS calls are small (Gram matrices of a few hundred thousand rows and at most a few
+    hundred columns, matrix-vector products); on two cores with the other one busy, OpenBLAS's second thread
+    waits for a core and its partner spins: case s103-008 (foreign, scale 0.5) took 29.2 and 29.7 s of CPU
+    with the default two threads and 12.9 and 11.6 s with one, under the shared load (docs/diagnose-speed.md).
+    Results differ by round-off only (another blocking of the same sums)."""
+    ctl = _openblas_controls()
+    old = [gt() for _, gt in ctl]
+    for st, _ in ctl:
+        st(int(n))
+    try:
+        yield
+    finally:
+        for (st, _), k in zip(ctl, old):
+            st(int(k))

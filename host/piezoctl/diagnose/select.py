@@ -16,11 +16,11 @@ import dataclasses
 
 import numpy as np
 
-from ..dsp import filt
+from ..dsp import blas_threads, filt
 from ..ident import refined
 from ..ident.terms import Term
 from ..io.recording import session_start
-from ..models.hysteresis import hysteresis_groups, initial_state_span
+from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg
 from .misfit import credited_ratio
 from .discriminate import discriminate_group, highpassed
@@ -241,10 +241,12 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None):
             lb = np.concatenate([np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
         th = _lstsq(Xtr, e[idx]) if lb is None else _lstsq_bounded(Xtr, e[idx], lb)
     sse_tr = float(np.sum((e[idx] - Xtr @ th) ** 2)) * (np.sum(train) / max(idx.size, 1))
+    # the prediction on every row, then the test rows: the same floats as X[test] @ th (each row's dot product is
+    # computed alike), without copying half the design's rows (about 1 M at full length) on every call
     if nuis is None:
-        return th, X[test] @ th, sse_tr
+        return th, (X @ th)[test], sse_tr
     m = nuis[1].shape[1]
-    return th, nuis[1] @ th[:m] + X[test] @ th[m:], sse_tr
+    return th, nuis[1] @ th[:m] + (X @ th[m:])[test], sse_tr
 
 
 def _design(ctx, term, st):
@@ -602,6 +604,7 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
     return None
 
 
+@blas_threads(1)   # small BLAS calls: a second thread only waits for a busy core (dsp.blas_threads)
 def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f_band=None):
     """Forward selection: per round every remaining term is evaluated (cross-validated, nested), the drive-side
     group discriminated, and the first significant candidate whose exact model improves each fold accepted;
@@ -659,4 +662,5 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         ctx_all = rebase(ctx_all, model_with(ctx_all.base, {term.name: term.term(ctx_all, st, th)}), recs)
         fctx = [rebase(fctx[f], best.exact[f]["params"], recs) for f in (0, 1)]
         accepted.append(best)
+    clear_output_cache()   # the drive-side settings' H outputs (up to 380 MB) serve the selection only
     return accepted, rounds, ctx_all, fctx

@@ -36,7 +36,7 @@ import dataclasses
 import numpy as np
 
 from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
-from ..models.hysteresis import hysteresis_groups, hysteresis_parts, scale_groups
+from ..models.hysteresis import hysteresis_groups, hysteresis_output, scale_groups
 
 __all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G"]
 
@@ -172,7 +172,7 @@ def h_of_drive(ctx, ue, u, h_now) -> np.ndarray:
     if np.array_equal(ue, u):
         return h_now
     v = (ue - float(ctx.base["u_mid"])) / float(ctx.base["u_half"])
-    return hysteresis_parts(ctx.base["hysteresis"], v)[0]
+    return hysteresis_output(ctx.base["hysteresis"], v)   # cached: every setting recurs per fold, round, model
 
 
 # A lag within this many sample periods is the sampled loop's own latency (the ZOH's half sample, the tick's

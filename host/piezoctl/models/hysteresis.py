@@ -30,6 +30,8 @@ operator on one drive many times with different weights.
 from __future__ import annotations
 
 import collections
+import hashlib
+import json
 import math
 import zlib
 
@@ -38,6 +40,7 @@ import numpy as np
 from .play import play_outputs
 
 __all__ = ["bouc_wen_h", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
+           "hysteresis_output", "clear_output_cache",
            "poly_clamped", "hysteresis_features", "add_to_features", "hysteresis_channels",
            "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span"]
 
@@ -310,6 +313,56 @@ def hysteresis_parts(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
     hyst = P @ w - float(w.sum()) * v
     out = float(w.sum()) * v + hyst + poly_clamped(v, hp["poly"], hp["v_lo"], hp["v_hi"])
     return out, hyst
+
+
+_OUTPUT_CACHE: "collections.OrderedDict" = collections.OrderedDict()
+_OUTPUT_CACHE_MAX_SAMPLES = 48_000_000   # H outputs kept: about 380 MB of float64
+
+
+def _output_key(hp: dict, v: np.ndarray) -> tuple:
+    """What H[v] depends on: the operator without its offset (its JSON text, floats written exactly) and the
+    drive (its size and SHA-256 digest: a collision has probability 2^-256; about 5 ms per 9 MB)."""
+    op = json.dumps({k: x for k, x in hp.items() if k != "offset"}, sort_keys=True,
+                    default=lambda o: o.tolist() if hasattr(o, "tolist") else repr(o))
+    return op, v.size, hashlib.sha256(v.view(np.uint8)).digest()
+
+
+def hysteresis_output(hp: dict, v) -> np.ndarray:
+    """H[v] without offset [um] (the first output of :func:`hysteresis_parts`, the same floats), cached: a
+    read-only result.
+
+    The diagnosis runs the current hysteresis on a changed drive for every setting of a drive-side term
+    (bandwidth, slew limit, saturation) on every recording, and again for each fold's model, each selection
+    round and the all-data model; those models share the base's operator unless an accepted term refitted it
+    (an intercept only moves the offset, which is not part of the key). On case s0-017 that was 1708 runs of
+    the plane. At most ``_OUTPUT_CACHE_MAX_SAMPLES`` samples are kept (only H: the hysteretic part is not asked
+    for there). When full, a new output of the operator the oldest entry belongs to is not stored (the settings
+    recur in the same order every round: evicting the oldest would evict each one just before it is asked for
+    again), while an output of another operator (a term refitted the hysteresis) evicts the oldest entries.
+    :func:`clear_output_cache` empties it."""
+    v = np.ascontiguousarray(v, dtype=float)
+    key = _output_key(hp, v)
+    hit = _OUTPUT_CACHE.get(key)
+    if hit is not None:
+        _OUTPUT_CACHE.move_to_end(key)
+        return hit
+    h = hysteresis_parts(hp, v)[0]
+    if not h.flags.owndata:     # never keep a view of a cached state
+        h = h.copy()
+    h.setflags(write=False)
+    total = sum(x.size for x in _OUTPUT_CACHE.values())
+    while _OUTPUT_CACHE and total + v.size > _OUTPUT_CACHE_MAX_SAMPLES:
+        if next(iter(_OUTPUT_CACHE))[0] == key[0]:
+            return h            # full of this operator's outputs: keep them
+        total -= _OUTPUT_CACHE.popitem(last=False)[1].size
+    if total + v.size <= _OUTPUT_CACHE_MAX_SAMPLES:
+        _OUTPUT_CACHE[key] = h
+    return h
+
+
+def clear_output_cache() -> None:
+    """Empty the cache of :func:`hysteresis_output` (the diagnosis does when its selection is done)."""
+    _OUTPUT_CACHE.clear()
 
 
 def hysteresis_features(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
