@@ -70,6 +70,10 @@ def test_two_axis_stage_own_50hz_triangle(calibration):
     rc, out, _ = calibration
     for path in (out / "summary.json", out / "axis2" / "summary.json"):
         t = json.loads(path.read_text())["tracking"]["50"]
+        # round 10: 3.77x in a loaded tools/test run, inferred: the learned run reported faulted after the host's
+        # stop_wave cut the wave at a random phase and the figure taken from the dynamics inverse; the
+        # triangles now end by themselves (docs/cross-coupling.md, "Round 10"): 13.9x-14.5x measured
+        assert t["compensation_used"] == "learned", t
         assert t["reduction"] >= 5.0, t
 
 

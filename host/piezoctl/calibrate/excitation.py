@@ -12,9 +12,13 @@ recorder, over the protocol: nothing here reaches into the simulation.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
-__all__ = ["forc_sweeps", "chirp", "chirp_frf", "triangle_run", "multitone_run"]
+from .. import interface
+
+__all__ = ["forc_sweeps", "chirp", "chirp_frf", "triangle_run", "multitone_run", "wait_wave_end"]
 
 
 def forc_sweeps(ctl, tops=(1.0, 0.8, 0.6, 0.4), *, f_hz: float = 1.0, periods: int = 2,
@@ -132,23 +136,70 @@ def settle_periods(f_hz: float) -> int:
     return max(1, int(np.ceil(SETTLE_S * f_hz - 1e-9)))
 
 
-def _settled_capture(ctl, period_s: float, periods: int, settle_periods: int) -> dict:
+def _ticks(ctl) -> int:
+    """The controller's tick counter (input ``tick_count``, wraps at 2^32)."""
+    hi, lo = ctl.client.read_input(interface.INPUT_REGISTERS["tick_count"][0], 2)
+    return (hi << 16) | lo
+
+
+def wait_wave_end(ctl, max_ticks: int, *, poll_s: float = 0.01) -> bool:
+    """Wait until a wave that ends by itself (``wave_cycles``) has ended.
+
+    The limit is counted in the controller's ticks, not in the host's time:
+    a host that is slow to ask (a loaded PC) never stops the wave early, and
+    a controller that stalls is waited for. True if the wave ended by itself
+    within ``max_ticks`` ticks of the call; False if it still ran then (the
+    caller stops it and says so).
+    """
+    t0 = _ticks(ctl)
+    while ctl.status()["wave_running"]:
+        if (_ticks(ctl) - t0) & 0xFFFFFFFF > max_ticks:
+            return False
+        time.sleep(poll_s)
+    return True
+
+
+def _settled_capture(ctl, period_s: float, periods: int, settle_periods: int, *, ends_itself: bool = False) -> dict:
+    """Start the loaded wave, record ``ref`` and ``y`` over ``periods`` after ``settle_periods``.
+
+    ``ends_itself`` (a triangle or a sine): the wave is told to end by itself one
+    period after the record (``wave_cycles``), back at its offset, on a tick the
+    firmware counts; nothing the host does (or how late) changes the run. Until
+    2026-11-26 the host stopped every run with ``stop_wave`` once it had read the
+    record: at a phase set by the host's speed, a step of up to the amplitude that
+    can ring the stage's mode past the sensor's range (``sensor_implausible``)
+    after a valid record, and the configuration was then reported as faulted
+    (docs/calibrate.md, "Host timing"). A multisine has no cycles: the host still
+    stops it, and ``faults_in_record`` (the faults read before that stop) tells
+    a fault of the run from one the stop latched.
+
+    Returns ``t`` [s], ``ref``, ``y`` [um], ``faults_in_record`` (int, the fault
+    bits before the host touched the wave) and ``stopped_by_host`` (bool).
+    """
     tick = ctl.identity.tick_hz
     total_s = period_s * (periods + settle_periods)
     cap = ctl.identity.rec_capacity // 2
     dec = max(1, int(np.ceil(total_s * tick / cap)))
     frames = int(round(total_s * tick / dec))
+    if ends_itself:
+        ctl.write("wave_cycles", periods + settle_periods + 1)
     cols = ctl.capture(["ref", "y"], frames, decimation=dec, trigger="software", start_wave=True)
-    ctl.command("stop_wave")
+    period_ticks = int(round(period_s * tick))
+    stopped_by_host = not (ends_itself and wait_wave_end(ctl, 2 * period_ticks + frames * dec))
+    faults = int(ctl.status()["faults"])
+    if stopped_by_host:
+        ctl.command("stop_wave")
     keep = cols["t"] >= settle_periods * period_s - 1e-12
-    return {"t": cols["t"][keep] - cols["t"][keep][0], "ref": cols["ref"][keep], "y": cols["y"][keep]}
+    return {"t": cols["t"][keep] - cols["t"][keep][0], "ref": cols["ref"][keep], "y": cols["y"][keep],
+            "faults_in_record": faults, "stopped_by_host": stopped_by_host}
 
 
 def triangle_run(ctl, f_hz: float, centre_um: float, amp_um: float, *, periods: int = 2,
                  settle: int | None = None) -> dict:
     """Play a position triangle in the current mode; ``ref`` and ``y`` [um] over whole periods after settling."""
     load_triangle(ctl, f_hz, centre_um, amp_um)
-    return _settled_capture(ctl, 1.0 / f_hz, periods, settle_periods(f_hz) if settle is None else settle)
+    return _settled_capture(ctl, 1.0 / f_hz, periods, settle_periods(f_hz) if settle is None else settle,
+                            ends_itself=True)
 
 
 def load_triangle(ctl, f_hz: float, centre_um: float, amp_um: float) -> None:

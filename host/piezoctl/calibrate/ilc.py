@@ -35,8 +35,6 @@ The best correction is what is kept.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from .. import interface
@@ -339,14 +337,16 @@ def _end_after(ctl, periods: int) -> None:
     ctl.write("wave_cycles", periods + 1)
 
 
-def _stop(ctl, timeout_s: float = 3.0) -> None:
+def _stop(ctl, max_ticks: int = 30000) -> None:
     """Wait for a wave that ends by itself (cycles), then stop it anyway (a
-    multisine has no cycles)."""
+    multisine has no cycles). The wait is counted in the controller's ticks
+    (:func:`excitation.wait_wave_end`): until 2026-11-26 it was 3 s of the
+    host's time, which a loaded host could spend before the wave's last period
+    was played, and the stop then came at a random phase."""
+    from .excitation import wait_wave_end
     kind = ctl.client.read_holding(interface.HOLDING_REGISTERS["wave_kind"][0], 1)[0]
     if kind in (interface.ENUMS["wave_kind"]["sine"], interface.ENUMS["wave_kind"]["triangle"]):
-        deadline = time.monotonic() + timeout_s
-        while ctl.status()["wave_running"] and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_wave_end(ctl, max_ticks)
     ctl.command("stop_wave")
 
 

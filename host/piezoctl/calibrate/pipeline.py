@@ -163,16 +163,28 @@ def drive_path_raw(ctl) -> None:
     ilc.switch_off(ctl)
 
 
-def _recover(ctl, faulted: list, label: str, say) -> None:
+def _recover(ctl, faulted: list, label: str, say, run: dict | None = None, stop_faults: list | None = None) -> None:
     """After a configuration's runs: a fault (a reference that rang the stage past
     its sensor's range) is recorded in ``faulted`` and said, cleared, and the
-    controller parked and armed again, so the next configuration starts clean."""
+    controller parked and armed again, so the next configuration starts clean.
+
+    ``run`` (:func:`excitation.triangle_run` and friends): a fault that was not
+    there when the run's record ended (``faults_in_record`` 0) latched when the
+    host stopped a multisine, at a phase the host's speed set: the record is
+    valid, the fault goes to ``stop_faults`` and is said and cleared, and the
+    configuration keeps its figures."""
     st = ctl.status()
     if not st["faults"]:
         return
-    faulted.append({"configuration": label, "faults": st["faults_names"]})
-    say(f"{label}: the controller faulted ({', '.join(st['faults_names'])}): its figures are invalid; "
-        "faults cleared")
+    if run is not None and run.get("stopped_by_host") and not run.get("faults_in_record", 1):
+        if stop_faults is not None:
+            stop_faults.append({"configuration": label, "faults": st["faults_names"]})
+        say(f"{label}: the controller faulted ({', '.join(st['faults_names'])}) after the record, when the "
+            "host stopped the wave: its figures stand; faults cleared")
+    else:
+        faulted.append({"configuration": label, "faults": st["faults_names"]})
+        say(f"{label}: the controller faulted ({', '.join(st['faults_names'])}): its figures are invalid; "
+            "faults cleared")
     ctl.arm(False)
     ctl.command("clear_faults")
     ctl.arm(True)
@@ -330,6 +342,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
         keys = [f for f in FREQS if f <= MAX_F_OF_RESONANCE * fb["resonance_hz"]] + ["multitone"]
         # what each part of the compensation buys: each configuration on every reference
         faulted = []   # configurations after whose runs the controller had faulted
+        stop_faults = []   # faults latched only when the host stopped a multisine, after a valid record
         # the dynamics inverse runs before preview and shaper: the learning below starts from the
         # configuration the loop leaves loaded, preview and shaper
         configs = (("open_loop", "uncompensated", "open_loop", None),
@@ -366,12 +379,12 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                 if f < 10:   # the long one (3 s at 1 Hz): said on its own so the step is never silent long
                     steps.say(f"{label}: {f:g} Hz triangle ...")
                 runs[(key_mode, f)] = excitation.triangle_run(ctl, f, centre, amp, periods=_periods(f))
-                _recover(ctl, faulted, f"{label}, {f:g} Hz triangle", steps.say)
+                _recover(ctl, faulted, f"{label}, {f:g} Hz triangle", steps.say, runs[(key_mode, f)], stop_faults)
             steps.say(f"{label}: multitone ...")
             runs[(key_mode, "multitone")] = excitation.multitone_run(ctl, centre_um=centre, amp_um=amp)
-            _recover(ctl, faulted, f"{label}, multitone", steps.say)
+            _recover(ctl, faulted, f"{label}, multitone", steps.say, runs[(key_mode, "multitone")], stop_faults)
             runs[(key_mode, RANDOM)] = excitation.random_scan_run(ctl, centre, amp, f_random)
-            _recover(ctl, faulted, f"{label}, random scan", steps.say)
+            _recover(ctl, faulted, f"{label}, random scan", steps.say, runs[(key_mode, RANDOM)], stop_faults)
         # + the learned feedforward: trials on the controller, then the same measurement with it played
         learned = {}
         f_cut_max = ILC_F_CUT * fb["resonance_hz"]
@@ -406,7 +419,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             else:
                 runs[(LEARNED, key)] = excitation.triangle_run(ctl, key, centre, amp, periods=_periods(key))
             ilc.switch_off(ctl)
-            _recover(ctl, faulted, f"+ learned feedforward, {name}", steps.say)
+            _recover(ctl, faulted, f"+ learned feedforward, {name}", steps.say, runs[(LEARNED, key)], stop_faults)
         _park(ctl, ctl.q15_position(y_lo))
         bad = {f["configuration"] for f in faulted}
         for key in keys:
@@ -507,6 +520,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
             "params_saved": params_saved,
             "tracking": tracking,
             "acceptance_faults": faulted,
+            "acceptance_stop_faults": stop_faults,
             "random_scan": random_scan,
             "dynamics_inverse_worse_on": worse_inverse,
             "checks": {"forward_inverse_max_error_fraction": identity_err, "quantization_max_lsb": quant_lsb,
