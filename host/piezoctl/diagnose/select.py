@@ -25,6 +25,7 @@ from . import significance as sg
 from .misfit import credited_ratio
 from .discriminate import discriminate_group, highpassed
 from .slow_signature import SIGNATURES, attribute, signature_tests
+from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
            "simulate_refined", "hysteresis_nuisance", "slow_nuisance", "dynamics_nuisance", "initial_state_nuisance",
@@ -201,28 +202,7 @@ def _lstsq(X, y):
 
 def _lstsq_bounded(X, y, lb):
     """Least squares with lower bounds ``lb`` (-inf: free) on unit-RMS columns."""
-    from scipy.optimize import lsq_linear
-    sc = np.sqrt(np.mean(X ** 2, axis=0))
-    sc[sc == 0] = 1.0
-    sol = lsq_linear(X / sc, y, bounds=(np.asarray(lb, float) * sc, np.inf), method="bvls", lsq_solver="exact")
-    return sol.x / sc
-
-
-def _lstsq_box(X, y, lo, hi):
-    """Least squares with box bounds ``lo <= theta <= hi`` (+-inf: free) on unit-RMS columns."""
-    from scipy.optimize import lsq_linear
-    sc = np.sqrt(np.mean(X ** 2, axis=0))
-    sc[sc == 0] = 1.0
-    sol = lsq_linear(X / sc, y, bounds=(np.asarray(lo, float) * sc, np.asarray(hi, float) * sc), method="bvls",
-                     lsq_solver="exact")
-    return sol.x / sc
-
-
-def train_rows(train, rows):
-    idx = np.flatnonzero(train)
-    if idx.size > rows:
-        idx = idx[:: int(np.ceil(idx.size / rows))]
-    return idx
+    return _lstsq_box(X, y, lb, np.inf)
 
 
 def _fit_predict(X, e, train, test, rows, lb=None, nuis=None):

@@ -47,6 +47,7 @@ import numpy as np
 from ..ident.terms import TERMS, G
 from . import significance as sg
 from .misfit import credited_ratio
+from .solve import lstsq_box, train_rows
 
 __all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute"]
 
@@ -131,14 +132,8 @@ def signature_groups(ctx) -> dict:
 def _fit(X, e, lo, hi, train, test, rows):
     """Box-bounded least squares of ``e`` on ``X`` over the training rows (strided to at most ``rows``), on
     unit-RMS columns; the prediction on the test rows."""
-    from scipy.optimize import lsq_linear
-    idx = np.flatnonzero(train)
-    if idx.size > rows:
-        idx = idx[:: int(np.ceil(idx.size / rows))]
-    sc = np.sqrt(np.mean(X[idx] ** 2, axis=0))
-    sc[sc == 0] = 1.0
-    sol = lsq_linear(X[idx] / sc, e[idx], bounds=(lo * sc, hi * sc), method="bvls", lsq_solver="exact")
-    return X[test] @ (sol.x / sc)
+    idx = train_rows(train, rows)
+    return X[test] @ lstsq_box(X[idx], e[idx], lo, hi)
 
 
 def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
