@@ -35,9 +35,9 @@ class TickController:
         me = self
 
         class Client:
-            def read_input(self, addr, n):
-                assert addr == interface.INPUT_REGISTERS["tick_count"][0] and n == 2
-                return [(me.tick >> 16) & 0xFFFF, me.tick & 0xFFFF]
+            def read_input_u32(self, addr):
+                assert addr == interface.INPUT_REGISTERS["tick_count"][0]
+                return me.tick & 0xFFFFFFFF
 
             def read_holding(self, addr, n):
                 assert addr == interface.HOLDING_REGISTERS["wave_kind"][0]

@@ -138,8 +138,7 @@ def settle_periods(f_hz: float) -> int:
 
 def _ticks(ctl) -> int:
     """The controller's tick counter (input ``tick_count``, wraps at 2^32)."""
-    hi, lo = ctl.client.read_input(interface.INPUT_REGISTERS["tick_count"][0], 2)
-    return (hi << 16) | lo
+    return ctl.client.read_input_u32(interface.INPUT_REGISTERS["tick_count"][0])
 
 
 def wait_wave_end(ctl, max_ticks: int, *, poll_s: float = 0.01) -> bool:
