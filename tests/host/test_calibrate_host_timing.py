@@ -115,6 +115,37 @@ def test_a_triangle_run_ends_on_its_tick_whatever_the_host_delay(two_axis, delay
     assert np.max(np.abs(tri[:200] - tri[800:])) < 1e-9
 
 
+@pytest.mark.parametrize("after_ms", [3.0, 11.0, 17.0, 40.0])
+def test_the_other_axis_wave_ends_at_its_offset_not_where_the_host_stops(two_axis, after_ms, monkeypatch):
+    # the coupling evaluation runs the other axis' triangle endlessly while the held axis learns;
+    # it used to stop it with stop_wave at whatever phase the host reached (after_ms into a 50 Hz
+    # period: anywhere on the triangle). It must now end at the end of a period, at its offset.
+    from piezoctl.calibrate import coupling
+    ctl = two_axis
+    if not ctl.status()["armed"]:
+        ctl.command("clear_faults")
+        ctl.set_mode("direct")
+        ctl.arm(True)
+    sent = []
+    command = ctl.command
+
+    def spy(name, *a, **k):
+        sent.append(name)
+        return command(name, *a, **k)
+
+    monkeypatch.setattr(ctl, "command", spy)
+    centre = 0.5 * (ctl.scale.position_min_um + ctl.scale.position_max_um)
+    excitation.load_triangle(ctl, 50.0, centre, 5.0)      # endless (wave_cycles 0), as coupling loads it
+    ctl.command("start_wave")
+    time.sleep(0.06 + after_ms / 1000.0)
+    assert ctl.status()["wave_running"]                    # it was still running when the host ended it
+    assert coupling._end_other_wave(ctl, 200)
+    st = ctl.status()
+    assert sent == ["start_wave"], sent                    # no stop_wave: it ended by itself
+    assert not st["wave_running"] and st["reference_q15"] == ctl.q15_position(centre)
+    assert not st["faults"]
+
+
 class FakeRecoverController:
     def __init__(self, faults: int):
         self.faults = faults

@@ -217,6 +217,27 @@ def _hold_and_drive(ci, cj, comp_i: dict, comp_j: dict, f: float, bypass: int) -
     return mid_i
 
 
+def _end_other_wave(cj, n_ticks: int) -> bool:
+    """End the other axis' triangle at the end of its current period, back at its
+    offset, instead of ``stop_wave`` at whatever phase the host's speed gives.
+
+    ``wave_cycles`` is written while the wave runs: the firmware compares it with
+    the periods already played at each period's end, so 1 ends it at the next one.
+    The wait is counted in controller ticks (:func:`excitation.wait_wave_end`).
+    Until 2026-11-26 the host stopped it at a random phase: a step of up to 60 %
+    of the stroke on the other axis, which rings the 140 Hz stage's mode and, through
+    the coupling, the held axis; a fault it latched was then counted as one of the
+    learning (``compensation_used`` fell back to ``table``). Returns True if the
+    wave ended by itself, False if the host had to stop it (it never ran finite).
+    """
+    from .excitation import wait_wave_end
+    cj.write("wave_cycles", 1)
+    ended = wait_wave_end(cj, 2 * n_ticks + 1000)
+    if not ended:
+        cj.command("stop_wave")
+    return ended
+
+
 def periodic_rms(err, n_ticks: int) -> tuple[float, float]:
     """What repeats with the other axis' period, and the noise, in an error record [um].
 
@@ -416,7 +437,7 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
             cols = ci.capture(["err"], n * p_eval, trigger="immediate")
             res[bypass] = float(np.sqrt(np.mean(cols["err"] ** 2)))
             per[bypass] = periodic_rms(cols["err"], n)
-            cj.command("stop_wave")
+            _end_other_wave(cj, n)
             for c, comp in ((ci, comp_i), (cj, comp_j)):
                 _park(c, c.q15_position(comp["stroke"][0]))
         # a fault while these were measured (the other axis stopped, or this one disarmed) makes them invalid
@@ -445,9 +466,12 @@ def evaluate_coupling(ci, cj, comp_i: dict, comp_j: dict, *, trials: int = ILC_T
         _still_trial(ci, n, p_eval, settle, comp_i["preview_ticks"], rms_all, per_learned)
         ilc_rms = rms_all[-1]   # the best correction, played in step, measured like the others
         ilc.switch_off(ci)
-        cj.command("stop_wave")
+        # the learning's faults are read before the other axis' wave ends, so that a fault of its end
+        # (none expected now it ends at its offset) is not counted as one of the learning
         learn_faults = _clear_latched((ci, cj), args, f"while learning at {f:g} Hz")
-        faults += table_faults + learn_faults + _CLEARED_AT_ARM
+        _end_other_wave(cj, n)
+        end_faults = _clear_latched((ci, cj), args, f"when the other axis' {f:g} Hz wave ended")
+        faults += table_faults + learn_faults + end_faults + _CLEARED_AT_ARM
         _CLEARED_AT_ARM.clear()
         # a fault during the learning makes its figures invalid: the coupling table alone is what holds
         used = "table" if learn_faults else "learned"
