@@ -243,26 +243,30 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     uint8_t mode = c->mode, rec_was;
     int run, wave_on;
 
-    /* 1. a committed table takes over only here, between two ticks */
-    pend = c->pending;
-    if (pend >= 0) {
-        c->active = pend;
-        c->pending = -1;
-    }
-    pend = c->xc_pending;
-    if (pend >= 0) {
-        c->xc_active = pend;
-        c->xc_pending = -1;
-    }
-    pend = c->wave_ff_pending;
-    if (pend >= 0) {
-        c->wave_ff_active = (pend == PIEZO_CTL_WAVE_FF_OFF) ? (int8_t)-1 : pend;
-        c->wave_ff_pending = -1;
-    }
-    if (c->servo_req != 0u) {
-        servo_switch(c, c->servo_req);
-        c->servo_req = 0u;
-        mode = c->mode;
+    /* 1. a committed table takes over only here, between two ticks; one
+     *    flag says whether anything waits (most ticks: one load and branch) */
+    if (c->boundary_req != 0u) {
+        c->boundary_req = 0u; /* before the requests are read: one published meanwhile sets it again */
+        pend = c->pending;
+        if (pend >= 0) {
+            c->active = pend;
+            c->pending = -1;
+        }
+        pend = c->xc_pending;
+        if (pend >= 0) {
+            c->xc_active = pend;
+            c->xc_pending = -1;
+        }
+        pend = c->wave_ff_pending;
+        if (pend >= 0) {
+            c->wave_ff_active = (pend == PIEZO_CTL_WAVE_FF_OFF) ? (int8_t)-1 : pend;
+            c->wave_ff_pending = -1;
+        }
+        if (c->servo_req != 0u) {
+            servo_switch(c, c->servo_req);
+            c->servo_req = 0u;
+            mode = c->mode;
+        }
     }
 
     /* 2-3. sensor */
@@ -409,10 +413,12 @@ int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on)
             return PIEZO_EORDER; /* disarmed: the drive rests at u_safe already */
         }
         c->servo_req = 1u;
+        c->boundary_req = 1u;
         return PIEZO_OK;
     }
     if (c->st.armed) {
         c->servo_req = 2u;
+        c->boundary_req = 1u;
         return PIEZO_OK;
     }
     if (c->st.faults != 0u) {
@@ -422,6 +428,7 @@ int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on)
      * (a tick in between runs it disarmed, which only sets state up) */
     reset_loop_state(c);
     c->servo_req = 2u;
+    c->boundary_req = 1u;
     c->st.armed = 1u;
     return PIEZO_OK;
 }
@@ -505,6 +512,7 @@ int piezo_ctl_wave_ff_commit(piezo_ctl_t *c, const int16_t *staged_q15, uint16_t
     c->wave_ff[spare].n = n;
     c->wave_ff[spare].freq_word = freq_word;
     c->wave_ff_pending = spare; /* published last: the tick sees a whole slot */
+    c->boundary_req = 1u;
     return PIEZO_OK;
 }
 
@@ -514,6 +522,7 @@ int piezo_ctl_wave_ff_off(piezo_ctl_t *c)
         return PIEZO_EBUSY;
     }
     c->wave_ff_pending = PIEZO_CTL_WAVE_FF_OFF;
+    c->boundary_req = 1u;
     return PIEZO_OK;
 }
 
@@ -706,6 +715,7 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint8_t session, uint32_t len)
             if ((r = load_xc_spare(c, &info, &spare)) == PIEZO_TABLE_REASON_OK) {
                 c->xc_previous = c->xc_active;
                 c->xc_pending = spare;
+                c->boundary_req = 1u;
                 c->last_commit_xc = 1u;
             }
         } else if ((r = load_spare(c, &info, &spare, session != PIEZO_CTL_SESSION_LOCAL)) == PIEZO_TABLE_REASON_OK) {
@@ -715,6 +725,7 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint8_t session, uint32_t len)
                 c->staged_crc = c->set[spare].crc;
                 c->previous = c->active;
                 c->pending = spare;
+                c->boundary_req = 1u;
                 c->last_commit_xc = 0u;
             }
         }
@@ -763,6 +774,7 @@ uint16_t piezo_ctl_rollback(piezo_ctl_t *c, uint8_t session)
                 piezo_xc_reset(&c->xc[c->xc_previous]);
             }
             c->xc_pending = c->xc_previous;
+            c->boundary_req = 1u;
             if (c->xc_pending < 0) {
                 c->xc_active = -1; /* no previous coupling table: compensation off */
             }
@@ -785,6 +797,7 @@ uint16_t piezo_ctl_rollback(piezo_ctl_t *c, uint8_t session)
         (void)piezo_ff_bind(&c->ff[prev], &c->set[prev]);
         c->previous = -1; /* one level: the rolled-back table is not kept */
         c->pending = prev;
+        c->boundary_req = 1u;
         r = PIEZO_TABLE_REASON_OK;
     }
     c->st.table_result = r;
