@@ -29,7 +29,9 @@ int16_t piezo_pid_process(piezo_pid_t *p, int16_t e_q15)
     const int64_t lo = (int64_t)c->out_min_q15 * PIEZO_Q24_ONE;
     const int64_t hi = (int64_t)c->out_max_q15 * PIEZO_Q24_ONE;
     int64_t integ = p->integ_q39;
-    int64_t v;
+    /* the proportional and derivative terms first: gcc then forms each
+     * product with one smull/smlal */
+    int64_t v = (int64_t)c->kp_q24 * e_q15 + (int64_t)c->kd_q24 * ((int32_t)e_q15 - p->e_prev_q15);
     /* anti-windup: hold the integrator while the last output sat at a limit
      * and the error would push it further out */
     if (!(p->saturated && ((p->out_q15 >= c->out_max_q15 && e_q15 > 0) ||
@@ -37,9 +39,7 @@ int16_t piezo_pid_process(piezo_pid_t *p, int16_t e_q15)
         integ += (int64_t)c->ki_q24 * e_q15;
         integ = integ > hi ? hi : (integ < lo ? lo : integ);
     }
-    v = (int64_t)c->kp_q24 * e_q15 + integ +
-        (int64_t)c->kd_q24 * ((int32_t)e_q15 - p->e_prev_q15);
-    v = piezo_rshift_rnd64(v, 24u);
+    v = piezo_rshift_rnd64(v + integ, 24u);
     p->saturated = (uint8_t)(v > c->out_max_q15 || v < c->out_min_q15);
     p->out_q15 = (int16_t)(v > c->out_max_q15 ? c->out_max_q15 : (v < c->out_min_q15 ? c->out_min_q15 : v));
     p->integ_q39 = integ;
