@@ -73,6 +73,42 @@ static inline int16_t piezo_sat_q15(int64_t x)
 #endif
 }
 
+/** acc + a * b in int64 (exact: |a * b| <= 2^62), one SMLAL on Thumb-2.
+ *
+ * gcc -O2 forms a 64 x 64 multiply (mul, mla, umull, add) for (int64_t)a * b
+ * when it already holds the sign extension of a or b from an earlier product
+ * in the same function; the instruction here keeps it one 32 x 32 -> 64
+ * multiply. Same value as the C expression on every build (the C expression
+ * where there is no Thumb-2; the golden-vector tests run on both). */
+static inline int64_t piezo_mlal(int64_t acc, int32_t a, int32_t b)
+{
+#if defined(__thumb2__) && defined(__GNUC__)
+    __asm__("smlal %Q0, %R0, %1, %2" : "+r"(acc) : "r"(a), "r"(b));
+    return acc;
+#else
+    return acc + (int64_t)a * b;
+#endif
+}
+
+/** a * b in int64 with one SMULL on Thumb-2 (see piezo_mlal). */
+static inline int64_t piezo_mul32(int32_t a, int32_t b)
+{
+#if defined(__thumb2__) && defined(__GNUC__)
+    int64_t p;
+    __asm__("smull %Q0, %R0, %1, %2" : "=r"(p) : "r"(a), "r"(b));
+    return p;
+#else
+    return (int64_t)a * b;
+#endif
+}
+
+/** piezo_rshift_rnd64((int64_t)a * b, s), the rounding rule's 2^(s-1) added
+ * by the multiply itself (one SMLAL on Thumb-2, see piezo_mlal). */
+static inline int64_t piezo_mul_rshift_rnd(int32_t a, int32_t b, unsigned s)
+{
+    return piezo_mlal((int64_t)1 << (s - 1u), a, b) >> s;
+}
+
 /** Clamp a wide value to the int32 range (q24, q16 intermediates). */
 static inline int32_t piezo_sat_i32(int64_t x)
 {
