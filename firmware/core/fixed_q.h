@@ -112,13 +112,14 @@ static inline int64_t piezo_mul_rshift_rnd(int32_t a, int32_t b, unsigned s)
 /** Clamp a wide value to the int32 range (q24, q16 intermediates). */
 static inline int32_t piezo_sat_i32(int64_t x)
 {
-    if (x > INT32_MAX) {
-        return INT32_MAX;
+    /* x lies in the int32 range iff its high word is the sign of its low
+     * word (one compare instead of two 64-bit ones); else the high word's
+     * sign picks the limit. (int32_t) keeps the low word (gcc, clang). */
+    const int32_t lo = (int32_t)x, hi = (int32_t)(x >> 32);
+    if (hi == (lo >> 31)) {
+        return lo;
     }
-    if (x < INT32_MIN) {
-        return INT32_MIN;
-    }
-    return (int32_t)x;
+    return hi < 0 ? INT32_MIN : INT32_MAX;
 }
 
 /** q15 * q24 -> q15 with the rounding rule and saturation. */
