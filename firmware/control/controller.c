@@ -347,8 +347,12 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         c->st.clamps++;
     }
     {
-        int64_t code = (int64_t)g->dac_zero + piezo_rshift_rnd64((int64_t)u * g->dac_gain_q16, 16u);
-        *dac = (int32_t)(code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code));
+        /* |u * gain| <= 2^15 * 2^31, so the shifted product fits int32 (|.| <= 2^30);
+         * the sum saturated to int32 and then clamped to [dac_min, dac_max] (int32)
+         * is the clamp of the exact sum: the same code as in int64 */
+        int32_t code = piezo_add_sat_i32(g->dac_zero,
+                                         (int32_t)piezo_rshift_rnd64((int64_t)u * g->dac_gain_q16, 16u));
+        *dac = code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code);
     }
 
     /* 9. recorder and status */

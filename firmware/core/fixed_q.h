@@ -122,6 +122,17 @@ static inline int32_t piezo_sat_i32(int64_t x)
     return hi < 0 ? INT32_MIN : INT32_MAX;
 }
 
+/** a + b clamped to the int32 range: piezo_sat_i32((int64_t)a + b), one QADD
+ * on a core with the DSP instructions (Cortex-M4: __ARM_FEATURE_DSP). */
+static inline int32_t piezo_add_sat_i32(int32_t a, int32_t b)
+{
+#if defined(__ARM_FEATURE_DSP) && defined(__GNUC__)
+    return (int32_t)__builtin_arm_qadd(a, b);
+#else
+    return piezo_sat_i32((int64_t)a + b);
+#endif
+}
+
 /** q15 * q24 -> q15 with the rounding rule and saturation. */
 static inline int16_t piezo_mul_q15_q24(int32_t a_q15, int32_t b_q24)
 {
