@@ -309,15 +309,13 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 5. feedforward (of the shaped, inverted early reference) */
     if (run && mode != PIEZO_MODE_FEEDBACK) {
-        if (mode == PIEZO_MODE_DIRECT) {
-            u_ff = r_ahead;
-        } else if (c->active >= 0 && (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK)) {
-            u_ff = piezo_ff_process(&c->ff[c->active], &c->set[c->active], r_ahead, c->limit.prev_q15);
-        } else if (c->active >= 0) {
-            u_ff = piezo_line_q15(r_ahead, c->set[c->active].open_loop_gain_q24,
-                                  c->set[c->active].open_loop_offset_q15);
+        const int8_t a = c->active; /* (volatile: read once) */
+        if (mode == PIEZO_MODE_DIRECT || a < 0) {
+            u_ff = r_ahead; /* DIRECT, or no table: the reference is the drive */
+        } else if (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK) {
+            u_ff = piezo_ff_process(&c->ff[a], &c->set[a], r_ahead, c->limit.prev_q15);
         } else {
-            u_ff = r_ahead; /* no table: the reference is the drive */
+            u_ff = piezo_line_q15(r_ahead, c->set[a].open_loop_gain_q24, c->set[a].open_loop_offset_q15);
         }
     }
 
