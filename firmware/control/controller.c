@@ -158,8 +158,11 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
     const piezo_ctl_cfg_t *g = &c->cfg;
     int16_t y = piezo_sat_q15(piezo_rshift_rnd64((int64_t)(code - g->adc_zero) * g->sensor_gain_q16, 16u));
     int32_t jump = (int32_t)y - c->y_prev_q15;
+    /* |jump| > max as one unsigned compare: jump + max lies outside [0, 2 max]
+     * (max in (0, 32767], |jump| <= 65535: no overflow) */
     int bad = code < g->adc_min_ok || code > g->adc_max_ok ||
-              (g->max_jump_q15 > 0 && c->have_y && (jump > g->max_jump_q15 || jump < -g->max_jump_q15));
+              (g->max_jump_q15 > 0 && c->have_y &&
+               (uint32_t)(jump + g->max_jump_q15) > 2u * (uint32_t)g->max_jump_q15);
     if (bad) {
         if (++c->bad_run >= g->bad_limit) {
             c->bad_run = g->bad_limit;
