@@ -380,7 +380,11 @@ int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs)
 
 int16_t piezo_line_q15(int16_t r_q15, int32_t gain_q24, int32_t offset_q15)
 {
-    return piezo_sat_q15(piezo_rshift_rnd64((int64_t)r_q15 * gain_q24 + (int64_t)offset_q15 * PIEZO_Q24_ONE, 24u));
+    /* rshift_rnd(r g + o 2^24, 24) = o + rshift_rnd(r g, 24) exactly (o 2^24
+     * is whole steps); |r g| < 2^46, so that term fits int32; the sum
+     * saturated to int32 (QADD) and then to q15 is the q15 saturation of the
+     * exact sum */
+    return piezo_sat_q15(piezo_add_sat_i32(offset_q15, (int32_t)piezo_rshift_rnd64((int64_t)r_q15 * gain_q24, 24u)));
 }
 
 int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15, int16_t u_applied_q15)
