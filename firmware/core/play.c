@@ -447,25 +447,28 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
     if (c->n_a == 0u) {
         /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
          * the operators that move are a prefix in both directions. */
+        /* the step d = new - old decides the break by its sign (one subs
+         * instead of a compare and a subtraction); |u|, r <= 2^20 and
+         * |F| <= 2^21 (play.h), so d cannot overflow */
         if (u_q15 > u_prev) {
             for (size_t i = 0; i < n_r; i++) {
                 const int32_t lo = u_q15 - r[i];
-                const int32_t y = f[i];
-                if (lo <= y) {
+                const int32_t d = lo - f[i];
+                if (d <= 0) {
                     break;
                 }
                 f[i] = lo;
-                acc += (int64_t)w[i] * (lo - y);
+                acc += (int64_t)w[i] * d;
             }
         } else {
             for (size_t i = 0; i < n_r; i++) {
                 const int32_t hi = u_q15 + r[i];
-                const int32_t y = f[i];
-                if (hi >= y) {
+                const int32_t d = hi - f[i];
+                if (d >= 0) {
                     break;
                 }
                 f[i] = hi;
-                acc += (int64_t)w[i] * (hi - y);
+                acc += (int64_t)w[i] * d;
             }
         }
         p->acc_q39 = acc;
