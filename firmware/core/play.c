@@ -143,8 +143,8 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * the golden vectors of test_eupi and test_eupi_inv check it under QEMU.
  * gcc's C spends 14 instructions per moving operator on the upper branch
  * (it splits the constant's ldrd and counts separately) and 19 with the
- * lower one, and spills the column loop's pointers; here 12 (two operators
- * per pass) and 18, the column state in the caller's struct (the constants'
+ * lower one, and spills the column loop's pointers; here 11 (two operators
+ * per pass; the break tested on the sign of the step it stores) and 18, the column state in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
 struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
@@ -203,24 +203,22 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"
-        "    cmp    r12, r11\n"
-        "    blt    6f\n"
+        "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
+        "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    sub    r11, r11, r12\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r11\n"
+        "    smlal  r8, r9, r12, r10\n"
         "4:  ldrd   r10, r11, [r1], #8\n"
         "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"
-        "    cmp    r12, r11\n"
-        "    blt    6f\n"
+        "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
+        "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    sub    r11, r11, r12\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r11\n"
+        "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
