@@ -102,11 +102,12 @@ static inline int64_t piezo_mul32(int32_t a, int32_t b)
 #endif
 }
 
-/** piezo_rshift_rnd64((int64_t)a * b, s), the rounding rule's 2^(s-1) added
- * by the multiply itself (one SMLAL on Thumb-2, see piezo_mlal). */
+/** piezo_rshift_rnd64((int64_t)a * b, s) with the product by piezo_mul32
+ * (one SMULL on Thumb-2; an SMLAL onto the rounding constant needs the
+ * constant copied into the accumulator's registers first). */
 static inline int64_t piezo_mul_rshift_rnd(int32_t a, int32_t b, unsigned s)
 {
-    return piezo_mlal((int64_t)1 << (s - 1u), a, b) >> s;
+    return piezo_rshift_rnd64(piezo_mul32(a, b), s);
 }
 
 /** Clamp a wide value to the int32 range (q24, q16 intermediates). */
