@@ -144,7 +144,8 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * gcc's C spends 14 instructions per moving operator on the upper branch
  * (it splits the constant's ldrd and counts separately) and 19 with the
  * lower one, and spills the column loop's pointers; here 11 (two operators
- * per pass; the break tested on the sign of the step it stores) and 18, the column state in the caller's struct (the constants'
+ * per pass; the break tested on the sign of the step it stores) and 17.5
+ * (two per pass too), the column state in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
 struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
@@ -222,8 +223,27 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
-        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch */
+        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch, two per pass */
+        "    sub    r12, r3, r2\n"
+        "    tst    r12, #4\n"
+        "    bne    52f\n"
         "51: ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r12, [r2]\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r7\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"
+        "    ldr    r10, [r0], #4\n"
+        "    sub    r10, lr, r10\n"
+        "    cmp    r11, r10\n"
+        "    it     lt\n"
+        "    movlt  r11, r10\n"
+        "    str    r11, [r2], #4\n"
+        "    sub    r11, r11, r12\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r11\n"
+        "52: ldrd   r10, r11, [r1], #8\n"
         "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"
