@@ -144,7 +144,7 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * gcc's C spends 14 instructions per moving operator on the upper branch
  * (it splits the constant's ldrd and counts separately) and 19 with the
  * lower one, and spills the column loop's pointers; here 11 (two operators
- * per pass; the break tested on the sign of the step it stores) and 17.5
+ * per pass; the break tested on the sign of the step it stores) and 17
  * (two per pass too), the column state in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
