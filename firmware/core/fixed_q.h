@@ -21,7 +21,6 @@
 
 #include <stdint.h>
 
-
 #define PIEZO_Q15_MAX INT16_MAX
 #define PIEZO_Q15_MIN INT16_MIN
 #define PIEZO_Q15_ONE 32768L      /* 1.0 in q15 (not representable in int16_t) */
@@ -73,7 +72,8 @@ static inline int16_t piezo_sat_q15(int64_t x)
 #endif
 }
 
-/** acc + a * b in int64 (exact: |a * b| <= 2^62), one SMLAL on Thumb-2.
+/** acc + a * b in int64 (|a * b| <= 2^62; the caller keeps the sum in
+ * range, as for the C expression), one SMLAL on Thumb-2.
  *
  * gcc -O2 forms a 64 x 64 multiply (mul, mla, umull, add) for (int64_t)a * b
  * when it already holds the sign extension of a or b from an earlier product
@@ -124,7 +124,8 @@ static inline int32_t piezo_sat_i32(int64_t x)
 }
 
 /** a + b clamped to the int32 range: piezo_sat_i32((int64_t)a + b), one QADD
- * on a core with the DSP instructions (Cortex-M4: __ARM_FEATURE_DSP). */
+ * on a core with the DSP instructions (Cortex-M4: __ARM_FEATURE_DSP; it sets
+ * the sticky Q flag, which nothing here reads). */
 static inline int32_t piezo_add_sat_i32(int32_t a, int32_t b)
 {
 #if defined(__ARM_FEATURE_DSP) && defined(__GNUC__)
