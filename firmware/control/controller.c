@@ -274,7 +274,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 2-3. sensor */
     y = read_sensor(c, adc[0]);
-    y2 = piezo_sat_q15(piezo_mul_rshift_rnd(adc[1] - g->adc_zero, g->sensor_gain_q16, 16u)); /* (one SMLAL: fixed_q.h) */
+    y2 = piezo_sat_q15(piezo_mul_rshift_rnd(adc[1] - g->adc_zero, g->sensor_gain_q16, 16u)); /* (one SMULL: fixed_q.h) */
     if (c->st.faults != 0u) {
         c->st.armed = 0u; /* any fault disarms */
     }
