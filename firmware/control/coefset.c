@@ -380,7 +380,21 @@ int piezo_ff_bind(piezo_ff_state_t *ff, const piezo_coefset_t *cs)
 
 int16_t piezo_line_q15(int16_t r_q15, int32_t gain_q24, int32_t offset_q15)
 {
-    return piezo_sat_q15(piezo_rshift_rnd64((int64_t)r_q15 * gain_q24 + (int64_t)offset_q15 * PIEZO_Q24_ONE, 24u));
+    /* rshift_rnd(r g + o 2^24, 24) = o + rshift_rnd(r g, 24) exactly (o 2^24
+     * is whole steps); |r g| < 2^46, so that term fits int32; the sum
+     * saturated to int32 (QADD) and then to q15 is the q15 saturation of the
+     * exact sum */
+    return piezo_sat_q15(piezo_add_sat_i32(offset_q15, (int32_t)piezo_rshift_rnd64((int64_t)r_q15 * gain_q24, 24u)));
+}
+
+/* The RKP kind's tick, out of line: its call to piezo_rkp_process() would
+ * make piezo_ff_process() save registers for every kind. */
+static int16_t __attribute__((noinline)) ff_rkp(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15,
+                                                int16_t u_applied_q15)
+{
+    (void)piezo_rkp_process(&ff->rkp, u_applied_q15); /* the density of this rate */
+    ff->dcc.u_last_q15 = u_applied_q15;
+    return piezo_dcc_process(&ff->dcc, piezo_line_q15(r_q15, cs->y_to_u_gain_q24, cs->y_offset_q15));
 }
 
 int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15, int16_t u_applied_q15)
@@ -390,9 +404,7 @@ int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_
         ff->dcc.u_last_q15 = u_applied_q15;
         return piezo_dcc_process(&ff->dcc, piezo_line_q15(r_q15, cs->y_to_u_gain_q24, cs->y_offset_q15));
     case PIEZO_TABLE_KIND_RKP:
-        (void)piezo_rkp_process(&ff->rkp, u_applied_q15); /* the density of this rate */
-        ff->dcc.u_last_q15 = u_applied_q15;
-        return piezo_dcc_process(&ff->dcc, piezo_line_q15(r_q15, cs->y_to_u_gain_q24, cs->y_offset_q15));
+        return ff_rkp(ff, cs, r_q15, u_applied_q15);
     case PIEZO_TABLE_KIND_EUPI_INVERSE:
         return piezo_eupi_inv_process(&ff->inv, r_q15);
     default:

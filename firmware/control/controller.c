@@ -158,8 +158,11 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
     const piezo_ctl_cfg_t *g = &c->cfg;
     int16_t y = piezo_sat_q15(piezo_rshift_rnd64((int64_t)(code - g->adc_zero) * g->sensor_gain_q16, 16u));
     int32_t jump = (int32_t)y - c->y_prev_q15;
+    /* |jump| > max as one unsigned compare: jump + max lies outside [0, 2 max]
+     * (max in (0, 32767], |jump| <= 65535: no overflow) */
     int bad = code < g->adc_min_ok || code > g->adc_max_ok ||
-              (g->max_jump_q15 > 0 && c->have_y && (jump > g->max_jump_q15 || jump < -g->max_jump_q15));
+              (g->max_jump_q15 > 0 && c->have_y &&
+               (uint32_t)(jump + g->max_jump_q15) > 2u * (uint32_t)g->max_jump_q15);
     if (bad) {
         if (++c->bad_run >= g->bad_limit) {
             c->bad_run = g->bad_limit;
@@ -243,31 +246,35 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     uint8_t mode = c->mode, rec_was;
     int run, wave_on;
 
-    /* 1. a committed table takes over only here, between two ticks */
-    pend = c->pending;
-    if (pend >= 0) {
-        c->active = pend;
-        c->pending = -1;
-    }
-    pend = c->xc_pending;
-    if (pend >= 0) {
-        c->xc_active = pend;
-        c->xc_pending = -1;
-    }
-    pend = c->wave_ff_pending;
-    if (pend >= 0) {
-        c->wave_ff_active = (pend == PIEZO_CTL_WAVE_FF_OFF) ? (int8_t)-1 : pend;
-        c->wave_ff_pending = -1;
-    }
-    if (c->servo_req != 0u) {
-        servo_switch(c, c->servo_req);
-        c->servo_req = 0u;
-        mode = c->mode;
+    /* 1. a committed table takes over only here, between two ticks; one
+     *    flag says whether anything waits (most ticks: one load and branch) */
+    if (c->boundary_req != 0u) {
+        c->boundary_req = 0u; /* before the requests are read: one published meanwhile sets it again */
+        pend = c->pending;
+        if (pend >= 0) {
+            c->active = pend;
+            c->pending = -1;
+        }
+        pend = c->xc_pending;
+        if (pend >= 0) {
+            c->xc_active = pend;
+            c->xc_pending = -1;
+        }
+        pend = c->wave_ff_pending;
+        if (pend >= 0) {
+            c->wave_ff_active = (pend == PIEZO_CTL_WAVE_FF_OFF) ? (int8_t)-1 : pend;
+            c->wave_ff_pending = -1;
+        }
+        if (c->servo_req != 0u) {
+            servo_switch(c, c->servo_req);
+            c->servo_req = 0u;
+            mode = c->mode;
+        }
     }
 
     /* 2-3. sensor */
     y = read_sensor(c, adc[0]);
-    y2 = piezo_sat_q15(piezo_rshift_rnd64((int64_t)(adc[1] - g->adc_zero) * g->sensor_gain_q16, 16u));
+    y2 = piezo_sat_q15(piezo_mul_rshift_rnd(adc[1] - g->adc_zero, g->sensor_gain_q16, 16u)); /* (one SMULL: fixed_q.h) */
     if (c->st.faults != 0u) {
         c->st.armed = 0u; /* any fault disarms */
     }
@@ -305,15 +312,13 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 5. feedforward (of the shaped, inverted early reference) */
     if (run && mode != PIEZO_MODE_FEEDBACK) {
-        if (mode == PIEZO_MODE_DIRECT) {
-            u_ff = r_ahead;
-        } else if (c->active >= 0 && (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK)) {
-            u_ff = piezo_ff_process(&c->ff[c->active], &c->set[c->active], r_ahead, c->limit.prev_q15);
-        } else if (c->active >= 0) {
-            u_ff = piezo_line_q15(r_ahead, c->set[c->active].open_loop_gain_q24,
-                                  c->set[c->active].open_loop_offset_q15);
+        const int8_t a = c->active; /* (volatile: read once) */
+        if (mode == PIEZO_MODE_DIRECT || a < 0) {
+            u_ff = r_ahead; /* DIRECT, or no table: the reference is the drive */
+        } else if (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK) {
+            u_ff = piezo_ff_process(&c->ff[a], &c->set[a], r_ahead, c->limit.prev_q15);
         } else {
-            u_ff = r_ahead; /* no table: the reference is the drive */
+            u_ff = piezo_line_q15(r_ahead, c->set[a].open_loop_gain_q24, c->set[a].open_loop_offset_q15);
         }
     }
 
@@ -343,8 +348,12 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         c->st.clamps++;
     }
     {
-        int64_t code = (int64_t)g->dac_zero + piezo_rshift_rnd64((int64_t)u * g->dac_gain_q16, 16u);
-        *dac = (int32_t)(code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code));
+        /* |u * gain| <= 2^15 * 2^31, so the shifted product fits int32 (|.| <= 2^30);
+         * the sum saturated to int32 and then clamped to [dac_min, dac_max] (int32)
+         * is the clamp of the exact sum: the same code as in int64 */
+        int32_t code = piezo_add_sat_i32(g->dac_zero,
+                                         (int32_t)piezo_rshift_rnd64((int64_t)u * g->dac_gain_q16, 16u));
+        *dac = code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code);
     }
 
     /* 9. recorder and status */
@@ -409,10 +418,12 @@ int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on)
             return PIEZO_EORDER; /* disarmed: the drive rests at u_safe already */
         }
         c->servo_req = 1u;
+        c->boundary_req = 1u;
         return PIEZO_OK;
     }
     if (c->st.armed) {
         c->servo_req = 2u;
+        c->boundary_req = 1u;
         return PIEZO_OK;
     }
     if (c->st.faults != 0u) {
@@ -422,6 +433,7 @@ int piezo_ctl_servo(piezo_ctl_t *c, uint8_t on)
      * (a tick in between runs it disarmed, which only sets state up) */
     reset_loop_state(c);
     c->servo_req = 2u;
+    c->boundary_req = 1u;
     c->st.armed = 1u;
     return PIEZO_OK;
 }
@@ -505,6 +517,7 @@ int piezo_ctl_wave_ff_commit(piezo_ctl_t *c, const int16_t *staged_q15, uint16_t
     c->wave_ff[spare].n = n;
     c->wave_ff[spare].freq_word = freq_word;
     c->wave_ff_pending = spare; /* published last: the tick sees a whole slot */
+    c->boundary_req = 1u;
     return PIEZO_OK;
 }
 
@@ -514,6 +527,7 @@ int piezo_ctl_wave_ff_off(piezo_ctl_t *c)
         return PIEZO_EBUSY;
     }
     c->wave_ff_pending = PIEZO_CTL_WAVE_FF_OFF;
+    c->boundary_req = 1u;
     return PIEZO_OK;
 }
 
@@ -706,6 +720,7 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint8_t session, uint32_t len)
             if ((r = load_xc_spare(c, &info, &spare)) == PIEZO_TABLE_REASON_OK) {
                 c->xc_previous = c->xc_active;
                 c->xc_pending = spare;
+                c->boundary_req = 1u;
                 c->last_commit_xc = 1u;
             }
         } else if ((r = load_spare(c, &info, &spare, session != PIEZO_CTL_SESSION_LOCAL)) == PIEZO_TABLE_REASON_OK) {
@@ -715,6 +730,7 @@ uint16_t piezo_ctl_commit(piezo_ctl_t *c, uint8_t session, uint32_t len)
                 c->staged_crc = c->set[spare].crc;
                 c->previous = c->active;
                 c->pending = spare;
+                c->boundary_req = 1u;
                 c->last_commit_xc = 0u;
             }
         }
@@ -763,6 +779,7 @@ uint16_t piezo_ctl_rollback(piezo_ctl_t *c, uint8_t session)
                 piezo_xc_reset(&c->xc[c->xc_previous]);
             }
             c->xc_pending = c->xc_previous;
+            c->boundary_req = 1u;
             if (c->xc_pending < 0) {
                 c->xc_active = -1; /* no previous coupling table: compensation off */
             }
@@ -785,6 +802,7 @@ uint16_t piezo_ctl_rollback(piezo_ctl_t *c, uint8_t session)
         (void)piezo_ff_bind(&c->ff[prev], &c->set[prev]);
         c->previous = -1; /* one level: the rolled-back table is not kept */
         c->pending = prev;
+        c->boundary_req = 1u;
         r = PIEZO_TABLE_REASON_OK;
     }
     c->st.table_result = r;

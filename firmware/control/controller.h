@@ -159,6 +159,11 @@ typedef struct {
     uint8_t mode;
     uint8_t ref_source;
     int16_t setpoint_q15;
+    /* 1: a request for the tick boundary is published (pending, xc_pending,
+     * wave_ff_pending or servo_req); step 1 of the tick looks at those only
+     * then. Set after the request itself (both volatile: in that order), cleared
+     * by the tick. */
+    volatile uint8_t boundary_req;
     /* The other axis' drive (q15), recorded as signal u2 and the input of the
      * cross-coupling compensation. A multi-axis target sets it before each
      * tick from the other axis' controller (sil_loop.c: that controller's

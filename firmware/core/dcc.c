@@ -324,8 +324,12 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
             }
             old++;
         }
-        for (; p < end && psi[p] > r; p++) {
-            dk += (int64_t)(r - psi[p]) * c[p];
+        for (; p < end; p++) {
+            const int32_t d = r - psi[p]; /* (the int32 difference the sum used already) */
+            if (d >= 0) {
+                break; /* psi <= r: the rest of the row stays (by its sign: one subs) */
+            }
+            dk += (int64_t)d * c[p];
             csum += c[p];
             psi[p] = r;
         }
@@ -386,11 +390,11 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
             old++;
             while (q > pos) { /* the column's operators before the run join */
                 const int32_t jj = (uint16_t)ord[q - 1];
-                const int32_t p0 = psi[jj];
-                if (p0 >= r) {
-                    break;
+                const int32_t d = r - psi[jj];
+                if (d <= 0) {
+                    break; /* psi >= r (by the sign of d: one subs) */
                 }
-                dk += (int64_t)(r - p0) * c[jj];
+                dk += (int64_t)d * c[jj];
                 csum += c[jj];
                 psi[jj] = r;
                 q--;

@@ -53,7 +53,9 @@ int16_t piezo_eupi_inv_process(struct piezo_eupi_inv *c, int16_t yr_q15)
 {
     const struct piezo_eupi_inv_coef *k = c->coef;
     /* v = y_r - G2(k-1), q15-scaled, |v| <= 17 FS. */
-    const int32_t v = (int32_t)piezo_rshift_rnd64((int64_t)yr_q15 * PIEZO_Q24_ONE - c->g2_q39, 24u);
+    /* = y_r + rshift_rnd(-G2, 24) exactly (y_r 2^24 is whole steps), fewer
+     * 64-bit operations */
+    const int32_t v = yr_q15 + (int32_t)piezo_rshift_rnd64(-c->g2_q39, 24u);
     /* u = G1^{-1}[v], clamped to the drive range. */
     int64_t acc = (int64_t)k->a0_inv_q24 * v;
     acc += piezo_play_process(&c->cpi_inv, v);
@@ -61,7 +63,7 @@ int16_t piezo_eupi_inv_process(struct piezo_eupi_inv *c, int16_t yr_q15)
     /* G2(k) = G_UPI[u] + P(u) - k_ex u, kept in Q39 for the next sample. */
     int64_t g2 = piezo_play_process(&c->upi, u);
     g2 += piezo_eupi_poly_q39(k->p_q24, k->n_p, k->p0_q24, u);
-    g2 -= (int64_t)k->kex_q24 * u;
+    g2 -= piezo_mul32(k->kex_q24, u); /* (no 64 x 64 multiply: fixed_q.h) */
     c->g2_q39 = g2;
     return u;
 }

@@ -26,22 +26,31 @@ void piezo_pid_reset(piezo_pid_t *p)
 int16_t piezo_pid_process(piezo_pid_t *p, int16_t e_q15)
 {
     const piezo_pid_coef_t *c = p->coef;
-    const int64_t lo = (int64_t)c->out_min_q15 * PIEZO_Q24_ONE;
-    const int64_t hi = (int64_t)c->out_max_q15 * PIEZO_Q24_ONE;
+    const int32_t out_max = c->out_max_q15, out_min = c->out_min_q15;
     int64_t integ = p->integ_q39;
-    int64_t v;
+    int32_t v;
+    /* the proportional and derivative terms first: gcc then forms each
+     * product with one smull/smlal */
+    int64_t pd = (int64_t)c->kp_q24 * e_q15 + (int64_t)c->kd_q24 * ((int32_t)e_q15 - p->e_prev_q15);
     /* anti-windup: hold the integrator while the last output sat at a limit
      * and the error would push it further out */
-    if (!(p->saturated && ((p->out_q15 >= c->out_max_q15 && e_q15 > 0) ||
-                           (p->out_q15 <= c->out_min_q15 && e_q15 < 0)))) {
+    if (!(p->saturated && ((p->out_q15 >= out_max && e_q15 > 0) ||
+                           (p->out_q15 <= out_min && e_q15 < 0)))) {
         integ += (int64_t)c->ki_q24 * e_q15;
-        integ = integ > hi ? hi : (integ < lo ? lo : integ);
+        /* clamp to [out_min, out_max] * 2^24 by the bits above the fraction:
+         * floor(integ / 2^24) >= out_max iff integ >= out_max 2^24 (at equality
+         * the clamp changes nothing), and < out_min iff integ < out_min 2^24;
+         * |integ| < 2^39 + 2^46 before the clamp, so the quotient fits int32 */
+        if ((int32_t)(integ >> 24) >= out_max) {
+            integ = (int64_t)out_max * PIEZO_Q24_ONE;
+        } else if ((int32_t)(integ >> 24) < out_min) {
+            integ = (int64_t)out_min * PIEZO_Q24_ONE;
+        }
     }
-    v = (int64_t)c->kp_q24 * e_q15 + integ +
-        (int64_t)c->kd_q24 * ((int32_t)e_q15 - p->e_prev_q15);
-    v = piezo_rshift_rnd64(v, 24u);
-    p->saturated = (uint8_t)(v > c->out_max_q15 || v < c->out_min_q15);
-    p->out_q15 = (int16_t)(v > c->out_max_q15 ? c->out_max_q15 : (v < c->out_min_q15 ? c->out_min_q15 : v));
+    /* |pd + integ| < 2^49: the rounded q15 value fits int32 */
+    v = (int32_t)piezo_rshift_rnd64(pd + integ, 24u);
+    p->saturated = (uint8_t)(v > out_max || v < out_min);
+    p->out_q15 = (int16_t)(v > out_max ? out_max : (v < out_min ? out_min : v));
     p->integ_q39 = integ;
     p->e_prev_q15 = e_q15;
     return p->out_q15;

@@ -143,8 +143,9 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * the golden vectors of test_eupi and test_eupi_inv check it under QEMU.
  * gcc's C spends 14 instructions per moving operator on the upper branch
  * (it splits the constant's ldrd and counts separately) and 19 with the
- * lower one, and spills the column loop's pointers; here 12 (two operators
- * per pass) and 18, the column state in the caller's struct (the constants'
+ * lower one, and spills the column loop's pointers; here 11 (two operators
+ * per pass; the break tested on the sign of the step it stores) and 17
+ * (two per pass too), the column state in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
 struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
@@ -203,29 +204,46 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"
-        "    cmp    r12, r11\n"
-        "    blt    6f\n"
+        "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
+        "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    sub    r11, r11, r12\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r11\n"
+        "    smlal  r8, r9, r12, r10\n"
         "4:  ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r12, [r2]\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r7\n"
+        "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
+        "    bgt    6f\n"
+        "    str    r11, [r2], #4\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r10\n"
+        "    cmp    r2, r3\n"
+        "    bne    31b\n"
+        "    b      6f\n"
+        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch, two per pass */
+        "    sub    r12, r3, r2\n"
+        "    tst    r12, #4\n"
+        "    bne    52f\n"
+        "51: ldrd   r10, r11, [r1], #8\n"
         "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"
         "    cmp    r12, r11\n"
         "    blt    6f\n"
+        "    ldr    r10, [r0], #4\n"
+        "    sub    r10, lr, r10\n"
+        "    cmp    r11, r10\n"
+        "    it     lt\n"
+        "    movlt  r11, r10\n"
         "    str    r11, [r2], #4\n"
         "    sub    r11, r11, r12\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
         "    smlal  r8, r9, r12, r11\n"
-        "    cmp    r2, r3\n"
-        "    bne    31b\n"
-        "    b      6f\n"
-        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch */
-        "51: ldrd   r10, r11, [r1], #8\n"
+        "52: ldrd   r10, r11, [r1], #8\n"
         "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"
@@ -326,8 +344,9 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
  * w (F_new - F_old).
  */
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-/* Cortex-M4: in Thumb-2, 11 instructions per moving operator (two per
- * pass) against gcc's 13; test_play and the EUPI golden vectors under QEMU. */
+/* Cortex-M4: in Thumb-2, 10 instructions per moving operator (two per
+ * pass; the break tested on the sign of the step it accumulates) against
+ * gcc's 13; test_play and the EUPI golden vectors under QEMU. */
 struct rise_args {
     int32_t *f;          /* 0 */
     const int32_t *w;    /* 4 */
@@ -367,23 +386,21 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *
         "2:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
-        "    cmp    r6, r7\n"
+        "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    sub    r6, r6, r7\n"
-        "    ldr    r7, [r0]\n"
+        "    ldr    r6, [r0]\n"
         "    add    r0, r0, r5\n"
-        "    smlal  r8, r9, r7, r6\n"
+        "    smlal  r8, r9, r6, r7\n"
         "3:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
-        "    cmp    r6, r7\n"
+        "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    sub    r6, r6, r7\n"
-        "    ldr    r7, [r0]\n"
+        "    ldr    r6, [r0]\n"
         "    add    r0, r0, r5\n"
-        "    smlal  r8, r9, r7, r6\n"
+        "    smlal  r8, r9, r6, r7\n"
         "    cmp    r2, r3\n"
         "    bne    2b\n"
         "4:  mov    r2, r3\n"                  /* the next column starts where this one ends */
@@ -447,25 +464,28 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
     if (c->n_a == 0u) {
         /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
          * the operators that move are a prefix in both directions. */
+        /* the step d = new - old decides the break by its sign (one subs
+         * instead of a compare and a subtraction); |u|, r <= 2^20 and
+         * |F| <= 2^21 (play.h), so d cannot overflow */
         if (u_q15 > u_prev) {
             for (size_t i = 0; i < n_r; i++) {
                 const int32_t lo = u_q15 - r[i];
-                const int32_t y = f[i];
-                if (lo <= y) {
+                const int32_t d = lo - f[i];
+                if (d <= 0) {
                     break;
                 }
                 f[i] = lo;
-                acc += (int64_t)w[i] * (lo - y);
+                acc += (int64_t)w[i] * d;
             }
         } else {
             for (size_t i = 0; i < n_r; i++) {
                 const int32_t hi = u_q15 + r[i];
-                const int32_t y = f[i];
-                if (hi >= y) {
+                const int32_t d = hi - f[i];
+                if (d >= 0) {
                     break;
                 }
                 f[i] = hi;
-                acc += (int64_t)w[i] * (hi - y);
+                acc += (int64_t)w[i] * d;
             }
         }
         p->acc_q39 = acc;

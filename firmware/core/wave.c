@@ -27,7 +27,7 @@ int16_t piezo_sine_q15(uint32_t phase)
 static int16_t scale_q15(int32_t offset_q15, int32_t amplitude_q15, int32_t shape_q15)
 {
     int32_t y = offset_q15 + ((amplitude_q15 * shape_q15 + (1 << 14)) >> 15);
-    return (int16_t)(y > PIEZO_Q15_MAX ? PIEZO_Q15_MAX : (y < PIEZO_Q15_MIN ? PIEZO_Q15_MIN : y));
+    return piezo_sat_q15(y); /* (an int32: one SSAT on Cortex-M4) */
 }
 
 static int16_t triangle_q15(uint32_t phase)

@@ -33,12 +33,66 @@ static void test_rounding_ties_go_up(void **state)
     assert_true(piezo_sat_q15(-40000) == -32768);
 }
 
+/* The Cortex-M forms (SSAT, QADD, SMLAL/SMULL in fixed_q.h) against the plain
+ * int64 definitions they replace, on edge values and a pseudo-random sweep;
+ * under QEMU this runs the instructions, on the host the C forms. */
+static int16_t ref_sat_q15(int64_t x)
+{
+    return (int16_t)(x > INT16_MAX ? INT16_MAX : (x < INT16_MIN ? INT16_MIN : x));
+}
+
+static int32_t ref_sat_i32(int64_t x)
+{
+    return (int32_t)(x > INT32_MAX ? INT32_MAX : (x < INT32_MIN ? INT32_MIN : x));
+}
+
+static uint64_t lcg_next(uint64_t *s)
+{
+    *s = *s * 6364136223846793005ull + 1442695040888963407ull;
+    return *s;
+}
+
+static void test_saturation_forms_match_int64(void **state)
+{
+    static const int64_t edge[] = {
+        0, 1, -1, 32767, 32768, -32768, -32769, 65535, -65536,
+        INT32_MAX, (int64_t)INT32_MAX + 1, INT32_MIN, (int64_t)INT32_MIN - 1,
+        (int64_t)1 << 32, -((int64_t)1 << 32), ((int64_t)1 << 32) + 5, -((int64_t)1 << 32) + 5,
+        ((int64_t)1 << 32) - 32768, INT64_MAX, INT64_MIN, INT64_MAX - 1, INT64_MIN + 1,
+    };
+    uint64_t seed = 12345u;
+    (void)state;
+    for (size_t k = 0; k < sizeof edge / sizeof edge[0]; k++) {
+        assert_true(piezo_sat_q15(edge[k]) == ref_sat_q15(edge[k]));
+        assert_true(piezo_sat_i32(edge[k]) == ref_sat_i32(edge[k]));
+    }
+    for (int k = 0; k < 20000; k++) {
+        /* every magnitude: a random word shifted right by 0..63 bits */
+        uint64_t w = lcg_next(&seed);
+        int64_t x = (int64_t)w >> (lcg_next(&seed) >> 58);
+        int32_t a = (int32_t)(uint32_t)(lcg_next(&seed) >> 32), b = (int32_t)(uint32_t)(lcg_next(&seed) >> 32);
+        a >>= (lcg_next(&seed) >> 59);
+        b >>= (lcg_next(&seed) >> 59);
+        assert_true(piezo_sat_q15(x) == ref_sat_q15(x));
+        assert_true(piezo_sat_i32(x) == ref_sat_i32(x));
+        assert_true(piezo_add_sat_i32(a, b) == ref_sat_i32((int64_t)a + b));
+        assert_true(piezo_mul32(a, b) == (int64_t)a * b);
+        /* acc small enough that acc + a b cannot overflow */
+        assert_true(piezo_mlal(x >> 2, a, b) == (x >> 2) + (int64_t)a * b);
+        assert_true(piezo_mul_rshift_rnd(a, b, 15u) == piezo_rshift_rnd64((int64_t)a * b, 15u));
+        assert_true(piezo_mul_rshift_rnd(a, b, 24u) == piezo_rshift_rnd64((int64_t)a * b, 24u));
+    }
+    assert_true(piezo_add_sat_i32(INT32_MAX, 1) == INT32_MAX);
+    assert_true(piezo_add_sat_i32(INT32_MIN, -1) == INT32_MIN);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_mul_q15_q24_matches_golden),
         cmocka_unit_test(test_rshift_rnd_matches_golden),
         cmocka_unit_test(test_rounding_ties_go_up),
+        cmocka_unit_test(test_saturation_forms_match_int64),
     };
     return cmocka_run_group_tests_name("fixed_q", tests, NULL, NULL);
 }

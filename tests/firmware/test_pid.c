@@ -107,6 +107,89 @@ static void test_limiter_clamps_and_slews(void **state)
     assert_int_equal(piezo_limit_init(&l, &c, 0), PIEZO_EINVAL);
 }
 
+/* The PID as the int64 formula of pid.h, written out (64-bit clamp of the
+ * integrator and of the output): the reference for the int32 forms in pid.c. */
+typedef struct {
+    int64_t integ;
+    int16_t e_prev, out;
+    uint8_t saturated;
+} ref_pid_t;
+
+static int16_t ref_pid(ref_pid_t *p, const piezo_pid_coef_t *c, int16_t e)
+{
+    const int64_t lo = (int64_t)c->out_min_q15 * 16777216, hi = (int64_t)c->out_max_q15 * 16777216;
+    int64_t v;
+    if (!(p->saturated && ((p->out >= c->out_max_q15 && e > 0) || (p->out <= c->out_min_q15 && e < 0)))) {
+        p->integ += (int64_t)c->ki_q24 * e;
+        p->integ = p->integ > hi ? hi : (p->integ < lo ? lo : p->integ);
+    }
+    v = piezo_rshift_rnd64((int64_t)c->kp_q24 * e + p->integ + (int64_t)c->kd_q24 * ((int32_t)e - p->e_prev), 24u);
+    p->saturated = (uint8_t)(v > c->out_max_q15 || v < c->out_min_q15);
+    p->out = (int16_t)(v > c->out_max_q15 ? c->out_max_q15 : (v < c->out_min_q15 ? c->out_min_q15 : v));
+    p->e_prev = e;
+    return p->out;
+}
+
+static uint32_t lcg32(uint32_t *s)
+{
+    *s = *s * 1664525u + 1013904223u;
+    return *s;
+}
+
+static void test_pid_matches_int64_formula(void **state)
+{
+    uint32_t seed = 7u;
+    (void)state;
+    /* the integrator's clamp at a fraction of an LSB above the limit: steps of
+     * ki e = 0.6 LSB (q15) into narrow limits, both ways */
+    {
+        const piezo_pid_coef_t c = {.kp_q24 = q24(0.1), .ki_q24 = 3 << 20, .kd_q24 = 0,
+                                    .out_min_q15 = -100, .out_max_q15 = 100};
+        piezo_pid_t p;
+        ref_pid_t r = {0, 0, 0, 0u};
+        assert_int_equal(piezo_pid_init(&p, &c), PIEZO_OK);
+        for (int k = 0; k < 2000; k++) {
+            const int16_t e = (int16_t)((k / 500) % 2 ? -3 : 3);
+            assert_int_equal(piezo_pid_process(&p, e), ref_pid(&r, &c, e));
+            assert_true(p.integ_q39 == r.integ);
+        }
+    }
+    for (int trial = 0; trial < 400; trial++) {
+        /* gains over the whole q24 range (any sign, up to +-128), limits
+         * anywhere (min <= max, sometimes equal, sometimes excluding 0) */
+        piezo_pid_coef_t c;
+        int16_t a = (int16_t)(lcg32(&seed) >> 16), b = (int16_t)(lcg32(&seed) >> 16);
+        c.kp_q24 = (int32_t)lcg32(&seed) >> (lcg32(&seed) >> 27);
+        c.ki_q24 = (int32_t)lcg32(&seed) >> (lcg32(&seed) >> 27); /* down to +-1 LSB */
+        c.kd_q24 = (trial % 3 == 0) ? 0 : (int32_t)lcg32(&seed) >> (lcg32(&seed) >> 27);
+        if (trial % 2 == 0) {
+            a = (int16_t)(a >> 8); /* narrow limits: the clamps bind often */
+            b = (int16_t)(b >> 8);
+        }
+        c.out_min_q15 = a < b ? a : b;
+        c.out_max_q15 = (trial % 17 == 0) ? c.out_min_q15 : (a < b ? b : a);
+        piezo_pid_t p;
+        ref_pid_t r = {0, 0, 0, 0u};
+        assert_int_equal(piezo_pid_init(&p, &c), PIEZO_OK);
+        int16_t e = 0;
+        for (int k = 0; k < 400; k++) {
+            /* runs of one sign (into saturation and out), jumps, extremes */
+            const uint32_t m = lcg32(&seed);
+            if ((m & 15u) == 0u) {
+                e = (int16_t)(m >> 16);
+            } else if ((m & 15u) == 1u) {
+                e = (m & 16u) ? INT16_MAX : INT16_MIN;
+            } else {
+                e = (int16_t)(e + (int16_t)((int32_t)(m >> 16) >> 6));
+            }
+            const int16_t want = ref_pid(&r, &c, e);
+            assert_int_equal(piezo_pid_process(&p, e), want);
+            assert_true(p.integ_q39 == r.integ);
+            assert_int_equal(p.saturated, r.saturated);
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -115,6 +198,7 @@ int main(void)
         cmocka_unit_test(test_notch_rejects_its_frequency_and_passes_dc),
         cmocka_unit_test(test_limiter_clamps_and_slews),
         cmocka_unit_test(test_notch_output_rounding_matches_int64),
+        cmocka_unit_test(test_pid_matches_int64_formula),
     };
     return cmocka_run_group_tests_name("pid", tests, NULL, NULL);
 }
