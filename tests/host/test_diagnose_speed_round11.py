@@ -145,3 +145,15 @@ def test_fit_base_runs_on_one_blas_thread(monkeypatch):
     with pytest.raises(RuntimeError, match="probe"):
         B.fit_base([rec])
     assert seen == [[1] * len(ctl)] and [g() for _, g in ctl] == before
+
+
+def test_design_stacks_the_settled_rows_exactly():
+    """``select._Design`` copies each recording's settled rows straight into the stacked design: the same array
+    as ``np.vstack`` of the masked regressors."""
+    import types
+    rng = np.random.default_rng(0)
+    valid = [rng.random(n) > 0.3 for n in (1000, 50, 777)]
+    Rs = [rng.normal(size=(v.size, 4)) for v in valid]
+    ctx = types.SimpleNamespace(signals=[types.SimpleNamespace(i=i) for i in range(3)], valid=valid)
+    d = S._Design(ctx, types.SimpleNamespace(regressors=lambda c, s, st: Rs[s.i]), 0)
+    assert np.array_equal(d.X, np.vstack([R[v] for R, v in zip(Rs, valid)])) and d.k == 4

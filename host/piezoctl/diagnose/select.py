@@ -185,19 +185,19 @@ class _Design:
 
     def __init__(self, ctx, term, setting):
         self.setting = setting
-        self.X = np.vstack([np.asarray(term.regressors(ctx, s, setting), float)[v]
-                            for s, v in zip(ctx.signals, ctx.valid)])
+        # each recording's settled rows copied once, straight into the stacked design (a masked copy per
+        # recording and then np.vstack copied every design of about 1 M rows twice)
+        n = sum(int(np.count_nonzero(v)) for v in ctx.valid)
+        X, pos = None, 0
+        for s, v in zip(ctx.signals, ctx.valid):
+            R = np.asarray(term.regressors(ctx, s, setting), float)   # (samples, columns)
+            if X is None:
+                X = np.empty((n, R.shape[1]))
+            m = int(np.count_nonzero(v))
+            np.compress(v, R, axis=0, out=X[pos:pos + m])
+            pos += m
+        self.X = X
         self.k = self.X.shape[1]
-
-
-def _lstsq(X, y):
-    """Least squares on unit-RMS columns through the normal equations (the design is tall and narrow: a
-    k x k solve instead of an SVD of the rows); rank deficiency is handled by the small solve's cutoff."""
-    sc = np.sqrt(np.mean(X ** 2, axis=0))
-    sc[sc == 0] = 1.0
-    Xs = X / sc
-    th, *_ = np.linalg.lstsq(Xs.T @ Xs, Xs.T @ y, rcond=1e-12)
-    return th / sc
 
 
 def _lstsq_bounded(X, y, lb):
@@ -222,8 +222,10 @@ def _nuis_gram(N, e, idx):
 
 
 def _lstsq_gram(G, b, n):
-    """:func:`_lstsq` from the normal equations ``G = X'X``, ``b = X'y`` of ``n`` rows: the same unit-RMS
-    columns (RMS from G's diagonal) and the same small solve with its cutoff; equal to round-off."""
+    """Least squares from the normal equations ``G = X'X``, ``b = X'y`` of ``n`` rows, on unit-RMS columns (RMS
+    from G's diagonal); rank deficiency is handled by the small solve's cutoff. The design is tall and narrow:
+    a k x k solve instead of an SVD of the rows. Equal to round-off to the stacked version it replaced
+    (``(X / sc)' (X / sc)`` formed from the rows; tests/host/test_diagnose_speed_round11.py)."""
     sc = np.sqrt(np.diag(G) / max(n, 1))
     sc[sc == 0] = 1.0
     th, *_ = np.linalg.lstsq(G / np.outer(sc, sc), b / sc, rcond=1e-12)
