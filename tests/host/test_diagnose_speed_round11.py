@@ -157,3 +157,20 @@ def test_design_stacks_the_settled_rows_exactly():
     ctx = types.SimpleNamespace(signals=[types.SimpleNamespace(i=i) for i in range(3)], valid=valid)
     d = S._Design(ctx, types.SimpleNamespace(regressors=lambda c, s, st: Rs[s.i]), 0)
     assert np.array_equal(d.X, np.vstack([R[v] for R, v in zip(Rs, valid)])) and d.k == 4
+
+
+@pytest.mark.parametrize("bw", (True, False))
+def test_plane_h_only_is_the_same_floats(bw):
+    """``plane_parts(..., hysteretic=False)`` (what the output cache computes) gives H bit for bit."""
+    from piezoctl.bench.diagnose_speed import _kernel_inputs, _plane_hp
+    from piezoctl.models import hysteresis as hy
+    hp = _plane_hp()
+    if not bw:
+        hp.pop("bw")
+    v = _kernel_inputs(40_000, seed=2) * 1.2        # beyond the knots too
+    h, y = hy.plane_parts(hp, v)
+    h1, y1 = hy.plane_parts(hp, v, hysteretic=False)
+    assert y1 is None and h1.tobytes() == h.tobytes()
+    hy.clear_output_cache()
+    assert hy.hysteresis_output(hp, v).tobytes() == h.tobytes()
+    hy.clear_output_cache()
