@@ -174,3 +174,24 @@ def test_plane_h_only_is_the_same_floats(bw):
     hy.clear_output_cache()
     assert hy.hysteresis_output(hp, v).tobytes() == h.tobytes()
     hy.clear_output_cache()
+
+
+def test_filt_with_cached_initial_state_is_the_same_floats():
+    """``dsp.filt`` takes ``lfilter_zi`` from a cache keyed on the exact coefficients: the same floats as the
+    direct computation, another coefficient (one ulp) another entry."""
+    from scipy import signal
+    from piezoctl import dsp
+    rng = np.random.default_rng(4)
+    b, a = signal.butter(4, 0.05)
+    x = np.cumsum(rng.normal(size=5000))
+    X = rng.normal(size=(3000, 3))
+    dsp._ZI_CACHE.clear()
+    for _ in range(2):
+        assert np.array_equal(dsp.filt(b, a, x), signal.lfilter(b, a, x, zi=signal.lfilter_zi(b, a) * x[0])[0])
+        zi = signal.lfilter_zi(b, a)
+        assert np.array_equal(dsp.filt(b, a, X), signal.lfilter(b, a, X, axis=0, zi=zi[:, None] * X[0][None, :])[0])
+    assert len(dsp._ZI_CACHE) == 1
+    b2 = b.copy()
+    b2[0] = np.nextafter(b2[0], 1.0)
+    assert np.array_equal(dsp.filt(b2, a, x), signal.lfilter(b2, a, x, zi=signal.lfilter_zi(b2, a) * x[0])[0])
+    assert len(dsp._ZI_CACHE) == 2
