@@ -123,8 +123,10 @@ def _evict_designs_after_each_term() -> bool:
     return True
 
 
-def _child(case_dir: str, out_dir: str, attribute: bool = False, evict: bool = False) -> None:
-    """Runs the diagnosis once in this process; prints one JSON line."""
+def _child(case_dir: str, out_dir: str, attribute: bool = False, evict: bool = False, profile: str | None = None) -> None:
+    """Runs the diagnosis once in this process; prints one JSON line. ``profile``: write a cProfile of the
+    diagnosis there, timed on the process' CPU clock (``time.process_time``: the other core's load and the
+    waits do not count), and print its 25 largest own times before the JSON line."""
     from ..diagnose.run import diagnose
     from ..models import hysteresis
     cal, rev = _case_files(case_dir)
@@ -135,9 +137,21 @@ def _child(case_dir: str, out_dir: str, attribute: bool = False, evict: bool = F
     w.designs = designs
     w.cache = hysteresis._STATE_CACHE
     w.start()
+    prof = None
+    if profile:
+        import cProfile
+        prof = cProfile.Profile(time.process_time)
     t0, c0 = time.perf_counter(), time.process_time()
+    if prof is not None:
+        prof.enable()
     doc = diagnose(cal, rev, out_dir, report=False, log=lambda *a, **k: None)
+    if prof is not None:
+        prof.disable()
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if prof is not None:
+        import pstats
+        prof.dump_stats(profile)
+        pstats.Stats(prof, stream=sys.stdout).sort_stats("tottime").print_stats(25)
     w.stop()
     h = doc.get("fit", {}).get("heldout", {})
     stack = [s for s in w.stack if "piezoctl" in s or "numpy" in s or "scipy" in s]
@@ -268,11 +282,13 @@ def main(argv=None) -> int:
                     help="experiment: empty the diagnosis' design caches after each term's evaluation")
     ap.add_argument("--busy", action="store_true",
                     help="keep the other core busy during the diagnosis (a niced busy loop, as the goal says)")
+    ap.add_argument("--profile", default=None, metavar="FILE",
+                    help="write a cProfile of the diagnosis (CPU-time clock) to FILE and print its largest own times")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--child-out", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.child:
-        _child(a.child, a.child_out, a.attribute, a.evict_designs)
+        _child(a.child, a.child_out, a.attribute, a.evict_designs, a.profile)
         return 0
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=os.path.dirname(os.path.abspath(__file__))).stdout.strip()
@@ -294,7 +310,8 @@ def main(argv=None) -> int:
             busy = subprocess.Popen([sys.executable, "-c", "while True: pass"], preexec_fn=lambda: os.nice(19))
         try:
             p = subprocess.run([sys.executable, "-m", "piezoctl.bench.diagnose_speed", "--child", d, "--child-out", out]
-                               + (["--attribute"] if a.attribute else []) + (["--evict-designs"] if a.evict_designs else []),
+                               + (["--attribute"] if a.attribute else []) + (["--evict-designs"] if a.evict_designs else [])
+                               + (["--profile", os.path.abspath(a.profile)] if a.profile else []),
                                capture_output=True, text=True)
         finally:
             if busy is not None:
@@ -303,7 +320,10 @@ def main(argv=None) -> int:
         if p.returncode != 0:
             print(p.stderr[-3000:], file=sys.stderr)
             return 3
-        res = json.loads(p.stdout.strip().splitlines()[-1])
+        lines = p.stdout.strip().splitlines()
+        if a.profile:
+            print("\n".join(lines[:-1]))
+        res = json.loads(lines[-1])
         print(f"diagnose: {res['wall_s']:.1f} s wall ({100 * res['wall_s'] / max(n / 1e4, 1e-9):.1f} s per 100 s of "
               f"data{', the other core busy' if a.busy else ''}), {res['cpu_s']:.1f} s CPU, peak resident "
               f"{res['peak_rss_mib']:.0f} MiB (goal 60 s per 100 s of data, 2048 MiB); named "

@@ -185,19 +185,19 @@ class _Design:
 
     def __init__(self, ctx, term, setting):
         self.setting = setting
-        self.X = np.vstack([np.asarray(term.regressors(ctx, s, setting), float)[v]
-                            for s, v in zip(ctx.signals, ctx.valid)])
+        # each recording's settled rows copied once, straight into the stacked design (a masked copy per
+        # recording and then np.vstack copied every design of about 1 M rows twice)
+        n = sum(int(np.count_nonzero(v)) for v in ctx.valid)
+        X, pos = None, 0
+        for s, v in zip(ctx.signals, ctx.valid):
+            R = np.asarray(term.regressors(ctx, s, setting), float)   # (samples, columns)
+            if X is None:
+                X = np.empty((n, R.shape[1]))
+            m = int(np.count_nonzero(v))
+            np.compress(v, R, axis=0, out=X[pos:pos + m])
+            pos += m
+        self.X = X
         self.k = self.X.shape[1]
-
-
-def _lstsq(X, y):
-    """Least squares on unit-RMS columns through the normal equations (the design is tall and narrow: a
-    k x k solve instead of an SVD of the rows); rank deficiency is handled by the small solve's cutoff."""
-    sc = np.sqrt(np.mean(X ** 2, axis=0))
-    sc[sc == 0] = 1.0
-    Xs = X / sc
-    th, *_ = np.linalg.lstsq(Xs.T @ Xs, Xs.T @ y, rcond=1e-12)
-    return th / sc
 
 
 def _lstsq_bounded(X, y, lb):
@@ -205,22 +205,69 @@ def _lstsq_bounded(X, y, lb):
     return _lstsq_box(X, y, lb, np.inf)
 
 
+_NUIS_GRAM: dict = {}   # the last nuisance's training products: {"last": (N, e, idx, N'N, N'e[idx])}
+
+
+def _nuis_gram(N, e, idx):
+    """(N' N, N' e[idx]) of the nuisance's training rows ``N`` (= the nuisance at rows ``idx``), kept for the
+    next call: :func:`best_setting` fits every setting of a term against the same nuisance and residual, so
+    these are computed once per term, fold and nuisance instead of once per setting. A hit needs the very same
+    arrays (identity) and equal rows."""
+    c = _NUIS_GRAM.get("last")
+    if c is not None and c[0] is N and c[1] is e and np.array_equal(c[2], idx):
+        return c[3], c[4]
+    NN, Ne = N.T @ N, N.T @ e[idx]
+    _NUIS_GRAM["last"] = (N, e, idx, NN, Ne)
+    return NN, Ne
+
+
+def _lstsq_gram(G, b, n):
+    """Least squares from the normal equations ``G = X'X``, ``b = X'y`` of ``n`` rows, on unit-RMS columns (RMS
+    from G's diagonal); rank deficiency is handled by the small solve's cutoff. The design is tall and narrow:
+    a k x k solve instead of an SVD of the rows. Equal to round-off to the stacked version it replaced
+    (``(X / sc)' (X / sc)`` formed from the rows; tests/host/test_diagnose_speed_round11.py)."""
+    sc = np.sqrt(np.diag(G) / max(n, 1))
+    sc[sc == 0] = 1.0
+    th, *_ = np.linalg.lstsq(G / np.outer(sc, sc), b / sc, rcond=1e-12)
+    return th / sc
+
+
 def _fit_predict(X, e, train, test, rows, lb=None, nuis=None):
     """Least squares of e on X over train rows (strided), coefficients >= ``lb`` when given; prediction on
     test rows. ``nuis``: the nested test's nuisance as (train rows, test rows) of its columns, prepended (its
-    coefficients first, unbounded), sliced once per fold by the caller."""
+    coefficients first, unbounded), sliced once per fold by the caller.
+
+    Unbounded fits are solved from their Gram matrix assembled by blocks: the nuisance's own block ``N'N`` is
+    shared by all the settings of a term (:func:`_nuis_gram`), and no stacked copy ``[N, X]`` of the training
+    rows is made."""
     idx = train_rows(train, rows)
-    Xtr = X[idx] if nuis is None else np.hstack([nuis[0], X[idx]])
     box = nuis is not None and len(nuis) > 2 and nuis[2] is not None
+    y = e[idx]
+    Xi = X[idx]
     if box:   # bounded nuisance columns (the initial state's gains): a box solve over all columns
+        Xtr = np.hstack([nuis[0], Xi])
         lo = np.concatenate([nuis[2][0], np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)])
         hi = np.concatenate([nuis[2][1], np.full(X.shape[1], np.inf)])
-        th = _lstsq_box(Xtr, e[idx], lo, hi)
-    else:
-        if lb is not None and nuis is not None:
+        th = _lstsq_box(Xtr, y, lo, hi)
+        fit = Xtr @ th
+    elif lb is not None:
+        Xtr = Xi if nuis is None else np.hstack([nuis[0], Xi])
+        if nuis is not None:
             lb = np.concatenate([np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
-        th = _lstsq(Xtr, e[idx]) if lb is None else _lstsq_bounded(Xtr, e[idx], lb)
-    sse_tr = float(np.sum((e[idx] - Xtr @ th) ** 2)) * (np.sum(train) / max(idx.size, 1))
+        th = _lstsq_bounded(Xtr, y, lb)
+        fit = Xtr @ th
+    elif nuis is None:
+        th = _lstsq_gram(Xi.T @ Xi, Xi.T @ y, idx.size)
+        fit = Xi @ th
+    else:
+        N = nuis[0]
+        NN, Ny = _nuis_gram(N, e, idx)
+        NX = N.T @ Xi
+        G = np.block([[NN, NX], [NX.T, Xi.T @ Xi]])
+        th = _lstsq_gram(G, np.concatenate([Ny, Xi.T @ y]), idx.size)
+        m = N.shape[1]
+        fit = N @ th[:m] + Xi @ th[m:]
+    sse_tr = float(np.sum((y - fit) ** 2)) * (np.sum(train) / max(idx.size, 1))
     # the prediction on every row, then the test rows: the same floats as X[test] @ th (each row's dot product is
     # computed alike), without copying half the design's rows (about 1 M at full length) on every call
     if nuis is None:

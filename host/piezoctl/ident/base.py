@@ -65,7 +65,7 @@ import numpy as np
 from scipy import optimize
 from scipy import signal as sig
 
-from ..dsp import filt
+from ..dsp import blas_threads, filt
 from ..models.hysteresis import hat_basis, play_states
 from .common import IdentError
 
@@ -734,6 +734,7 @@ def history_holdout(params: dict) -> list:
     return params.pop("_holdout", [])
 
 
+@blas_threads(1)   # its BLAS calls are small: a second thread only waits for a busy core (docs/diagnose-speed.md)
 def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s: float = 0.5,
              holdout: bool = False) -> dict:
     """Fit the base model (kind ``refined`` without terms) to calibration recordings.

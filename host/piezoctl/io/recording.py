@@ -210,6 +210,35 @@ def _locate_bad_row(path: str, lines: list[str], first: int, ncols: int,
     return _fail(path, None, "data could not be parsed")
 
 
+def _scan_body(body: list[str]):
+    """(keep, commas) per line of ``body``: whether it is a data line (not blank, not a comment) and its number
+    of commas, by array operations over the lines' bytes; None when the lines are not all ASCII (the caller
+    then tests each line in Python, the general path).
+
+    The two Python tests per line they replace took about 0.5 s per million lines (more than ``np.loadtxt``'s
+    conversion). The lines are joined with LF; as ``str.splitlines`` made them, none holds a line break, so
+    each LF ends exactly one line. A line whose first byte is a space or tab (rare) is tested in Python."""
+    if not body:
+        return None
+    joined = "\n".join(body) + "\n"
+    if not joined.isascii():
+        return None
+    b = np.frombuffer(joined.encode("ascii"), dtype=np.uint8)
+    ends = np.flatnonzero(b == 0x0A)
+    if ends.size != len(body):
+        return None
+    starts = np.empty_like(ends)
+    starts[0] = 0
+    starts[1:] = ends[:-1] + 1
+    lead = b[starts]
+    keep = (lead != ord("#")) & (lead != 0x0A)
+    for i in np.flatnonzero(lead <= 0x20):   # whitespace first (str.strip's whitespace is all <= 0x20 in ASCII)
+        s = body[i]
+        keep[i] = bool(s.strip()) and not s.lstrip().startswith("#")
+    commas = np.diff(np.searchsorted(np.flatnonzero(b == ord(",")), ends), prepend=0)
+    return keep, commas
+
+
 def _sample_rate_meta(path: str, meta: dict, meta_lines: dict) -> None:
     value = meta.get("sample_rate_hz")
     if value is None:
@@ -355,8 +384,12 @@ def load_recording(path: str | os.PathLike, *, require: tuple = REQUIRED_COLUMNS
     # Data lines and their 1-based line numbers (blank and comment lines skipped).
     first = hdr + 1
     body = lines[first:]
-    keep = np.fromiter((bool(s.strip()) and not s.lstrip().startswith("#") for s in body),
-                       dtype=bool, count=len(body))
+    scan = _scan_body(body)
+    if scan is None:   # the general path: a Python test per line
+        keep = np.fromiter((bool(s.strip()) and not s.lstrip().startswith("#") for s in body),
+                           dtype=bool, count=len(body))
+    else:
+        keep, commas = scan
     lineno = np.nonzero(keep)[0] + first + 1
     if lineno.size < 2:
         raise _fail(path, None, f"{lineno.size} data row(s); a recording needs at least 2")
@@ -369,7 +402,10 @@ def load_recording(path: str | os.PathLike, *, require: tuple = REQUIRED_COLUMNS
     except ValueError:
         raise _locate_bad_row(path, lines, first, len(names), use) from None
     # loadtxt only checks the columns it converts; every row must still have all fields.
-    nfields = np.fromiter((s.count(",") for s in data_lines), dtype=np.int64, count=len(data_lines))
+    if scan is None:
+        nfields = np.fromiter((s.count(",") for s in data_lines), dtype=np.int64, count=len(data_lines))
+    else:
+        nfields = commas[keep]
     bad = np.nonzero(nfields != len(names) - 1)[0]
     if bad.size:
         r = int(bad[0])
