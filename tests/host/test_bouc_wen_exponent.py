@@ -12,17 +12,17 @@ def _drive(seed, n=20_000):
     return 0.9 * np.sin(np.cumsum(rng.normal(0, 0.01, n))) * np.linspace(1.0, 0.4, n)
 
 
-@pytest.mark.parametrize("beta,gamma", [(3.0, 1.0), (10.0, -4.0), (1.0, 0.5)])
-def test_table_at_exponent_one_equals_the_closed_form(beta, gamma):
+@pytest.mark.parametrize("beta,gamma,f0", [(3.0, 1.0, 0.0), (10.0, -4.0, -0.8), (1.0, 0.5, 0.6)])
+def test_table_at_exponent_one_equals_the_closed_form(beta, gamma, f0):
     v = _drive(0)
-    exact = _bouc_wen_h(v, beta, gamma, 0.2)
     hu = 1.0 / (beta + gamma)
-    assert np.max(np.abs(_bouc_wen_h_n(v, beta, gamma, 0.2, 1.0) - exact)) < 1e-4 * hu
+    exact = _bouc_wen_h(v, beta, gamma, 0.2, f0 * hu)
+    assert np.max(np.abs(_bouc_wen_h_n(v, beta, gamma, 0.2, 1.0, f0 * hu) - exact)) < 1e-4 * hu
 
 
-def _rk4(v, beta, gamma, n, v_rest, sub=20):
+def _rk4(v, beta, gamma, n, v_rest, h0=0.0, sub=20):
     """Per-sample RK4 of dh/dv = 1 - |h|^n (beta sign(h dv) + gamma), ``sub`` steps per drive step."""
-    h, out, prev = 0.0, np.empty(v.size), v_rest
+    h, out, prev = h0, np.empty(v.size), v_rest
     for k, x in enumerate(v):
         dv = (x - prev) / sub
         s = 1.0 if dv > 0 else -1.0
@@ -36,13 +36,13 @@ def _rk4(v, beta, gamma, n, v_rest, sub=20):
     return out
 
 
-@pytest.mark.parametrize("n", [0.6, 1.7, 3.0])
-def test_exponent_n_follows_the_law_integrated_step_by_step(n):
+@pytest.mark.parametrize("n,f0", [(0.6, 0.0), (1.7, -0.7), (3.0, 0.5)])
+def test_exponent_n_follows_the_law_integrated_step_by_step(n, f0):
     v = _drive(1, 3000)
     beta, gamma = 2.0, -0.6
-    ref = _rk4(v, beta, gamma, n, -0.3)
     hu = (beta + gamma) ** (-1.0 / n)
-    got = bouc_wen_h(v, beta, gamma, -0.3, n)
+    ref = _rk4(v, beta, gamma, n, -0.3, f0 * hu)
+    got = bouc_wen_h(v, beta, gamma, -0.3, n, f0 * hu)
     assert np.max(np.abs(got - ref)) < 1e-3 * hu
     assert np.max(np.abs(got - ref)) < 0.01 * np.std(ref)
 

@@ -85,14 +85,14 @@ def _peek_state(kind: str, params: tuple, v: np.ndarray):
     return None
 
 
-def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 1.0) -> np.ndarray:
+def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 1.0, h0: float = 0.0) -> np.ndarray:
     """Hysteretic state of a Bouc-Wen element of exponent ``n`` (see :func:`_bouc_wen_h`; ``n != 1``:
-    :func:`_bouc_wen_h_n`), cached: read-only result."""
+    :func:`_bouc_wen_h_n`) starting at state ``h0`` at ``v_rest``, cached: read-only result."""
     if float(n) == 1.0:
-        return _cached_state("bw", (float(beta), float(gamma), float(v_rest)), v,
-                             lambda x: _bouc_wen_h(x, float(beta), float(gamma), float(v_rest)))
-    return _cached_state("bwn", (float(beta), float(gamma), float(v_rest), float(n)), v,
-                         lambda x: _bouc_wen_h_n(x, float(beta), float(gamma), float(v_rest), float(n)))
+        return _cached_state("bw", (float(beta), float(gamma), float(v_rest), float(h0)), v,
+                             lambda x: _bouc_wen_h(x, float(beta), float(gamma), float(v_rest), float(h0)))
+    return _cached_state("bwn", (float(beta), float(gamma), float(v_rest), float(n), float(h0)), v,
+                         lambda x: _bouc_wen_h_n(x, float(beta), float(gamma), float(v_rest), float(n), float(h0)))
 
 
 BW_TABLE_POINTS = 16001  # points of the tabulated run solution of a Bouc-Wen element with n != 1
@@ -113,10 +113,12 @@ def _bouc_wen_table(beta: float, gamma: float, n: float):
     return h, L
 
 
-def _bouc_wen_h_n(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 2.0) -> np.ndarray:
+def _bouc_wen_h_n(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 2.0,
+                  h_start: float = 0.0) -> np.ndarray:
     """Hysteretic state h of a Bouc-Wen element of exponent ``n`` (alpha = 1) along the drive path v.
 
-    ``dh = dv - |h|^n (beta sign(h dv) + gamma) |dv|`` (``beta > |gamma|``), starting at h = 0 at ``v_rest``; n = 1
+    ``dh = dv - |h|^n (beta sign(h dv) + gamma) |dv|`` (``beta > |gamma|``), starting at h = ``h_start`` at
+    ``v_rest`` (clipped inside the limits +-h_u); n = 1
     is :func:`_bouc_wen_h`. Rate independent and autonomous within a monotone run: an ascending run moves h
     along the tabulated solution (:func:`_bouc_wen_table`) by the path length travelled, a descending run does
     the same on -h (the law is odd). The Python loop runs over turning points (one scalar lookup each); the
@@ -124,7 +126,8 @@ def _bouc_wen_h_n(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 
     hgrid, Lgrid = _bouc_wen_table(beta, gamma, n)
     v = np.concatenate([[v_rest], np.asarray(v, float)])
     dv = np.diff(v)
-    out = np.zeros(dv.size)
+    h0 = float(np.clip(h_start, hgrid[0], hgrid[-1]))
+    out = np.full(dv.size, h0)
     nz = np.flatnonzero(dv != 0.0)
     if nz.size == 0:
         return out
@@ -142,7 +145,6 @@ def _bouc_wen_h_n(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 
         return ys[i] + f * (ys[i + 1] - ys[i])
 
     L0 = np.empty(starts.size)
-    h0 = 0.0
     runlen = (path[ends] - path[starts]).tolist()
     for k, (s, dl) in enumerate(zip(sd.tolist(), runlen)):
         L0[k] = lookup(s * h0, hl, Ll)
@@ -154,11 +156,12 @@ def _bouc_wen_h_n(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 
     return out
 
 
-def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray:
+def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, h_start: float = 0.0) -> np.ndarray:
     """Hysteretic state h of a Bouc-Wen element with alpha = 1 along the drive path v.
 
-    ``dh = dv - beta |dv| h - gamma dv |h|`` (``beta > |gamma|``), starting at h = 0 at
-    ``v_rest``. Rate independent: within a monotone run of the drive (direction s) h is a
+    ``dh = dv - beta |dv| h - gamma dv |h|`` (``beta > |gamma|``), starting at h = ``h_start`` at
+    ``v_rest`` (clipped inside the limits +-1 / (beta + gamma)). Rate independent: within a monotone run of
+    the drive (direction s) h is a
     closed-form function of the path length L travelled in the run,
     ``h = heq + (h0 - heq) exp(-k L)``, ``k = beta + s sign(h) gamma``, ``heq = s / k``;
     when h starts against the direction it reaches zero after
@@ -167,7 +170,9 @@ def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray
     """
     v = np.concatenate([[v_rest], np.asarray(v, float)])
     dv = np.diff(v)
-    out = np.zeros(dv.size)
+    kp, km = beta + gamma, beta - gamma
+    h0 = float(np.clip(h_start, -(1.0 - 1e-9) / kp, (1.0 - 1e-9) / kp))
+    out = np.full(dv.size, h0)
     nz = np.flatnonzero(dv != 0.0)
     if nz.size == 0:
         return out
@@ -176,9 +181,7 @@ def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray
     starts = nz[np.concatenate([[0], np.flatnonzero(sgn[1:] != sgn[:-1]) + 1])]
     ends = np.append(starts[1:], dv.size)
     path = np.cumsum(np.abs(dv))
-    h0 = 0.0
     hs = []
-    kp, km = beta + gamma, beta - gamma
     sds = np.sign(dv[starts]).tolist()
     p0s = np.concatenate([[0.0], path])[starts].tolist()
     for a, b, sd, p0 in zip(starts.tolist(), ends.tolist(), sds, p0s):
@@ -338,7 +341,8 @@ def plane_parts(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
                 hyst -= interp_linear_ext(v, knots[j], values[j])
     bw = hp.get("bw")
     if bw:
-        hb = float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), v_rest, float(bw.get("n", 1.0)))
+        hb = float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), v_rest, float(bw.get("n", 1.0)),
+                                           float(bw.get("h0", 0.0)))
         h += hb
         hyst += hb
     return h, hyst
@@ -444,7 +448,8 @@ def hysteresis_features(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
         th = np.concatenate([np.asarray(vals[1:], float) - float(vals[0]) for vals in hp["values"]])
         bw = hp.get("bw")
         if bw:
-            hb = bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)), float(bw.get("n", 1.0)))
+            hb = bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
+                            float(bw.get("n", 1.0)), float(bw.get("h0", 0.0)))
             F, th = np.column_stack([F, hb]), np.append(th, float(bw["c_h"]))
         return F, th
     vc = np.clip(v, float(hp.get("v_lo", -1.0)), float(hp.get("v_hi", 1.0)))
@@ -495,7 +500,8 @@ def hysteresis_channels(hp: dict, v) -> np.ndarray:
     bw = hp.get("bw")
     if bw:
         cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]),
-                                                  float(hp.get("v_rest", 0.0)), float(bw.get("n", 1.0))))
+                                                  float(hp.get("v_rest", 0.0)), float(bw.get("n", 1.0)),
+                                                  float(bw.get("h0", 0.0))))
     return np.column_stack(cols)
 
 
