@@ -34,7 +34,10 @@ Fit (``fit_base``):
    plane's size ``(R, K)`` and the weight of a roughness penalty (squared
    second differences of each play's function) are chosen from ``PLANE_PLAYS`` x
    ``PLANE_KNOTS`` x ``RIDGES`` (and with or without one Bouc-Wen column, its
-   shape searched on the reversible curve alone) by the held-out RMS error (the
+   shape - beta, gamma, the exponent n and the state h0 it starts in at rest -
+   searched on the reversible curve alone: a Duhem element has no return-point
+   memory, so no Preisach density reaches it, and one that never saturates inside
+   the range remembers its start) by the held-out RMS error (the
    smallest size within 2 % of the best). Only play counts R the calibration
    can resolve are offered: at least 2 R distinct reversal levels
    (:func:`reversal_levels`); a periodic calibration (two levels) gets R = 1,
