@@ -611,7 +611,7 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
 
     # the Bouc-Wen column's shape, with the reversible curve alone (R = 1): a grid over (beta, n) at gamma = 0 and
     # h0 = 0, the start states and then the gamma ratios at the best of it, then Nelder-Mead on
-    # (log beta, gamma / beta, log n, h0 / h_u): 76 evaluations, as many as the exponent-1 search had (75)
+    # (log beta, gamma / beta, log n, h0 / h_u): 96 evaluations (the exponent-1 search had 75)
     def bw_shape(z):
         beta, gr = float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95))
         n = float(np.clip(np.exp(z[2]), *BW_EXPONENT_RANGE))
@@ -629,7 +629,7 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
     sc0, z0 = min(grid)
     z0 = np.array(z0)
     sol = optimize.minimize(bw_score, z0, method="Nelder-Mead",
-                            options={"maxfev": 40, "xatol": 0.01, "fatol": 1e-4 * sc0,
+                            options={"maxfev": 60, "xatol": 0.01, "fatol": 1e-4 * sc0,
                                      "initial_simplex": [z0, z0 + [0.25, 0, 0, 0], z0 + [0, 0.15, 0, 0],
                                                          z0 + [0, 0, 0.2, 0], z0 + [0, 0, 0, 0.2]]})
     z = sol.x if sol.fun < sc0 else z0
