@@ -27,9 +27,9 @@ from .discriminate import discriminate_group, highpassed
 from .slow_signature import SIGNATURES, attribute, signature_tests
 from .solve import lstsq_box as _lstsq_box, train_rows
 
-__all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals", "residual", "select", "model_with",
-           "simulate_refined", "hysteresis_nuisance", "slow_nuisance", "dynamics_nuisance", "initial_state_nuisance",
-           "term_nuisance", "best_setting", "train_rows"]
+__all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",
+           "residual", "select", "model_with", "simulate_refined", "hysteresis_nuisance", "slow_nuisance",
+           "dynamics_nuisance", "initial_state_nuisance", "term_nuisance", "best_setting", "train_rows"]
 
 
 # Rounds after the first (docs/diagnose.md, "Round 11: the second effect"). The first round's size gates (fold
@@ -589,7 +589,8 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
         if not c.significant or c.veto:
             continue
         if c.below_gates and check is None and c.name not in SIGNATURES:
-            c.veto = "after the first term it passed only below the first round's size gates, and no signature check ran"
+            c.veto = ("after the first term it passed only below the first round's size gates, and no signature "
+                      "check ran")
             continue
         if check is not None:
             c.signature_check = check(c)
