@@ -30,7 +30,7 @@ from . import locate as loc
 from . import significance as sg
 from .discriminate import calibration_band_hz
 from .misfit import BANDS, band_energy, base_misfit
-from .select import Ctx, make_masks, make_signals, select, simulate_refined
+from .select import CHECKED_TERMS, FURTHER_RATIO_MAX, Ctx, make_masks, make_signals, select, simulate_refined
 
 __all__ = ["diagnose", "DEFAULTS", "load", "fit_base_model", "locate", "refine", "document"]
 
@@ -292,6 +292,10 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                          f"from {a.exact_before:.4f} to {a.exact_after:.4f} (active-block t and signed-rank tests on "
                          f"the linearized term, nested against a refit of the base's hysteresis, p = {a.p:.1e}, "
                          f"threshold {a.p_max:.1e})." + (f" {a.discrimination}" if a.discrimination else "")
+                         + (f" Named in round {a.selection_round}, beside the terms before it: its fold ratios "
+                            f"{a.fold_ratios[0]:.2f}/{a.fold_ratios[1]:.2f} and credited ratio {a.credited:.2f} are "
+                            f"above the first round's {sg.RATIO_MAX} but below {a.ratio_max:g}, and its signature holds."
+                            if a.below_gates else "")
                          + (f" Caution: the refined model is worse on {a.worsened[0]} (held-out error x"
                             f"{a.worsened[1]:.2f} there): where it is wrong, this model does not hold."
                             if a.worsened else "")),
@@ -301,6 +305,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             "linearized": {"nrmse_before": a.nrmse_before, "nrmse_after": a.nrmse_after},
                             "fold_ratios": a.fold_ratios, "p_value": a.p, "delta_bic": a.dbic,
                             "credited_ratio": a.credited, "credited_bands": a.credited_bands,
+                            "selection_round": a.selection_round, "ratio_max": a.ratio_max,
                             "worse_on": ({"recording": a.worsened[0], "factor": a.worsened[1]}
                                          if a.worsened else None),
                             **({"slow_signature": a.slow_signature} if a.slow_signature else {})},
@@ -323,6 +328,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                         "candidate": {"nrmse_after": c.nrmse_after,
                                                       "exact_fold_ratios": c.exact_fold_ratios},
                                         "credited_ratio": c.credited, "credited_bands": c.credited_bands,
+                                        "selection_round": c.selection_round, "ratio_max": c.ratio_max,
                                         "fold_ratios": c.fold_ratios, "p_value": c.p, "delta_bic": c.dbic,
                                         **({"slow_signature": c.slow_signature} if c.slow_signature else {})},
                         "signature": c.term.signature, "signature_check": c.signature_check})
@@ -350,8 +356,13 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                   "decreases; and its improvement, less per band (level, slow, fast) the base's "
                                   "misfit on held-out calibration histories (base_info.misfit), still gives a ratio "
                                   f"of at most {sg.RATIO_MAX}; and the refined model, simulated exactly with the term fitted on one "
-                                  "fold, lowers the error on the other fold in each",
-                     "ratio_max": sg.RATIO_MAX, "alpha_family": sg.ALPHA, "active_fraction": sg.ACTIVE_FRAC,
+                                  "fold, lowers the error on the other fold in each. After the first term, a term with a "
+                                  "signature test of its own (" + ", ".join(CHECKED_TERMS) + ") is tested with both ratios "
+                                  f"below {FURTHER_RATIO_MAX:g} instead of {sg.RATIO_MAX} (at the round's level: Holm's "
+                                  "step-down over the remaining candidates); when it passes only so, its signature must "
+                                  "hold (a slow signature at alpha / 3, a drive-side transfer check that can test it)",
+                     "ratio_max": sg.RATIO_MAX, "ratio_max_further": FURTHER_RATIO_MAX,
+                     "further_checked_terms": list(CHECKED_TERMS), "alpha_family": sg.ALPHA, "active_fraction": sg.ACTIVE_FRAC,
                      "unit_correlation_times": sg.UNIT_TAUS, "unit_min_s": sg.UNIT_MIN_S},
             "outside_calibrated_range": outside_doc,
             "base_info": base_info,
