@@ -23,7 +23,7 @@ from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg
 from .misfit import credited_ratio
-from .discriminate import discriminate_group, highpassed
+from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import SIGNATURES, attribute, signature_tests
 from .solve import lstsq_box as _lstsq_box, train_rows
 
@@ -142,6 +142,8 @@ class Candidate:
     credited_bands: dict | None = None        # per band: the improvement and the misfit energy [um^2/sample]
     slow_signature: dict | None = None        # creep, drift, offset: its signature's unique contribution
     signature_check: dict | None = None       # the frequency-domain shape check (signature.py), drive-side terms
+    separation: list | None = None            # accepted: the pair tests against the round's others (discriminate.separate)
+    heldout: tuple | None = None              # (before, correction, fold, block, rec): signature.HELDOUT_CHECKED only
 
     @property
     def name(self) -> str:
@@ -425,10 +427,13 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
                             f"{np.sqrt(x['misfit_um2']):.4f} um" for b, x in bands.items()) + ")")
     for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
         c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
+    from .signature import HELDOUT_CHECKED
+    held = ((rb_res, pred_after[used], fold_all[used], block_all[used], rec) if term.name in HELDOUT_CHECKED and
+            significant else None)   # its signature check reads them (one term: arrays of the data's length)
     return Candidate(term=term, ratio=na / nb if nb > 0 else 1.0, fold_ratios=fold_ratios, nrmse_before=nb,
                      nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
-                     veto=veto, credited=cr, credited_bands=bands)
+                     veto=veto, credited=cr, credited_bands=bands, heldout=held)
 
 
 def model_with(base, terms):
@@ -490,6 +495,67 @@ def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
            for i in range(len(ctx.valid))]
     return {"params": new, "sse_before": float(np.sum(e_old[test] ** 2)), "sse_after": float(np.sum(e_new[test] ** 2)),
             "n": int(np.sum(test)), "ys": ys, "per_recording": per}
+
+
+def pair_design(ctxs, cands, f):
+    """The joint fit of several candidates on fold f's model (``discriminate.separate``): the union of their
+    nested tests' nuisances with its bounds, and each candidate's columns at the setting its test chose there."""
+    ctx, terms = ctxs[f], [c.term for c in cands]
+    parts, lo, hi = [], [], []
+    for flag, fn, bound in (("nested", hysteresis_nuisance, np.inf), ("nested_dynamics", dynamics_nuisance, np.inf),
+                            ("initial_state", initial_state_nuisance, 1.0)):
+        if any(getattr(t, flag) for t in terms):
+            N = fn(ctx)
+            parts.append(N)
+            lo.append(np.full(N.shape[1], -bound))
+            hi.append(np.full(N.shape[1], bound))
+    cols = []
+    for c in cands:   # own columns only: a term's own nuisance (creep's levels per recording, an intercept) would
+        X = _design(ctx, c.term, c.setting[f]).X   # credit it, or the other, with any level (an offset's)
+        lb = c.term.lower(ctx)
+        lb = np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)
+        own = [j for j in range(X.shape[1]) if j not in c.term.nuisance_columns(ctx, X.shape[1])]
+        cols.append((X[:, own], lb[own], np.full(len(own), np.inf)))
+    n = sum(int(np.sum(v)) for v in ctx.valid)
+    N = np.hstack(parts) if parts else np.zeros((n, 0))
+    return N, np.concatenate(lo) if lo else np.zeros(0), np.concatenate(hi) if hi else np.zeros(0), cols
+
+
+def _separate(best, evals, fctx, es, fold_all, block_all, rows, log):
+    """The accepted candidate's pair tests against the round's other candidates (``discriminate.separate``);
+    sets ``best.separation``."""
+    e = np.zeros(fold_all.size)
+    for f in (0, 1):
+        e[fold_all == 1 - f] = es[f][fold_all == 1 - f]
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(fctx[0].valid)])
+    best.separation = separate(best, evals, lambda cs, f: pair_design(fctx, cs, f), e, fold_all, block_all, rec,
+                               fctx[0].dt, rows)
+    for c in fctx:
+        c.design_cache.clear()
+    for r in best.separation:
+        log(f"    pair {best.name}/{r['name']}: {r['verdict']} (alone p {r['named_alone']['p']:.0e}/"
+            f"{r['alternative_alone']['p']:.0e}, beyond p {r['named_beyond']['p']:.0e}/"
+            f"{r['alternative_beyond']['p']:.0e})")
+
+
+def _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check):
+    """The pair tests of the accepted candidate (:func:`_separate`); when another significant candidate of a
+    different group explains all it does and more (verdict ``b``: held out, it improves beyond the accepted one and
+    the accepted one does not beyond it), that one is offered first instead (its exact and signature checks
+    again), once. Returns the candidate accepted."""
+    _separate(best, evals, fctx, es, fold_all, block_all, rows, log)
+    alt = next((c for r in best.separation if r["verdict"] == "b" for c in evals
+                if c.name == r["name"] and c.significant and not c.veto
+                and not (c.term.group and c.term.group == best.term.group)), None)
+    if alt is None:
+        return best
+    log(f"    {alt.name} explains what {best.name} does and more: offered first")
+    evals.insert(evals.index(best), evals.pop(evals.index(alt)))
+    first = _first_exact(evals, fctx, fold_all, recs, span, log, check)
+    if first is alt:
+        _separate(alt, evals, fctx, es, fold_all, block_all, rows, log)
+        return alt
+    return best
 
 
 def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
@@ -616,18 +682,24 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term
             tests = signature_tests(fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows)
             log("    slow signatures: " + attribute(evals, tests))
+            for t in tests:
+                if t.level is not None:
+                    log(f"    {t.name} level dependence: p {t.level['p']:.1e}, folds {t.level['fold_ratios'][0]:.3f}/"
+                        f"{t.level['fold_ratios'][1]:.3f}" + (" (depends on the level)" if t.level["depends_on_level"] else ""))
         rounds.append(evals)
         check = None
         if f_band is not None:   # the drive-side terms' frequency-domain shape on the current model (signature.py)
             from .signature import check_in_context
             cache = {}
-            check = (lambda c, _x=ctx_all, _k=cache: check_in_context(_x, c.name, _setting_of(c), f_band, _k))
+            check = (lambda c, _x=ctx_all, _k=cache: check_in_context(_x, c.name, _setting_of(c), f_band, _k,
+                                                                      heldout=c.heldout))
         best = _first_exact(evals, fctx, fold_all, recs, span, log, check)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
                              f"n{c.n_active} c{c.credited:.2f}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"
                              for c in evals[:6]))
         if best is None:
             break
+        best = _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check)
         # setting and coefficients on all selection samples, applied to the all-data model
         allmask = fold_all >= 0
         e_all = residual(ctx_all)
