@@ -136,21 +136,19 @@ def beyond_test(e, p_small, p_big, fold_all, block_all, rec, dt) -> dict:
 def pair_verdict(a_beyond_b: dict, b_beyond_a: dict, a_alone: dict, b_alone: dict) -> str:
     """How two candidates ``a`` (the named one) and ``b`` stand, from the four held-out tests:
 
-    - ``"inseparable"``: each alone improves significantly, neither beyond the other (they take the same
-      residual: the data cannot tell them apart);
-    - ``"a"`` / ``"b"``: only that one improves beyond the other;
-    - ``"both"``: each beyond the other (two effects, or one that needs both shapes);
-    - ``"neither"``: ``b`` alone explains nothing (no alternative).
+    - ``"both"``: each improves beyond the other (two effects, or one that needs both shapes);
+    - ``"a"`` / ``"b"``: only that one improves beyond the other (it explains what the other does and more);
+    - ``"inseparable"``: neither beyond the other, while each alone improves significantly: they take the same
+      residual, and the data cannot tell them apart;
+    - ``"neither"``: neither beyond the other, and one of them explains nothing alone (no alternative).
     """
-    if not b_alone["significant"]:
-        return "neither" if not a_beyond_b["significant"] or a_alone["significant"] else "a"
     if a_beyond_b["significant"] and b_beyond_a["significant"]:
         return "both"
     if a_beyond_b["significant"]:
         return "a"
     if b_beyond_a["significant"]:
         return "b"
-    return "inseparable" if a_alone["significant"] else "neither"
+    return "inseparable" if a_alone["significant"] and b_alone["significant"] else "neither"
 
 
 def separation_hint(a: str, b: str) -> str:
