@@ -6,6 +6,7 @@ improvement also lies below its limit fails its check; the bench counts a truth 
 """
 
 import dataclasses
+import types
 
 import numpy as np
 import pytest
@@ -37,6 +38,9 @@ class Cand:
     p: float = 1e-9
     fold_ratios: tuple = (0.5, 0.5)
     setting: tuple = (None, None)
+    veto: str | None = None
+    discrimination: str | None = None
+    term: object = dataclasses.field(default_factory=lambda: types.SimpleNamespace(group=""))
 
 
 def _run_separate(xa, xb, e):
@@ -164,7 +168,10 @@ def test_offset_level_dependence_is_measured():
     assert not r0["depends_on_level"] and not r0["refused"]
 
 
-def _slew_case(below_too):
+def _slew_case(below_too, limit_adds=True):
+    """A slew candidate's held-out figures: one fast step per block (beyond the limit) and a slow ramp (below it).
+    ``below_too``: the candidate also takes a slow oscillation everywhere, which the term's refit of the dynamics
+    alone (no limit) takes as well; ``limit_adds``: the limit then still takes the steps' ring beyond that refit."""
     rng = np.random.default_rng(6)
     fold, block, rec = layout()
     n = N_BLOCKS * BLOCK
@@ -174,26 +181,33 @@ def _slew_case(below_too):
         u[k:] += 5.0 * (1 if (k // BLOCK) % 2 else -1)
     u += 0.001 * np.arange(n)
     limit = 1e3   # [V/s]: the steps (5 V in one sample, 5000 V/s) exceed it, the ramp (1 V/s) does not
-    fast = np.zeros(n)
+    ring = np.zeros(n)
     for k in step_at:
-        fast[k:k + 40] = np.exp(-np.arange(min(40, n - k)) / 10.0)
-    true = fast.copy()
-    if below_too:   # a slow oscillation everywhere that the candidate also takes
-        true += 0.5 * np.sin(2 * np.pi * 3.0 * np.arange(n) * DT)
-    before = true + 0.01 * rng.standard_normal(n)
-    correction = true + 0.002 * rng.standard_normal(n)
-    return check_slew_absent((before, correction, fold, block, rec), [u], DT, limit, nperseg=50)
+        ring[k:k + 40] = np.exp(-np.arange(min(40, n - k)) / 10.0)
+    slow = 0.5 * np.sin(2 * np.pi * 3.0 * np.arange(n) * DT) if below_too else np.zeros(n)
+    e = ring + slow + 0.01 * rng.standard_normal(n)
+    correction = ring + slow + 0.002 * rng.standard_normal(n)
+    p_refit = slow + 0.002 * rng.standard_normal(n)
+    p_both = p_refit + (ring if limit_adds else 0.0)
+    return check_slew_absent((e, correction, fold, block, rec, e, p_refit, p_both), [u], DT, limit, nperseg=50)
 
 
 def test_slew_improvement_absent_below_the_limit_passes():
     r = _slew_case(False)
     assert r["testable"] and r["passed"], r
+    assert r["figures"]["p_improvement_below"] >= 0.01
 
 
-def test_slew_improvement_below_the_limit_fails():
-    r = _slew_case(True)
+def test_slew_improvement_below_the_limit_passes_when_the_limit_adds_beyond_its_refit():
+    r = _slew_case(True, limit_adds=True)
+    assert r["passed"] and r["figures"]["p_improvement_below"] < 0.01 and r["figures"]["p_beyond_refit"] < 0.01
+
+
+def test_slew_improvement_below_the_limit_fails_when_the_refit_takes_it_all():
+    r = _slew_case(True, limit_adds=False)
     assert r["testable"] and not r["passed"]
-    assert "below the limit" in r["reason"] and r["figures"]["p_improvement_below"] < 0.01
+    assert "does not act" in r["reason"] and r["figures"]["p_improvement_below"] < 0.01
+    assert r["figures"]["p_beyond_refit"] >= 0.01
 
 
 def test_bench_counts_truth_in_pair_separately():
