@@ -160,7 +160,9 @@ def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> li
     """The alternatives the data cannot tell from the named candidate (docs/diagnose.md, "Round 11").
 
     For each other candidate ``b`` (pre-filter: its own test's held-out error lower in each fold at p <
-    ``ALPHA_SEPARATE``; one whose own held-out error does not fall significantly is no alternative), four joint fits per fold, each fitted on fold f and scored
+    ``ALPHA_SEPARATE``, not vetoed by a check, and not of the named one's group when that group's discrimination,
+    :func:`discriminate_group`, told them apart; one whose own held-out error does not fall significantly is no
+    alternative), four joint fits per fold, each fitted on fold f and scored
     on fold 1 - f: the pair's nuisance alone (``N``), ``N`` + the named term, ``N`` + ``b``, ``N`` + both, every
     term at the setting its own test chose in that fold. :func:`beyond_test` then gives each alone (beyond
     ``N``) and each beyond the other; :func:`pair_verdict` reads them.
@@ -194,7 +196,10 @@ def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> li
     used = fold_all >= 0
     out = []
     for b in others:
-        if b is named or not b.setting or not (b.p < ALPHA_SEPARATE and max(b.fold_ratios) < 1.0):
+        if b is named or not b.setting or b.veto or not (b.p < ALPHA_SEPARATE and max(b.fold_ratios) < 1.0):
+            continue
+        if b.term.group and b.term.group == named.term.group and (named.discrimination or "").startswith(
+                "Discrimination:"):   # its group's own test (discriminate_group) told them apart
             continue
         preds = {k: np.zeros(fold_all.size) for k in ("n", "a", "b", "ab")}
         for f in (0, 1):
