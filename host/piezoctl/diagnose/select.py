@@ -380,7 +380,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
     """
     e_before = np.zeros(fold_all.size)
     pred_after = np.zeros(fold_all.size)
-    chosen, fold_ratios = [], []
+    chosen, fold_ratios, best_st = [], [], []
     k = 1
     for f in (0, 1):
         ctx, e = ctxs[f], es[f]
@@ -396,6 +396,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
             _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
             e_before[test] = e[test] - pn
         best = best_setting(ctx, term, e, train, test, rows, N)
+        best_st.append(best[0])
         pred_after[test] = best[3] - (e[test] - e_before[test])
         if term.nested_dynamics or term.initial_state:   # the model's setting and coefficients: without the
             Nm = _nuis(ctx, term, train, test, rows, dynamics=False, initial=False)   # columns it will not have
@@ -428,12 +429,37 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max) -> Candidate:
     for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
         c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
     from .signature import HELDOUT_CHECKED
-    held = ((rb_res, pred_after[used], fold_all[used], block_all[used], rec) if term.name in HELDOUT_CHECKED and
-            significant else None)   # its signature check reads them (one term: arrays of the data's length)
+    held = None
+    if term.name in HELDOUT_CHECKED and significant:   # its signature check reads them (one term: arrays of the
+        e_all = np.zeros(fold_all.size)                # data's length)
+        for f in (0, 1):
+            e_all[fold_all == 1 - f] = es[f][fold_all == 1 - f]
+        p_small, p_big = _beside_unlimited(ctxs, term, es, fold_all, rows, best_st)
+        held = (rb_res, pred_after[used], fold_all[used], block_all[used], rec, e_all[used], p_small[used],
+                p_big[used])
     return Candidate(term=term, ratio=na / nb if nb > 0 else 1.0, fold_ratios=fold_ratios, nrmse_before=nb,
                      nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
                      veto=veto, credited=cr, credited_bands=bands, heldout=held)
+
+
+def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):
+    """Held-out predictions of the drive term with its setting unbounded (``inf``: the drive unchanged, only the
+    dynamics refitted on the calibration as the term refits them) and of that plus the term at ``settings[f]``,
+    both nested as in :func:`_evaluate`: what the term takes beyond its own refit of the dynamics
+    (``signature.check_slew_absent``)."""
+    p_small, p_big = np.zeros(fold_all.size), np.zeros(fold_all.size)
+    for f in (0, 1):
+        ctx, e = ctxs[f], es[f]
+        train, test = fold_all == f, fold_all == 1 - f
+        N = _nuis(ctx, term, train, test, rows)
+        x0 = _design(ctx, term, float("inf")).X
+        x1 = _design(ctx, term, settings[f]).X
+        lb = term.lower(ctx)
+        p_small[test] = _fit_predict(x0, e, train, test, rows, lb, N)[1]
+        p_big[test] = _fit_predict(np.hstack([x0, x1]), e, train, test, rows,
+                                   None if lb is None else list(lb) * 2, N)[1]
+    return p_small, p_big
 
 
 def model_with(base, terms):
