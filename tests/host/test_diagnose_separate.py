@@ -217,3 +217,4 @@ def test_bench_counts_truth_in_pair_separately():
     assert ambiguous({**row, "named": ["sensor_nonlinearity"], "pair": ["sensor_nonlinearity", "saturation"]})
     assert not ambiguous({**row, "pair": []})
     assert not ambiguous({**row, "pair": ["asymmetric_hysteresis", "saturation"]})
+
