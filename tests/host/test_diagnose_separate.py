@@ -218,3 +218,14 @@ def test_bench_counts_truth_in_pair_separately():
     assert not ambiguous({**row, "pair": []})
     assert not ambiguous({**row, "pair": ["asymmetric_hysteresis", "saturation"]})
 
+
+
+def test_slew_shape_check_with_no_bin_below_unity_does_not_fail():
+    """Development null s107-007 crashed here: every informative bin below the limit had |T| above 1, so the
+    delay and bandwidth shapes had nothing to fit (not testable), which must neither raise nor refuse."""
+    from piezoctl.diagnose.signature import Transfer, check_bandwidth, check_delay
+    f = np.array([10.0, 20.0, 30.0])
+    tr = Transfer(f=f, T=np.full(3, 2.0 + 0j), g2=np.full(3, 0.99), var=np.full(3, 1e-6), n_d=20, df=10.0,
+                  segments=20)
+    for r in (check_delay(tr, 1.0, 5.0, 1e-4), check_bandwidth(tr, 1.0, 5.0, 1e-4)):
+        assert not r["testable"] and r["passed"]
