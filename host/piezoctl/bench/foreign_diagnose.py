@@ -17,7 +17,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 from ..foreign.cases import EFFECTS, case_plan, draw_case, write_case
 
-__all__ = ["run_diagnose", "run_case", "main"]
+__all__ = ["run_diagnose", "run_case", "ambiguous", "main"]
 
 
 def run_diagnose(calibration: list, recordings: list, out_dir: str) -> dict:
@@ -28,7 +28,8 @@ def run_diagnose(calibration: list, recordings: list, out_dir: str) -> dict:
     dict
         ``named`` (list of str, ``["none"]`` when nothing is named), ``ratio`` (held-out
         NRMSE of the refined model over the base's), ``base_nrmse``, ``refined_nrmse``,
-        ``effect_ratios`` (name -> held-out ratio of each significant effect, where given).
+        ``effect_ratios`` (name -> held-out ratio of each significant effect, where given), ``pair`` (the first
+        named effect with the alternatives the data cannot tell it from, round 11; ``[]`` when none).
     """
     from ..diagnose.run import diagnose
     doc = diagnose(calibration, recordings, out_dir, report=False, log=lambda *a, **k: None)
@@ -39,7 +40,10 @@ def run_diagnose(calibration: list, recordings: list, out_dir: str) -> dict:
         imp = e.get("improvement") or {}
         if e.get("significant") and imp.get("nrmse_before"):
             ratios[e["name"]] = float(imp["nrmse_after"]) / float(imp["nrmse_before"])
-    return {"named": list(doc.get("named") or ["none"]), "base_nrmse": base, "refined_nrmse": refined,
+    first = (doc.get("named") or ["none"])[0]
+    pair = next((p for p in doc.get("inseparable", []) if p and p[0] == first), [])
+    return {"named": list(doc.get("named") or ["none"]), "pair": list(pair), "base_nrmse": base,
+            "refined_nrmse": refined,
             "ratio": refined / base if base > 0 else 1.0, "effect_ratios": ratios}
 
 
@@ -55,6 +59,12 @@ def run_case(seed: int, index: int, truth: tuple, scale: float, root: str) -> di
     data_s = sum(r.u.size for r in case.calibration + case.reveal) / 1e4
     return {"id": case.case_id, "law": case.stage.law.name, "truth": list(truth) or ["none"],
             "design": case.design, "gen_s": t1 - t0, "diag_s": t2 - t1, "data_s": data_s, **res}
+
+
+def ambiguous(row: dict) -> bool:
+    """A case whose first named effect came with alternatives the data cannot tell it from (``pair``) and whose
+    truth is in that pair: "ambiguous, truth in pair", counted on its own line, not as first named correct."""
+    return bool(row.get("pair")) and bool(set(row["truth"]) & set(row["pair"]))
 
 
 def _print_summary(rows: list, multi: bool) -> None:
@@ -75,8 +85,11 @@ def _print_summary(rows: list, multi: bool) -> None:
         first = sum(1 for r in eff if r["named"][0] in r["truth"])
         print(f"\ntwo-effect cases: both named {both}/{len(eff)}; first named is one of them {first}/{len(eff)}")
     else:
-        ok = sum(1 for r in eff if r["named"][0] == r["truth"][0])
+        amb = [r for r in eff if ambiguous(r)]
+        ok = sum(1 for r in eff if r["named"][0] == r["truth"][0] and not ambiguous(r))
         print(f"\nfirst named correct (effect cases): {ok}/{len(eff)}")
+        print(f"ambiguous, truth in pair (not counted as first named correct): {len(amb)}/{len(eff)}"
+              + (" (" + ", ".join(f"{r['id']}: {' or '.join(r['pair'])}" for r in amb) + ")" if amb else ""))
     if nul:
         print(f"nulls 'none': {sum(1 for r in nul if r['named'] == ['none'])}/{len(nul)}")
     named = [r for r in rows if r["named"] != ["none"]]
@@ -124,7 +137,8 @@ def main(argv=None) -> int:
     rows = []
 
     def show(r):
-        print(f"{r['id']:42s} {r['law']:16s} truth {'+'.join(r['truth']):38s} named {','.join(r['named']):40s} "
+        named = ",".join(r["named"]) + (f" ({' or '.join(r['pair'])})" if r.get("pair") else "")
+        print(f"{r['id']:42s} {r['law']:16s} truth {'+'.join(r['truth']):38s} named {named:40s} "
               f"ratio {r['ratio']:.2f} {r['diag_s']:6.1f} s (gen {r['gen_s']:.1f} s)", flush=True)
 
     if a.jobs <= 1:

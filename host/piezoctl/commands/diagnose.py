@@ -162,7 +162,8 @@ def run(args) -> int:
     for f, p in zip(doc.get("drive_discontinuities", []), _given_paths(doc, paths, used)):
         f["file"] = p
     fit = doc["fit"]
-    lines = [f"named: {', '.join(doc['named'])}",
+    from ..diagnose.discriminate import inseparable_lines
+    lines = [f"named: {', '.join(doc['named'])}"] + inseparable_lines(doc) + [
              f"NRMSE base {fit['base']['nrmse']:.4f} -> refined {fit['refined']['nrmse']:.4f} "
              f"(held-out {fit['heldout']['base_nrmse']:.4f} -> {fit['heldout']['refined_nrmse']:.4f})"]
     lines += discontinuity_lines(doc.get("drive_discontinuities", []))
@@ -190,7 +191,7 @@ def discontinuity_lines(dd: list) -> list[str]:
 
 def result_of(doc: dict, out: Path) -> dict:
     """The ``--json`` object: the verdict, the fit figures, the discontinuities and the files written."""
-    return {"named": doc["named"], "fit": {k: doc["fit"][k] for k in ("base", "refined", "heldout")},
+    return {"named": doc["named"], "inseparable": doc.get("inseparable", []), "fit": {k: doc["fit"][k] for k in ("base", "refined", "heldout")},
             "effects": [{"name": x["name"], "significant": x["significant"], "evidence": x["evidence"]}
                         for x in doc.get("effects", [])],
             "drive_discontinuities": doc.get("drive_discontinuities", []), "time_s": doc["time_s"],

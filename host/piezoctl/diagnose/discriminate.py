@@ -86,3 +86,179 @@ def discriminate_group(cands, hp, fold_all, block_all, fc):
     text = (f"Ambiguous: above {fc:.0f} Hz the candidates {', '.join(names)} leave similar residual "
             f"({rms}; p = {pmax:.1e}); ordered by the overall held-out error.")
     return list(range(len(cands))), text
+
+
+# --- round 11: candidates the data cannot tell apart ------------------------------------------------------------
+
+ALPHA_SEPARATE = 0.01   # level of each "one beyond the other" test (one pre-specified pair test per alternative)
+
+# what a recording must contain to tell each term from the others (the console's "record X to separate them")
+SEPARATED_BY = {
+    "asymmetric_hysteresis": "equal drive reached at different displacements (minor loops at several offsets)",
+    "sensor_nonlinearity": "equal displacement reached at different drives (minor loops, a hold while it creeps)",
+    "rate_dependent_hysteresis": "the same loop at several rates (e.g. 1, 10 and 50 Hz triangles)",
+    "saturation": "a stroke beyond the calibrated drive range and back inside it",
+    "creep": "holds of several seconds after steps of both signs",
+    "thermal_drift": "a long hold at constant drive, recorded on the session clock",
+    "sensor_offset": "a recording at the calibration's drive history in each sensor session",
+    "cross_coupling": "the other axis moving while this one holds",
+    "delay": "fast small steps (a delay keeps the edge sharp)",
+    "amplifier_bandwidth": "small sines above the calibration's band (a pole's magnitude falls there)",
+    "amplifier_slew_limit": "steps of several sizes (a slew limit's ramp grows with the step)",
+    "unmodeled_resonance": "a small chirp through the suspected mode's frequency",
+}
+
+
+def beyond_test(e, p_small, p_big, fold_all, block_all, rec, dt) -> dict:
+    """Whether a fit with more columns predicts the held-out residual better than a fit with fewer.
+
+    ``e``: the held-out residual (used samples), ``p_small``, ``p_big``: the held-out predictions of the two nested
+    fits (each sample predicted by the fold that did not see it). The active-block test of
+    ``significance.active_block_test`` on ``e - p_small`` against ``e - p_big`` (correction ``p_big - p_small``)
+    and the fold ratios sqrt(SSE big / SSE small). *Significant* when p < ``ALPHA_SEPARATE`` and the error
+    falls in each fold.
+    """
+    from . import significance as sg
+    before, after, corr = e - p_small, e - p_big, p_big - p_small
+    fr = []
+    for f in (0, 1):
+        sel = fold_all == 1 - f
+        sb = float(np.sum(before[sel] ** 2))
+        fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    if not np.any(corr):
+        return {"p": 1.0, "fold_ratios": fr, "n_active": 0, "significant": False}
+    units = sg.test_units(before, block_all, rec, dt, corr)
+    _, p, n_act = sg.active_block_test(before, after, corr, block_all, units)
+    return {"p": float(p), "fold_ratios": fr, "n_active": int(n_act),
+            "significant": bool(p < ALPHA_SEPARATE and max(fr) < 1.0)}
+
+
+def pair_verdict(a_beyond_b: dict, b_beyond_a: dict, a_alone: dict, b_alone: dict) -> str:
+    """How two candidates ``a`` (the named one) and ``b`` stand, from the four held-out tests:
+
+    - ``"both"``: each improves beyond the other (two effects, or one that needs both shapes);
+    - ``"a"`` / ``"b"``: only that one improves beyond the other (it explains what the other does and more);
+    - ``"inseparable"``: neither beyond the other, while each alone improves significantly: they take the same
+      residual, and the data cannot tell them apart;
+    - ``"neither"``: neither beyond the other, and one of them explains nothing alone (no alternative).
+    """
+    if a_beyond_b["significant"] and b_beyond_a["significant"]:
+        return "both"
+    if a_beyond_b["significant"]:
+        return "a"
+    if b_beyond_a["significant"]:
+        return "b"
+    return "inseparable" if a_alone["significant"] and b_alone["significant"] else "neither"
+
+
+def separation_hint(a: str, b: str) -> str:
+    """The recording that would tell ``a`` from ``b`` (``SEPARATED_BY``), in words."""
+    return "; ".join(f"for {n}: {SEPARATED_BY[n]}" for n in (a, b) if n in SEPARATED_BY)
+
+
+def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> list:
+    """The alternatives the data cannot tell from the named candidate (docs/diagnose.md, "Round 11").
+
+    For each other candidate ``b`` (pre-filter: its own test's held-out error lower in each fold at p <
+    ``ALPHA_SEPARATE``, not vetoed by a check, and not of the named one's group when that group's discrimination,
+    :func:`discriminate_group`, told them apart; one whose own held-out error does not fall significantly is no
+    alternative), four joint fits per fold, each fitted on fold f and scored
+    on fold 1 - f: the pair's nuisance alone (``N``), ``N`` + the named term, ``N`` + ``b``, ``N`` + both, every
+    term at the setting its own test chose in that fold. :func:`beyond_test` then gives each alone (beyond
+    ``N``) and each beyond the other; :func:`pair_verdict` reads them.
+
+    Parameters
+    ----------
+    named : Candidate
+        The accepted candidate.
+    others : list of Candidate
+        The round's other candidates.
+    design : callable
+        ``design(cands, f)`` -> (N, n_lo, n_hi, [(X, lo, hi) per candidate]): the pair's nuisance and each
+        candidate's columns (settled samples, stacked) with bounds, on fold f's model.
+    e : ndarray
+        The held-out residual of the current model (each sample from the fold model that did not see it).
+    fold_all, block_all, rec : ndarray
+        Fold, block and recording of every settled sample.
+    dt : float
+        Sample period [s].
+    rows : int
+        The most training rows a fit uses.
+
+    Returns
+    -------
+    list of dict
+        One per alternative tested: ``name``, ``verdict``, and the four tests (``p``, ``fold_ratios``,
+        ``n_active``, ``significant``) as ``named_alone``, ``alternative_alone``, ``named_beyond``,
+        ``alternative_beyond``.
+    """
+    from .solve import lstsq_box, train_rows
+    used = fold_all >= 0
+    out = []
+    for b in others:
+        if b is named or not b.setting or b.veto or not (b.p < ALPHA_SEPARATE and max(b.fold_ratios) < 1.0):
+            continue
+        if b.term.group and b.term.group == named.term.group and (named.discrimination or "").startswith(
+                "Discrimination:"):   # its group's own test (discriminate_group) told them apart
+            continue
+        preds = {k: np.zeros(fold_all.size) for k in ("n", "a", "b", "ab")}
+        for f in (0, 1):
+            N, n_lo, n_hi, cols = design([named, b], f)
+            train, test = fold_all == f, fold_all == 1 - f
+            idx = train_rows(train, rows)
+            for k, keep in (("n", []), ("a", [0]), ("b", [1]), ("ab", [0, 1])):
+                X = np.hstack([N] + [cols[i][0] for i in keep])
+                lo = np.concatenate([n_lo] + [cols[i][1] for i in keep])
+                hi = np.concatenate([n_hi] + [cols[i][2] for i in keep])
+                if X.shape[1] == 0:
+                    continue
+                preds[k][test] = X[test] @ lstsq_box(X[idx], e[idx], lo, hi)
+        ev, p = e[used], {k: v[used] for k, v in preds.items()}
+        fa, bl, rec_u = fold_all[used], block_all[used], rec[used]
+        r = {"name": b.name,
+             "named_alone": beyond_test(ev, p["n"], p["a"], fa, bl, rec_u, dt),
+             "alternative_alone": beyond_test(ev, p["n"], p["b"], fa, bl, rec_u, dt),
+             "named_beyond": beyond_test(ev, p["b"], p["ab"], fa, bl, rec_u, dt),
+             "alternative_beyond": beyond_test(ev, p["a"], p["ab"], fa, bl, rec_u, dt)}
+        r["verdict"] = pair_verdict(r["named_beyond"], r["alternative_beyond"], r["named_alone"],
+                                    r["alternative_alone"])
+        out.append(r)
+    return out
+
+
+def separation_doc(named_name: str, separation: list | None) -> tuple[dict, str]:
+    """The named effect's round-11 fields and the sentence its evidence ends with.
+
+    Returns
+    -------
+    (fields, text)
+        ``fields``: ``separation`` (every pair test: ``name``, ``verdict`` and the four tests) and
+        ``alternatives`` (the names the data cannot tell from it, verdict ``inseparable``, each with its
+        ``named_beyond`` and ``alternative_beyond`` tests and ``record_to_separate``). ``text``: "" when none.
+    """
+    if separation is None:
+        return {}, ""
+    alts = [{"name": r["name"], "named_beyond": r["named_beyond"], "alternative_beyond": r["alternative_beyond"],
+             "record_to_separate": separation_hint(named_name, r["name"])}
+            for r in separation if r["verdict"] == "inseparable"]
+    fields = {"separation": separation, "alternatives": alts}
+    if not alts:
+        return fields, ""
+    text = " ".join(
+        f"The data cannot tell it from {a['name']}: each alone lowers the held-out error, neither beyond the other "
+        f"({named_name} beyond it p = {a['named_beyond']['p']:.1e}, it beyond {named_name} p = "
+        f"{a['alternative_beyond']['p']:.1e}, level {ALPHA_SEPARATE:g}); to separate them record {a['record_to_separate']}."
+        for a in alts)
+    return fields, text
+
+
+def inseparable_lines(doc: dict) -> list[str]:
+    """Console lines for named effects with alternatives: "A or B (the data cannot tell them apart; record X
+    to separate them)"."""
+    out = []
+    for e in doc.get("effects", []):
+        alts = e.get("alternatives") or []
+        if e.get("significant") and alts:
+            out.append(f"{' or '.join([e['name']] + [a['name'] for a in alts])} (the data cannot tell them apart; "
+                       f"record {'; '.join(a['record_to_separate'] for a in alts)} to separate them)")
+    return out

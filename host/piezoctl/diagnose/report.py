@@ -17,6 +17,8 @@ import os
 
 import numpy as np
 
+from .discriminate import inseparable_lines
+
 __all__ = ["write_report", "figures", "whiteness_figure", "where_rows", "discontinuity_rows"]
 
 
@@ -228,6 +230,7 @@ def write_report(path, doc, sigs, valid, yr_all, held_pred=None, png_dir=None) -
              "border-bottom:1px solid #ddd;text-align:left}img{max-width:100%}</style></head><body>",
              "<h1>Mismatch diagnosis</h1>",
              f"<p><b>Named:</b> {html.escape(', '.join(doc['named']))}</p>",
+             *[f"<p><b>Cannot tell apart:</b> {html.escape(line)}</p>" for line in inseparable_lines(doc)],
              f"<p>NRMSE on the recordings: base {fit['base']['nrmse']:.4f}, refined {fit['refined']['nrmse']:.4f}; "
              f"held-out (terms fitted on the other time blocks): base {fit['heldout']['base_nrmse']:.4f}, refined "
              f"{fit['heldout']['refined_nrmse']:.4f}.</p>",

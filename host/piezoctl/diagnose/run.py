@@ -28,7 +28,7 @@ from ..io.modelfile import make_provenance, save_model
 from ..io.recording import load_recording, sensor_session, session_start
 from . import locate as loc
 from . import significance as sg
-from .discriminate import calibration_band_hz
+from .discriminate import calibration_band_hz, separation_doc
 from .misfit import BANDS, band_energy, base_misfit
 from .select import CHECKED_TERMS, FURTHER_RATIO_MAX, Ctx, make_masks, make_signals, select, simulate_refined
 
@@ -284,6 +284,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
     effects = []
     for a in accepted:
         params, phrase = a.described
+        sep_fields, sep_text = separation_doc(a.name, a.separation)
         where = loc.where_of([_cut(s, v) for s, v in zip(ctx.signals, ctx.valid)],
                              [x[v] for x, v in zip(a.contrib, ctx.valid)], ctx.dt)
         effects.append({
@@ -298,7 +299,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             if a.below_gates else "")
                          + (f" Caution: the refined model is worse on {a.worsened[0]} (held-out error x"
                             f"{a.worsened[1]:.2f} there): where it is wrong, this model does not hold."
-                            if a.worsened else "")),
+                            if a.worsened else "") + (f" {sep_text}" if sep_text else "")),
             "where": where, "params": params,
             "improvement": {"nrmse_before": a.exact_before, "nrmse_after": a.exact_after,
                             "exact_fold_ratios": a.exact_fold_ratios,
@@ -309,7 +310,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             "worse_on": ({"recording": a.worsened[0], "factor": a.worsened[1]}
                                          if a.worsened else None),
                             **({"slow_signature": a.slow_signature} if a.slow_signature else {})},
-            "signature": a.term.signature, "signature_check": a.signature_check})
+            "signature": a.term.signature, "signature_check": a.signature_check, **sep_fields})
     last = rounds[-1] if rounds else []
     named = {x["name"] for x in effects}
     if not effects:
@@ -334,6 +335,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                         "signature": c.term.signature, "signature_check": c.signature_check})
     return {"format": "piezoctl-diagnosis", "version": 1,
             "named": [x["name"] for x in effects if x["significant"]] or ["none"],
+            "inseparable": [[x["name"]] + [a["name"] for a in x.get("alternatives", [])]
+                            for x in effects if x["significant"] and x.get("alternatives")],
             "effects": effects,
             "base_model": "base_model.json", "refined_model": "refined_model.json",
             "fit": fit,

@@ -23,7 +23,7 @@ from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg
 from .misfit import credited_ratio
-from .discriminate import discriminate_group, highpassed
+from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import SIGNATURES, attribute, signature_tests
 from .solve import lstsq_box as _lstsq_box, train_rows
 
@@ -162,6 +162,8 @@ class Candidate:
     ratio_max: float = sg.RATIO_MAX           # the size gate it was tested at (FURTHER_RATIO_MAX: after the first term,
     #                                           its signature must hold as well)
     selection_round: int = 1                  # the round it was evaluated in (1: on the base)
+    separation: list | None = None            # accepted: the pair tests against the round's others (discriminate.separate)
+    heldout: tuple | None = None              # (before, correction, fold, block, rec): signature.HELDOUT_CHECKED only
 
     @property
     def below_gates(self) -> bool:
@@ -453,7 +455,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     """
     e_before = np.zeros(fold_all.size)
     pred_after = np.zeros(fold_all.size)
-    chosen, fold_ratios = [], []
+    chosen, fold_ratios, best_st = [], [], []
     k = 1
     for f in (0, 1):
         ctx, e = ctxs[f], es[f]
@@ -469,6 +471,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
             e_before[test] = e[test] - pn
         best = best_setting(ctx, term, e, train, test, rows, N)
+        best_st.append(best[0])
         pred_after[test] = best[3] - (e[test] - e_before[test])
         if term.nested_dynamics or term.initial_state:   # the model's setting and coefficients: without the
             Nm = _nuis(ctx, term, train, test, rows, dynamics=False, initial=False)   # columns it will not have
@@ -502,10 +505,38 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                             f"{np.sqrt(x['misfit_um2']):.4f} um" for b, x in bands.items()) + ")")
     for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
         c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
+    from .signature import HELDOUT_CHECKED
+    held = None
+    if term.name in HELDOUT_CHECKED and significant:   # its signature check reads them (one term: arrays of the
+        e_all = np.zeros(fold_all.size)                # data's length)
+        for f in (0, 1):
+            e_all[fold_all == 1 - f] = es[f][fold_all == 1 - f]
+        p_small, p_big = _beside_unlimited(ctxs, term, es, fold_all, rows, best_st)
+        held = (rb_res, pred_after[used], fold_all[used], block_all[used], rec, e_all[used], p_small[used],
+                p_big[used])
     return Candidate(term=term, ratio=na / nb if nb > 0 else 1.0, fold_ratios=fold_ratios, nrmse_before=nb,
                      nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
-                     veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max)
+                     veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held)
+
+
+def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):
+    """Held-out predictions of the drive term with its setting unbounded (``inf``: the drive unchanged, only the
+    dynamics refitted on the calibration as the term refits them) and of that plus the term at ``settings[f]``,
+    both nested as in :func:`_evaluate`: what the term takes beyond its own refit of the dynamics
+    (``signature.check_slew_absent``)."""
+    p_small, p_big = np.zeros(fold_all.size), np.zeros(fold_all.size)
+    for f in (0, 1):
+        ctx, e = ctxs[f], es[f]
+        train, test = fold_all == f, fold_all == 1 - f
+        N = _nuis(ctx, term, train, test, rows)
+        x0 = _design(ctx, term, float("inf")).X
+        x1 = _design(ctx, term, settings[f]).X
+        lb = term.lower(ctx)
+        p_small[test] = _fit_predict(x0, e, train, test, rows, lb, N)[1]
+        p_big[test] = _fit_predict(np.hstack([x0, x1]), e, train, test, rows,
+                                   None if lb is None else list(lb) * 2, N)[1]
+    return p_small, p_big
 
 
 def model_with(base, terms):
@@ -567,6 +598,67 @@ def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
            for i in range(len(ctx.valid))]
     return {"params": new, "sse_before": float(np.sum(e_old[test] ** 2)), "sse_after": float(np.sum(e_new[test] ** 2)),
             "n": int(np.sum(test)), "ys": ys, "per_recording": per}
+
+
+def pair_design(ctxs, cands, f):
+    """The joint fit of several candidates on fold f's model (``discriminate.separate``): the union of their
+    nested tests' nuisances with its bounds, and each candidate's columns at the setting its test chose there."""
+    ctx, terms = ctxs[f], [c.term for c in cands]
+    parts, lo, hi = [], [], []
+    for flag, fn, bound in (("nested", hysteresis_nuisance, np.inf), ("nested_dynamics", dynamics_nuisance, np.inf),
+                            ("initial_state", initial_state_nuisance, 1.0)):
+        if any(getattr(t, flag) for t in terms):
+            N = fn(ctx)
+            parts.append(N)
+            lo.append(np.full(N.shape[1], -bound))
+            hi.append(np.full(N.shape[1], bound))
+    cols = []
+    for c in cands:   # own columns only: a term's own nuisance (creep's levels per recording, an intercept) would
+        X = _design(ctx, c.term, c.setting[f]).X   # credit it, or the other, with any level (an offset's)
+        lb = c.term.lower(ctx)
+        lb = np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)
+        own = [j for j in range(X.shape[1]) if j not in c.term.nuisance_columns(ctx, X.shape[1])]
+        cols.append((X[:, own], lb[own], np.full(len(own), np.inf)))
+    n = sum(int(np.sum(v)) for v in ctx.valid)
+    N = np.hstack(parts) if parts else np.zeros((n, 0))
+    return N, np.concatenate(lo) if lo else np.zeros(0), np.concatenate(hi) if hi else np.zeros(0), cols
+
+
+def _separate(best, evals, fctx, es, fold_all, block_all, rows, log):
+    """The accepted candidate's pair tests against the round's other candidates (``discriminate.separate``);
+    sets ``best.separation``."""
+    e = np.zeros(fold_all.size)
+    for f in (0, 1):
+        e[fold_all == 1 - f] = es[f][fold_all == 1 - f]
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(fctx[0].valid)])
+    best.separation = separate(best, evals, lambda cs, f: pair_design(fctx, cs, f), e, fold_all, block_all, rec,
+                               fctx[0].dt, rows)
+    for c in fctx:
+        c.design_cache.clear()
+    for r in best.separation:
+        log(f"    pair {best.name}/{r['name']}: {r['verdict']} (alone p {r['named_alone']['p']:.0e}/"
+            f"{r['alternative_alone']['p']:.0e}, beyond p {r['named_beyond']['p']:.0e}/"
+            f"{r['alternative_beyond']['p']:.0e})")
+
+
+def _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check):
+    """The pair tests of the accepted candidate (:func:`_separate`); when another significant candidate of a
+    different group explains all it does and more (verdict ``b``: held out, it improves beyond the accepted one and
+    the accepted one does not beyond it), that one is offered first instead (its exact and signature checks
+    again), once. Returns the candidate accepted."""
+    _separate(best, evals, fctx, es, fold_all, block_all, rows, log)
+    alt = next((c for r in best.separation if r["verdict"] == "b" for c in evals
+                if c.name == r["name"] and c.significant and not c.veto
+                and not (c.term.group and c.term.group == best.term.group)), None)
+    if alt is None:
+        return best
+    log(f"    {alt.name} explains what {best.name} does and more: offered first")
+    evals.insert(evals.index(best), evals.pop(evals.index(alt)))
+    first = _first_exact(evals, fctx, fold_all, recs, span, log, check)
+    if first is alt:
+        _separate(alt, evals, fctx, es, fold_all, block_all, rows, log)
+        return alt
+    return best
 
 
 def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
@@ -726,19 +818,25 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term
             tests = signature_tests(fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows)
             log("    slow signatures: " + attribute(evals, tests))
+            for t in tests:
+                if t.level is not None:
+                    log(f"    {t.name} level dependence: p {t.level['p']:.1e}, folds {t.level['fold_ratios'][0]:.3f}/"
+                        f"{t.level['fold_ratios'][1]:.3f}" + (" (depends on the level)" if t.level["depends_on_level"] else ""))
             _slow_beyond_gates(evals, log)
         rounds.append(evals)
         check = None
         if f_band is not None:   # the drive-side terms' frequency-domain shape on the current model (signature.py)
             from .signature import check_in_context
             cache = {}
-            check = (lambda c, _x=ctx_all, _k=cache: check_in_context(_x, c.name, _setting_of(c), f_band, _k))
+            check = (lambda c, _x=ctx_all, _k=cache: check_in_context(_x, c.name, _setting_of(c), f_band, _k,
+                                                                      heldout=c.heldout))
         best = _first_exact(evals, fctx, fold_all, recs, span, log, check)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
                              f"n{c.n_active} c{c.credited:.2f}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"
                              for c in evals[:6]))
         if best is None:
             break
+        best = _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check)
         # setting and coefficients on all selection samples, applied to the all-data model
         allmask = fold_all >= 0
         e_all = residual(ctx_all)

@@ -28,7 +28,9 @@ say nothing about G, and any drive-side term can take a misfit of G there. This 
 4. A mode's check: the largest ``|T - 1|`` among the bins where it deviates from 0 beyond the estimate's own
    variance (chi-square, level ``ALPHA`` over the number of bins) must lie within the candidate mode's
    half-power band (``f0 (1 +- zeta)``, at least one bin and the 3 % of the candidate's frequency grid).
-5. A slew limit's check: its residual is present only where the drive's rate exceeds its limit. ``T`` is
+5. A slew limit's check: its residual is present only where the drive's rate exceeds its limit. Round 11
+   (:func:`check_slew_absent`): the candidate's held-out improvement must not be significant on the samples
+   below the limit (an active-block test on those samples). Round 10's shape test follows: ``T`` is
    estimated again on the segments whose drive rate stays below the limit throughout and for one segment's
    length before (the dynamics still ring after a burst); there the term predicts nothing, so neither a
    delay's nor a pole's shape may pass check 3 there: a lag below the limit is not the rate's.
@@ -48,12 +50,13 @@ from scipy import stats
 from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
 
 __all__ = ["ALPHA", "Transfer", "transfer", "dispersion", "check_delay", "check_bandwidth", "check_mode",
-           "check_slew", "check_candidate", "DRIVE_TERMS"]
+           "check_slew", "check_slew_absent", "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
 
 ALPHA = 0.01                 # level of every test here
 SEG_S = 0.1                  # [s] segment length aimed at (10 Hz bins); shortened so each recording gives 4
 MIN_SEGMENTS = 4             # segments per recording at least (fewer: the recording is not used)
 DRIVE_TERMS = ("delay", "amplifier_bandwidth", "unmodeled_resonance", "amplifier_slew_limit")
+HELDOUT_CHECKED = ("amplifier_slew_limit",)   # checks that read the candidate's held-out correction (round 11)
 
 
 @dataclasses.dataclass
@@ -259,7 +262,7 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
     grid = np.arange(0.0, 64.25, 0.25) * dt
     r = _shape_test(tr, s2, f_band, dt, "delay", grid, lambda d, f: np.exp(-2j * np.pi * f * d),
                     "phase linear in frequency through zero with a flat magnitude of a delay")
-    r["figures"]["delay_s"] = r["figures"].pop("setting")
+    r["figures"]["delay_s"] = r["figures"].pop("setting", None)
     return r
 
 
@@ -268,7 +271,7 @@ def check_bandwidth(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
     grid = np.geomspace(0.0005 / dt, 0.5 / dt, 200)
     r = _shape_test(tr, s2, f_band, dt, "amplifier_bandwidth", grid, lambda fc, f: 1.0 / (1.0 + 1j * f / fc),
                     "magnitude falling and phase lagging together as one pole")
-    r["figures"]["fc_hz"] = r["figures"].pop("setting")
+    r["figures"]["fc_hz"] = r["figures"].pop("setting", None)
     return r
 
 
@@ -306,10 +309,7 @@ def check_slew(xs, ys, us, dt, limit_v_per_s, f_band, nperseg=None) -> dict:
     stays below ``limit_v_per_s`` (and did for one segment before), neither a delay's nor a pole's shape may
     explain the residual's transfer beyond the loop's latency (:func:`check_delay`, :func:`check_bandwidth`)."""
     n = nperseg or _nperseg([x.size for x in xs], dt)
-    keep = []
-    for u in us:   # below the limit, and for a segment's length before (the dynamics still ring after a burst)
-        fast = (np.abs(np.diff(np.asarray(u, float), prepend=u[0])) / dt >= limit_v_per_s).astype(float)
-        keep.append(np.convolve(fast, np.ones(n), "full")[:fast.size] == 0)
+    keep = below_limit(us, dt, limit_v_per_s, n)
     tr = transfer(xs, ys, dt, keep=keep, nperseg=n)
     fig = {"limit_v_per_s": float(limit_v_per_s), "identified_band_hz": float(f_band)}
     if tr is None:
@@ -318,8 +318,8 @@ def check_slew(xs, ys, us, dt, limit_v_per_s, f_band, nperseg=None) -> dict:
     s2, _ = dispersion(tr, f_band)
     lag = [check_delay(tr, s2, f_band, dt), check_bandwidth(tr, s2, f_band, dt)]
     fig.update({"bins": tr.k, "segments": tr.n_d, "dispersion": s2,
-                "p_delay_below": lag[0]["figures"]["p"], "p_bandwidth_below": lag[1]["figures"]["p"]})
-    found = [r for r in lag if r["passed"]]
+                "p_delay_below": lag[0]["figures"].get("p"), "p_bandwidth_below": lag[1]["figures"].get("p")})
+    found = [r for r in lag if r["testable"] and r["passed"]]   # an untestable shape (no bin to fit) found nothing
     passed = not found
     reason = None if passed else (
         f"where the drive's rate stays below the limit ({limit_v_per_s / 1000:.1f} V/ms; {tr.n_d} segments, "
@@ -330,7 +330,74 @@ def check_slew(xs, ys, us, dt, limit_v_per_s, f_band, nperseg=None) -> dict:
             "figures": fig}
 
 
-def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None) -> dict | None:
+def below_limit(us, dt, limit_v_per_s, n, limited=False) -> list:
+    """Per recording, the samples whose drive rate |du/dt| stays below ``limit_v_per_s`` [V/s] and did for ``n``
+    samples before (the dynamics still ring after a burst). ``limited``: instead, where the rate-limited drive
+    (``AmplifierSlewLimit.drive``) equals the drive, and did for ``n`` samples before: after a large step the
+    limited drive still ramps while the drive's own rate is zero."""
+    from ..ident.terms import AmplifierSlewLimit
+    keep = []
+    for u in us:
+        u = np.asarray(u, float)
+        if limited:
+            act = (np.abs(AmplifierSlewLimit.drive(u, limit_v_per_s, dt) - u) > 1e-9 * max(np.ptp(u), 1e-12))
+        else:
+            act = np.abs(np.diff(u, prepend=u[0])) / dt >= limit_v_per_s
+        keep.append(np.convolve(act.astype(float), np.ones(n), "full")[:u.size] == 0)
+    return keep
+
+
+def check_slew_absent(heldout, us, dt, limit_v_per_s, nperseg=None) -> dict:
+    """Round 11: a slew limit explains nothing where the drive's rate stays below it, so the candidate's held-out
+    improvement must be absent there.
+
+    ``heldout``: (before, correction, fold, block, rec[, e, p_refit, p_both]) over the settled samples, stacked:
+    the residual before the term (nested), the term's held-out predicted correction (fitted on the other fold),
+    each sample's fold, block and recording, and optionally the residual and the held-out predictions of the
+    term's own refit of the dynamics without a limit and of that plus the limit (``select._beside_unlimited``). On the samples where the rate-limited drive equals the drive (:func:`below_limit` with
+    ``limited``: the limit does not act there; one segment's guard after it acted), the
+    active-block test of ``discriminate.beyond_test`` (level ``ALPHA_SEPARATE``, the error lower in each fold)
+    asks whether the correction lowers the held-out error there. When it does, the limit must improve beyond the
+    dynamics the term refits (``p_refit`` against ``p_both``, the same test on all samples): a limit that also
+    acted on the calibration brings refitted dynamics that improve every sample (development case s109-009, the
+    true limit: fold ratios 0.20/0.15 where it does not act); otherwise what the term takes is the refit's, not
+    the rate's (development case s109-006, a resonance: the limit acts on 7 samples) and the check fails. This
+    second step was added after reading s109-009 fail the first alone."""
+    from .discriminate import ALPHA_SEPARATE, beyond_test
+    before, corr, fold, block, rec = heldout[:5]
+    n = nperseg or _nperseg([u.size for u in us], dt)
+    below = np.concatenate(below_limit(us, dt, limit_v_per_s, n, limited=True))
+    if below.size != before.size:   # the held-out figures cover the settled samples, as ``us`` do
+        raise ValueError(f"check_slew_absent: {before.size} held-out samples against {below.size} drive samples")
+    below &= fold >= 0
+    fig = {"limit_v_per_s": float(limit_v_per_s), "below_fraction": float(np.mean(below[fold >= 0]))}
+    if np.sum(below) < 16 or np.unique(block[below]).size < 4:
+        return {"testable": False, "passed": True, "figures": fig,
+                "reason": "too few samples with the drive's rate below the limit to test"}
+    r = beyond_test(before[below], np.zeros(int(np.sum(below))), corr[below], fold[below], block[below], rec[below],
+                    dt)
+    fig.update({"p_improvement_below": r["p"], "fold_ratios_below": r["fold_ratios"], "n_active_below": r["n_active"]})
+    if not r["significant"]:
+        return {"testable": True, "passed": True, "figures": fig, "reason": None}
+    # an improvement where the limit does not act: the dynamics the term refits on the calibration (a limit that
+    # acted on the calibration too needs them). It passes only when the limit itself improves beyond that refit
+    if len(heldout) < 8:
+        own = {"significant": False, "p": 1.0, "fold_ratios": [1.0, 1.0]}
+    else:
+        e, p0, p1 = heldout[5:8]
+        own = beyond_test(e, p0, p1, fold, block, rec, dt)
+    fig.update({"p_beyond_refit": own["p"], "fold_ratios_beyond_refit": own["fold_ratios"]})
+    if own["significant"]:
+        return {"testable": True, "passed": True, "figures": fig, "reason": None}
+    reason = (f"where the limit does not act ({100 * fig['below_fraction']:.0f} % of the samples) the term still "
+              f"lowers the held-out error (p = {r['p']:.1e}, fold ratios {r['fold_ratios'][0]:.3f}/"
+              f"{r['fold_ratios'][1]:.3f}), and the limit adds nothing beyond the dynamics it refits (p = "
+              f"{own['p']:.1e}, fold ratios {own['fold_ratios'][0]:.3f}/{own['fold_ratios'][1]:.3f}; level "
+              f"{ALPHA_SEPARATE:g}): what it takes is not the rate's")
+    return {"testable": True, "passed": False, "figures": fig, "reason": reason}
+
+
+def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None) -> dict | None:
     """The signature check of one candidate (None: the term has none here).
 
     Parameters
@@ -348,11 +415,21 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None) -> dict | No
         The band the base's dynamics were identified in [Hz] (the calibration's).
     tr : Transfer, optional
         :func:`transfer` of ``xs``, ``ys`` when already computed.
+    heldout : tuple, optional
+        The slew limit's held-out figures for :func:`check_slew_absent` (before, correction, fold, block, rec).
     """
     if name not in DRIVE_TERMS:
         return None
     if name == "amplifier_slew_limit":
-        return check_slew(xs, ys, us, dt, float(setting), f_band)
+        r = check_slew(xs, ys, us, dt, float(setting), f_band)
+        if heldout is not None:   # round 11: the improvement absent below the limit as well
+            a = check_slew_absent(heldout, us, dt, float(setting))
+            r["figures"].update(a["figures"])
+            r["testable"] = bool(r["testable"] or a["testable"])
+            if not a["passed"]:
+                r["passed"] = False
+                r["reason"] = "; ".join(x for x in (r["reason"], a["reason"]) if x)
+        return r
     tr = tr if tr is not None else transfer(xs, ys, dt)
     if tr is None:
         return {"term": name, "testable": False, "passed": True, "figures": {"identified_band_hz": float(f_band)},
@@ -365,7 +442,7 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None) -> dict | No
     return check_mode(tr, s2, f_band, float(setting[0]), float(setting[1]))
 
 
-def check_in_context(ctx, name, setting, f_band, cache=None) -> dict | None:
+def check_in_context(ctx, name, setting, f_band, cache=None, heldout=None) -> dict | None:
     """:func:`check_candidate` on the current model of a selection context (``select.Ctx``): its output, the
     measurements and the drives of the settled samples. ``cache`` (a dict) keeps the transfer for the round."""
     if name not in DRIVE_TERMS:
@@ -381,4 +458,4 @@ def check_in_context(ctx, name, setting, f_band, cache=None) -> dict | None:
             tr = transfer(xs, ys, ctx.dt)
             if cache is not None:
                 cache["transfer"] = tr
-    return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr)
+    return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr, heldout=heldout)

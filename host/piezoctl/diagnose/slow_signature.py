@@ -69,11 +69,13 @@ class SignatureTest:
     n_active: int
     holds: bool              # at ALPHA_SIGNATURE (a search over the three)
     confirms: bool = False   # the same criteria at ALPHA (one pre-specified hypothesis: a passed term's own)
+    level: dict | None = None   # sensor_offset: the level dependence within its sessions (offset_level_test)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "unique_ratio": self.unique_ratio, "fold_ratios": self.fold_ratios,
                 "credited_ratio": self.credited, "p_value": self.p, "n_active": self.n_active,
-                "alpha": ALPHA_SIGNATURE, "holds": self.holds, "alpha_own": sg.ALPHA, "confirms": self.confirms}
+                "alpha": ALPHA_SIGNATURE, "holds": self.holds, "alpha_own": sg.ALPHA, "confirms": self.confirms,
+                **({"level_dependence": self.level} if self.level is not None else {})}
 
     def phrase(self) -> str:
         verdict = "holds" if self.holds else ("holds as its own term's" if self.confirms else "does not hold")
@@ -126,6 +128,90 @@ def signature_groups(ctx) -> dict:
         # offset was taken by creep's 30 s element); creep's signature is the transients' shape
         C = np.vstack([_centred(G(ctx.base, creep.basis(s.h, taus, s.dt))[v]) for s, v in zip(ctx.signals, ctx.valid)])
         out["creep"] = (C, np.zeros(len(taus)))
+    return out
+
+
+def level_columns(ctx) -> np.ndarray:
+    """Per sensor-zero column (a session other than the calibration's, or a recording), the output level and the
+    drive level within it: ``yb`` and ``u`` centred on their means over that column's settled samples, zero
+    elsewhere (settled samples, stacked; 2 columns per sensor-zero column). An offset adds the same at every
+    level; these take a residual of that session that changes with the level."""
+    grp = np.concatenate([np.full(int(np.sum(v)), ctx.offset_of(s.index)) for s, v in zip(ctx.signals, ctx.valid)])
+    yb = np.concatenate([np.asarray(s.yb, float)[v] for s, v in zip(ctx.signals, ctx.valid)])
+    u = np.concatenate([np.asarray(s.u, float)[v] for s, v in zip(ctx.signals, ctx.valid)])
+    cols = []
+    for g in range(ctx.n_offset()):
+        m = grp == g
+        if not np.any(m):
+            continue
+        for x in (yb, u):
+            c = np.zeros(x.size)
+            c[m] = x[m] - x[m].mean()
+            cols.append(c)
+    return np.column_stack(cols) if cols else np.zeros((grp.size, 0))
+
+
+def offset_level_test(designs, levels, es, fold_all, block_all, rec, dt, rows, misfit=None) -> dict | None:
+    """Whether the offset's level can be told from the base's misfit (round 11).
+
+    Two statistics:
+
+    - **level dependence** (reported, ``depends_on_level``; it does not refuse): an offset is the same at every
+      level. The joint fit of the slow signatures (with the nuisance) is compared, held out, with the same fit plus
+      :func:`level_columns` (``levels[f]``, per fold model), by ``discriminate.beyond_test`` (the active-block test
+      at ``ALPHA_SEPARATE``, lower in each fold). As a refusal it refused the true offset of development case
+      s109-002 (p = 9e-4, fold ratios 0.99/0.98: the base's level-dependent misfit is in every session, and on
+      top of a true offset it is significant too), and it does not fire on the null s109-007 (p = 0.22): the
+      level of a misfit confined to one session is a level, not a slope.
+    - **the base's own level misfit** (refuses the offset): on calibration histories it did not see, the base is off by a level
+      whose RMS is ``s_L = sqrt(misfit.mse_um2.level)`` (over ``H`` held-out histories; ``misfit.py``). A session's
+      offset ``c`` (the joint fit's, mean of the two folds) is told from it only when ``|c| > q s_L``, ``q`` the
+      two-sided Student-t quantile at ``ALPHA`` / (number of sessions) with ``H - 1`` degrees of freedom: a level
+      the base's misfit on one unseen history reaches with probability below that.
+
+    ``designs[f]``: (N, lo, hi, groups) of :func:`signature_tests`.
+    """
+    from scipy import stats as st
+    from .discriminate import beyond_test
+    if "sensor_offset" not in designs[0][3]:
+        return None
+    p_small, p_big = np.zeros(fold_all.size), np.zeros(fold_all.size)
+    levels_c = []
+    for f in (0, 1):
+        N, n_lo, n_hi, groups = designs[f]
+        names = [n for n in SIGNATURES if n in groups]
+        X = np.hstack([N] + [groups[n][0] for n in names])
+        lo = np.concatenate([n_lo] + [groups[n][1] for n in names])
+        hi = np.concatenate([n_hi] + [np.full(groups[n][0].shape[1], np.inf) for n in names])
+        train, test = fold_all == f, fold_all == 1 - f
+        idx = train_rows(train, rows)
+        th = lstsq_box(X[idx], es[f][idx], lo, hi)
+        p_small[test] = X[test] @ th
+        k0 = N.shape[1] + sum(groups[n][0].shape[1] for n in names[:names.index("sensor_offset")])
+        levels_c.append(th[k0:k0 + groups["sensor_offset"][0].shape[1]])
+        L = levels[f]
+        if L.shape[1]:
+            p_big[test] = _fit(np.hstack([X, L]), es[f], np.concatenate([lo, np.full(L.shape[1], -np.inf)]),
+                               np.concatenate([hi, np.full(L.shape[1], np.inf)]), train, test, rows)
+        else:
+            p_big[test] = p_small[test]
+    e = np.zeros(fold_all.size)
+    for f in (0, 1):
+        e[fold_all == 1 - f] = es[f][fold_all == 1 - f]
+    used = fold_all >= 0
+    r = beyond_test(e[used], p_small[used], p_big[used], fold_all[used], block_all[used], rec[used], dt)
+    c = 0.5 * (levels_c[0] + levels_c[1])
+    out = {"p": r["p"], "fold_ratios": r["fold_ratios"], "n_active": r["n_active"],
+           "depends_on_level": r["significant"], "offset_um": [float(x) for x in c]}
+    if misfit and misfit.get("histories"):
+        h = len(misfit["histories"])
+        s_l = float(np.sqrt(misfit["mse_um2"]["level"]))
+        q = float(st.t.isf(0.5 * sg.ALPHA / max(c.size, 1), max(h - 1, 1)))
+        out.update({"base_level_rms_um": s_l, "histories": h, "quantile": q,
+                    "within_base_misfit": bool(np.all(np.abs(c) <= q * s_l))})
+    else:
+        out["within_base_misfit"] = False
+    out["refused"] = bool(out["within_base_misfit"])
     return out
 
 
@@ -199,7 +285,23 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
         out.append(SignatureTest(name=n, unique_ratio=ratio, fold_ratios=fr, credited=float(cr), p=float(p),
                                  n_active=int(n_act), holds=bool(better and p < ALPHA_SIGNATURE),
                                  confirms=bool(better and p < sg.ALPHA)))
+        if n == "sensor_offset":
+            out[-1].level = offset_level_test(designs, [level_columns(c) for c in ctxs], es, fold_all, block_all,
+                                              rec, ctx.dt, rows, ctx.misfit)
     return out
+
+
+def level_phrase(lv: dict) -> str:
+    """The offset's refusal by :func:`offset_level_test`, in words."""
+    why = []
+    if lv.get("within_base_misfit"):
+        why.append(f"its level ({', '.join(f'{x:+.3f}' for x in lv['offset_um'])} um per session) lies within "
+                   f"{lv['quantile']:.2f} x the base's own level misfit on calibration histories it did not see "
+                   f"({lv['base_level_rms_um']:.3f} um RMS over {lv['histories']} histories)")
+    if lv.get("depends_on_level") and why:
+        why.append(f"the residual of its sessions follows the output and drive level (held-out p = {lv['p']:.1e}, "
+                   f"folds {lv['fold_ratios'][0]:.3f}/{lv['fold_ratios'][1]:.3f}), which an offset does not")
+    return " and ".join(why) + ": the offset cannot be told from the base's misfit there"
 
 
 def _sized(c) -> bool:
@@ -239,14 +341,21 @@ def attribute(evals, tests) -> str | None:
         return None
     figures = "; ".join(t.phrase() for t in tests)
     chosen = None
+    refused = None
     for n in _precedence(tests, {c.name for c in passed}):
         c = next((x for x in slow if x.name == n), None)
+        if c is not None and by[n].level is not None and by[n].level["refused"]:
+            refused = level_phrase(by[n].level)   # round 11: an offset the base's misfit could be
+            continue
         if c is not None and not c.veto and (c.significant or _sized(c)):
             chosen = c
             break
     if chosen is None:
         text = ("no slow signature holds beyond the other two and the base's misfit, so the level is not "
                 f"attributed to creep, drift or an offset ({figures})")
+        if refused:
+            text = ("the sensor offset's signature holds, but " + refused + "; " + text.replace(
+                "no slow signature holds", "no other slow signature holds"))
     else:
         level = ALPHA_SIGNATURE if by[chosen.name].holds else sg.ALPHA
         text = (f"of the slow terms, the signature of {chosen.name} holds beyond the other two and the base's misfit "
