@@ -102,18 +102,18 @@ def test_recording_dataclass_columns():
     assert list(rec.columns()) == ["t", "u", "y", "temp"]
 
 
-def test_large_file_is_fast(tmp_path):
-    import time
+def test_large_file_round_trips(tmp_path):
+    # a file of the size diagnose reads (200k rows, 20 s at 10 kHz) takes the array path whole: the same
+    # values back. Its speed is measured by tools/bench-diagnose-speed, not asserted here (a wall-clock
+    # limit in a unit test failed under load: 1.15 s for 0.2 s of CPU)
     n = 200_000
     t = np.arange(n) * 1e-4
     p = tmp_path / "big.csv"
     save_recording(p, {"t": t, "u": np.sin(t), "y": np.cos(t)})
-    t0 = time.perf_counter()
     rec = load_recording(p)
-    elapsed = time.perf_counter() - t0
     assert len(rec) == n
-    # 1M rows load in about 0.5 s on the 2-core build machine; 200k must take well under 1 s.
-    assert elapsed < 1.0
+    assert np.allclose(rec.t, t, rtol=0, atol=1e-12) and np.allclose(rec.u, np.sin(t), rtol=1e-9, atol=1e-12)
+    assert np.allclose(rec.y, np.cos(t), rtol=1e-9, atol=1e-12)
 
 
 # The line scan by array operations (io.recording._scan_body) against the Python test per line it replaced: the
