@@ -44,6 +44,9 @@ KIND_NAMES = {v: k for k, v in interface.TABLE_KINDS.items()}
 FAULT_NAMES = {1 << v: k for k, v in interface.FAULT_BITS.items()}
 WINDOW = interface.HOLDING_REGISTERS["table_window"][2]      # registers per table chunk
 REC_WINDOW = interface.HOLDING_REGISTERS["rec_window"][2]
+# wall time [s] without a single tick after which a wait on the controller's
+# own clock gives up: the controller is not ticking (not: it ticks slowly)
+STALL_S = 5.0
 
 
 class DeviceError(ControllerRefused):
@@ -444,17 +447,42 @@ class Controller:
             cols[sname] = self.to_physical(sname, data[:, i])
         return cols
 
-    def wait_recorder(self, frames: int, timeout_s: float) -> None:
-        """Wait until the armed recorder holds ``frames`` frames or is full; :class:`DeviceError` after
-        ``timeout_s`` [s]."""
-        deadline = time.monotonic() + timeout_s
+    def wait_recorder(self, frames: int, timeout_s: float, *, stall_s: float = STALL_S) -> None:
+        """Wait until the armed recorder holds ``frames`` frames or is full.
+
+        ``timeout_s`` [s] is counted in the controller's own time (its
+        ``tick_count`` over ``tick_hz``), not on the host's clock: an
+        emulated controller (QEMU with ``-icount``) or a SIL controller on a
+        loaded machine ticks slower than real time, and still fills its
+        recorder in the ticks it needs. The host's clock only watches that
+        the controller ticks at all: no tick for ``stall_s`` [s] of wall time
+        fails at once.
+
+        Raises
+        ------
+        DeviceError
+            ``timeout_s`` of controller time passed, or the controller did not
+            tick for ``stall_s`` of wall time.
+        """
+        tick_hz = self.identity.tick_hz
+        budget = int(np.ceil(timeout_s * tick_hz))
+        first = last = None
+        last_wall = time.monotonic()
         while True:
             st = self.status()
             if st["rec_frames"] >= frames or st["rec_state"] == 3:
                 return
-            if time.monotonic() > deadline:
-                raise DeviceError("the recorder did not fill in time (is the controller ticking? "
-                                  "did the trigger condition occur?)")
+            now, tc = time.monotonic(), st["tick_count"]
+            if first is None:
+                first = last = tc
+            if tc != last:
+                last, last_wall = tc, now
+            elif now - last_wall > stall_s:
+                raise DeviceError(f"the recorder did not fill: the controller did not tick for {stall_s:g} s "
+                                  f"(it holds {st['rec_frames']} of {frames} frames)")
+            if (tc - first) % (1 << 32) > budget:   # tick_count wraps at 2^32
+                raise DeviceError(f"the recorder did not fill in {timeout_s:g} s of controller time "
+                                  f"({st['rec_frames']} of {frames} frames; did the trigger condition occur?)")
             time.sleep(0.02)
 
     def rec_frames_capacity(self, n_signals: int) -> int:

@@ -4,8 +4,8 @@ The firmware image with the C stage model behind its converter seams
 (``piezoctl-pil``) runs under ``qemu-system-arm -M netduinoplus2``; the host
 calibrates it over Modbus RTU on QEMU's pseudo-terminal, the same pipeline as
 ``--target sil`` (docs/target-cortex-m4.md, "PIL"). One model kind (EUPI) to
-keep it short: about a minute here; the goal is 5 minutes for the whole
-calibration.
+keep it short. Its time (goal 5 minutes) is measured by
+``tools/bench-calibrate --targets qemu``, not asserted here.
 """
 
 import hashlib
@@ -43,13 +43,12 @@ def test_pil_summary_names_the_image_that_ran(pil_calibration):
     assert not s["rolled_back"]
 
 
-def test_pil_meets_the_tracking_goals_in_time(pil_calibration):
-    rc, out, seconds = pil_calibration
+def test_pil_meets_the_tracking_goals(pil_calibration):
+    rc, out, _ = pil_calibration
     s = json.loads((out / "summary.json").read_text())
     for key, goal in (("1", 10.0), ("10", 5.0), ("50", 3.0)):
         t = s["tracking"][key]
         assert t["rmse_uncompensated_um"] / t["rmse_compensated_um"] >= goal, (key, t)
-    assert seconds < 300.0
 
 
 def test_the_board_image_serves_its_register_map_over_rtu():

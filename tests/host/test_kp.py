@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
@@ -148,14 +147,16 @@ def test_model_reproduces_a_known_density():
     np.testing.assert_array_equal(fkp.kp_model(u, g, e), P[:, 11])
 
 
-def test_kp_outputs_is_fast_enough():
+def test_kp_outputs_on_a_long_noisy_drive_are_causal_and_bounded():
+    # 300k samples (30 s at 10 kHz) with noise: every sample a small reversal. Its speed is
+    # measured by tools/bench-diagnose-speed --kernels-only, not asserted here.
     g = fkp.kp_grid(10)
     t = np.arange(300_000) * 1e-4
     u = 0.9 * np.sin(2 * np.pi * 7 * t) + 1e-3 * np.random.default_rng(0).standard_normal(t.size)
-    t0 = time.perf_counter()
     out = fkp.kp_outputs(u, g)
     assert out.shape == (300_000, 55)
-    assert time.perf_counter() - t0 < 4.0
+    assert np.all(np.abs(out) <= 1.0)
+    np.testing.assert_array_equal(out[:5000], fkp.kp_outputs(u[:5000], g))   # no sample sees the future
 
 
 # -------------------------------------------------- compensation operators

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
@@ -86,12 +85,14 @@ def test_play_outputs_rejects_bad_arguments():
         play_outputs(np.zeros((3, 2)), [0.1])
 
 
-def test_play_outputs_is_fast():
+def test_play_outputs_on_a_long_drive_are_causal():
+    # 300k samples, 40 unparallel plays. Its speed is measured by
+    # tools/bench-diagnose-speed --kernels-only, not asserted here.
     u = 0.9 * np.sin(np.linspace(0, 200, 300_000))
-    t0 = time.perf_counter()
-    out = play_outputs(u, np.linspace(0, 0.9, 40), a=np.linspace(0.5, 1.5, 40))
+    r, a = np.linspace(0, 0.9, 40), np.linspace(0.5, 1.5, 40)
+    out = play_outputs(u, r, a=a)
     assert out.shape == (300_000, 40)
-    assert time.perf_counter() - t0 < 5.0
+    np.testing.assert_array_equal(out[:5000], play_outputs(u[:5000], r, a=a))   # no sample sees the future
 
 
 # ------------------------------------------------------------------ model and inverse

@@ -230,6 +230,14 @@ def kernel_timings(repeat: int = 3) -> list:
                  _median_time(lambda: play_outputs(vn, r), repeat)))
     rows.append(("play_outputs, 16 unparallel plays (a = 0.9)",
                  _median_time(lambda: play_outputs(v, r, a=0.9), repeat)))
+    rows.append(("play_outputs, 40 unparallel plays, varied a (was a 5 s test limit on 300k samples)",
+                 _median_time(lambda: play_outputs(v, np.linspace(0, 0.9, 40), a=np.linspace(0.5, 1.5, 40)),
+                              repeat)))
+    from ..models import kp as fkp
+    g10 = fkp.kp_grid(10)
+    vk = np.clip(vn / max(1.0, float(np.max(np.abs(vn)))), -1.0, 1.0)
+    rows.append(("kp_outputs, 55 KP operators (L = 10), drive with 1e-4 noise (was a 4 s test limit on 300k)",
+                 _median_time(lambda: fkp.kp_outputs(vk, g10), repeat)))
     kn, vals = hp["knots"][3], hp["values"][3]
     rows.append(("interp_linear_ext, 17 even knots", _median_time(lambda: hy.interp_linear_ext(v, kn, vals), repeat)))
     kn_u = np.sort(np.concatenate([[-1.0, 1.0], np.random.default_rng(2).uniform(-1, 1, 15)]))

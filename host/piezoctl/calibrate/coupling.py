@@ -54,6 +54,7 @@ import time
 
 import numpy as np
 
+from ..device import DeviceError
 from ..errors import CliError
 from . import ilc
 from .excitation import load_triangle, settle_periods
@@ -157,13 +158,13 @@ def identify_coupling(ci, cj) -> dict:
         ci.configure_recorder(["y", "u2"], trigger="immediate")
         ci.command("arm_recorder")
         cj.command("start_wave")
-        deadline = time.monotonic() + 3 * CHIRP_S + 10
-        while ci.status()["rec_frames"] < frames // 1 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        try:
+            ci.wait_recorder(frames, 3 * CHIRP_S + 10)   # in the controller's time (device.py)
+        except DeviceError as exc:
+            cj.command("stop_wave")
+            raise CliError(f"coupling identification: {exc}") from None
         data = ci.read_recording(2)[:frames]
         cj.command("stop_wave")
-        if data.shape[0] < frames:
-            raise CliError("coupling identification: the recorder did not fill in time")
         y = ci.to_physical("y", data[:, 0])
         u2 = cj.scale.drive_from_fs(data[:, 1] / 32768.0)   # the other axis' drive, its own scale
         t = np.arange(y.size) / tick
