@@ -222,6 +222,177 @@ static void test_row_and_column_table_limits(void **state)
     }
 }
 
+/* ---- runs held across reversals: random walks against an oracle ---- */
+
+/* A KP plane of L levels in the host's cell convention (row by row, the
+ * operators at the cells' midpoints) over the reference set's range, with
+ * weights of both signs whose magnitudes sum below 2^31 (the runs apply). */
+#define WALK_MAX_L 30u
+#define WALK_MAX_OPS (WALK_MAX_L * (WALK_MAX_L + 1u) / 2u)
+static int16_t walk_n1[WALK_MAX_OPS], walk_n2[WALK_MAX_OPS];
+static int32_t walk_c[WALK_MAX_OPS];
+static int32_t walk_psi[WALK_MAX_OPS]; /* the oracle's operators */
+
+static uint32_t walk_rng;
+static uint32_t walk_rand(uint32_t n)
+{
+    walk_rng = walk_rng * 1664525u + 1013904223u;
+    return (uint32_t)(((uint64_t)(walk_rng >> 8) * n) >> 24);
+}
+
+static struct piezo_dcc_coeffs walk_plane(uint16_t L)
+{
+    const int32_t lo = -32768, hi = 32767;
+    uint16_t j = 0;
+    for (uint16_t i = 0; i < L; i++) {
+        for (uint16_t k = i; k < L; k++) {
+            walk_n1[j] = (int16_t)(lo + (int32_t)((2 * i + 1) * (hi - lo)) / (2 * L));
+            walk_n2[j] = (int16_t)(lo + (int32_t)((2 * k + 1) * (hi - lo)) / (2 * L));
+            walk_c[j] = (int32_t)walk_rand(1u << 18) - (1 << 16); /* |c| < 2^18, 465 of them < 2^27 */
+            j++;
+        }
+    }
+    struct piezo_dcc_coeffs dc = dcc_std;
+    dc.grid.n1_q15 = walk_n1;
+    dc.grid.n2_q15 = walk_n2;
+    dc.grid.n_ops = j;
+    dc.grid.nmin_q15 = (int16_t)lo;
+    dc.c_q24 = walk_c;
+    return dc;
+}
+
+/* The next input of a walk: monotone segments of random length, half of
+ * them short (1..8 ticks of 0..8 LSB: the jitter of a closed loop's drive,
+ * small reversals), the others long (up to 400 ticks of up to 600 LSB: large
+ * reversals), now and then a jump or a pause; kept in q15. */
+struct walk {
+    int32_t v;
+    int32_t dir;
+    int32_t left;
+    int32_t step;
+};
+
+static int16_t walk_next(struct walk *w)
+{
+    if (w->left == 0) {
+        w->dir = -w->dir;
+        if (walk_rand(2u) == 0u) {
+            w->left = 1 + (int32_t)walk_rand(8u);
+            w->step = (int32_t)walk_rand(9u);
+        } else {
+            w->left = 10 + (int32_t)walk_rand(390u);
+            w->step = 1 + (int32_t)walk_rand(600u);
+        }
+    }
+    w->left--;
+    int32_t dv = w->dir * (int32_t)walk_rand((uint32_t)w->step + 1u);
+    if (walk_rand(500u) == 0u) {
+        dv = (int32_t)walk_rand(65536u) - 32768; /* a jump */
+    }
+    w->v += dv;
+    if (w->v > 32767 || w->v < -32768) {
+        w->v = w->v > 32767 ? 32767 : -32768;
+        w->dir = -w->dir;
+    }
+    return (int16_t)w->v;
+}
+
+/* The oracle: every operator by the KP equations (dcc.h), one by one. */
+static void walk_oracle(const struct piezo_kp_grid *g, int32_t v_prev, int32_t v)
+{
+    for (uint16_t j = 0; j < g->n_ops; j++) {
+        if (v > v_prev) {
+            const int32_t r = piezo_kp_ridge_q15(g, v - g->n2_q15[j]);
+            walk_psi[j] = r > walk_psi[j] ? r : walk_psi[j];
+        } else if (v < v_prev) {
+            const int32_t r = piezo_kp_ridge_q15(g, v - g->n1_q15[j]);
+            walk_psi[j] = r < walk_psi[j] ? r : walk_psi[j];
+        }
+    }
+}
+
+/* Runs (constant weights) against the oracle, every operator and the kept
+ * sum every tick, on a walk with small and large reversals; and the law's
+ * drive against the band scan (weights summed every tick). Returns how many
+ * reversals took up held runs. */
+static unsigned walk_check(uint16_t L, uint32_t seed, size_t n, unsigned *reversals)
+{
+    walk_rng = seed;
+    const struct piezo_dcc_coeffs dc = walk_plane(L);
+    struct piezo_dcc d, band;
+    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    piezo_dcc_const_weights(&d);
+    assert_true(d.n_rows == L && d.n_cols == L && d.c_abs_31);
+    for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+        walk_psi[j] = 0;
+    }
+    struct walk w = {.v = dc.grid.nmin_q15, .dir = 1, .left = 0, .step = 0};
+    int32_t v_prev = dc.grid.nmin_q15;
+    int dir = -1;
+    unsigned taken_up = 0;
+    *reversals = 0;
+    for (size_t k = 0; k < n; k++) {
+        const int16_t v = walk_next(&w);
+        const int ndir = v > v_prev ? 1 : v < v_prev ? -1 : dir;
+        if (ndir != dir) {
+            ++*reversals;
+            taken_up += d.n_run[d.held] != 0u; /* this direction's runs were held: the new path */
+        }
+        dir = ndir;
+        walk_oracle(&dc.grid, v_prev, v);
+        piezo_dcc_ops_update(&d, v);
+        int64_t kacc = 0;
+        for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+            if (d.psi_q15[j] != walk_psi[j]) {
+                fail_msg("L %u seed %lu tick %lu v %d operator %u: psi %ld, oracle %ld", (unsigned)L,
+                         (unsigned long)seed, (unsigned long)k, v, (unsigned)j, (long)d.psi_q15[j],
+                         (long)walk_psi[j]);
+            }
+            kacc += (int64_t)walk_psi[j] * walk_c[j];
+        }
+        if (d.kacc != kacc) {
+            fail_msg("L %u seed %lu tick %lu: kept sum %lld, oracle %lld", (unsigned)L, (unsigned long)seed,
+                     (unsigned long)k, (long long)d.kacc, (long long)kacc);
+        }
+        v_prev = v;
+    }
+    /* the law on its own drive: a desired output walking the same way */
+    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_init(&band, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    piezo_dcc_const_weights(&d);
+    struct walk wy = {.v = 0, .dir = 1, .left = 0, .step = 0};
+    for (size_t k = 0; k < n; k++) {
+        const int16_t yd = walk_next(&wy);
+        const int16_t ur = piezo_dcc_process(&d, yd), ub = piezo_dcc_process(&band, yd);
+        if (ur != ub) {
+            fail_msg("L %u seed %lu tick %lu: runs %d, band scan %d", (unsigned)L, (unsigned long)seed,
+                     (unsigned long)k, ur, ub);
+        }
+    }
+    return taken_up;
+}
+
+static void test_runs_held_across_reversals(void **state)
+{
+    (void)state;
+    static const uint16_t planes[] = {10u, 20u, 30u};
+    for (size_t i = 0; i < N_OF(planes); i++) {
+        for (uint32_t seed = 1u; seed <= 2u; seed++) {
+            unsigned reversals;
+            const unsigned taken_up = walk_check(planes[i], seed * 7919u + planes[i], 20000u, &reversals);
+            /* a segment lasts about 100 ticks on average: some 200
+             * reversals, and at least half of them must find runs held
+             * (else the new path is hardly tested) */
+            if (reversals < 100u || 2u * taken_up < reversals) {
+                fail_msg("L %u seed %lu: held runs taken up at %u of %u reversals", (unsigned)planes[i],
+                         (unsigned long)seed, taken_up, reversals);
+            }
+            print_message("L %u seed %lu: held runs taken up at %u of %u reversals\n", (unsigned)planes[i],
+                          (unsigned long)seed, taken_up, reversals);
+        }
+    }
+}
+
 static enum piezo_err init_with(const struct piezo_dcc_coeffs *c, size_t n_state)
 {
     struct piezo_dcc d;
@@ -265,6 +436,7 @@ int main(void)
         cmocka_unit_test(test_reset_restores_initial_state),
         cmocka_unit_test(test_init_refuses_bad_coefficients),
         cmocka_unit_test(test_row_and_column_table_limits),
+        cmocka_unit_test(test_runs_held_across_reversals),
     };
     return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);
 }
