@@ -136,7 +136,7 @@ void piezo_dcc_const_weights(struct piezo_dcc *dcc)
     dcc->c_abs_31 = (uint8_t)(cabs <= INT32_MAX);
     dcc->kacc = kacc;
     dcc->const_w = 1u;
-    dcc->n_run[0] = dcc->n_run[1] = dcc->n_run[2] = 0u;
+    dcc->n_run = 0u;
 }
 
 void piezo_dcc_reset(struct piezo_dcc *dcc)
@@ -150,9 +150,8 @@ void piezo_dcc_reset(struct piezo_dcc *dcc)
     dcc->v_prev_q15 = g->nmin_q15;
     dcc->u_last_q15 = g->nmin_q15;
     dcc->dir = -1;
-    dcc->n_run[0] = dcc->n_run[1] = dcc->n_run[2] = 0u;
+    dcc->n_run = 0u;
     dcc->cur = 0u;
-    dcc->held = 1u;
     dcc->row_cur = 0u;
     dcc->col_cur = 0u;
 }
@@ -297,10 +296,9 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
     int32_t *psi = dcc->psi_q15;
     const int32_t n_rows = dcc->n_rows;
     const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
-    const uint32_t wr = 3u - dcc->cur - dcc->held;
     const struct piezo_dcc_run *old = dcc->run[dcc->cur];
-    const struct piezo_dcc_run *old_end = old + dcc->n_run[dcc->cur];
-    struct piezo_dcc_run *out = dcc->run[wr];
+    const struct piezo_dcc_run *old_end = old + dcc->n_run;
+    struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
     for (int32_t k = first_row_above(th, rs, n_rows, v - xsat, &dcc->row_cur); k < n_rows; k++) {
@@ -317,23 +315,11 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
         int32_t p = j;
         int32_t csum = 0;
         if (old < old_end && old->thr == n1) {
-            const int32_t lvl = old->lvl;
-            if (psi[j] == lvl) {
-                /* intact (only rises since it was written, and its first
-                 * operator did not rise: none did) */
-                if (r >= lvl) {
-                    /* nothing in the row moves (r > lvl only after a
-                     * reversal: the run is taken up again unchanged) */
-                    if (o < out_end) {
-                        *o++ = *old;
-                    }
-                    old++;
-                    continue;
-                }
-                /* the run moves as one, then its row's next operators join */
-                csum = old->csum;
-                p = j + old->k;
-                dk += (int64_t)(r - lvl) * csum;
+            /* the run moves as one, then its row's next operators join */
+            csum = old->csum;
+            p = j + old->k;
+            if (r != old->lvl) {
+                dk += (int64_t)(r - old->lvl) * csum;
                 fill_i32(psi + j, psi + p, r);
             }
             old++;
@@ -352,8 +338,8 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
                                           (uint16_t)(p - j)};
         }
     }
-    dcc->cur = (uint8_t)wr;
-    dcc->n_run[wr] = (uint8_t)(o - out);
+    dcc->cur ^= 1u;
+    dcc->n_run = (uint8_t)(o - out);
     return dk;
 }
 
@@ -373,10 +359,9 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
     int32_t *psi = dcc->psi_q15;
     const int32_t n_cols = dcc->n_cols;
     const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
-    const uint32_t wr = 3u - dcc->cur - dcc->held;
     const struct piezo_dcc_run *old = dcc->run[dcc->cur];
-    const struct piezo_dcc_run *old_end = old + dcc->n_run[dcc->cur];
-    struct piezo_dcc_run *out = dcc->run[wr];
+    const struct piezo_dcc_run *old_end = old + dcc->n_run;
+    struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
     int32_t k = dcc->n2_banded ? first_col_above(ord, cs, n_cols, dcc->v_prev_q15 - xsat, &dcc->col_cur) : 0;
@@ -393,32 +378,16 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
         }
         int32_t q;
         int32_t csum = 0;
-        int held_ok = 0;
         if (old < old_end && old->thr == n2) {
-            const int32_t lvl = old->lvl;
-            /* intact iff its last operator did not fall (only falls since
-             * it was written, and they lower a column's last operators first) */
-            if (psi[(uint16_t)ord[end - 1]] == lvl) {
-                if (r <= lvl) {
-                    /* nothing in the column moves (r < lvl only after a
-                     * reversal: the run is taken up again unchanged) */
-                    if (o < out_end) {
-                        *o++ = *old;
-                    }
-                    old++;
-                    continue;
-                }
-                held_ok = 1;
-                csum = old->csum;
-                q = end - old->k; /* the run: positions q .. end-1 */
-                dk += (int64_t)(r - lvl) * csum;
+            csum = old->csum;
+            q = end - old->k; /* the run: positions q .. end-1 */
+            if (r != old->lvl) {
+                dk += (int64_t)(r - old->lvl) * csum;
                 for (int32_t i = q; i < end; i++) {
                     psi[(uint16_t)ord[i]] = r;
                 }
             }
             old++;
-        }
-        if (held_ok) {
             while (q > pos) { /* the column's operators before the run join */
                 const int32_t jj = (uint16_t)ord[q - 1];
                 const int32_t d = r - psi[jj];
@@ -448,8 +417,8 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
                                           (uint16_t)(end - q)};
         }
     }
-    dcc->cur = (uint8_t)wr;
-    dcc->n_run[wr] = (uint8_t)(o - out);
+    dcc->cur ^= 1u;
+    dcc->n_run = (uint8_t)(o - out);
     return dk;
 }
 
@@ -486,11 +455,7 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
     if (dir != dcc->dir) { /* reversal: where it happened (kept for the record) */
         dcc->xi_q15 = dcc->v_prev_q15;
         dcc->dir = dir;
-        /* the runs are the other direction's: hold them, take up this
-         * direction's from its last tick (each checked where it is used) */
-        const uint8_t t = dcc->cur;
-        dcc->cur = dcc->held;
-        dcc->held = t;
+        dcc->n_run = 0u; /* the runs are the other direction's */
     }
     if (dcc->const_w && dcc->n_rows != 0u && dcc->n_cols != 0u && dcc->c_abs_31) {
         dk = dir > 0 ? dcc_rise_runs(dcc, v) : dcc_fall_runs(dcc, v, dv);
