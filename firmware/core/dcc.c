@@ -60,6 +60,7 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
         return PIEZO_EINVAL;
     }
     dcc->coeffs = coeffs;
+    dcc->psum = NULL;
     dcc->psi_q15 = psi_q15;
     dcc->order = order;
     dcc->const_w = 0u;
@@ -137,6 +138,51 @@ void piezo_dcc_const_weights(struct piezo_dcc *dcc)
     dcc->kacc = kacc;
     dcc->const_w = 1u;
     dcc->n_run = 0u;
+    /* the prefix sums, only if every entry is the one these weights give */
+    dcc->psum = NULL;
+    const int32_t *ps = c->csum_q24;
+    if (ps != NULL && dcc->c_abs_31 && dcc->n_rows != 0u && dcc->n_cols != 0u) {
+        const uint16_t n = c->grid.n_ops;
+        int32_t a = 0, b = 0;
+        int ok = ps[0] == 0 && ps[n + 1u] == 0;
+        for (uint16_t j = 0; j < n && ok; j++) {
+            a += c->c_q24[j];
+            b += c->c_q24[(uint16_t)dcc->order[j]];
+            ok = ps[j + 1u] == a && ps[n + 2u + j] == b;
+        }
+        if (ok) {
+            dcc->psum = ps;
+        }
+    }
+}
+
+enum piezo_err piezo_dcc_prefix_sums(const struct piezo_dcc *dcc, int32_t *sums, size_t n_sums)
+{
+    if (dcc == NULL || dcc->coeffs == NULL || sums == NULL) {
+        return PIEZO_EINVAL;
+    }
+    const int32_t *c = dcc->coeffs->c_q24;
+    const uint16_t n = dcc->coeffs->grid.n_ops;
+    if (n_sums < 2u * ((size_t)n + 1u)) {
+        return PIEZO_ERANGE;
+    }
+    int64_t cabs = 0;
+    for (uint16_t j = 0; j < n; j++) {
+        cabs += c[j] < 0 ? -(int64_t)c[j] : c[j];
+    }
+    if (cabs > INT32_MAX) {
+        return PIEZO_EINVAL; /* a partial sum could leave int32 */
+    }
+    int32_t a = 0, b = 0;
+    sums[0] = 0;
+    sums[n + 1u] = 0;
+    for (uint16_t j = 0; j < n; j++) {
+        a += c[j];
+        b += c[(uint16_t)dcc->order[j]];
+        sums[j + 1u] = a;
+        sums[n + 2u + j] = b;
+    }
+    return PIEZO_OK;
 }
 
 void piezo_dcc_reset(struct piezo_dcc *dcc)
@@ -323,6 +369,41 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
                 fill_i32(psi + j, psi + p, r);
             }
             old++;
+        } else if (dcc->psum != NULL && psi[j] == rmax) {
+            /* a row entering the band (r < rmax here: x < xsat) with its
+             * first operators at rmax: they all move to r at once, their
+             * weights' sum from the prefix sums. Their end: psi is
+             * non-increasing along the row, and after a rise most of the row
+             * is at rmax, so gallop from the row's end (steps 1, 2, 4, ...)
+             * to an operator at rmax, then bisect the last step. */
+            int32_t lo = end, hi = end; /* the whole row if its last is at rmax */
+            if (psi[end - 1] != rmax) {
+                hi = end - 1; /* psi[hi] < rmax <= psi[lo] from here on */
+                for (int32_t step = 1;; step <<= 1) {
+                    lo = hi - step;
+                    if (lo <= j) {
+                        lo = j;
+                        break;
+                    }
+                    if (psi[lo] == rmax) {
+                        break;
+                    }
+                    hi = lo;
+                }
+                lo++;
+            }
+            while (lo < hi) {
+                const int32_t mid = (lo + hi) >> 1;
+                if (psi[mid] == rmax) {
+                    lo = mid + 1;
+                } else {
+                    hi = mid;
+                }
+            }
+            csum = dcc->psum[lo] - dcc->psum[j];
+            dk += (int64_t)(r - rmax) * csum;
+            fill_i32(psi + j, psi + lo, r);
+            p = lo;
         }
         for (; p < end; p++) {
             const int32_t d = r - psi[p]; /* (the int32 difference the sum used already) */
@@ -405,7 +486,35 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
             for (; e < end && psi[(uint16_t)ord[e]] >= r; e++) {
             }
             q = e;
-            for (; e < end; e++) {
+            int32_t z = end; /* from z on the column's operators are at 0 */
+            if (dcc->psum != NULL && e < end && psi[(uint16_t)ord[end - 1]] == 0) {
+                /* its last operators at 0 (psi is non-increasing along the
+                 * column) move to r at once: their first by bisection (none
+                 * when the first that moves is at 0), their weights' sum from
+                 * the prefix sums */
+                int32_t lo = e, hi = e;
+                if (psi[(uint16_t)ord[e]] != 0) {
+                    lo = e + 1;
+                    hi = end - 1;
+                }
+                while (lo < hi) {
+                    const int32_t mid = (lo + hi) >> 1;
+                    if (psi[(uint16_t)ord[mid]] == 0) {
+                        hi = mid;
+                    } else {
+                        lo = mid + 1;
+                    }
+                }
+                z = lo;
+                const int32_t *pc = dcc->psum + dcc->coeffs->grid.n_ops + 1;
+                const int32_t zs = pc[end] - pc[z];
+                dk += (int64_t)r * zs;
+                csum = zs;
+                for (int32_t i = z; i < end; i++) {
+                    psi[(uint16_t)ord[i]] = r;
+                }
+            }
+            for (; e < z; e++) {
                 const int32_t jj = (uint16_t)ord[e];
                 dk += (int64_t)(r - psi[jj]) * c[jj];
                 csum += c[jj];

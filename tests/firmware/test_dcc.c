@@ -32,9 +32,23 @@ struct dcc_case {
     {#name, &set, dcc_case_##name##_yd, dcc_case_##name##_u, sizeof(dcc_case_##name##_yd) / sizeof(int16_t)},
 static const struct dcc_case cases[] = {DCC_GOLDEN_CASES(DCC_CASE)};
 #define N_CASES (sizeof(cases) / sizeof(cases[0]))
+#define N_OF(a) (sizeof(a) / sizeof((a)[0]))
 
 static int32_t cpsi_a[PIEZO_KP_MAX_OPS], zo_a[PIEZO_KP_MAX_OPS];
 static int32_t cpsi_b[PIEZO_KP_MAX_OPS], zo_b[PIEZO_KP_MAX_OPS];
+/* prefix sums of the planes below (the golden sets and the walks' L = 30:
+ * the cortex-m4 test image has no room for PIEZO_KP_MAX_OPS) */
+#define SUMS_MAX_OPS 465u
+static int32_t sums_a[2u * (SUMS_MAX_OPS + 1u)];
+
+/* dc's weights' prefix sums for an instance initialized on dc (as the
+ * controller's loader does); 1 when they apply (sum |c| < 2^31) */
+static int with_sums(struct piezo_dcc *d, struct piezo_dcc_coeffs *dc)
+{
+    const enum piezo_err rc = piezo_dcc_prefix_sums(d, sums_a, sizeof sums_a / sizeof sums_a[0]);
+    dc->csum_q24 = rc == PIEZO_OK ? sums_a : NULL;
+    return rc == PIEZO_OK;
+}
 static int16_t psi_k[PIEZO_KP_MAX_OPS];
 
 static void run_block(struct piezo_dcc *d, const struct dcc_case *c, size_t k0, size_t k1)
@@ -61,6 +75,7 @@ static void test_golden_cases(void **state)
 {
     (void)state;
     assert_true(N_CASES >= 9u);
+    assert_true(dcc_std_NOPS <= SUMS_MAX_OPS && dcc_edge_NOPS <= SUMS_MAX_OPS);
     for (size_t i = 0; i < N_CASES; i++) {
         struct piezo_dcc d;
         assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
@@ -73,6 +88,45 @@ static void test_golden_cases(void **state)
         assert_int_equal(d.c_abs_31, cases[i].c == &dcc_edge ? 0 : 1);
         assert_true(cases[i].c == &dcc_edge || (d.n_rows != 0u && d.n_cols != 0u)); /* the runs, with their tables */
         run_block(&d, &cases[i], 0, cases[i].n);
+        /* and with the weights' prefix sums (lines at rmax or 0 join as one) */
+        struct piezo_dcc_coeffs dc = *cases[i].c;
+        assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+        assert_int_equal(with_sums(&d, &dc), cases[i].c == &dcc_edge ? 0 : 1);
+        piezo_dcc_const_weights(&d);
+        assert_true(cases[i].c == &dcc_edge || d.psum == sums_a);
+        run_block(&d, &cases[i], 0, cases[i].n);
+    }
+}
+
+/* Prefix sums: too small an array and weights whose sums could leave int32
+ * are refused; sums that do not match the weights are not used (checked
+ * entry by entry by piezo_dcc_const_weights), and the law is unchanged. */
+static void test_prefix_sums_checked(void **state)
+{
+    (void)state;
+    struct piezo_dcc d;
+    struct piezo_dcc_coeffs dc = dcc_std;
+    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_prefix_sums(&d, sums_a, 2u * dcc_std_NOPS + 1u), PIEZO_ERANGE);
+    assert_int_equal(piezo_dcc_prefix_sums(&d, NULL, 2u * dcc_std_NOPS + 2u), PIEZO_EINVAL);
+    assert_int_equal(piezo_dcc_prefix_sums(&d, sums_a, 2u * dcc_std_NOPS + 2u), PIEZO_OK);
+    assert_int_equal(sums_a[0], 0);
+    assert_int_equal(sums_a[dcc_std_NOPS + 1u], 0);
+    assert_int_equal(sums_a[dcc_std_NOPS], sums_a[2u * dcc_std_NOPS + 1u]); /* both orders sum every c */
+    struct piezo_dcc_coeffs de = dcc_edge;
+    assert_int_equal(piezo_dcc_init(&d, &de, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_prefix_sums(&d, sums_a, sizeof sums_a / sizeof sums_a[0]), PIEZO_EINVAL);
+    /* one entry off, in either half: not used */
+    const size_t bad[] = {1u, dcc_std_NOPS / 2u, dcc_std_NOPS, dcc_std_NOPS + 1u, dcc_std_NOPS + 7u,
+                          2u * dcc_std_NOPS + 1u};
+    const struct dcc_case *c = find_case("realistic");
+    for (size_t b = 0; b < N_OF(bad); b++) {
+        assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+        assert_int_equal(with_sums(&d, &dc), 1);
+        sums_a[bad[b]] += 1;
+        piezo_dcc_const_weights(&d);
+        assert_null(d.psum);
+        run_block(&d, c, 0, c->n);
     }
 }
 
@@ -104,8 +158,6 @@ static void check_identity(const struct piezo_dcc_coeffs *dc, const int16_t *v, 
         }
     }
 }
-
-#define N_OF(a) (sizeof(a) / sizeof((a)[0]))
 
 static void test_psi_plus_compensation_is_input(void **state)
 {
@@ -315,14 +367,18 @@ static void walk_oracle(const struct piezo_kp_grid *g, int32_t v_prev, int32_t v
  * sum every tick, on a walk with small and large reversals; and the law's
  * drive against the band scan (weights summed every tick). Returns the
  * walk's reversals. */
-static unsigned walk_check(uint16_t L, uint32_t seed, size_t n)
+static unsigned walk_check(uint16_t L, uint32_t seed, size_t n, int sums)
 {
     walk_rng = seed;
-    const struct piezo_dcc_coeffs dc = walk_plane(L);
+    struct piezo_dcc_coeffs dc = walk_plane(L);
     struct piezo_dcc d, band;
     assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    if (sums) {
+        assert_int_equal(with_sums(&d, &dc), 1);
+    }
     piezo_dcc_const_weights(&d);
     assert_true(d.n_rows == L && d.n_cols == L && d.c_abs_31);
+    assert_true(sums ? d.psum == sums_a : d.psum == NULL);
     for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
         walk_psi[j] = 0;
     }
@@ -356,6 +412,7 @@ static unsigned walk_check(uint16_t L, uint32_t seed, size_t n)
     assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
     assert_int_equal(piezo_dcc_init(&band, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
     piezo_dcc_const_weights(&d);
+    assert_true(sums ? d.psum == sums_a : d.psum == NULL);
     struct walk wy = {.v = 0, .dir = 1, .left = 0, .step = 0};
     for (size_t k = 0; k < n; k++) {
         const int16_t yd = walk_next(&wy);
@@ -374,9 +431,11 @@ static void test_runs_on_random_walks(void **state)
     static const uint16_t planes[] = {10u, 20u, 30u};
     for (size_t i = 0; i < N_OF(planes); i++) {
         for (uint32_t seed = 1u; seed <= 2u; seed++) {
-            const unsigned reversals = walk_check(planes[i], seed * 7919u + planes[i], 20000u);
-            /* a segment lasts about 100 ticks on average: some 200 reversals */
-            assert_true(reversals >= 100u);
+            for (int sums = 0; sums <= 1; sums++) {
+                const unsigned reversals = walk_check(planes[i], seed * 7919u + planes[i], 20000u, sums);
+                /* a segment lasts about 100 ticks on average: some 200 reversals */
+                assert_true(reversals >= 100u);
+            }
         }
     }
 }
@@ -425,6 +484,7 @@ int main(void)
         cmocka_unit_test(test_init_refuses_bad_coefficients),
         cmocka_unit_test(test_row_and_column_table_limits),
         cmocka_unit_test(test_runs_on_random_walks),
+        cmocka_unit_test(test_prefix_sums_checked),
     };
     return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);
 }
