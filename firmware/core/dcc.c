@@ -137,7 +137,7 @@ void piezo_dcc_const_weights(struct piezo_dcc *dcc)
     dcc->c_abs_31 = (uint8_t)(cabs <= INT32_MAX);
     dcc->kacc = kacc;
     dcc->const_w = 1u;
-    dcc->n_run[0] = dcc->n_run[1] = dcc->n_run[2] = 0u;
+    dcc->n_run = 0u;
     /* the prefix sums, only if every entry is the one these weights give */
     dcc->psum = NULL;
     const int32_t *ps = c->csum_q24;
@@ -196,9 +196,8 @@ void piezo_dcc_reset(struct piezo_dcc *dcc)
     dcc->v_prev_q15 = g->nmin_q15;
     dcc->u_last_q15 = g->nmin_q15;
     dcc->dir = -1;
-    dcc->n_run[0] = dcc->n_run[1] = dcc->n_run[2] = 0u;
+    dcc->n_run = 0u;
     dcc->cur = 0u;
-    dcc->held = 1u;
     dcc->row_cur = 0u;
     dcc->col_cur = 0u;
 }
@@ -343,10 +342,9 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
     int32_t *psi = dcc->psi_q15;
     const int32_t n_rows = dcc->n_rows;
     const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
-    const uint32_t wr = 3u - dcc->cur - dcc->held;
     const struct piezo_dcc_run *old = dcc->run[dcc->cur];
-    const struct piezo_dcc_run *old_end = old + dcc->n_run[dcc->cur];
-    struct piezo_dcc_run *out = dcc->run[wr];
+    const struct piezo_dcc_run *old_end = old + dcc->n_run;
+    struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
     for (int32_t k = first_row_above(th, rs, n_rows, v - xsat, &dcc->row_cur); k < n_rows; k++) {
@@ -362,48 +360,14 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
         }
         int32_t p = j;
         int32_t csum = 0;
-        int32_t q = j, jk = j; /* the run's operators before q rose since its tick (held across a reversal) */
         if (old < old_end && old->thr == n1) {
-            jk = j + old->k;
-            if (psi[j] != old->lvl) {
-                for (q = j + 1; q < jk && psi[q] != old->lvl; q++) {
-                }
-                if (q == jk) {
-                    old++; /* all of it rose: the row is scanned as if it had no run */
-                }
-            }
-        }
-        if (q < jk) {
-            const int32_t lvl = old->lvl; /* some of the run still at lvl: the rest of the row is at most lvl */
-            if (r >= lvl) {
-                /* the run's operators at lvl stay (and the rest of the row,
-                 * psi <= lvl); those that rose fall to r if above it. The
-                 * run is kept as it is. */
-                for (; p < q; p++) {
-                    const int32_t d = r - psi[p];
-                    if (d >= 0) {
-                        break;
-                    }
-                    dk += (int64_t)d * c[p];
-                    psi[p] = r;
-                }
-                if (o < out_end) {
-                    *o++ = *old;
-                }
-                old++;
-                continue;
-            }
-            /* the whole run moves to r: those that rose one by one, the
-             * rest as one; then its row's next operators join */
-            int32_t cq = 0;
-            for (; p < q; p++) {
-                dk += (int64_t)(r - psi[p]) * c[p];
-                cq += c[p];
-            }
+            /* the run moves as one, then its row's next operators join */
             csum = old->csum;
-            dk += (int64_t)(r - lvl) * (csum - cq);
-            fill_i32(psi + j, psi + jk, r);
-            p = jk;
+            p = j + old->k;
+            if (r != old->lvl) {
+                dk += (int64_t)(r - old->lvl) * csum;
+                fill_i32(psi + j, psi + p, r);
+            }
             old++;
         } else if (dcc->psum != NULL && psi[j] == rmax) {
             /* a row entering the band (r < rmax here: x < xsat) with its
@@ -455,8 +419,8 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
                                           (uint16_t)(p - j)};
         }
     }
-    dcc->cur = (uint8_t)wr;
-    dcc->n_run[wr] = (uint8_t)(o - out);
+    dcc->cur ^= 1u;
+    dcc->n_run = (uint8_t)(o - out);
     return dk;
 }
 
@@ -476,10 +440,9 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
     int32_t *psi = dcc->psi_q15;
     const int32_t n_cols = dcc->n_cols;
     const int32_t slope = g->slope_q16, xsat = g->xsat_q15, rmax = g->rmax_q15;
-    const uint32_t wr = 3u - dcc->cur - dcc->held;
     const struct piezo_dcc_run *old = dcc->run[dcc->cur];
-    const struct piezo_dcc_run *old_end = old + dcc->n_run[dcc->cur];
-    struct piezo_dcc_run *out = dcc->run[wr];
+    const struct piezo_dcc_run *old_end = old + dcc->n_run;
+    struct piezo_dcc_run *out = dcc->run[dcc->cur ^ 1u];
     struct piezo_dcc_run *out_end = out + PIEZO_DCC_RUNS, *o = out;
     int64_t dk = 0;
     int32_t k = dcc->n2_banded ? first_col_above(ord, cs, n_cols, dcc->v_prev_q15 - xsat, &dcc->col_cur) : 0;
@@ -494,52 +457,16 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
         while (old < old_end && old->thr < n2) {
             old++;
         }
-        int32_t q = end, f = end; /* the run: positions q .. end-1; from f on they fell since its tick */
+        int32_t q;
         int32_t csum = 0;
         if (old < old_end && old->thr == n2) {
-            q = end - old->k;
-            if (psi[(uint16_t)ord[end - 1]] != old->lvl) {
-                for (f = end - 1; f > q && psi[(uint16_t)ord[f - 1]] != old->lvl; f--) {
-                }
-                if (f == q) {
-                    old++; /* all of it fell: the column is scanned as if it had no run */
-                    q = end;
-                }
-            }
-        }
-        if (q < end) {
-            const int32_t lvl = old->lvl; /* some of the run still at lvl: the column before it is at least lvl */
-            if (r <= lvl) {
-                /* the run's operators at lvl stay (and the column's before
-                 * it, psi >= lvl); those that fell rise to r if below it.
-                 * The run is kept as it is. */
-                for (int32_t i = end; i > f; i--) {
-                    const int32_t jj = (uint16_t)ord[i - 1];
-                    const int32_t d = r - psi[jj];
-                    if (d <= 0) {
-                        break;
-                    }
-                    dk += (int64_t)d * c[jj];
-                    psi[jj] = r;
-                }
-                if (o < out_end) {
-                    *o++ = *old;
-                }
-                old++;
-                continue;
-            }
-            /* the whole run moves to r: those that fell one by one, the
-             * rest as one; then the column's operators before it join */
-            int32_t cf = 0;
-            for (int32_t i = f; i < end; i++) {
-                const int32_t jj = (uint16_t)ord[i];
-                dk += (int64_t)(r - psi[jj]) * c[jj];
-                cf += c[jj];
-            }
             csum = old->csum;
-            dk += (int64_t)(r - lvl) * (csum - cf);
-            for (int32_t i = q; i < end; i++) {
-                psi[(uint16_t)ord[i]] = r;
+            q = end - old->k; /* the run: positions q .. end-1 */
+            if (r != old->lvl) {
+                dk += (int64_t)(r - old->lvl) * csum;
+                for (int32_t i = q; i < end; i++) {
+                    psi[(uint16_t)ord[i]] = r;
+                }
             }
             old++;
             while (q > pos) { /* the column's operators before the run join */
@@ -599,8 +526,8 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
                                           (uint16_t)(end - q)};
         }
     }
-    dcc->cur = (uint8_t)wr;
-    dcc->n_run[wr] = (uint8_t)(o - out);
+    dcc->cur ^= 1u;
+    dcc->n_run = (uint8_t)(o - out);
     return dk;
 }
 
@@ -637,12 +564,7 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
     if (dir != dcc->dir) { /* reversal: where it happened (kept for the record) */
         dcc->xi_q15 = dcc->v_prev_q15;
         dcc->dir = dir;
-        /* the runs are the other direction's: hold them, and take up this
-         * direction's from its last tick (their operators moved only the
-         * other way since, which dcc_fall_runs and dcc_rise_runs allow for) */
-        const uint8_t t = dcc->cur;
-        dcc->cur = dcc->held;
-        dcc->held = t;
+        dcc->n_run = 0u; /* the runs are the other direction's */
     }
     if (dcc->const_w && dcc->n_rows != 0u && dcc->n_cols != 0u && dcc->c_abs_31) {
         dk = dir > 0 ? dcc_rise_runs(dcc, v) : dcc_fall_runs(dcc, v, dv);

@@ -133,9 +133,8 @@ struct piezo_dcc {
     uint8_t n2_banded;   /* every n2 > nmin - xsat: the rising band may skip saturated ones */
     uint8_t lex_sorted;  /* (n1, n2) non-decreasing in index order: rows are index ranges
                           * with n2 ascending, the runs apply (with const_w) */
-    uint8_t cur;         /* run[cur]: the runs of the current direction's last tick */
-    uint8_t held;        /* run[held]: the other direction's, held across the reversal */
-    uint8_t n_run[3];    /* runs in each buffer, by ascending thr */
+    uint8_t n_run;       /* runs of the current direction, in run[cur] by ascending thr */
+    uint8_t cur;         /* which of the two run buffers is current */
     uint8_t c_abs_31;    /* sum_j |c_j| < 2^31: the runs' weight sums fit int32 */
     uint8_t n_rows;      /* lex_sorted with at most PIEZO_DCC_MAX_ROWS rows: their count; else 0 */
     uint8_t row_cur;     /* the falling band's first row at the last falling tick (a hint) */
@@ -145,7 +144,7 @@ struct piezo_dcc {
                           * a row's (column's) operators at rmax (at 0) join in one step */
     uint16_t row_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first index of each row, then n_ops */
     uint16_t col_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first order position of each column, then n_ops */
-    struct piezo_dcc_run run[3][PIEZO_DCC_RUNS]; /* current, held, and the one being written */
+    struct piezo_dcc_run run[2][PIEZO_DCC_RUNS];
 };
 
 /**
