@@ -322,6 +322,39 @@ static inline void fill_i32(int32_t *p, int32_t *end, int32_t r)
 #endif
 }
 
+/* The end of the block of operators equal to b that starts at p in a row
+ * (psi[p] == b; psi is non-increasing along the row, so the block is
+ * [p, end of it) and everything after it is below b). After a rise most of
+ * a row is at one value, so gallop from the row's end (steps 1, 2, 4, ...)
+ * to an operator of the block, then bisect the last step. */
+static inline int32_t row_block_end(const int32_t *psi, int32_t p, int32_t end, int32_t b)
+{
+    if (psi[end - 1] == b) {
+        return end;
+    }
+    int32_t hi = end - 1, lo; /* psi[hi] < b = psi[lo] from here on */
+    for (int32_t step = 1;; step <<= 1) {
+        lo = hi - step;
+        if (lo <= p) {
+            lo = p;
+            break;
+        }
+        if (psi[lo] == b) {
+            break;
+        }
+        hi = lo;
+    }
+    for (lo++; lo < hi;) {
+        const int32_t mid = (lo + hi) >> 1;
+        if (psi[mid] == b) {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
 /*
  * Falling to v with runs (const_w, n_rows, c_abs_31; docs/kernels-kp.md, "DCC:
  * runs"). In a row (one n1, index order = n2 order) psi is non-increasing
@@ -371,39 +404,25 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
             old++;
         } else if (dcc->psum != NULL && psi[j] == rmax) {
             /* a row entering the band (r < rmax here: x < xsat) with its
-             * first operators at rmax: they all move to r at once, their
-             * weights' sum from the prefix sums. Their end: psi is
-             * non-increasing along the row, and after a rise most of the row
-             * is at rmax, so gallop from the row's end (steps 1, 2, 4, ...)
-             * to an operator at rmax, then bisect the last step. */
-            int32_t lo = end, hi = end; /* the whole row if its last is at rmax */
-            if (psi[end - 1] != rmax) {
-                hi = end - 1; /* psi[hi] < rmax <= psi[lo] from here on */
-                for (int32_t step = 1;; step <<= 1) {
-                    lo = hi - step;
-                    if (lo <= j) {
-                        lo = j;
-                        break;
-                    }
-                    if (psi[lo] == rmax) {
-                        break;
-                    }
-                    hi = lo;
-                }
-                lo++;
-            }
-            while (lo < hi) {
-                const int32_t mid = (lo + hi) >> 1;
-                if (psi[mid] == rmax) {
-                    lo = mid + 1;
-                } else {
-                    hi = mid;
-                }
-            }
-            csum = dcc->psum[lo] - dcc->psum[j];
+             * first operators at rmax: they move to r as one block */
+            const int32_t e = row_block_end(psi, j, end, rmax);
+            csum = dcc->psum[e] - dcc->psum[j];
             dk += (int64_t)(r - rmax) * csum;
-            fill_i32(psi + j, psi + lo, r);
-            p = lo;
+            fill_i32(psi + j, psi + e, r);
+            p = e;
+        } else if (dcc->psum != NULL && end - j >= 3 && psi[j + 1] > r && psi[j + 1] == psi[j + 2]) {
+            /* the fall resuming after a short rise, which raised only the
+             * row's first operator (its diagonal cell, n1 = n2) above the
+             * level the last fall left: the first moves alone, then the
+             * block equal to the next as one */
+            const int32_t b = psi[j + 1];
+            dk += (int64_t)(r - psi[j]) * c[j];
+            psi[j] = r;
+            const int32_t e = row_block_end(psi, j + 1, end, b);
+            csum = dcc->psum[e] - dcc->psum[j];
+            dk += (int64_t)(r - b) * (dcc->psum[e] - dcc->psum[j + 1]);
+            fill_i32(psi + j + 1, psi + e, r);
+            p = e;
         }
         for (; p < end; p++) {
             const int32_t d = r - psi[p]; /* (the int32 difference the sum used already) */
