@@ -33,7 +33,11 @@
  * at most PIEZO_DCC_MAX_ROWS rows (init keeps each row's first index) the
  * moving operators of a row (falling) or column (rising) hold one value and
  * move as one run, (r' - r) * csum (docs/kernels-kp.md, "DCC: runs"); every
- * psi is still written.
+ * psi is still written. With the weights' prefix sums (csum_q24, below) a
+ * line that starts to move without a run moves its operators of one value
+ * (a row's at rmax, or after its first; a column's at 0) as one block, found
+ * by galloping and bisection (docs/kernels-kp.md, "DCC: blocks from prefix
+ * sums").
  *
  * Control law, one sample per tick (the operators see the previous drive, which
  * avoids an algebraic loop):
