@@ -75,6 +75,7 @@ static uint16_t load_grid(piezo_coefset_t *cs, const piezo_table_info_t *info, u
     grid->slope_q16 = piezo_section_i32(g, 2);
     grid->xsat_q15 = piezo_section_i32(g, 3);
     cs->rkp.grid = *grid;
+    cs->dcc.csum_q24 = NULL; /* kp_dcc sets them once c is loaded */
     return PIEZO_TABLE_REASON_OK;
 }
 
@@ -99,7 +100,14 @@ static uint16_t load_kp_dcc(piezo_coefset_t *cs, piezo_ff_state_t *ff, const pie
     }
     copy_i32(cs->c_q24, c);
     cs->dcc.c_q24 = cs->c_q24;
-    return reason_of(piezo_dcc_init(&ff->dcc, &cs->dcc, ff->cpsi_q15, ff->zo_q15, PIEZO_CS_MAX_KP_OPS));
+    r = reason_of(piezo_dcc_init(&ff->dcc, &cs->dcc, ff->cpsi_q15, ff->zo_q15, PIEZO_CS_MAX_KP_OPS));
+    /* the weights' prefix sums, for the DCC's lines that join as one (none
+     * when sum |c| >= 2^31: the kernel then works operator by operator) */
+    if (r == 0u && piezo_dcc_prefix_sums(&ff->dcc, cs->by_kind.dcc_csum_q24,
+                                         sizeof cs->by_kind.dcc_csum_q24 / sizeof cs->by_kind.dcc_csum_q24[0]) == PIEZO_OK) {
+        cs->dcc.csum_q24 = cs->by_kind.dcc_csum_q24;
+    }
+    return r;
 }
 
 static uint16_t load_rkp(piezo_coefset_t *cs, piezo_ff_state_t *ff, const piezo_table_info_t *info)
@@ -117,10 +125,10 @@ static uint16_t load_rkp(piezo_coefset_t *cs, piezo_ff_state_t *ff, const piezo_
     if ((r = need(info, PIEZO_SECTION_RKP_THETA_Q24, PIEZO_SECTION_TYPE_INT32, n, n, &th)) != 0u) {
         return r;
     }
-    copy_i32(cs->theta_q24, th);
+    copy_i32(cs->by_kind.theta_q24, th);
     copy_i32(cs->center_q24, ce);
     copy_i32(cs->inv_width_q16, iw);
-    cs->rkp.theta_q24 = cs->theta_q24;
+    cs->rkp.theta_q24 = cs->by_kind.theta_q24;
     cs->rkp.center_q24 = cs->center_q24;
     cs->rkp.inv_width_q16 = cs->inv_width_q16;
     cs->rkp.n_rbf = (uint16_t)ce->count;

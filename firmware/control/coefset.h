@@ -82,7 +82,10 @@ typedef struct {
     int16_t n1_q15[PIEZO_CS_MAX_KP_OPS];
     int16_t n2_q15[PIEZO_CS_MAX_KP_OPS];
     int32_t c_q24[PIEZO_CS_MAX_KP_OPS];
-    int32_t theta_q24[PIEZO_CS_MAX_RKP_OPS * PIEZO_CS_MAX_RBF];
+    union {
+        int32_t theta_q24[PIEZO_CS_MAX_RKP_OPS * PIEZO_CS_MAX_RBF]; /* rkp */
+        int32_t dcc_csum_q24[2u * (PIEZO_CS_MAX_KP_OPS + 1u)];     /* kp_dcc: c's prefix sums (dcc.h) */
+    } by_kind; /* one set holds one kind */
     int32_t center_q24[PIEZO_CS_MAX_RBF];
     int32_t inv_width_q16[PIEZO_CS_MAX_RBF];
 

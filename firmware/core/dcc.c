@@ -60,6 +60,7 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
         return PIEZO_EINVAL;
     }
     dcc->coeffs = coeffs;
+    dcc->psum = NULL;
     dcc->psi_q15 = psi_q15;
     dcc->order = order;
     dcc->const_w = 0u;
@@ -137,6 +138,51 @@ void piezo_dcc_const_weights(struct piezo_dcc *dcc)
     dcc->kacc = kacc;
     dcc->const_w = 1u;
     dcc->n_run = 0u;
+    /* the prefix sums, only if every entry is the one these weights give */
+    dcc->psum = NULL;
+    const int32_t *ps = c->csum_q24;
+    if (ps != NULL && dcc->c_abs_31 && dcc->n_rows != 0u && dcc->n_cols != 0u) {
+        const uint16_t n = c->grid.n_ops;
+        int32_t a = 0, b = 0;
+        int ok = ps[0] == 0 && ps[n + 1u] == 0;
+        for (uint16_t j = 0; j < n && ok; j++) {
+            a += c->c_q24[j];
+            b += c->c_q24[(uint16_t)dcc->order[j]];
+            ok = ps[j + 1u] == a && ps[n + 2u + j] == b;
+        }
+        if (ok) {
+            dcc->psum = ps;
+        }
+    }
+}
+
+enum piezo_err piezo_dcc_prefix_sums(const struct piezo_dcc *dcc, int32_t *sums, size_t n_sums)
+{
+    if (dcc == NULL || dcc->coeffs == NULL || sums == NULL) {
+        return PIEZO_EINVAL;
+    }
+    const int32_t *c = dcc->coeffs->c_q24;
+    const uint16_t n = dcc->coeffs->grid.n_ops;
+    if (n_sums < 2u * ((size_t)n + 1u)) {
+        return PIEZO_ERANGE;
+    }
+    int64_t cabs = 0;
+    for (uint16_t j = 0; j < n; j++) {
+        cabs += c[j] < 0 ? -(int64_t)c[j] : c[j];
+    }
+    if (cabs > INT32_MAX) {
+        return PIEZO_EINVAL; /* a partial sum could leave int32 */
+    }
+    int32_t a = 0, b = 0;
+    sums[0] = 0;
+    sums[n + 1u] = 0;
+    for (uint16_t j = 0; j < n; j++) {
+        a += c[j];
+        b += c[(uint16_t)dcc->order[j]];
+        sums[j + 1u] = a;
+        sums[n + 2u + j] = b;
+    }
+    return PIEZO_OK;
 }
 
 void piezo_dcc_reset(struct piezo_dcc *dcc)
@@ -276,6 +322,39 @@ static inline void fill_i32(int32_t *p, int32_t *end, int32_t r)
 #endif
 }
 
+/* The end of the block of operators equal to b that starts at p in a row
+ * (psi[p] == b; psi is non-increasing along the row, so the block is
+ * [p, end of it) and everything after it is below b). After a rise most of
+ * a row is at one value, so gallop from the row's end (steps 1, 2, 4, ...)
+ * to an operator of the block, then bisect the last step. */
+static inline int32_t row_block_end(const int32_t *psi, int32_t p, int32_t end, int32_t b)
+{
+    if (psi[end - 1] == b) {
+        return end;
+    }
+    int32_t hi = end - 1, lo; /* psi[hi] < b = psi[lo] from here on */
+    for (int32_t step = 1;; step <<= 1) {
+        lo = hi - step;
+        if (lo <= p) {
+            lo = p;
+            break;
+        }
+        if (psi[lo] == b) {
+            break;
+        }
+        hi = lo;
+    }
+    for (lo++; lo < hi;) {
+        const int32_t mid = (lo + hi) >> 1;
+        if (psi[mid] == b) {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
 /*
  * Falling to v with runs (const_w, n_rows, c_abs_31; docs/kernels-kp.md, "DCC:
  * runs"). In a row (one n1, index order = n2 order) psi is non-increasing
@@ -323,6 +402,27 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
                 fill_i32(psi + j, psi + p, r);
             }
             old++;
+        } else if (dcc->psum != NULL && psi[j] == rmax) {
+            /* a row entering the band (r < rmax here: x < xsat) with its
+             * first operators at rmax: they move to r as one block */
+            const int32_t e = row_block_end(psi, j, end, rmax);
+            csum = dcc->psum[e] - dcc->psum[j];
+            dk += (int64_t)(r - rmax) * csum;
+            fill_i32(psi + j, psi + e, r);
+            p = e;
+        } else if (dcc->psum != NULL && end - j >= 3 && psi[j + 1] > r && psi[j + 1] == psi[j + 2]) {
+            /* the fall resuming after a short rise, which raised only the
+             * row's first operator (its diagonal cell, n1 = n2) above the
+             * level the last fall left: the first moves alone, then the
+             * block equal to the next as one */
+            const int32_t b = psi[j + 1];
+            dk += (int64_t)(r - psi[j]) * c[j];
+            psi[j] = r;
+            const int32_t e = row_block_end(psi, j + 1, end, b);
+            csum = dcc->psum[e] - dcc->psum[j];
+            dk += (int64_t)(r - b) * (dcc->psum[e] - dcc->psum[j + 1]);
+            fill_i32(psi + j + 1, psi + e, r);
+            p = e;
         }
         for (; p < end; p++) {
             const int32_t d = r - psi[p]; /* (the int32 difference the sum used already) */
@@ -405,7 +505,35 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
             for (; e < end && psi[(uint16_t)ord[e]] >= r; e++) {
             }
             q = e;
-            for (; e < end; e++) {
+            int32_t z = end; /* from z on the column's operators are at 0 */
+            if (dcc->psum != NULL && e < end && psi[(uint16_t)ord[end - 1]] == 0) {
+                /* its last operators at 0 (psi is non-increasing along the
+                 * column) move to r at once: their first by bisection (none
+                 * when the first that moves is at 0), their weights' sum from
+                 * the prefix sums */
+                int32_t lo = e, hi = e;
+                if (psi[(uint16_t)ord[e]] != 0) {
+                    lo = e + 1;
+                    hi = end - 1;
+                }
+                while (lo < hi) {
+                    const int32_t mid = (lo + hi) >> 1;
+                    if (psi[(uint16_t)ord[mid]] == 0) {
+                        hi = mid;
+                    } else {
+                        lo = mid + 1;
+                    }
+                }
+                z = lo;
+                const int32_t *pc = dcc->psum + dcc->coeffs->grid.n_ops + 1;
+                const int32_t zs = pc[end] - pc[z];
+                dk += (int64_t)r * zs;
+                csum = zs;
+                for (int32_t i = z; i < end; i++) {
+                    psi[(uint16_t)ord[i]] = r;
+                }
+            }
+            for (; e < z; e++) {
                 const int32_t jj = (uint16_t)ord[e];
                 dk += (int64_t)(r - psi[jj]) * c[jj];
                 csum += c[jj];

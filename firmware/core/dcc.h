@@ -33,7 +33,11 @@
  * at most PIEZO_DCC_MAX_ROWS rows (init keeps each row's first index) the
  * moving operators of a row (falling) or column (rising) hold one value and
  * move as one run, (r' - r) * csum (docs/kernels-kp.md, "DCC: runs"); every
- * psi is still written.
+ * psi is still written. With the weights' prefix sums (csum_q24, below) a
+ * line that starts to move without a run moves its operators of one value
+ * (a row's at rmax, or after its first; a column's at 0) as one block, found
+ * by galloping and bisection (docs/kernels-kp.md, "DCC: blocks from prefix
+ * sums").
  *
  * Control law, one sample per tick (the operators see the previous drive, which
  * avoids an algebraic loop):
@@ -90,6 +94,10 @@ struct piezo_dcc_coeffs {
     struct piezo_kp_grid grid;
     const int32_t *c_q24;  /* g * w_j, n_ops entries */
     int32_t g_q24;         /* gain g = 1 / sum(w), >= 1 */
+    /* Optional (NULL: none): the prefix sums of c_q24, from
+     * piezo_dcc_prefix_sums(): 2 (n_ops + 1) entries, sum_{i<j} c_i in index
+     * order, then the same in the n2 order (init's order array). */
+    const int32_t *csum_q24;
 };
 
 /* Runs kept per direction: rows (falling) or columns (rising) of the band
@@ -136,6 +144,8 @@ struct piezo_dcc {
     uint8_t row_cur;     /* the falling band's first row at the last falling tick (a hint) */
     uint8_t n_cols;      /* columns (equal n2) in the order array, at most PIEZO_DCC_MAX_ROWS; else 0 */
     uint8_t col_cur;     /* the rising band's first column at the last rising tick (a hint) */
+    const int32_t *psum; /* coeffs->csum_q24 when checked by piezo_dcc_const_weights (else NULL):
+                          * a row's (column's) operators at rmax (at 0) join in one step */
     uint16_t row_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first index of each row, then n_ops */
     uint16_t col_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first order position of each column, then n_ops */
     struct piezo_dcc_run run[2][PIEZO_DCC_RUNS];
@@ -159,6 +169,17 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
  * (kp_dcc); not when c_q24 is a density rewritten every tick (RKP).
  */
 void piezo_dcc_const_weights(struct piezo_dcc *dcc);
+/* (It also checks the coefficients' csum_q24, if any, against c_q24 and the
+ * order, and uses them only if every entry matches.) */
+
+/**
+ * Fill sums (n_sums >= 2 (n_ops + 1) entries, else PIEZO_ERANGE) with the
+ * prefix sums of the weights of an initialized instance, for its
+ * coefficients' csum_q24: sums[j] = sum_{i<j} c_i (index order), then
+ * sums[n_ops + 1 + k] = sum of c over the order array's first k entries.
+ * PIEZO_EINVAL when sum_j |c_j| >= 2^31 (they would not fit int32).
+ */
+enum piezo_err piezo_dcc_prefix_sums(const struct piezo_dcc *dcc, int32_t *sums, size_t n_sums);
 
 /** Reset state (see above). */
 void piezo_dcc_reset(struct piezo_dcc *dcc);

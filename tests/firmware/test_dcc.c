@@ -32,9 +32,23 @@ struct dcc_case {
     {#name, &set, dcc_case_##name##_yd, dcc_case_##name##_u, sizeof(dcc_case_##name##_yd) / sizeof(int16_t)},
 static const struct dcc_case cases[] = {DCC_GOLDEN_CASES(DCC_CASE)};
 #define N_CASES (sizeof(cases) / sizeof(cases[0]))
+#define N_OF(a) (sizeof(a) / sizeof((a)[0]))
 
 static int32_t cpsi_a[PIEZO_KP_MAX_OPS], zo_a[PIEZO_KP_MAX_OPS];
 static int32_t cpsi_b[PIEZO_KP_MAX_OPS], zo_b[PIEZO_KP_MAX_OPS];
+/* prefix sums of the planes below (the golden sets and the walks' L = 30:
+ * the cortex-m4 test image has no room for PIEZO_KP_MAX_OPS) */
+#define SUMS_MAX_OPS 465u
+static int32_t sums_a[2u * (SUMS_MAX_OPS + 1u)];
+
+/* dc's weights' prefix sums for an instance initialized on dc (as the
+ * controller's loader does); 1 when they apply (sum |c| < 2^31) */
+static int with_sums(struct piezo_dcc *d, struct piezo_dcc_coeffs *dc)
+{
+    const enum piezo_err rc = piezo_dcc_prefix_sums(d, sums_a, sizeof sums_a / sizeof sums_a[0]);
+    dc->csum_q24 = rc == PIEZO_OK ? sums_a : NULL;
+    return rc == PIEZO_OK;
+}
 static int16_t psi_k[PIEZO_KP_MAX_OPS];
 
 static void run_block(struct piezo_dcc *d, const struct dcc_case *c, size_t k0, size_t k1)
@@ -61,6 +75,7 @@ static void test_golden_cases(void **state)
 {
     (void)state;
     assert_true(N_CASES >= 9u);
+    assert_true(dcc_std_NOPS <= SUMS_MAX_OPS && dcc_edge_NOPS <= SUMS_MAX_OPS);
     for (size_t i = 0; i < N_CASES; i++) {
         struct piezo_dcc d;
         assert_int_equal(piezo_dcc_init(&d, cases[i].c, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
@@ -73,6 +88,45 @@ static void test_golden_cases(void **state)
         assert_int_equal(d.c_abs_31, cases[i].c == &dcc_edge ? 0 : 1);
         assert_true(cases[i].c == &dcc_edge || (d.n_rows != 0u && d.n_cols != 0u)); /* the runs, with their tables */
         run_block(&d, &cases[i], 0, cases[i].n);
+        /* and with the weights' prefix sums (lines at rmax or 0 join as one) */
+        struct piezo_dcc_coeffs dc = *cases[i].c;
+        assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+        assert_int_equal(with_sums(&d, &dc), cases[i].c == &dcc_edge ? 0 : 1);
+        piezo_dcc_const_weights(&d);
+        assert_true(cases[i].c == &dcc_edge || d.psum == sums_a);
+        run_block(&d, &cases[i], 0, cases[i].n);
+    }
+}
+
+/* Prefix sums: too small an array and weights whose sums could leave int32
+ * are refused; sums that do not match the weights are not used (checked
+ * entry by entry by piezo_dcc_const_weights), and the law is unchanged. */
+static void test_prefix_sums_checked(void **state)
+{
+    (void)state;
+    struct piezo_dcc d;
+    struct piezo_dcc_coeffs dc = dcc_std;
+    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_prefix_sums(&d, sums_a, 2u * dcc_std_NOPS + 1u), PIEZO_ERANGE);
+    assert_int_equal(piezo_dcc_prefix_sums(&d, NULL, 2u * dcc_std_NOPS + 2u), PIEZO_EINVAL);
+    assert_int_equal(piezo_dcc_prefix_sums(&d, sums_a, 2u * dcc_std_NOPS + 2u), PIEZO_OK);
+    assert_int_equal(sums_a[0], 0);
+    assert_int_equal(sums_a[dcc_std_NOPS + 1u], 0);
+    assert_int_equal(sums_a[dcc_std_NOPS], sums_a[2u * dcc_std_NOPS + 1u]); /* both orders sum every c */
+    struct piezo_dcc_coeffs de = dcc_edge;
+    assert_int_equal(piezo_dcc_init(&d, &de, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_prefix_sums(&d, sums_a, sizeof sums_a / sizeof sums_a[0]), PIEZO_EINVAL);
+    /* one entry off, in either half: not used */
+    const size_t bad[] = {1u, dcc_std_NOPS / 2u, dcc_std_NOPS, dcc_std_NOPS + 1u, dcc_std_NOPS + 7u,
+                          2u * dcc_std_NOPS + 1u};
+    const struct dcc_case *c = find_case("realistic");
+    for (size_t b = 0; b < N_OF(bad); b++) {
+        assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+        assert_int_equal(with_sums(&d, &dc), 1);
+        sums_a[bad[b]] += 1;
+        piezo_dcc_const_weights(&d);
+        assert_null(d.psum);
+        run_block(&d, c, 0, c->n);
     }
 }
 
@@ -104,8 +158,6 @@ static void check_identity(const struct piezo_dcc_coeffs *dc, const int16_t *v, 
         }
     }
 }
-
-#define N_OF(a) (sizeof(a) / sizeof((a)[0]))
 
 static void test_psi_plus_compensation_is_input(void **state)
 {
@@ -222,6 +274,172 @@ static void test_row_and_column_table_limits(void **state)
     }
 }
 
+/* ---- the runs on random walks with small and large reversals, against an oracle ---- */
+
+/* A KP plane of L levels in the host's cell convention (row by row, the
+ * operators at the cells' midpoints) over the reference set's range, with
+ * weights of both signs whose magnitudes sum below 2^31 (the runs apply). */
+#define WALK_MAX_L 30u
+#define WALK_MAX_OPS (WALK_MAX_L * (WALK_MAX_L + 1u) / 2u)
+static int16_t walk_n1[WALK_MAX_OPS], walk_n2[WALK_MAX_OPS];
+static int32_t walk_c[WALK_MAX_OPS];
+static int32_t walk_psi[WALK_MAX_OPS]; /* the oracle's operators */
+
+static uint32_t walk_rng;
+static uint32_t walk_rand(uint32_t n)
+{
+    walk_rng = walk_rng * 1664525u + 1013904223u;
+    return (uint32_t)(((uint64_t)(walk_rng >> 8) * n) >> 24);
+}
+
+static struct piezo_dcc_coeffs walk_plane(uint16_t L)
+{
+    const int32_t lo = -32768, hi = 32767;
+    uint16_t j = 0;
+    for (uint16_t i = 0; i < L; i++) {
+        for (uint16_t k = i; k < L; k++) {
+            walk_n1[j] = (int16_t)(lo + (int32_t)((2 * i + 1) * (hi - lo)) / (2 * L));
+            walk_n2[j] = (int16_t)(lo + (int32_t)((2 * k + 1) * (hi - lo)) / (2 * L));
+            walk_c[j] = (int32_t)walk_rand(1u << 18) - (1 << 16); /* |c| < 2^18, 465 of them < 2^27 */
+            j++;
+        }
+    }
+    struct piezo_dcc_coeffs dc = dcc_std;
+    dc.grid.n1_q15 = walk_n1;
+    dc.grid.n2_q15 = walk_n2;
+    dc.grid.n_ops = j;
+    dc.grid.nmin_q15 = (int16_t)lo;
+    dc.c_q24 = walk_c;
+    return dc;
+}
+
+/* The next input of a walk: monotone segments of random length, half of
+ * them short (1..8 ticks of 0..8 LSB: the jitter of a closed loop's drive,
+ * small reversals), the others long (up to 400 ticks of up to 600 LSB: large
+ * reversals), now and then a jump or a pause; kept in q15. */
+struct walk {
+    int32_t v;
+    int32_t dir;
+    int32_t left;
+    int32_t step;
+};
+
+static int16_t walk_next(struct walk *w)
+{
+    if (w->left == 0) {
+        w->dir = -w->dir;
+        if (walk_rand(2u) == 0u) {
+            w->left = 1 + (int32_t)walk_rand(8u);
+            w->step = (int32_t)walk_rand(9u);
+        } else {
+            w->left = 10 + (int32_t)walk_rand(390u);
+            w->step = 1 + (int32_t)walk_rand(600u);
+        }
+    }
+    w->left--;
+    int32_t dv = w->dir * (int32_t)walk_rand((uint32_t)w->step + 1u);
+    if (walk_rand(500u) == 0u) {
+        dv = (int32_t)walk_rand(65536u) - 32768; /* a jump */
+    }
+    w->v += dv;
+    if (w->v > 32767 || w->v < -32768) {
+        w->v = w->v > 32767 ? 32767 : -32768;
+        w->dir = -w->dir;
+    }
+    return (int16_t)w->v;
+}
+
+/* The oracle: every operator by the KP equations (dcc.h), one by one. */
+static void walk_oracle(const struct piezo_kp_grid *g, int32_t v_prev, int32_t v)
+{
+    for (uint16_t j = 0; j < g->n_ops; j++) {
+        if (v > v_prev) {
+            const int32_t r = piezo_kp_ridge_q15(g, v - g->n2_q15[j]);
+            walk_psi[j] = r > walk_psi[j] ? r : walk_psi[j];
+        } else if (v < v_prev) {
+            const int32_t r = piezo_kp_ridge_q15(g, v - g->n1_q15[j]);
+            walk_psi[j] = r < walk_psi[j] ? r : walk_psi[j];
+        }
+    }
+}
+
+/* Runs (constant weights) against the oracle, every operator and the kept
+ * sum every tick, on a walk with small and large reversals; and the law's
+ * drive against the band scan (weights summed every tick). Returns the
+ * walk's reversals. */
+static unsigned walk_check(uint16_t L, uint32_t seed, size_t n, int sums)
+{
+    walk_rng = seed;
+    struct piezo_dcc_coeffs dc = walk_plane(L);
+    struct piezo_dcc d, band;
+    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    if (sums) {
+        assert_int_equal(with_sums(&d, &dc), 1);
+    }
+    piezo_dcc_const_weights(&d);
+    assert_true(d.n_rows == L && d.n_cols == L && d.c_abs_31);
+    assert_true(sums ? d.psum == sums_a : d.psum == NULL);
+    for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+        walk_psi[j] = 0;
+    }
+    struct walk w = {.v = dc.grid.nmin_q15, .dir = 1, .left = 0, .step = 0};
+    int32_t v_prev = dc.grid.nmin_q15;
+    int dir = -1;
+    unsigned reversals = 0;
+    for (size_t k = 0; k < n; k++) {
+        const int16_t v = walk_next(&w);
+        const int ndir = v > v_prev ? 1 : v < v_prev ? -1 : dir;
+        reversals += ndir != dir;
+        dir = ndir;
+        walk_oracle(&dc.grid, v_prev, v);
+        piezo_dcc_ops_update(&d, v);
+        int64_t kacc = 0;
+        for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+            if (d.psi_q15[j] != walk_psi[j]) {
+                fail_msg("L %u seed %lu tick %lu v %d operator %u: psi %ld, oracle %ld", (unsigned)L,
+                         (unsigned long)seed, (unsigned long)k, v, (unsigned)j, (long)d.psi_q15[j],
+                         (long)walk_psi[j]);
+            }
+            kacc += (int64_t)walk_psi[j] * walk_c[j];
+        }
+        if (d.kacc != kacc) {
+            fail_msg("L %u seed %lu tick %lu: kept sum %lld, oracle %lld", (unsigned)L, (unsigned long)seed,
+                     (unsigned long)k, (long long)d.kacc, (long long)kacc);
+        }
+        v_prev = v;
+    }
+    /* the law on its own drive: a desired output walking the same way */
+    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    assert_int_equal(piezo_dcc_init(&band, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    piezo_dcc_const_weights(&d);
+    assert_true(sums ? d.psum == sums_a : d.psum == NULL);
+    struct walk wy = {.v = 0, .dir = 1, .left = 0, .step = 0};
+    for (size_t k = 0; k < n; k++) {
+        const int16_t yd = walk_next(&wy);
+        const int16_t ur = piezo_dcc_process(&d, yd), ub = piezo_dcc_process(&band, yd);
+        if (ur != ub) {
+            fail_msg("L %u seed %lu tick %lu: runs %d, band scan %d", (unsigned)L, (unsigned long)seed,
+                     (unsigned long)k, ur, ub);
+        }
+    }
+    return reversals;
+}
+
+static void test_runs_on_random_walks(void **state)
+{
+    (void)state;
+    static const uint16_t planes[] = {10u, 20u, 30u};
+    for (size_t i = 0; i < N_OF(planes); i++) {
+        for (uint32_t seed = 1u; seed <= 2u; seed++) {
+            for (int sums = 0; sums <= 1; sums++) {
+                const unsigned reversals = walk_check(planes[i], seed * 7919u + planes[i], 20000u, sums);
+                /* a segment lasts about 100 ticks on average: some 200 reversals */
+                assert_true(reversals >= 100u);
+            }
+        }
+    }
+}
+
 static enum piezo_err init_with(const struct piezo_dcc_coeffs *c, size_t n_state)
 {
     struct piezo_dcc d;
@@ -265,6 +483,8 @@ int main(void)
         cmocka_unit_test(test_reset_restores_initial_state),
         cmocka_unit_test(test_init_refuses_bad_coefficients),
         cmocka_unit_test(test_row_and_column_table_limits),
+        cmocka_unit_test(test_runs_on_random_walks),
+        cmocka_unit_test(test_prefix_sums_checked),
     };
     return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);
 }

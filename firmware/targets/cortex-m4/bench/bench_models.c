@@ -52,10 +52,18 @@ static void dcc_tick(uint32_t k)
     piezo_bench_sink = piezo_dcc_process(&dcc, piezo_bench_u[k]);
 }
 
+/* As the controller's loader does for a kp_dcc table: the weights' prefix
+ * sums (coefset.c), then the weights declared constant. */
+static struct piezo_dcc_coeffs dcc_summed;
+static int32_t dcc_sums[2u * (bench_dcc30_NOPS + 1u)];
 static enum piezo_err dcc_init_const(size_t i)
 {
-    const enum piezo_err rc = piezo_dcc_init(&dcc, &dcc_coeffs[i], dcc_cpsi, dcc_zo, bench_dcc30_NOPS);
+    dcc_summed = dcc_coeffs[i];
+    const enum piezo_err rc = piezo_dcc_init(&dcc, &dcc_summed, dcc_cpsi, dcc_zo, bench_dcc30_NOPS);
     if (rc == PIEZO_OK) {
+        if (piezo_dcc_prefix_sums(&dcc, dcc_sums, sizeof dcc_sums / sizeof dcc_sums[0]) == PIEZO_OK) {
+            dcc_summed.csum_q24 = dcc_sums;
+        }
         piezo_dcc_const_weights(&dcc);
     }
     return rc;
