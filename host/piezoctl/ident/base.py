@@ -38,7 +38,12 @@ Fit (``fit_base``):
    searched on the reversible curve alone: a Duhem element has no return-point
    memory, so no Preisach density reaches it, and one that never saturates inside
    the range remembers its start) by the held-out RMS error (the
-   smallest size within 2 % of the best). Only play counts R the calibration
+   smallest size within 2 % of the best). The column's shape is scored on
+   held-out *histories* (each quarter of every recording predicted by the fit on
+   the other three, no trend columns), and a size with the column is kept only
+   when it also beats the same plane without it there by more than 2 %:
+   interleaved blocks share their histories with the fold that predicts them
+   (round 12, docs/diagnose.md). Only play counts R the calibration
    can resolve are offered: at least 2 R distinct reversal levels
    (:func:`reversal_levels`); a periodic calibration (two levels) gets R = 1,
    the reversible curve with the Bouc-Wen column. No parametric family: the grid of a Preisach
@@ -90,6 +95,7 @@ BW_START_FRACTIONS = (-0.9, -0.5, 0.5, 0.9)   # the column's state at rest, as a
                                               # unknown (the stage's history before the recording); a Duhem state
                                               # that never saturates inside the range remembers it throughout
 CV_BLOCKS = 32           # interleaved blocks per calibration recording in the size cross-validation
+SIZE_ON_HISTORIES = False   # True: the whole size table on held-out histories (tried, round 12), not only the column
 SIZE_TOLERANCE = 1.02    # the smallest size within 2 % of the best cross-validated error is chosen
 ORDERS = (0, 2, 4, 6)
 QS_LP_HZ = 20.0          # quasi-static: drive within QS_TOL of its zero-phase low-pass at this frequency
@@ -655,7 +661,9 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
         for R in plays:
             for K in PLANE_KNOTS:
                 lay = PlaneLayout(R, K, spans, r_all, bw=bw)
-                for ridge, score in zip(RIDGES, _cv_score(design(lay), yr, folds, lay, RIDGES, sign)):
+                scores = (history_score(lay, RIDGES) if SIZE_ON_HISTORIES else
+                          _cv_score(design(lay), yr, folds, lay, RIDGES, sign))
+                for ridge, score in zip(RIDGES, scores):
                     table.append({"plays": R, "knots": K, "ridge": ridge, "bouc_wen": bw, "columns": lay.n_cols,
                                   "cv_rmse_um": score})
                     if best is None or score < best:
@@ -664,7 +672,7 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
     ok = [t for t in table if t["cv_rmse_um"] <= SIZE_TOLERANCE * best]
     pick = min(ok, key=lambda t: (t["columns"], -t["ridge"]))
     column_check = None
-    if pick["bouc_wen"] is not None:
+    if pick["bouc_wen"] is not None and not SIZE_ON_HISTORIES:
         # the column is kept only when it also predicts held-out histories better than the same plane without it
         # (by more than SIZE_TOLERANCE, the rule that prefers the smaller model above)
         lay_c = PlaneLayout(pick["plays"], pick["knots"], spans, r_all, bw=pick["bouc_wen"])
