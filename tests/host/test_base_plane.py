@@ -188,14 +188,16 @@ def test_thermal_drift_on_the_session_clock_is_its_regressor_and_continues_acros
     assert np.all(refined.simulate(par, t, u, t_session=0.0) == y)
 
 
-def test_base_fits_a_foreign_bouc_wen_law_of_exponent_not_one_to_twice_the_noise():
+def test_base_column_exponent_beats_exponent_one_on_a_foreign_bouc_wen_law(monkeypatch):
     # a Duhem law (no return-point memory, exponent 1.76, its state starting saturated): the plane's Bouc-Wen
-    # column with its exponent and start state searched. The goal, 2x the noise (10 nm), was met on the
-    # bench's draw (1.8 / 1.4 nm) but not on this noise draw (12.8 nm on the triangles): asserted is the bound of
-    # the Preisach-class test above, 0.5 % of the stroke, which the base with an exponent-1 column missed (423 nm)
+    # column with its exponent searched. Round 11 also searched the column's start state and met 0.5 % of the
+    # stroke here; round 12 dropped the start state (it cost the own diagnosis cases, docs/diagnose.md), so the
+    # law's saturated start is not reproduced (1.2 um at 0.5 s). Asserted: the exponent is found on the law's side
+    # of 1, and the held-out error is lower than the same base with the exponent held at 1
+    import piezoctl.ident.base as base_mod
     from piezoctl.foreign.hysteresis import draw_law
     law = draw_law(np.random.default_rng(0), "bouc_wen")
-    assert abs(law.n - 1.0) > 0.3
+    assert law.n - 1.0 > 0.3
     stroke, noise = 40.0, 0.005
 
     def stage(u):
@@ -207,11 +209,22 @@ def test_base_fits_a_foreign_bouc_wen_law_of_exponent_not_one_to_twice_the_noise
     fo = np.concatenate([np.linspace(3, 147, 4000)] + [np.concatenate([np.linspace(147, lv, 1500),
                                                                          np.linspace(lv, 147, 1500)])
                                                          for lv in np.linspace(10, 140, 14)])
-    base = fit_base([_rec(u, stage(u) + rng.normal(0, noise, u.size)) for u in (cal_u, fo)])
-    base.pop("base_info")
+    cal = [_rec(u, stage(u) + rng.normal(0, noise, u.size)) for u in (cal_u, fo)]
     tt = np.arange(int(6 * FS)) / FS
     tri = 75 + np.interp(tt % 1.0, [0, 0.5, 1], [-1, 1, -1]) * np.where(tt < 3, 60, 30)
     walk = 75 + 55 * np.sin(np.cumsum(rng.normal(0, 0.004, tt.size)))
-    for u in (tri, walk):
-        e = (refined.simulate(base, tt, u) - stage(u))[int(0.5 * FS):]
-        assert np.sqrt(np.mean(e ** 2)) < 0.005 * stroke
+
+    def errors(base):
+        return [float(np.sqrt(np.mean((refined.simulate(base, tt, u) - stage(u))[int(0.5 * FS):] ** 2)))
+                for u in (tri, walk)]
+    base = fit_base(cal)
+    bw = base.pop("base_info")["plane"]["bouc_wen"]
+    assert bw is not None and bw[2] > 1.3
+    err_n = errors(base)
+    monkeypatch.setattr(base_mod, "BW_EXPONENTS", (1.0,))
+    monkeypatch.setattr(base_mod, "BW_EXPONENT_RANGE", (1.0, 1.0))
+    base1 = fit_base(cal)
+    bw1 = base1.pop("base_info")["plane"]["bouc_wen"]
+    assert bw1 is None or bw1[2] == 1.0
+    err_1 = errors(base1)
+    assert err_n[0] < err_1[0] and err_n[1] < err_1[1]
