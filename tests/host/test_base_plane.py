@@ -186,3 +186,18 @@ def test_thermal_drift_on_the_session_clock_is_its_regressor_and_continues_acros
     assert d1[0] > d0[-1] > d0[0] > 0
     # the calibration (before the reference) is not drifted
     assert np.all(refined.simulate(par, t, u, t_session=0.0) == y)
+
+
+def test_bench_base_noise_free_reference_is_the_measured_output_without_its_noise(tmp_path):
+    # tools/bench-base --nulls scores the base against the stage's noise-free output, drawn as write_case draws the
+    # measured files: the two may differ only by the sensor's white noise (and its quantization)
+    from piezoctl.bench.base_laws import _noise_free
+    from piezoctl.foreign.cases import draw_case, write_case
+    from piezoctl.io.recording import load_recording
+    case = draw_case(105, 4, (), scale=0.2)
+    files = write_case(case, str(tmp_path))
+    sigma = case.stage.sensor.noise_um
+    for path, y0 in zip(files["recordings"], _noise_free(case)):
+        d = load_recording(path).y - y0
+        assert abs(np.std(d) / sigma - 1.0) < 0.1
+        assert abs(np.mean(d)) < 5 * sigma / np.sqrt(d.size) + case.stage.sensor.lsb_um
