@@ -1,7 +1,6 @@
-"""Round 12: where the mode is offered (piezoctl.diagnose.signature.transfer_peaks). Synthetic model outputs x
-and measurements y = x plus a mode the model lacks, plus noise: the residual transfer's peak must fall within the
-mode grid's 3 % of the mode, also when the model's dynamics overshoot the measurement above their band (|T - 1|
-dips at the mode there, |T| peaks); a residual that is noise alone offers nothing."""
+"""Round 12: where the mode is offered (piezoctl.diagnose.signature.mode_frequencies). Synthetic model outputs x
+and measurements y = x plus a mode the model lacks, plus noise: the offered frequency must fall within the mode
+grid's 3 % of the mode and pass the mode's own signature check; a residual that is noise alone offers nothing."""
 
 import numpy as np
 from scipy import signal as sps
@@ -34,30 +33,30 @@ def _transfer(shape, seeds=(1, 2), noise=0.02):
     return sig.transfer(xs, ys, DT)
 
 
-def test_a_missing_mode_is_offered_near_its_frequency():
+def test_a_missing_mode_is_offered_near_its_frequency_where_its_check_passes():
     f0 = 1730.0
     tr = _transfer(lambda x: x + 0.05 * (_mode(x, f0, 0.02) - x))
-    peaks = sig.transfer_peaks(tr, F_BAND)
-    assert peaks, "no peak offered"
-    assert abs(peaks[0] / f0 - 1.0) <= 0.03, peaks
+    offered = sig.mode_frequencies(tr)
+    assert len(offered) == 1 and abs(offered[0] / f0 - 1.0) <= 0.03, offered
+    # one definition of the peak: the offered frequency passes the mode's check, one 30 % away does not
+    assert sig.check_mode(tr, 1.0, F_BAND, offered[0], 0.02)["passed"]
+    assert not sig.check_mode(tr, 1.0, F_BAND, 0.7 * f0, 0.02)["passed"]
 
 
-def test_a_mode_on_a_transfer_the_model_overshoots_is_offered_by_its_magnitude_peak():
-    # the measurement rolls off above 800 Hz where the model does not (|T| falls to ~0.2): |T - 1| is near 1
-    # everywhere there and dips at the mode, |T| peaks at it (development case s110-006)
-    f0 = 2900.0
-    lp = sps.butter(2, 800.0, fs=1.0 / DT)
-    tr = _transfer(lambda x: sps.lfilter(*lp, x) + 0.05 * (_mode(x, f0, 0.04) - x))
-    peaks = sig.transfer_peaks(tr, F_BAND)
-    assert any(abs(p / f0 - 1.0) <= 0.03 for p in peaks), peaks
+def test_a_mode_among_other_misfit_is_offered_at_the_largest_significant_deviation():
+    # the model's gain is also 10 % off at every frequency (|T - 1| = 0.1 everywhere): the mode still stands out
+    f0 = 2300.0
+    tr = _transfer(lambda x: 1.1 * x + 0.05 * (_mode(x, f0, 0.02) - x))
+    offered = sig.mode_frequencies(tr)
+    assert len(offered) == 1 and abs(offered[0] / f0 - 1.0) <= 0.03, offered
 
 
 def test_noise_alone_offers_no_mode():
     tr = _transfer(lambda x: x)
-    assert sig.transfer_peaks(tr, F_BAND) == []
+    assert sig.mode_frequencies(tr) == []
 
 
-def test_nothing_without_a_transfer_or_bins_above_the_band():
-    assert sig.transfer_peaks(None, F_BAND) == []
+def test_no_transfer_leaves_the_choice_to_the_residual_spectrum_and_a_low_peak_is_not_offered():
+    assert sig.mode_frequencies(None) is None
     tr = _transfer(lambda x: x + 0.05 * (_mode(x, 1730.0, 0.02) - x))
-    assert sig.transfer_peaks(tr, 1e6) == []
+    assert sig.mode_frequencies(tr, f_min=5000.0) == []

@@ -125,7 +125,8 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None):
               u_mid_all=0.5 * (float(uv.max()) + float(uv.min())),
               u_half_all=max(0.5 * float(np.ptp(uv)), 1e-9),
               max_step=max(float(np.max(np.abs(np.diff(s.u)))) for s in sigs),
-              peak_freqs=_peak_freqs(sigs, resid, valid, cal, dt, settle_s), y_span=span,
+              peak_freqs=loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt), y_span=span,
+              mode_freqs=_mode_freqs(sigs, valid, dt),
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
               cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
               cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
@@ -151,18 +152,12 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None):
     return ctx, located, outside_doc
 
 
-def _peak_freqs(sigs, resid, valid, cal, dt, settle_s) -> list:
-    """Where a mode is offered (``UnmodeledResonance.settings``): the residual spectrum's narrow peaks, and (round
-    12) the residual transfer's peaks above the band the calibration identified the dynamics in
-    (``signature.transfer_peaks``), those within the mode grid's 3 % of one already listed left out."""
-    from .signature import transfer, transfer_peaks
-    out = list(loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt))
-    k0s = [min(int(round(settle_s / r.dt)), len(r) // 2) for r in cal]
-    tr = transfer([s.yb[v] for s, v in zip(sigs, valid)], [s.y[v] for s, v in zip(sigs, valid)], dt)
-    for f in transfer_peaks(tr, calibration_band_hz(cal, k0s)):
-        if all(abs(f / g - 1.0) > 0.03 for g in out):
-            out.append(f)
-    return out
+def _mode_freqs(sigs, valid, dt) -> list | None:
+    """Where ``unmodeled_resonance`` is offered (round 12, ``Ctx.mode_freqs``): the residual transfer's significant
+    peak (``signature.mode_frequencies``); None without a transfer estimate (then the residual spectrum's peaks)."""
+    from .signature import mode_frequencies, transfer
+    return mode_frequencies(transfer([s.yb[v] for s, v in zip(sigs, valid)], [s.y[v] for s, v in zip(sigs, valid)],
+                                     dt))
 
 
 def _drift_clock(cal, recs) -> dict:
