@@ -60,3 +60,33 @@ def test_no_transfer_leaves_the_choice_to_the_residual_spectrum_and_a_low_peak_i
     assert sig.mode_frequencies(None) is None
     tr = _transfer(lambda x: x + 0.05 * (_mode(x, 1730.0, 0.02) - x))
     assert sig.mode_frequencies(tr, f_min=5000.0) == []
+
+
+def _zero_pair(f0, zeta):
+    """Numerator of a discrete zero pair at f0 [Hz] with damping zeta (z = exp(s DT))."""
+    s = 2 * np.pi * f0 * (-zeta + 1j * np.sqrt(1 - zeta ** 2))
+    z = np.exp(s * DT)
+    return np.real(np.poly([z, np.conj(z)]))
+
+
+def test_model_notches_finds_light_zero_pairs_only():
+    b = np.convolve(_zero_pair(2100.0, 0.055), _zero_pair(1200.0, 0.3))
+    found = sig.model_notches(b, DT)
+    assert len(found) == 1
+    assert abs(found[0][0] / 2100.0 - 1.0) < 1e-6 and abs(found[0][1] - 0.055) < 1e-6
+    assert sig.model_notches([1.0], DT) == []
+
+
+def test_a_peak_in_a_notch_of_the_model_is_not_offered():
+    # the model's dynamics have a notch at 2100 Hz the stage does not: measured over model peaks there
+    b = _zero_pair(2100.0, 0.05)
+    b = b / np.sum(b)                     # unit static gain
+    xs = [sps.lfilter(b, [1.0], _drive(s)) for s in (1, 2)]
+    ys = [_drive(s) + 0.02 * np.random.default_rng(s + 100).standard_normal(N) for s in (1, 2)]
+    tr = sig.transfer(xs, ys, DT)
+    peak = sig.mode_frequencies(tr)
+    assert peak and abs(peak[0] / 2100.0 - 1.0) <= 0.03       # without the model's notches: offered
+    assert sig.mode_frequencies(tr, notches=sig.model_notches(b, DT)) == []
+    # a stage mode far from the notch is still offered
+    tr2 = _transfer(lambda x: x + 0.05 * (_mode(x, 1300.0, 0.02) - x))
+    assert sig.mode_frequencies(tr2, notches=sig.model_notches(b, DT))

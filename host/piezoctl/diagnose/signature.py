@@ -49,7 +49,7 @@ from scipy import stats
 
 from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
 
-__all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies", "dispersion", "check_delay", "check_bandwidth", "check_mode",
+__all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies", "model_notches", "NOTCH_DAMPING", "dispersion", "check_delay", "check_bandwidth", "check_mode",
            "check_slew", "check_slew_absent", "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
 
 ALPHA = 0.01                 # level of every test here
@@ -154,14 +154,39 @@ def transfer_peak(tr: Transfer) -> tuple[int, bool]:
     return int(np.argmax(np.where(sig, np.abs(tr.T - 1.0), -1.0))), True
 
 
-def mode_frequencies(tr: Transfer | None, f_min: float = 80.0) -> list[float] | None:
+NOTCH_DAMPING = 2 * max(UnmodeledResonance.DAMPINGS)   # a zero pair of the model this light is a notch (round 12)
+
+
+def model_notches(b, dt: float) -> list[tuple[float, float]]:
+    """(frequency [Hz], |damping|) of the lightly damped zero pairs of a discrete transfer function's numerator
+    ``b`` (|damping| at most ``NOTCH_DAMPING``, twice the vocabulary's largest mode damping): where the
+    model's dynamics have a notch, the measured-over-model transfer peaks by the model's doing.
+
+    The bound was read from the own benchmark (round 12): its sensor_offset and rate cases' base dynamics have a
+    zero pair at 2093 Hz with |damping| 0.055 (above their 959 Hz identified band, the C stage's one mode is at
+    600 Hz) and the transfer peaks there; the base dynamics' zeros of the nine foreign resonance cases have
+    |damping| 0.24 or more. Any bound between the two gives the same verdicts on them."""
+    out = []
+    for z in np.roots(np.atleast_1d(np.asarray(b, float))) if np.size(b) > 1 else []:
+        if z.imag <= 0 or abs(z) == 0:
+            continue
+        sz = np.log(z) / dt
+        w = abs(sz)
+        if w > 0 and abs(sz.real) / w <= NOTCH_DAMPING:
+            out.append((float(w / (2 * np.pi)), float(abs(sz.real) / w)))
+    return out
+
+
+def mode_frequencies(tr: Transfer | None, f_min: float = 80.0, notches=()) -> list[float] | None:
     """Round 12: where ``unmodeled_resonance`` is offered: the residual transfer's significant peak
     (:func:`transfer_peak`), the one place its signature check (:func:`check_mode`) lets a mode pass.
 
     Returns ``[f]`` [Hz] (the mode's grid is +-3 % around it), ``[]`` when ``|T - 1|`` deviates nowhere
     significantly or peaks at or below ``f_min`` (the residual spectrum's floor, ``locate.peak_frequencies``):
     every mode would fail its check, and None when the recordings give no transfer estimate (the residual
-    spectrum's peaks are used then).
+    spectrum's peaks are used then). ``notches``: :func:`model_notches` of the current model's dynamics; a peak
+    within a notch's half-power band (``|damping| f``, at least the mode grid's 3 % and one bin) is the model's own
+    notch, not a mode of the stage, and ``[]`` is returned.
 
     Why: ``locate.peak_frequencies`` ranks the peaks of the residual's *power* spectrum against a wide median;
     the reveal's wide chirp drives the residual over the whole band, so a mode's excess there is no narrow peak:
@@ -172,7 +197,12 @@ def mode_frequencies(tr: Transfer | None, f_min: float = 80.0) -> list[float] | 
     if tr is None:
         return None
     i, significant = transfer_peak(tr)
-    return [float(tr.f[i])] if significant and tr.f[i] > f_min else []
+    if not significant or tr.f[i] <= f_min:
+        return []
+    f0 = float(tr.f[i])
+    if any(abs(f0 - fz) <= max(z * fz, 0.03 * fz, tr.df) for fz, z in notches):
+        return []
+    return [f0]
 
 
 def dispersion(tr: Transfer, f_band: float) -> tuple[float, int]:
