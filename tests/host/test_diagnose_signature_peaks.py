@@ -90,3 +90,11 @@ def test_a_peak_in_a_notch_of_the_model_is_not_offered():
     # a stage mode far from the notch is still offered
     tr2 = _transfer(lambda x: x + 0.05 * (_mode(x, 1300.0, 0.02) - x))
     assert sig.mode_frequencies(tr2, notches=sig.model_notches(b, DT))
+
+
+def test_a_peak_inside_the_identified_band_is_not_offered():
+    # the model lacks a mode at 420 Hz that the calibration's band (here up to 535 Hz) covered: G's misfit there,
+    # not a mode above the band (development null s110-027)
+    tr = _transfer(lambda x: x + 0.3 * (_mode(x, 420.0, 0.1) - x))
+    assert sig.mode_frequencies(tr, f_min=80.0)
+    assert sig.mode_frequencies(tr, f_min=535.0) == []

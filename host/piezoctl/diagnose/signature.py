@@ -182,8 +182,10 @@ def mode_frequencies(tr: Transfer | None, f_min: float = 80.0, notches=()) -> li
     (:func:`transfer_peak`), the one place its signature check (:func:`check_mode`) lets a mode pass.
 
     Returns ``[f]`` [Hz] (the mode's grid is +-3 % around it), ``[]`` when ``|T - 1|`` deviates nowhere
-    significantly or peaks at or below ``f_min`` (the residual spectrum's floor, ``locate.peak_frequencies``):
-    every mode would fail its check, and None when the recordings give no transfer estimate (the residual
+    significantly (every mode would fail its check) or peaks at or below ``f_min`` (the diagnosis passes the band
+    the calibration identified the dynamics in, at least the residual spectrum's 80 Hz floor: the term's signature
+    is a mode above that band; inside it the base's G was fitted, and development null s110-027's transfer peaked
+    at its own main mode, 418 Hz inside its 535 Hz band, which the first form named), and None when the recordings give no transfer estimate (the residual
     spectrum's peaks are used then). ``notches``: :func:`model_notches` of the current model's dynamics; a peak
     within a notch's half-power band (``|damping| f``, at least the mode grid's 3 % and one bin) is the model's own
     notch, not a mode of the stage, and ``[]`` is returned.
