@@ -49,8 +49,9 @@ from scipy import stats
 
 from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
 
-__all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies", "model_notches", "NOTCH_DAMPING", "dispersion", "check_delay", "check_bandwidth", "check_mode",
-           "check_slew", "check_slew_absent", "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
+__all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies", "model_notches", "NOTCH_DAMPING",
+           "dispersion", "check_delay", "check_bandwidth", "check_mode", "check_slew", "check_slew_absent",
+           "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
 
 ALPHA = 0.01                 # level of every test here
 SEG_S = 0.1                  # [s] segment length aimed at (10 Hz bins); shortened so each recording gives 4
@@ -187,15 +188,17 @@ def mode_frequencies(tr: Transfer | None, f_min: float = 80.0, notches=()) -> li
     significantly (every mode would fail its check) or peaks at or below ``f_min`` (the diagnosis passes the band
     the calibration identified the dynamics in, at least the residual spectrum's 80 Hz floor: the term's signature
     is a mode above that band; inside it the base's G was fitted, and development null s110-027's transfer peaked
-    at its own main mode, 418 Hz inside its 535 Hz band, which the first form named), and None when the recordings give no transfer estimate (the residual
-    spectrum's peaks are used then). ``notches``: :func:`model_notches` of the current model's dynamics; a peak
-    within a notch's half-power band (``|damping| f``, at least the mode grid's 3 % and one bin) is the model's own
+    at its own main mode, 418 Hz inside its 535 Hz band, which the first form named), and None when the
+    recordings give no transfer estimate (the residual spectrum's peaks are used then). ``notches``:
+    :func:`model_notches` of the current model's dynamics; a peak within a notch's half-power band
+    (``|damping| f``, at least the mode grid's 3 % and one bin) is the model's own
     notch, not a mode of the stage, and ``[]`` is returned.
 
     Why: ``locate.peak_frequencies`` ranks the peaks of the residual's *power* spectrum against a wide median;
     the reveal's wide chirp drives the residual over the whole band, so a mode's excess there is no narrow peak:
-    on development cases s106-006 to s110-021 and the two-effect s109-002, s110-002 it offered no frequency
-    near the concealed mode (or none at all) in 8 of 9, while the transfer peaks within 2.5 % of it in 8 of 9.
+    on the resonance cases of development seeds 105-110 and the two-effect s109-002, s110-002 it offered no
+    frequency near the concealed mode (or none at all) in 8 of 9, while the transfer peaks within 2.5 % of it in
+    8 of 9 (docs/diagnose.md, "Round 12").
     On s106-006 the best of the residual spectrum's settings (302 Hz) won the grid and was then refused by the
     check (the transfer peaks at 930 Hz); offering only where the check can pass keeps the two consistent."""
     if tr is None:
