@@ -126,6 +126,7 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None):
               u_half_all=max(0.5 * float(np.ptp(uv)), 1e-9),
               max_step=max(float(np.max(np.abs(np.diff(s.u)))) for s in sigs),
               peak_freqs=loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt), y_span=span,
+              mode_freqs=_mode_freqs(base, sigs, valid, cal, cal_k0, dt),
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
               cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
               cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
@@ -149,6 +150,18 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None):
                                     "inside); a term found there rests on the base model's extrapolation.")}
     located = loc.locate([_cut(s, v) for s, v in zip(sigs, valid)], [r[v] for r, v in zip(resid, valid)], dt)
     return ctx, located, outside_doc
+
+
+def _mode_freqs(base, sigs, valid, cal, cal_k0, dt) -> list | None:
+    """Where ``unmodeled_resonance`` is offered (round 12, ``Ctx.mode_freqs``): the residual transfer's significant
+    peak (``signature.mode_frequencies``) when it lies above the band the calibration identified the dynamics in
+    (the term's signature: a mode above the calibration's band; inside it G was fitted and a peak there is the
+    base's misfit) and outside a notch of the base's own dynamics; None without a transfer estimate (then the
+    residual spectrum's peaks)."""
+    from .signature import mode_frequencies, model_notches, transfer
+    tr = transfer([s.yb[v] for s, v in zip(sigs, valid)], [s.y[v] for s, v in zip(sigs, valid)], dt)
+    return mode_frequencies(tr, f_min=max(80.0, calibration_band_hz(cal, cal_k0)),
+                            notches=model_notches(base["dynamics"]["b"], dt))
 
 
 def _drift_clock(cal, recs) -> dict:

@@ -109,6 +109,8 @@ class Ctx:
     #                                   offset of its own); None: one per recording (sessions unknown)
     offset_sessions: list | None = None  # the session label of each column, when sessions are known
     misfit: dict | None = None      # the base's error on held-out calibration histories (misfit.base_misfit)
+    mode_freqs: list | None = None  # where unmodeled_resonance is offered (round 12: the residual transfer's
+    #                                 significant peak, signature.mode_frequencies); None: at peak_freqs
 
     def offset_columns(self, s) -> np.ndarray:
         """The sensor-zero columns (n, m) of recording ``s``: a constant per sensor session other than the

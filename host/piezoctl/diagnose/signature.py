@@ -49,8 +49,9 @@ from scipy import stats
 
 from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
 
-__all__ = ["ALPHA", "Transfer", "transfer", "dispersion", "check_delay", "check_bandwidth", "check_mode",
-           "check_slew", "check_slew_absent", "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
+__all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies", "model_notches", "NOTCH_DAMPING",
+           "dispersion", "check_delay", "check_bandwidth", "check_mode", "check_slew", "check_slew_absent",
+           "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
 
 ALPHA = 0.01                 # level of every test here
 SEG_S = 0.1                  # [s] segment length aimed at (10 Hz bins); shortened so each recording gives 4
@@ -140,6 +141,75 @@ def transfer(xs, ys, dt, keep=None, nperseg=None) -> Transfer | None:
     var = np.abs(T[ok]) ** 2 * (1.0 - g2o) / (2.0 * nd * g2o)
     return Transfer(f=f[ok], T=T[ok], g2=g2o, var=np.maximum(var, 1e-300), n_d=nd, df=float(f[1]),
                     segments=nd)
+
+
+def transfer_peak(tr: Transfer) -> tuple[int, bool]:
+    """(index, significant): the bin of the largest ``|T - 1|`` among the informative bins where it deviates from 0
+    beyond the estimate's own variance (chi-square with 2 degrees of freedom, level ``ALPHA`` over the number of
+    bins, Bonferroni); when no bin does, the bin of the largest ``|T - 1|^2 / var`` and False. One definition for
+    where the mode is offered (:func:`mode_frequencies`) and where its check looks (:func:`check_mode`)."""
+    q = np.abs(tr.T - 1.0) ** 2 / tr.var
+    sig = stats.chi2.sf(q, 2) < ALPHA / max(tr.k, 1)
+    if not np.any(sig):
+        return int(np.argmax(q)), False
+    return int(np.argmax(np.where(sig, np.abs(tr.T - 1.0), -1.0))), True
+
+
+NOTCH_DAMPING = 0.2   # a zero pair of the model this light is a notch (round 12; read from cases, see model_notches)
+
+
+def model_notches(b, dt: float) -> list[tuple[float, float]]:
+    """(frequency [Hz], |damping|) of the lightly damped zero pairs of a discrete transfer function's numerator
+    ``b`` (|damping| at most ``NOTCH_DAMPING``): where the model's dynamics have a notch, the measured-over-model
+    transfer peaks by the model's doing.
+
+    **The bound was read from cases, not derived from a statistic** (round 12): on the own benchmark the transfer
+    peak named a second ``unmodeled_resonance`` on sensor_offset (the base dynamics' zero pair at 2093 Hz,
+    |damping| 0.055, transfer peak 2110 Hz) and on rate_dependent_hysteresis (zero pair 1115 Hz, |damping| 0.113,
+    peak 1180 Hz), above their identified bands; the C stage's one mode is at 600 Hz. The base dynamics' zero pairs
+    of the nine foreign resonance cases have |damping| 0.24 or more. 0.2 lies between; a value derived from the
+    notch's depth against the transfer's variance is left to do."""
+    out = []
+    for z in np.roots(np.atleast_1d(np.asarray(b, float))) if np.size(b) > 1 else []:
+        if z.imag <= 0 or abs(z) == 0:
+            continue
+        sz = np.log(z) / dt
+        w = abs(sz)
+        if w > 0 and abs(sz.real) / w <= NOTCH_DAMPING:
+            out.append((float(w / (2 * np.pi)), float(abs(sz.real) / w)))
+    return out
+
+
+def mode_frequencies(tr: Transfer | None, f_min: float = 80.0, notches=()) -> list[float] | None:
+    """Round 12: where ``unmodeled_resonance`` is offered: the residual transfer's significant peak
+    (:func:`transfer_peak`), the one place its signature check (:func:`check_mode`) lets a mode pass.
+
+    Returns ``[f]`` [Hz] (the mode's grid is +-3 % around it), ``[]`` when ``|T - 1|`` deviates nowhere
+    significantly (every mode would fail its check) or peaks at or below ``f_min`` (the diagnosis passes the band
+    the calibration identified the dynamics in, at least the residual spectrum's 80 Hz floor: the term's signature
+    is a mode above that band; inside it the base's G was fitted, and development null s110-027's transfer peaked
+    at its own main mode, 418 Hz inside its 535 Hz band, which the first form named), and None when the
+    recordings give no transfer estimate (the residual spectrum's peaks are used then). ``notches``:
+    :func:`model_notches` of the current model's dynamics; a peak within a notch's half-power band
+    (``|damping| f``, at least the mode grid's 3 % and one bin) is the model's own
+    notch, not a mode of the stage, and ``[]`` is returned.
+
+    Why: ``locate.peak_frequencies`` ranks the peaks of the residual's *power* spectrum against a wide median;
+    the reveal's wide chirp drives the residual over the whole band, so a mode's excess there is no narrow peak:
+    on the resonance cases of development seeds 105-110 and the two-effect s109-002, s110-002 it offered no
+    frequency near the concealed mode (or none at all) in 8 of 9, while the transfer peaks within 2.5 % of it in
+    8 of 9 (docs/diagnose.md, "Round 12").
+    On s106-006 the best of the residual spectrum's settings (302 Hz) won the grid and was then refused by the
+    check (the transfer peaks at 930 Hz); offering only where the check can pass keeps the two consistent."""
+    if tr is None:
+        return None
+    i, significant = transfer_peak(tr)
+    if not significant or tr.f[i] <= f_min:
+        return []
+    f0 = float(tr.f[i])
+    if any(abs(f0 - fz) <= max(z * fz, 0.03 * fz, tr.df) for fz, z in notches):
+        return []
+    return [f0]
 
 
 def dispersion(tr: Transfer, f_band: float) -> tuple[float, int]:
@@ -284,23 +354,21 @@ def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: 
     lies within the mode's half-power band."""
     half = max(float(damping) * freq_hz, 0.03 * freq_hz, tr.df)
     near = np.abs(tr.f - freq_hz) <= half
-    q = np.abs(tr.T - 1.0) ** 2 / tr.var
-    sig = stats.chi2.sf(q, 2) < ALPHA / max(tr.k, 1)      # Bonferroni over the bins
+    i, significant = transfer_peak(tr)
     fig = {"bins": tr.k, "segments": tr.n_d, "mode_hz": float(freq_hz), "half_band_hz": half,
            "identified_band_hz": float(f_band), "dispersion": float(s2)}
     if not np.any(near):
         return {"term": "unmodeled_resonance", "testable": False, "passed": True, "figures": fig,
                 "reason": f"no informative bin of the residual's transfer within {half:.0f} Hz of {freq_hz:.0f} Hz"}
     dev = np.abs(tr.T - 1.0)
-    i = int(np.argmax(np.where(sig, dev, -1.0))) if np.any(sig) else int(np.argmax(q))
     j = int(np.argmax(np.where(near, dev, -1.0)))
-    fig.update({"peak_hz": float(tr.f[i]), "peak_deviation": float(dev[i]), "peak_significant": bool(np.any(sig)),
+    fig.update({"peak_hz": float(tr.f[i]), "peak_deviation": float(dev[i]), "peak_significant": significant,
                 "deviation_at_mode": float(dev[j]), "deviation_at_mode_hz": float(tr.f[j])})
-    passed = bool(np.any(sig) and near[i])
+    passed = bool(significant and near[i])
     reason = None if passed else (
         f"the residual's transfer peaks at {tr.f[i]:.0f} Hz (|T - 1| = {dev[i]:.3g}), not within {half:.0f} Hz of "
         f"the mode's {freq_hz:.0f} Hz (there at most {dev[j]:.3g})"
-        if np.any(sig) else "the residual's transfer does not deviate significantly from 1 at any frequency")
+        if significant else "the residual's transfer does not deviate significantly from 1 at any frequency")
     return {"term": "unmodeled_resonance", "testable": True, "passed": passed, "reason": reason, "figures": fig}
 
 

@@ -493,12 +493,20 @@ class UnmodeledResonance(Term):
         bm, am = mode_filter(freq_hz, damping, dt)
         return np.column_stack([filt(bm, am, y) - y, filt(bm[1:], am, y) - y])
 
+    @staticmethod
+    def frequencies(ctx) -> list:
+        """Where the mode is offered [Hz]: ``ctx.mode_freqs`` (round 12: the residual transfer's significant peak,
+        where the mode's signature check can pass) when the diagnosis gives it, else ``ctx.peak_freqs`` (the
+        residual spectrum's peaks)."""
+        f = getattr(ctx, "mode_freqs", None)
+        return list(ctx.peak_freqs) if f is None else list(f)
+
     def applicable(self, ctx):
-        return bool(ctx.peak_freqs)
+        return bool(self.frequencies(ctx))
 
     def settings(self, ctx):
-        # around each residual peak (a damped ring's peak is not exactly its mode frequency)
-        return [(f * q, z) for f in ctx.peak_freqs for q in (0.97, 0.98, 0.99, 1.0, 1.01, 1.02, 1.03)
+        # around each offered frequency (a damped ring's peak is not exactly its mode frequency)
+        return [(f * q, z) for f in self.frequencies(ctx) for q in (0.97, 0.98, 0.99, 1.0, 1.01, 1.02, 1.03)
                 for z in self.DAMPINGS]
 
     def columns(self, ctx, s, setting):
