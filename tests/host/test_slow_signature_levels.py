@@ -82,7 +82,7 @@ def _with_spread(t, varies):
     return t
 
 
-def test_attribute_refuses_an_offset_whose_session_levels_vary_and_names_the_sized_drift():
+def test_attribute_names_the_sized_drift_whose_session_levels_vary():
     # s108-001-like: the offset passed and its signature holds, the drift's within the recordings does not, but
     # the recordings' levels vary beyond the base's misfit and the drift's candidate has the size
     evals = [_cand("sensor_offset", True, 0.5), _cand("thermal_drift", False, 0.57, p=1.2e-3), _cand("creep", False, 1.0)]
@@ -90,9 +90,9 @@ def test_attribute_refuses_an_offset_whose_session_levels_vary_and_names_the_siz
              _with_spread(_test("sensor_offset", True, 0.5), True)]
     text = attribute(evals, tests)
     assert evals[0].name == "thermal_drift" and evals[0].significant, text
-    assert "different levels" in text
+    assert "different levels" in evals[0].discrimination
     off = next(c for c in evals if c.name == "sensor_offset")
-    assert not off.significant and off.veto
+    assert not off.significant and off.veto and "attributed to thermal_drift" in off.veto
     # the same levels within the base's misfit: the offset keeps the name (round 11's verdict)
     evals = [_cand("sensor_offset", True, 0.5), _cand("thermal_drift", False, 0.57, p=1.2e-3), _cand("creep", False, 1.0)]
     tests = [_test("creep", False, 1.0), _with_spread(_test("thermal_drift", False, 0.8), False),
@@ -101,15 +101,16 @@ def test_attribute_refuses_an_offset_whose_session_levels_vary_and_names_the_siz
     assert evals[0].name == "sensor_offset" and evals[0].significant
 
 
-def test_varying_levels_alone_do_not_name_a_drift_without_its_size():
-    """Varying levels refuse the offset, but they are the drift's only when its own curve has the size: else no
-    slow name (creep's history or the base's misfit per recording could have set them)."""
+def test_varying_levels_alone_neither_name_a_drift_nor_refuse_the_offset():
+    """Varying levels are the drift's only when its own curve has the size; they do not refuse an offset (a reveal
+    recording of another kind can sit further off than the calibration's histories say: development offset cases
+    s110-002 and s110-017 named `none` when they did)."""
     evals = [_cand("sensor_offset", True, 0.5), _cand("thermal_drift", False, 0.95), _cand("creep", False, 1.0)]
     tests = [_test("creep", False, 1.0), _with_spread(_test("thermal_drift", False, 0.9), True),
              _with_spread(_test("sensor_offset", True, 0.5), True)]
-    text = attribute(evals, tests)
-    assert not any(c.significant for c in evals), text
-    assert "one sensor zero per session does not do" in text
+    attribute(evals, tests)
+    assert evals[0].name == "sensor_offset" and evals[0].significant
+    assert not next(c for c in evals if c.name == "thermal_drift").significant
 
 
 def test_a_holding_drift_takes_the_level_the_offset_candidate_took():
