@@ -131,3 +131,14 @@ def test_a_holding_drift_takes_the_level_the_offset_candidate_took():
 def test_signature_test_carries_the_spread_in_its_dict():
     t = _with_spread(SignatureTest("sensor_offset", 0.5, [0.5, 0.5], 0.5, 1e-6, 10, True), True)
     assert t.as_dict()["level_spread"]["varies"] is True
+
+
+def test_a_holding_drift_does_not_take_a_level_within_the_base_misfit():
+    """The offset's level refused as within the base's own level misfit (round 11) is no drift's either."""
+    evals = [_cand("sensor_offset", True, 0.6), _cand("thermal_drift", False, 0.95), _cand("creep", False, 1.0)]
+    off = _test("sensor_offset", True, 0.86)
+    off.level = {"refused": True, "within_base_misfit": True, "offset_um": [0.01], "quantile": 3.0,
+                 "base_level_rms_um": 0.02, "histories": 16, "depends_on_level": False, "p": 0.5,
+                 "fold_ratios": [1.0, 1.0]}
+    attribute(evals, [_test("creep", False, 1.0), _test("thermal_drift", True, 0.56), off])
+    assert not any(c.significant for c in evals)

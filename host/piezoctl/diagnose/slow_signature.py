@@ -436,8 +436,10 @@ def attribute(evals, tests) -> str | None:
         # round 12: a drift whose signature holds goes before the offset because a drift leaves a level; its own
         # candidate is tested beyond a constant per session, i.e. without that level. When the offset's candidate
         # passed or meets the size criteria, the slow effect's size is there and the level it took is the drift's
+        # (not when the offset's level lies within the base's own level misfit: then it is no drift's either)
         if c is not None and n == "thermal_drift" and not c.veto and "sensor_offset" in sized \
-                and "sensor_offset" in order[order.index(n):]:
+                and "sensor_offset" in order[order.index(n):] \
+                and not ((by["sensor_offset"].level or {}).get("refused")):
             chosen = c
             break
     if chosen is None:
@@ -448,10 +450,13 @@ def attribute(evals, tests) -> str | None:
                 "no slow signature holds", "no other slow signature holds"))
     else:
         level = ALPHA_SIGNATURE if by[chosen.name].holds else sg.ALPHA
-        text = (f"of the slow terms, the signature of {chosen.name} holds beyond the other two and the base's misfit "
-                f"at p < {level:.1e} ({figures})")
-        if not by[chosen.name].holds and not (by[chosen.name].confirms and chosen.significant):
-            text += f"; between the recordings: {spread_phrase(by[chosen.name].spread)}, on the session clock"
+        if by[chosen.name].holds or (by[chosen.name].confirms and chosen.significant):
+            text = (f"of the slow terms, the signature of {chosen.name} holds beyond the other two and the base's "
+                    f"misfit at p < {level:.1e} ({figures})")
+        else:   # round 12: between the recordings (_precedence)
+            text = (f"of the slow terms, the drift's signature holds between the recordings: "
+                    f"{spread_phrase(by[chosen.name].spread)}, and its curve on the session clock meets the size "
+                    f"criteria ({figures})")
         if not chosen.significant and _sized(chosen):
             text += (f"; {passed[0].name} passed its own test (p = {passed[0].p:.1e}), so a slow effect is there, and "
                      f"{chosen.name}'s own candidate meets the size criteria (fold ratios "
