@@ -36,6 +36,12 @@ signatures decide): the name goes to the term whose signature holds (a drift's b
 also leaves a level; otherwise the smallest unique ratio first), provided its own candidate meets the size
 criteria (fold ratios and credited ratio at most ``RATIO_MAX``, BIC lower). Slow candidates whose signature does
 not hold are not accepted, and when none holds the verdict is ``none`` with that reason.
+
+Round 12 (docs/diagnose.md, "Round 12: slow effects"): a foreign drift is almost all levels *between* the
+recordings. :func:`level_spread_test` compares the levels of a session's recordings with the base's level misfit
+(an F test); when they vary and the drift's own candidate has the size, the drift's signature holds between the
+recordings; and a drift whose signature holds takes the level the offset's candidate took (the drift's model term
+carries that level, ``ThermalDrift``'s ``level_um``).
 """
 
 from __future__ import annotations
