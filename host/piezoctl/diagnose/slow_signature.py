@@ -76,7 +76,7 @@ class SignatureTest:
     holds: bool              # at ALPHA_SIGNATURE (a search over the three)
     confirms: bool = False   # the same criteria at ALPHA (one pre-specified hypothesis: a passed term's own)
     level: dict | None = None   # sensor_offset: the level dependence within its sessions (offset_level_test)
-    spread: dict | None = None  # sensor_offset, thermal_drift: the recordings' levels within a session (level_spread_test)
+    spread: dict | None = None  # offset, drift: the levels of a session's recordings (level_spread_test)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "unique_ratio": self.unique_ratio, "fold_ratios": self.fold_ratios,
@@ -470,7 +470,8 @@ def attribute(evals, tests) -> str | None:
         elif not chosen.significant:
             off = next(x for x in slow if x.name == "sensor_offset")
             text += (f"; the drift leaves a level, and the offset's candidate took it (fold ratios "
-                     f"{off.fold_ratios[0]:.2f}/{off.fold_ratios[1]:.2f}, credited {off.credited:.2f}, p = {off.p:.1e}): "
+                     f"{off.fold_ratios[0]:.2f}/{off.fold_ratios[1]:.2f}, credited {off.credited:.2f}, "
+                     f"p = {off.p:.1e}): "
                      f"that level and the drift's own trend beyond it (fold ratios {chosen.fold_ratios[0]:.2f}/"
                      f"{chosen.fold_ratios[1]:.2f}) are the drift's")
         chosen.significant = True
