@@ -36,6 +36,12 @@ signatures decide): the name goes to the term whose signature holds (a drift's b
 also leaves a level; otherwise the smallest unique ratio first), provided its own candidate meets the size
 criteria (fold ratios and credited ratio at most ``RATIO_MAX``, BIC lower). Slow candidates whose signature does
 not hold are not accepted, and when none holds the verdict is ``none`` with that reason.
+
+Round 12 (docs/diagnose.md, "Round 12: slow effects"): a foreign drift is almost all levels *between* the
+recordings. :func:`level_spread_test` compares the levels of a session's recordings with the base's level misfit
+(an F test); when they vary and the drift's own candidate has the size, the drift's signature holds between the
+recordings; and a drift whose signature holds takes the level the offset's candidate took (the drift's model term
+carries that level, ``ThermalDrift``'s ``level_um``).
 """
 
 from __future__ import annotations
@@ -70,12 +76,14 @@ class SignatureTest:
     holds: bool              # at ALPHA_SIGNATURE (a search over the three)
     confirms: bool = False   # the same criteria at ALPHA (one pre-specified hypothesis: a passed term's own)
     level: dict | None = None   # sensor_offset: the level dependence within its sessions (offset_level_test)
+    spread: dict | None = None  # offset, drift: the levels of a session's recordings (level_spread_test)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "unique_ratio": self.unique_ratio, "fold_ratios": self.fold_ratios,
                 "credited_ratio": self.credited, "p_value": self.p, "n_active": self.n_active,
                 "alpha": ALPHA_SIGNATURE, "holds": self.holds, "alpha_own": sg.ALPHA, "confirms": self.confirms,
-                **({"level_dependence": self.level} if self.level is not None else {})}
+                **({"level_dependence": self.level} if self.level is not None else {}),
+                **({"level_spread": self.spread} if self.spread is not None else {})}
 
     def phrase(self) -> str:
         verdict = "holds" if self.holds else ("holds as its own term's" if self.confirms else "does not hold")
@@ -215,6 +223,68 @@ def offset_level_test(designs, levels, es, fold_all, block_all, rec, dt, rows, m
     return out
 
 
+def level_spread_test(designs, es, fold_all, rec, ctx, rows) -> dict | None:
+    """Whether the recordings of one sensor session sit at one level (round 12).
+
+    A moved sensor zero is one constant for every recording of its session; a drift on the session clock puts
+    each recording at the level the drift has got to when it was recorded. Per recording, its level ``L_r`` is
+    the coefficient of a constant for that recording fitted jointly with the nuisance and creep's regressors
+    (both centred or bounded so that they set no free level; the drift's columns are left out: the question is
+    whether there is something for them to explain), on each fold, averaged over the two. What else sets a level
+    per recording is the base's misfit on a history it did not see (the recording's initial state, the loop's
+    centre), whose level RMS ``s_L`` the calibration measures on ``H`` held-out histories (``misfit.py``). Within
+    the sessions other than the calibration's with at least two recordings, ``Q = sum (L_r - mean_session L)^2``
+    over ``d = sum (n_s - 1)`` degrees of freedom, and ``F = (Q / d) / s_L^2`` is compared with the F
+    distribution with (``d``, ``H``) degrees of freedom (``s_L^2`` is itself a mean of ``H`` squares); the
+    levels **vary** when its upper tail is below ``ALPHA_SIGNATURE``. None when no session has two recordings or
+    the misfit is not known (then one constant per recording: nothing to test).
+
+    It does **not** refuse an offset: ``s_L`` is measured on calibration histories, and a reveal recording of
+    another kind can sit much further off (development offset case s110-002: the random walk's level 0.9 um
+    from the triangles' against ``s_L`` = 0.008 um; refusing the offset there named ``none`` on two true
+    offsets). It is the drift's evidence *between* the recordings only together with the drift's own candidate
+    (its curve on the session clock) meeting the size criteria (:func:`_precedence`).
+    """
+    from scipy import stats as st
+    if ctx.offset_group is None or not ctx.misfit or not ctx.misfit.get("histories"):
+        return None
+    groups = np.array([ctx.offset_of(i) for i in range(ctx.n_rec)])
+    multi = [g for g in np.unique(groups) if g >= 0 and np.sum(groups == g) >= 2]
+    if not multi:
+        return None
+    R = (rec[:, None] == np.arange(ctx.n_rec)[None, :]).astype(float)
+    levels = []
+    for f in (0, 1):
+        N, n_lo, n_hi, grp = designs[f]
+        keep = [n for n in ("creep",) if n in grp]
+        X = np.hstack([N] + [grp[n][0] for n in keep] + [R])
+        lo = np.concatenate([n_lo] + [grp[n][1] for n in keep] + [np.full(ctx.n_rec, -np.inf)])
+        hi = np.concatenate([n_hi] + [np.full(grp[n][0].shape[1], np.inf) for n in keep] + [np.full(ctx.n_rec, np.inf)])
+        idx = train_rows(fold_all == f, rows)
+        levels.append(lstsq_box(X[idx], es[f][idx], lo, hi)[-ctx.n_rec:])
+    L = 0.5 * (levels[0] + levels[1])
+    q, d = 0.0, 0
+    for g in multi:
+        m = groups == g
+        q += float(np.sum((L[m] - L[m].mean()) ** 2))
+        d += int(np.sum(m)) - 1
+    h = len(ctx.misfit["histories"])
+    s2 = float(ctx.misfit["mse_um2"]["level"])
+    F = (q / d) / s2 if s2 > 0 else np.inf
+    p = float(st.f.sf(F, d, h)) if np.isfinite(F) else 0.0
+    return {"levels_um": [float(x) for x in L], "sessions_tested": [int(g) for g in multi], "dof": d,
+            "spread_rms_um": float(np.sqrt(q / d)), "base_level_rms_um": float(np.sqrt(s2)), "histories": h,
+            "f": float(F), "p": p, "varies": bool(p < ALPHA_SIGNATURE)}
+
+
+def spread_phrase(sp: dict) -> str:
+    """The level spread of :func:`level_spread_test`, in words."""
+    return (f"the recordings of a session sit at different levels ({', '.join(f'{x:+.3f}' for x in sp['levels_um'])} "
+            f"um; spread {sp['spread_rms_um']:.3f} um RMS against the base's own level misfit "
+            f"{sp['base_level_rms_um']:.3f} um on {sp['histories']} held-out histories, F = {sp['f']:.1f}, "
+            f"p = {sp['p']:.1e})")
+
+
 def _fit(X, e, lo, hi, train, test, rows):
     """Box-bounded least squares of ``e`` on ``X`` over the training rows (strided to at most ``rows``), on
     unit-RMS columns; the prediction on the test rows."""
@@ -288,6 +358,10 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
         if n == "sensor_offset":
             out[-1].level = offset_level_test(designs, [level_columns(c) for c in ctxs], es, fold_all, block_all,
                                               rec, ctx.dt, rows, ctx.misfit)
+    spread = level_spread_test(designs, es, fold_all, rec, ctx, rows)
+    for t in out:
+        if t.name in ("sensor_offset", "thermal_drift"):
+            t.spread = spread
     return out
 
 
@@ -310,12 +384,21 @@ def _sized(c) -> bool:
     return bool(max(c.fold_ratios) <= sg.RATIO_MAX and c.credited <= sg.RATIO_MAX and c.dbic < 0)
 
 
-def _precedence(tests, passed) -> list:
+def _varies(t) -> bool:
+    """The recordings of a session sit at different levels beyond the base's misfit (:func:`level_spread_test`)."""
+    return bool(t.spread and t.spread.get("varies"))
+
+
+def _precedence(tests, passed, sized=()) -> list:
     """The holding signatures in the order their terms are offered: by unique ratio, a drift before an offset
     (a drift leaves a level too: the offset's unique contribution then holds as well). A signature holds at
     ``ALPHA_SIGNATURE`` (any of the three: a search), or at ``ALPHA`` when its term passed its own test (``passed``:
-    the one hypothesis that the named term's signature is its own)."""
-    order = sorted((t for t in tests if t.holds or (t.confirms and t.name in passed)), key=lambda t: t.unique_ratio)
+    the one hypothesis that the named term's signature is its own). Round 12: the drift's also holds *between*
+    the recordings when the levels of a session's recordings vary beyond the base's misfit (``level_spread``, at
+    ``ALPHA_SIGNATURE``) and the drift's own candidate, a curve on the session clock, meets its size criteria
+    (``sized``): the levels follow the clock, which one constant per session cannot do."""
+    order = sorted((t for t in tests if t.holds or (t.confirms and t.name in passed)
+                    or (t.name == "thermal_drift" and _varies(t) and t.name in sized)), key=lambda t: t.unique_ratio)
     names = [t.name for t in order]
     if "thermal_drift" in names and "sensor_offset" in names:
         names.remove("thermal_drift")
@@ -340,14 +423,29 @@ def attribute(evals, tests) -> str | None:
     if not passed:
         return None
     figures = "; ".join(t.phrase() for t in tests)
+    spread = next((t.spread for t in tests if t.spread), None)
+    if spread:
+        figures += "; " + spread_phrase(spread).replace("the recordings of a session sit at", "recordings' levels:") \
+            + (" (vary)" if spread["varies"] else " (one level within the base's misfit)")
     chosen = None
     refused = None
-    for n in _precedence(tests, {c.name for c in passed}):
+    sized = {c.name for c in slow if not c.veto and (c.significant or _sized(c))}
+    order = _precedence(tests, {c.name for c in passed}, sized)
+    for n in order:
         c = next((x for x in slow if x.name == n), None)
         if c is not None and by[n].level is not None and by[n].level["refused"]:
             refused = level_phrase(by[n].level)   # round 11: an offset the base's misfit could be
             continue
         if c is not None and not c.veto and (c.significant or _sized(c)):
+            chosen = c
+            break
+        # round 12: a drift whose signature holds goes before the offset because a drift leaves a level; its own
+        # candidate is tested beyond a constant per session, i.e. without that level. When the offset's candidate
+        # passed or meets the size criteria, the slow effect's size is there and the level it took is the drift's
+        # (not when the offset's level lies within the base's own level misfit: then it is no drift's either)
+        if c is not None and n == "thermal_drift" and not c.veto and "sensor_offset" in sized \
+                and "sensor_offset" in order[order.index(n):] \
+                and not ((by["sensor_offset"].level or {}).get("refused")):
             chosen = c
             break
     if chosen is None:
@@ -358,12 +456,24 @@ def attribute(evals, tests) -> str | None:
                 "no slow signature holds", "no other slow signature holds"))
     else:
         level = ALPHA_SIGNATURE if by[chosen.name].holds else sg.ALPHA
-        text = (f"of the slow terms, the signature of {chosen.name} holds beyond the other two and the base's misfit "
-                f"at p < {level:.1e} ({figures})")
-        if not chosen.significant:
+        if by[chosen.name].holds or (by[chosen.name].confirms and chosen.significant):
+            text = (f"of the slow terms, the signature of {chosen.name} holds beyond the other two and the base's "
+                    f"misfit at p < {level:.1e} ({figures})")
+        else:   # round 12: between the recordings (_precedence)
+            text = (f"of the slow terms, the drift's signature holds between the recordings: "
+                    f"{spread_phrase(by[chosen.name].spread)}, and its curve on the session clock meets the size "
+                    f"criteria ({figures})")
+        if not chosen.significant and _sized(chosen):
             text += (f"; {passed[0].name} passed its own test (p = {passed[0].p:.1e}), so a slow effect is there, and "
                      f"{chosen.name}'s own candidate meets the size criteria (fold ratios "
                      f"{chosen.fold_ratios[0]:.2f}/{chosen.fold_ratios[1]:.2f}, credited {chosen.credited:.2f})")
+        elif not chosen.significant:
+            off = next(x for x in slow if x.name == "sensor_offset")
+            text += (f"; the drift leaves a level, and the offset's candidate took it (fold ratios "
+                     f"{off.fold_ratios[0]:.2f}/{off.fold_ratios[1]:.2f}, credited {off.credited:.2f}, "
+                     f"p = {off.p:.1e}): "
+                     f"that level and the drift's own trend beyond it (fold ratios {chosen.fold_ratios[0]:.2f}/"
+                     f"{chosen.fold_ratios[1]:.2f}) are the drift's")
         chosen.significant = True
         chosen.discrimination = "Attribution: " + text + "."
     for c in passed:

@@ -647,8 +647,14 @@ class ThermalDrift(Term):
         tau, sgn = setting
         c = sgn * np.asarray(coef, float)[self.n_nuisance(ctx):]
         lin = float(tau) >= 1e30
+        # round 12: the level the drift had reached when the recordings began (its constant per sensor-zero column,
+        # mean over the recordings, as sensor_offset's model): the drift's history before the first recording is
+        # not known (a warm-up that began between the calibration and the reveal), and without it a drift named
+        # for the level it left (slow_signature.attribute) failed its exact check (development s110-016: 1.10/1.02)
+        lv = np.asarray(coef, float)[:self.n_nuisance(ctx)]
+        per = [float(lv[ctx.offset_of(i)]) if ctx.offset_of(i) >= 0 else 0.0 for i in range(ctx.n_rec)]
         out = {"amplitude_um": 0.0 if lin else float(c[0]), "tau_s": 1e300 if lin else float(tau),
-               "slope_um_per_s": float(c[1])}
+               "slope_um_per_s": float(c[1]), "level_um": float(np.mean(per)) if per else 0.0}
         if ctx.drift_t0 is not None:
             out["t0_session_s"] = float(ctx.drift_t0)
         return out
@@ -657,6 +663,8 @@ class ThermalDrift(Term):
         t_from = self._t_from(p.get("t0_session_s"), st.t_session)
         st.y = st.y + self.basis(st.t, float(p["tau_s"]), t_from) @ [float(p["amplitude_um"]),
                                                                      float(p.get("slope_um_per_s", 0.0))]
+        if p.get("t0_session_s") is None or st.t_session is None or t_from >= 0.0:   # not on the calibration
+            st.y = st.y + float(p.get("level_um", 0.0))
 
     def describe_own(self, ctx, setting, coef):
         tau, sgn = setting
