@@ -158,10 +158,9 @@ def test_term_regressors_are_the_linearized_simulation():
         assert np.max(np.abs(d - X @ coef)) < tol * max(1.0, np.max(np.abs(d))), name
 
 
-def test_thermal_drift_on_the_session_clock_is_its_regressor_and_continues_across_recordings():
-    """With ``session_time_s`` on every recording the drift runs on the session clock from the end of the
-    calibration: a recording that starts 20 s later starts where the drift has got to, and the model with the
-    term minus the model without equals the drift's regressors times its coefficients."""
+def drift_session_setup():
+    """A 3 s calibration at session time 0 and two reveal recordings at 10 s and 30 s, on a base
+    model (plane + dynamics): (ctx, base, t [s], u [V], y [um], recordings), ``locate``'s context."""
     n = int(3 * FS)
     t = np.arange(n) / FS
     rng = np.random.default_rng(5)
@@ -172,6 +171,14 @@ def test_thermal_drift_on_the_session_clock_is_its_regressor_and_continues_acros
     cal = [Recording(t=t, u=u, y=y, path="c.csv", meta={"session_time_s": "0"})]
     recs = [Recording(t=t, u=u, y=y, path=f"r{i}.csv", meta={"session_time_s": f"{10 + 20 * i}"}) for i in (0, 1)]
     ctx, _, _ = locate(base, cal, recs, ["r0.csv", "r1.csv"], 0.5, 1.0)
+    return ctx, base, t, u, y, recs
+
+
+def test_thermal_drift_on_the_session_clock_is_its_regressor_and_continues_across_recordings():
+    """With ``session_time_s`` on every recording the drift runs on the session clock from the end of the
+    calibration: a recording that starts 20 s later starts where the drift has got to, and the model with the
+    term minus the model without equals the drift's regressors times its coefficients."""
+    ctx, base, t, u, y, recs = drift_session_setup()
     assert ctx.drift_t0 == pytest.approx(3.0 - 1 / FS) and ctx.drift_span == pytest.approx(30.0)
     term = TERMS["thermal_drift"]
     coef = [0.0, 0.0, 0.3, 0.002]

@@ -13,10 +13,10 @@ F_BAND = 20.0      # [Hz] the band "the calibration identified"
 N = 60_000         # 6 s per recording
 
 
-def _drive(seed, n=N):
-    """A broadband model output [um]: white noise low-passed at 1 kHz plus a slow sine."""
+def _drive(seed, n=N, f_cut=1000.0):
+    """A broadband model output [um]: white noise low-passed at ``f_cut`` [Hz] plus a slow sine."""
     rng = np.random.default_rng(seed)
-    b, a = sps.butter(2, 1000.0, fs=1.0 / DT)
+    b, a = sps.butter(2, f_cut, fs=1.0 / DT)
     t = np.arange(n) * DT
     return 2.0 * np.sin(2 * np.pi * 2.0 * t) + sps.lfilter(b, a, rng.standard_normal(n))
 

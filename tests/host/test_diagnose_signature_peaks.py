@@ -6,6 +6,7 @@ import numpy as np
 from scipy import signal as sps
 
 from piezoctl.diagnose import signature as sig
+from test_diagnose_signature import _drive as _broadband
 
 DT = 1e-4          # 10 kHz
 F_BAND = 300.0     # [Hz] the band "the calibration identified"
@@ -13,11 +14,8 @@ N = 60_000         # 6 s per recording
 
 
 def _drive(seed, n=N):
-    """A broadband model output [um]: white noise low-passed at 4 kHz plus a slow sine."""
-    rng = np.random.default_rng(seed)
-    b, a = sps.butter(2, 4000.0, fs=1.0 / DT)
-    t = np.arange(n) * DT
-    return 2.0 * np.sin(2 * np.pi * 2.0 * t) + sps.lfilter(b, a, rng.standard_normal(n))
+    """A broadband model output [um] reaching 4 kHz (above this file's modes)."""
+    return _broadband(seed, n, f_cut=4000.0)
 
 
 def _mode(x, f0, zeta):

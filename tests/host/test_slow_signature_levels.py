@@ -148,21 +148,10 @@ def test_the_drift_term_carries_the_level_it_reached_and_leaves_the_calibration_
     """Round 12: the refined model's drift adds its level (its constant per sensor-zero column, mean over the
     recordings) on the recordings after the calibration, so that the model with the term minus the model
     without is its regressors times its coefficients, level included; the calibration stays undrifted."""
-    from piezoctl.diagnose.run import locate
     from piezoctl.ident import refined
     from piezoctl.ident.terms import TERMS
-    from piezoctl.io.recording import Recording
-    from test_base_plane import FS, _plane
-    n = int(3 * FS)
-    t = np.arange(n) / FS
-    rng = np.random.default_rng(5)
-    u = 75 + 60 * np.sin(2 * np.pi * 3 * t)
-    base = {"fs_hz": FS, "u_mid": 75.0, "u_half": 75.0, "hysteresis": _plane(rng),
-            "dynamics": {"b": [0.3, 0.2], "a": [1.0, -0.5]}, "terms": {}}
-    y = refined.simulate(base, t, u)
-    cal = [Recording(t=t, u=u, y=y, path="c.csv", meta={"session_time_s": "0"})]
-    recs = [Recording(t=t, u=u, y=y, path=f"r{i}.csv", meta={"session_time_s": f"{10 + 20 * i}"}) for i in (0, 1)]
-    ctx, _, _ = locate(base, cal, recs, ["r0.csv", "r1.csv"], 0.5, 1.0)
+    from test_base_plane import drift_session_setup
+    ctx, base, t, u, y, recs = drift_session_setup()
     term = TERMS["thermal_drift"]
     coef = [0.15, 0.15, 0.3, 0.002]          # the level per recording (one value), warm-up, trend
     par = dict(base, terms={"thermal_drift": term.term(ctx, (15.0, 1.0), coef)})
