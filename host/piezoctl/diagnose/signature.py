@@ -155,6 +155,11 @@ def transfer_peak(tr: Transfer) -> tuple[int, bool]:
     return int(np.argmax(np.where(sig, np.abs(tr.T - 1.0), -1.0))), True
 
 
+def _half_band(freq_hz: float, damping: float, df: float) -> float:
+    """[Hz] a mode's (or notch's) half-power half-width ``|damping| f``, at least the mode grid's 3 % and one bin."""
+    return max(abs(float(damping)) * freq_hz, 0.03 * freq_hz, df)
+
+
 NOTCH_DAMPING = 0.2   # a zero pair of the model this light is a notch (round 12; read from cases, see model_notches)
 
 
@@ -207,7 +212,7 @@ def mode_frequencies(tr: Transfer | None, f_min: float = 80.0, notches=()) -> li
     if not significant or tr.f[i] <= f_min:
         return []
     f0 = float(tr.f[i])
-    if any(abs(f0 - fz) <= max(z * fz, 0.03 * fz, tr.df) for fz, z in notches):
+    if any(abs(f0 - fz) <= _half_band(fz, z, tr.df) for fz, z in notches):
         return []
     return [f0]
 
@@ -352,7 +357,7 @@ def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: 
     own variance (chi-square with 2 degrees of freedom, level ``ALPHA`` over the number of bins; where it lies
     is the question, not how well a model fits, so ``s2`` is not applied). Not testable when no informative bin
     lies within the mode's half-power band."""
-    half = max(float(damping) * freq_hz, 0.03 * freq_hz, tr.df)
+    half = _half_band(freq_hz, damping, tr.df)
     near = np.abs(tr.f - freq_hz) <= half
     i, significant = transfer_peak(tr)
     fig = {"bins": tr.k, "segments": tr.n_d, "mode_hz": float(freq_hz), "half_band_hz": half,
