@@ -86,6 +86,9 @@ void piezo_play_reset(struct piezo_play *p)
     p->acc_q39 = 0;
     p->u_prev_q15 = 0;
     p->primed = 0u;
+    p->run_dir = 0;
+    p->run_n = 0u;
+    p->run_w_q24 = 0;
 }
 
 /* The formula on every operator, the sum from scratch (first sample). */
@@ -463,12 +466,27 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
 
     if (c->n_a == 0u) {
         /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
-         * the operators that move are a prefix in both directions. */
+         * the operators that move are a prefix in both directions. The
+         * last sample's run (play.h) moves by d = u - u_prev as one when
+         * the direction holds: d * run_w, then only its stores; the scan
+         * goes on after it. */
         /* the step d = new - old decides the break by its sign (one subs
          * instead of a compare and a subtraction); |u|, r <= 2^20 and
          * |F| <= 2^21 (play.h), so d cannot overflow */
-        if (u_q15 > u_prev) {
-            for (size_t i = 0; i < n_r; i++) {
+        const int8_t dir = u_q15 > u_prev ? 1 : -1;
+        size_t i = 0;
+        int64_t run_w = 0;
+        if (dir == p->run_dir) {
+            i = p->run_n;
+            run_w = p->run_w_q24;
+            acc += run_w * (u_q15 - u_prev);
+        }
+        p->run_dir = dir;
+        if (dir > 0) {
+            for (size_t k = 0; k < i; k++) {
+                f[k] = u_q15 - r[k];
+            }
+            for (; i < n_r; i++) {
                 const int32_t lo = u_q15 - r[i];
                 const int32_t d = lo - f[i];
                 if (d <= 0) {
@@ -476,9 +494,13 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
                 }
                 f[i] = lo;
                 acc += (int64_t)w[i] * d;
+                run_w += w[i];
             }
         } else {
-            for (size_t i = 0; i < n_r; i++) {
+            for (size_t k = 0; k < i; k++) {
+                f[k] = u_q15 + r[k];
+            }
+            for (; i < n_r; i++) {
                 const int32_t hi = u_q15 + r[i];
                 const int32_t d = hi - f[i];
                 if (d >= 0) {
@@ -486,8 +508,11 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
                 }
                 f[i] = hi;
                 acc += (int64_t)w[i] * d;
+                run_w += w[i];
             }
         }
+        p->run_n = (uint16_t)i;
+        p->run_w_q24 = run_w;
         p->acc_q39 = acc;
         return acc;
     }
