@@ -443,13 +443,19 @@ static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, 
 }
 #endif
 
-int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
+/* The first sample after init or reset: every operator by the formula. */
+static __attribute__((noinline)) int64_t play_first(struct piezo_play *p, int32_t u_q15)
+{
+    p->primed = 1u;
+    p->u_prev_q15 = u_q15;
+    p->acc_q39 = play_full(p, u_q15);
+    return p->acc_q39;
+}
+
+int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15)
 {
     if (!p->primed) {
-        p->primed = 1u;
-        p->u_prev_q15 = u_q15;
-        p->acc_q39 = play_full(p, u_q15);
-        return p->acc_q39;
+        return play_first(p, u_q15);
     }
     const int32_t u_prev = p->u_prev_q15;
     if (u_q15 == u_prev) {
@@ -463,71 +469,86 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
     int32_t *f = p->f_q15;
     const size_t n_r = c->n_r;
     int64_t acc = p->acc_q39;
-
-    if (c->n_a == 0u) {
-        /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
-         * the operators that move are a prefix in both directions. The
-         * last sample's run (play.h) moves by d = u - u_prev as one when
-         * the direction holds: d * run_w, then only its stores; the scan
-         * goes on after it. */
-        /* the step d = new - old decides the break by its sign (one subs
-         * instead of a compare and a subtraction); |u|, r <= 2^20 and
-         * |F| <= 2^21 (play.h), so d cannot overflow */
-        const int8_t dir = u_q15 > u_prev ? 1 : -1;
-        size_t i = 0;
-        int64_t run_w = 0;
-        if (dir == p->run_dir) {
-            i = p->run_n;
-            run_w = p->run_w_q24;
-            acc += run_w * (u_q15 - u_prev);
-        }
-        p->run_dir = dir;
-        if (dir > 0) {
-            for (size_t k = 0; k < i; k++) {
-                f[k] = u_q15 - r[k];
-            }
-            for (; i < n_r; i++) {
-                const int32_t lo = u_q15 - r[i];
-                const int32_t d = lo - f[i];
-                if (d <= 0) {
-                    break;
-                }
-                f[i] = lo;
-                acc += (int64_t)w[i] * d;
-                run_w += w[i];
-            }
-        } else {
-            for (size_t k = 0; k < i; k++) {
-                f[k] = u_q15 + r[k];
-            }
-            for (; i < n_r; i++) {
-                const int32_t hi = u_q15 + r[i];
-                const int32_t d = hi - f[i];
-                if (d >= 0) {
-                    break;
-                }
-                f[i] = hi;
-                acc += (int64_t)w[i] * d;
-                run_w += w[i];
-            }
-        }
-        p->run_n = (uint16_t)i;
-        p->run_w_q24 = run_w;
-        p->acc_q39 = acc;
-        return acc;
+    /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
+     * the operators that move are a prefix in both directions. The
+     * last sample's run (play.h) moves by d = u - u_prev as one when
+     * the direction holds: d * run_w, then only its stores; the scan
+     * goes on after it. */
+    /* the step d = new - old decides the break by its sign (one subs
+     * instead of a compare and a subtraction); |u|, r <= 2^20 and
+     * |F| <= 2^21 (play.h), so d cannot overflow */
+    const int8_t dir = u_q15 > u_prev ? 1 : -1;
+    size_t i = 0;
+    int64_t run_w = 0;
+    if (dir == p->run_dir) {
+        i = p->run_n;
+        run_w = p->run_w_q24;
+        acc += run_w * (u_q15 - u_prev);
     }
+    p->run_dir = dir;
+    if (dir > 0) {
+        for (size_t k = 0; k < i; k++) {
+            f[k] = u_q15 - r[k];
+        }
+        for (; i < n_r; i++) {
+            const int32_t lo = u_q15 - r[i];
+            const int32_t d = lo - f[i];
+            if (d <= 0) {
+                break;
+            }
+            f[i] = lo;
+            acc += (int64_t)w[i] * d;
+            run_w += w[i];
+        }
+    } else {
+        for (size_t k = 0; k < i; k++) {
+            f[k] = u_q15 + r[k];
+        }
+        for (; i < n_r; i++) {
+            const int32_t hi = u_q15 + r[i];
+            const int32_t d = hi - f[i];
+            if (d >= 0) {
+                break;
+            }
+            f[i] = hi;
+            acc += (int64_t)w[i] * d;
+            run_w += w[i];
+        }
+    }
+    p->run_n = (uint16_t)i;
+    p->run_w_q24 = run_w;
+    p->acc_q39 = acc;
+    return acc;
+}
+
+int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
+{
+    if (!p->primed) {
+        return play_first(p, u_q15);
+    }
+    const int32_t u_prev = p->u_prev_q15;
+    if (u_q15 == u_prev) {
+        return p->acc_q39; /* the update is idempotent */
+    }
+    p->u_prev_q15 = u_q15;
 
     /* Unparallel, column by column (slope a_j, thresholds ascending); the
      * outputs are stored column by column too (slot j * n_r + i), so that a
      * column's outputs, thresholds and branch constants are walked in step;
      * only the weights (row-major, as given) are read with a stride. */
-    const size_t n_a = c->n_a;
+    const struct piezo_play_coef *c = p->coef;
+    int64_t acc = p->acc_q39;
     if (u_q15 > u_prev) {
         /* F = max(u - r_i, F): the upper branch cannot bind while rising. */
-        acc = rise(f, w, r, n_r, n_a, n_a, u_q15, acc);
+        acc = rise(p->f_q15, c->w_q24, c->r_q15, c->n_r, c->n_a, c->n_a, u_q15, acc);
     } else {
-        acc = upi_fall(c, p->off_q39, f, u_q15, acc);
+        acc = upi_fall(c, p->off_q39, p->f_q15, u_q15, acc);
     }
     p->acc_q39 = acc;
     return acc;
+}
+
+int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
+{
+    return p->coef->n_a == 0u ? piezo_play_process_cpi(p, u_q15) : piezo_play_process_upi(p, u_q15);
 }

@@ -128,6 +128,15 @@ void piezo_play_reset(struct piezo_play *p);
  */
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15);
 
+/*
+ * The same sample for a bank whose kind the caller knows (the EUPI model and
+ * its inverse: init checked it), without the dispatch: _cpi for a classical
+ * bank (n_a == 0), _upi for an unparallel one (n_a >= 1) or an empty one
+ * (n_r == 0).
+ */
+int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15);
+int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15);
+
 /* Output F_k of operator k = i * n_a + j (row-major, as the weights). */
 static inline int32_t piezo_play_output(const struct piezo_play *p, size_t k)
 {
