@@ -148,7 +148,12 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * (it splits the constant's ldrd and counts separately) and 19 with the
  * lower one, and spills the column loop's pointers; here 11 (two operators
  * per pass; the break tested on the sign of the step it stores) and 17
- * (two per pass too), the column state in the caller's struct (the constants'
+ * with the lower branch, but only over the column's lower-branch prefix:
+ * g_i = (u - r_i) - hi_i is non-increasing in i (r_{i+1} - r_i = D >= 0
+ * raises hi by floor(x + a D) - floor(x) >= floor(a D) >= 0, so g falls by
+ * at least D), so once the upper branch wins (u - r < hi) it wins for the
+ * rest of the column, which the upper-branch loop finishes at 11 (round 13).
+ * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
 struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
@@ -226,44 +231,34 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
-        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch, two per pass */
-        "    sub    r12, r3, r2\n"
-        "    tst    r12, #4\n"
-        "    bne    52f\n"
+        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r10, r11, [r1], #8\n"
-        "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"
-        "    cmp    r12, r11\n"
-        "    blt    6f\n"
+        "    adc    r11, r11, r7\n"            /* hi */
         "    ldr    r10, [r0], #4\n"
-        "    sub    r10, lr, r10\n"
-        "    cmp    r11, r10\n"
-        "    it     lt\n"
-        "    movlt  r11, r10\n"
-        "    str    r11, [r2], #4\n"
-        "    sub    r11, r11, r12\n"
+        "    sub    r10, lr, r10\n"            /* lo = u - r */
+        "    cmp    r10, r11\n"
+        "    blt    53f\n"                     /* lo < hi: from here on the upper branch wins */
+        "    ldr    r12, [r2]\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"                      /* F < hi ends the scan */
+        "    str    r10, [r2], #4\n"
+        "    sub    r10, r10, r12\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r11\n"
-        "52: ldrd   r10, r11, [r1], #8\n"
-        "    ldr    r12, [r2]\n"
-        "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"
-        "    cmp    r12, r11\n"
-        "    blt    6f\n"
-        "    ldr    r10, [r0], #4\n"
-        "    sub    r10, lr, r10\n"
-        "    cmp    r11, r10\n"
-        "    it     lt\n"
-        "    movlt  r11, r10\n"
-        "    str    r11, [r2], #4\n"
-        "    sub    r11, r11, r12\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r11\n"
+        "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    51b\n"
+        "    b      6f\n"
+        "53: ldr    r12, [r2]\n"               /* this operator on the upper branch, */
+        "    subs   r10, r11, r12\n"
+        "    bgt    6f\n"
+        "    str    r11, [r2], #4\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r10\n"
+        "    cmp    r2, r3\n"
+        "    bne    3b\n"                      /* the rest by the upper-branch loop */
         "6:  ldr    r0, [sp]\n"                /* next column: fp's starts where this one ends */
         "    str    r3, [r0, #4]\n"
         "    ldr    r12, [r0, #8]\n"
