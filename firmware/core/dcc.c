@@ -3,8 +3,25 @@
 
 #include "fixed_q.h"
 
+#include <string.h>
+
 /* The order entries: n2 in the upper half, the operator index in the lower
  * (n_ops <= 4096 < 2^16); as signed integers they sort by n2 first. */
+/* The operator index of an order entry (its low 16 bits). On a
+ * little-endian core they are the entry's first two bytes: one halfword load
+ * (ldrh, post-indexed in a loop) instead of a load and a zero extension; the
+ * same value either way. */
+static inline uint32_t order_index(const int32_t *entry)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    uint16_t j;
+    memcpy(&j, entry, sizeof j);
+    return j;
+#else
+    return (uint16_t)*entry;
+#endif
+}
+
 static int32_t order_entry(int16_t n2, uint16_t j)
 {
     return (int32_t)((uint32_t)(uint16_t)n2 << 16 | j);
@@ -484,7 +501,7 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
             if (r != old->lvl) {
                 dk += (int64_t)(r - old->lvl) * csum;
                 for (int32_t i = q; i < end; i++) {
-                    psi[(uint16_t)ord[i]] = r;
+                    psi[order_index(&ord[i])] = r;
                 }
             }
             old++;
@@ -530,7 +547,7 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
                 dk += (int64_t)r * zs;
                 csum = zs;
                 for (int32_t i = z; i < end; i++) {
-                    psi[(uint16_t)ord[i]] = r;
+                    psi[order_index(&ord[i])] = r;
                 }
             }
             for (; e < z; e++) {
