@@ -156,7 +156,7 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
-struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
+struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it updates it */
     uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
     int32_t *f;          /* 4: the column's outputs (column by column) */
     const int32_t *w;    /* 8: the column's first weight (row-major) */
@@ -165,26 +165,52 @@ struct upi_fall_args {   /* the column loop's state too: the assembly updates it
     const int32_t *a_end;/* 20: one past the last slope */
     uint32_t f_step;     /* 24: n_r * 4, bytes of a column of outputs */
     uint32_t w_stride;   /* 28: n_a * 4, bytes between a column's weights */
-    int32_t u;           /* 32 */
 };
 typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_stride) == 28u &&
-                                                 offsetof(struct upi_fall_args, u) == 32u) ? 1 : -1];
+                                                 sizeof(struct upi_fall_args) == 32u) ? 1 : -1];
+/* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
+typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
+                                        offsetof(struct piezo_play, f_q15) == 4u &&
+                                        offsetof(struct piezo_play, off_q39) == 8u &&
+                                        offsetof(struct piezo_play, u_prev_q15) == 24u &&
+                                        offsetof(struct piezo_play_coef, r_q15) == 0u &&
+                                        offsetof(struct piezo_play_coef, a_q24) == 4u &&
+                                        offsetof(struct piezo_play_coef, w_q24) == 8u &&
+                                        offsetof(struct piezo_play_coef, n_r) == 12u &&
+                                        offsetof(struct piezo_play_coef, n_a) == 14u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args *arg, int64_t acc)
+static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_play *p, int64_t acc)
 {
-    (void)arg;
+    (void)p;
     (void)acc;
     /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
      * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
      * thresholds in the lower-branch loop (the state's address at [sp]) */
     __asm__ volatile(
-        "    push   {r0, r4-r11, lr}\n"
+        "    push   {r4-r11, lr}\n"
+        "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
         "    mov    r8, r2\n"
         "    mov    r9, r3\n"
-        "    ldr    r5, [r0, #28]\n"
-        "    ldr    lr, [r0, #32]\n"
-        "    ldr    r1, [r0, #24]\n"
-        "    cmp    r1, #0\n"
+        "    ldr    r1, [r0, #0]\n"           /* coef */
+        "    ldr    r4, [r0, #4]\n"           /* f */
+        "    ldr    r5, [r0, #8]\n"           /* off */
+        "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
+        "    ldrh   r6, [r1, #12]\n"          /* n_r */
+        "    ldrh   r7, [r1, #14]\n"          /* n_a */
+        "    ldr    r10, [r1, #4]\n"          /* a */
+        "    ldr    r12, [r1, #8]\n"          /* w */
+        "    ldr    r11, [r1, #0]\n"          /* r */
+        "    sub    r5, r5, r4, lsl #1\n"
+        "    add    r1, r10, r7, lsl #2\n"
+        "    lsl    r6, r6, #2\n"
+        "    lsl    r7, r7, #2\n"
+        "    strd   r5, r4, [sp, #0]\n"
+        "    strd   r12, r11, [sp, #8]\n"
+        "    strd   r10, r1, [sp, #16]\n"
+        "    strd   r6, r7, [sp, #24]\n"
+        "    mov    r5, r7\n"
+        "    mov    r0, sp\n"
+        "    cmp    r6, #0\n"
         "    beq    7f\n"
         "1:  ldr    r10, [r0, #16]\n"          /* column: a_j, the split a u */
         "    ldr    r11, [r10], #4\n"
@@ -259,7 +285,7 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    3b\n"                      /* the rest by the upper-branch loop */
-        "6:  ldr    r0, [sp]\n"                /* next column: fp's starts where this one ends */
+        "6:  mov    r0, sp\n"                  /* next column: fp's starts where this one ends */
         "    str    r3, [r0, #4]\n"
         "    ldr    r12, [r0, #8]\n"
         "    add    r12, r12, #4\n"
@@ -269,24 +295,10 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    bne    1b\n"
         "7:  mov    r0, r8\n"
         "    mov    r1, r9\n"
-        "    add    sp, #4\n"
+        "    add    sp, #32\n"
         "    pop    {r4-r11, pc}\n");
 }
 
-static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
-                        int64_t acc)
-{
-    struct upi_fall_args arg = {(uintptr_t)off - 2u * (uintptr_t)f,
-                                f,
-                                c->w_q24,
-                                c->r_q15,
-                                c->a_q24,
-                                c->a_q24 + c->n_a,
-                                (uint32_t)(c->n_r * sizeof *f),
-                                (uint32_t)(c->n_a * sizeof *c->w_q24),
-                                u_q15};
-    return upi_fall_m4(&arg, acc);
-}
 #else
 static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
                         int64_t acc)
@@ -345,20 +357,10 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
 /* Cortex-M4: in Thumb-2, 10 instructions per moving operator (two per
  * pass; the break tested on the sign of the step it accumulates) against
  * gcc's 13; test_play and the EUPI golden vectors under QEMU. */
-struct rise_args {
-    int32_t *f;          /* 0 */
-    const int32_t *w;    /* 4 */
-    const int32_t *r;    /* 8 */
-    uint32_t n_col;      /* 12: >= 1 */
-    uint32_t f_step;     /* 16: n_r * 4 */
-    uint32_t w_stride;   /* 20: w_step * 4 */
-    int32_t u;           /* 24 */
-};
-typedef char piezo_rise_args_layout_check_t[(offsetof(struct rise_args, u) == 24u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *arg, int64_t acc)
+static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play *p, int64_t acc)
 {
-    (void)arg;
+    (void)p;
     (void)acc;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
      * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
@@ -367,14 +369,15 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *
         "    push   {r4-r11, lr}\n"
         "    mov    r8, r2\n"
         "    mov    r9, r3\n"
-        "    ldr    r2, [r0, #0]\n"
-        "    ldr    r4, [r0, #4]\n"
-        "    ldr    r11, [r0, #8]\n"
-        "    ldr    r10, [r0, #12]\n"
-        "    ldr    r12, [r0, #16]\n"
-        "    ldr    r5, [r0, #20]\n"
-        "    ldr    lr, [r0, #24]\n"
-        "    cmp    r12, #0\n"
+        "    ldr    r1, [r0, #0]\n"           /* coef */
+        "    ldr    r2, [r0, #4]\n"           /* f */
+        "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
+        "    ldr    r4, [r1, #8]\n"           /* w */
+        "    ldr    r11, [r1, #0]\n"          /* r */
+        "    ldrh   r12, [r1, #12]\n"         /* n_r */
+        "    ldrh   r10, [r1, #14]\n"         /* n_a: the columns and the weights' step */
+        "    lsl    r5, r10, #2\n"
+        "    lsls   r12, r12, #2\n"
         "    beq    5f\n"
         "1:  add    r3, r2, r12\n"             /* column */
         "    mov    r1, r11\n"
@@ -410,13 +413,6 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *
         "    pop    {r4-r11, pc}\n");
 }
 
-static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
-                    int32_t u_q15, int64_t acc)
-{
-    const struct rise_args arg = {f, w, r, (uint32_t)n_col, (uint32_t)(n_r * sizeof *f),
-                                  (uint32_t)(w_step * sizeof *w), u_q15};
-    return rise_m4(&arg, acc);
-}
 #else
 static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
                     int32_t u_q15, int64_t acc)
@@ -572,12 +568,17 @@ int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
      * only the weights (row-major, as given) are read with a stride. */
     const struct piezo_play_coef *c = p->coef;
     int64_t acc = p->acc_q39;
+    /* rising, F = max(u - r_i, F): the upper branch cannot bind */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+    (void)c;
+    acc = u_q15 > u_prev ? rise_m4(p, acc) : upi_fall_m4(p, acc); /* (they read p and its coefficients) */
+#else
     if (u_q15 > u_prev) {
-        /* F = max(u - r_i, F): the upper branch cannot bind while rising. */
         acc = rise(p->f_q15, c->w_q24, c->r_q15, c->n_r, c->n_a, c->n_a, u_q15, acc);
     } else {
         acc = upi_fall(c, p->off_q39, p->f_q15, u_q15, acc);
     }
+#endif
     p->acc_q39 = acc;
     return acc;
 }
