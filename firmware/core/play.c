@@ -86,6 +86,9 @@ void piezo_play_reset(struct piezo_play *p)
     p->acc_q39 = 0;
     p->u_prev_q15 = 0;
     p->primed = 0u;
+    p->run_dir = 0;
+    p->run_n = 0u;
+    p->run_w_q24 = 0;
 }
 
 /* The formula on every operator, the sum from scratch (first sample). */
@@ -145,10 +148,15 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * (it splits the constant's ldrd and counts separately) and 19 with the
  * lower one, and spills the column loop's pointers; here 11 (two operators
  * per pass; the break tested on the sign of the step it stores) and 17
- * (two per pass too), the column state in the caller's struct (the constants'
+ * with the lower branch, but only over the column's lower-branch prefix:
+ * g_i = (u - r_i) - hi_i is non-increasing in i (r_{i+1} - r_i = D >= 0
+ * raises hi by floor(x + a D) - floor(x) >= floor(a D) >= 0, so g falls by
+ * at least D), so once the upper branch wins (u - r < hi) it wins for the
+ * rest of the column, which the upper-branch loop finishes at 11 (round 13).
+ * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
-struct upi_fall_args {   /* the column loop's state too: the assembly updates it */
+struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it updates it */
     uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
     int32_t *f;          /* 4: the column's outputs (column by column) */
     const int32_t *w;    /* 8: the column's first weight (row-major) */
@@ -157,26 +165,52 @@ struct upi_fall_args {   /* the column loop's state too: the assembly updates it
     const int32_t *a_end;/* 20: one past the last slope */
     uint32_t f_step;     /* 24: n_r * 4, bytes of a column of outputs */
     uint32_t w_stride;   /* 28: n_a * 4, bytes between a column's weights */
-    int32_t u;           /* 32 */
 };
 typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_stride) == 28u &&
-                                                 offsetof(struct upi_fall_args, u) == 32u) ? 1 : -1];
+                                                 sizeof(struct upi_fall_args) == 32u) ? 1 : -1];
+/* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
+typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
+                                        offsetof(struct piezo_play, f_q15) == 4u &&
+                                        offsetof(struct piezo_play, off_q39) == 8u &&
+                                        offsetof(struct piezo_play, u_prev_q15) == 24u &&
+                                        offsetof(struct piezo_play_coef, r_q15) == 0u &&
+                                        offsetof(struct piezo_play_coef, a_q24) == 4u &&
+                                        offsetof(struct piezo_play_coef, w_q24) == 8u &&
+                                        offsetof(struct piezo_play_coef, n_r) == 12u &&
+                                        offsetof(struct piezo_play_coef, n_a) == 14u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args *arg, int64_t acc)
+static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_play *p, int64_t acc)
 {
-    (void)arg;
+    (void)p;
     (void)acc;
     /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
      * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
      * thresholds in the lower-branch loop (the state's address at [sp]) */
     __asm__ volatile(
-        "    push   {r0, r4-r11, lr}\n"
+        "    push   {r4-r11, lr}\n"
+        "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
         "    mov    r8, r2\n"
         "    mov    r9, r3\n"
-        "    ldr    r5, [r0, #28]\n"
-        "    ldr    lr, [r0, #32]\n"
-        "    ldr    r1, [r0, #24]\n"
-        "    cmp    r1, #0\n"
+        "    ldr    r1, [r0, #0]\n"           /* coef */
+        "    ldr    r4, [r0, #4]\n"           /* f */
+        "    ldr    r5, [r0, #8]\n"           /* off */
+        "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
+        "    ldrh   r6, [r1, #12]\n"          /* n_r */
+        "    ldrh   r7, [r1, #14]\n"          /* n_a */
+        "    ldr    r10, [r1, #4]\n"          /* a */
+        "    ldr    r12, [r1, #8]\n"          /* w */
+        "    ldr    r11, [r1, #0]\n"          /* r */
+        "    sub    r5, r5, r4, lsl #1\n"
+        "    add    r1, r10, r7, lsl #2\n"
+        "    lsl    r6, r6, #2\n"
+        "    lsl    r7, r7, #2\n"
+        "    strd   r5, r4, [sp, #0]\n"
+        "    strd   r12, r11, [sp, #8]\n"
+        "    strd   r10, r1, [sp, #16]\n"
+        "    strd   r6, r7, [sp, #24]\n"
+        "    mov    r5, r7\n"
+        "    mov    r0, sp\n"
+        "    cmp    r6, #0\n"
         "    beq    7f\n"
         "1:  ldr    r10, [r0, #16]\n"          /* column: a_j, the split a u */
         "    ldr    r11, [r10], #4\n"
@@ -223,45 +257,35 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
-        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch, two per pass */
-        "    sub    r12, r3, r2\n"
-        "    tst    r12, #4\n"
-        "    bne    52f\n"
+        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r10, r11, [r1], #8\n"
-        "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"
-        "    cmp    r12, r11\n"
-        "    blt    6f\n"
+        "    adc    r11, r11, r7\n"            /* hi */
         "    ldr    r10, [r0], #4\n"
-        "    sub    r10, lr, r10\n"
-        "    cmp    r11, r10\n"
-        "    it     lt\n"
-        "    movlt  r11, r10\n"
-        "    str    r11, [r2], #4\n"
-        "    sub    r11, r11, r12\n"
+        "    sub    r10, lr, r10\n"            /* lo = u - r */
+        "    cmp    r10, r11\n"
+        "    blt    53f\n"                     /* lo < hi: from here on the upper branch wins */
+        "    ldr    r12, [r2]\n"
+        "    cmp    r12, r11\n"
+        "    blt    6f\n"                      /* F < hi ends the scan */
+        "    str    r10, [r2], #4\n"
+        "    sub    r10, r10, r12\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r11\n"
-        "52: ldrd   r10, r11, [r1], #8\n"
-        "    ldr    r12, [r2]\n"
-        "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"
-        "    cmp    r12, r11\n"
-        "    blt    6f\n"
-        "    ldr    r10, [r0], #4\n"
-        "    sub    r10, lr, r10\n"
-        "    cmp    r11, r10\n"
-        "    it     lt\n"
-        "    movlt  r11, r10\n"
-        "    str    r11, [r2], #4\n"
-        "    sub    r11, r11, r12\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r11\n"
+        "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    51b\n"
-        "6:  ldr    r0, [sp]\n"                /* next column: fp's starts where this one ends */
+        "    b      6f\n"
+        "53: ldr    r12, [r2]\n"               /* this operator on the upper branch, */
+        "    subs   r10, r11, r12\n"
+        "    bgt    6f\n"
+        "    str    r11, [r2], #4\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r10\n"
+        "    cmp    r2, r3\n"
+        "    bne    3b\n"                      /* the rest by the upper-branch loop */
+        "6:  mov    r0, sp\n"                  /* next column: fp's starts where this one ends */
         "    str    r3, [r0, #4]\n"
         "    ldr    r12, [r0, #8]\n"
         "    add    r12, r12, #4\n"
@@ -271,24 +295,10 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct upi_fall_args
         "    bne    1b\n"
         "7:  mov    r0, r8\n"
         "    mov    r1, r9\n"
-        "    add    sp, #4\n"
+        "    add    sp, #32\n"
         "    pop    {r4-r11, pc}\n");
 }
 
-static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
-                        int64_t acc)
-{
-    struct upi_fall_args arg = {(uintptr_t)off - 2u * (uintptr_t)f,
-                                f,
-                                c->w_q24,
-                                c->r_q15,
-                                c->a_q24,
-                                c->a_q24 + c->n_a,
-                                (uint32_t)(c->n_r * sizeof *f),
-                                (uint32_t)(c->n_a * sizeof *c->w_q24),
-                                u_q15};
-    return upi_fall_m4(&arg, acc);
-}
 #else
 static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
                         int64_t acc)
@@ -347,20 +357,10 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
 /* Cortex-M4: in Thumb-2, 10 instructions per moving operator (two per
  * pass; the break tested on the sign of the step it accumulates) against
  * gcc's 13; test_play and the EUPI golden vectors under QEMU. */
-struct rise_args {
-    int32_t *f;          /* 0 */
-    const int32_t *w;    /* 4 */
-    const int32_t *r;    /* 8 */
-    uint32_t n_col;      /* 12: >= 1 */
-    uint32_t f_step;     /* 16: n_r * 4 */
-    uint32_t w_stride;   /* 20: w_step * 4 */
-    int32_t u;           /* 24 */
-};
-typedef char piezo_rise_args_layout_check_t[(offsetof(struct rise_args, u) == 24u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *arg, int64_t acc)
+static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play *p, int64_t acc)
 {
-    (void)arg;
+    (void)p;
     (void)acc;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
      * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
@@ -369,14 +369,15 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *
         "    push   {r4-r11, lr}\n"
         "    mov    r8, r2\n"
         "    mov    r9, r3\n"
-        "    ldr    r2, [r0, #0]\n"
-        "    ldr    r4, [r0, #4]\n"
-        "    ldr    r11, [r0, #8]\n"
-        "    ldr    r10, [r0, #12]\n"
-        "    ldr    r12, [r0, #16]\n"
-        "    ldr    r5, [r0, #20]\n"
-        "    ldr    lr, [r0, #24]\n"
-        "    cmp    r12, #0\n"
+        "    ldr    r1, [r0, #0]\n"           /* coef */
+        "    ldr    r2, [r0, #4]\n"           /* f */
+        "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
+        "    ldr    r4, [r1, #8]\n"           /* w */
+        "    ldr    r11, [r1, #0]\n"          /* r */
+        "    ldrh   r12, [r1, #12]\n"         /* n_r */
+        "    ldrh   r10, [r1, #14]\n"         /* n_a: the columns and the weights' step */
+        "    lsl    r5, r10, #2\n"
+        "    lsls   r12, r12, #2\n"
         "    beq    5f\n"
         "1:  add    r3, r2, r12\n"             /* column */
         "    mov    r1, r11\n"
@@ -412,13 +413,6 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct rise_args *
         "    pop    {r4-r11, pc}\n");
 }
 
-static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
-                    int32_t u_q15, int64_t acc)
-{
-    const struct rise_args arg = {f, w, r, (uint32_t)n_col, (uint32_t)(n_r * sizeof *f),
-                                  (uint32_t)(w_step * sizeof *w), u_q15};
-    return rise_m4(&arg, acc);
-}
 #else
 static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
                     int32_t u_q15, int64_t acc)
@@ -440,13 +434,62 @@ static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, 
 }
 #endif
 
-int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
+/* The classical run's stores: f[k] = u + r[k] falling (rsb == 0), u - r[k]
+ * rising (rsb == 1). On Thumb-2 two per pass (ldrd/strd: three
+ * instructions per operator; gcc's C pairs neither and spends five). */
+static inline void store_run(int32_t *f, const int32_t *r, size_t n, int32_t u, int rsb)
+{
+#if defined(__thumb2__)
+    if (n >= 2u) {
+        int32_t *const last2 = f + n - 1u; /* a pair fits while f < last2 */
+        int32_t t0, t1;
+        if (rsb) {
+            __asm__ volatile("1:\n\t"
+                             "ldrd  %[t0], %[t1], [%[r]], #8\n\t"
+                             "sub   %[t0], %[u], %[t0]\n\t"
+                             "sub   %[t1], %[u], %[t1]\n\t"
+                             "strd  %[t0], %[t1], [%[f]], #8\n\t"
+                             "cmp   %[f], %[l]\n\t"
+                             "blo   1b"
+                             : [f] "+r"(f), [r] "+r"(r), [t0] "=&r"(t0), [t1] "=&r"(t1)
+                             : [u] "r"(u), [l] "r"(last2)
+                             : "cc", "memory");
+        } else {
+            __asm__ volatile("1:\n\t"
+                             "ldrd  %[t0], %[t1], [%[r]], #8\n\t"
+                             "add   %[t0], %[u], %[t0]\n\t"
+                             "add   %[t1], %[u], %[t1]\n\t"
+                             "strd  %[t0], %[t1], [%[f]], #8\n\t"
+                             "cmp   %[f], %[l]\n\t"
+                             "blo   1b"
+                             : [f] "+r"(f), [r] "+r"(r), [t0] "=&r"(t0), [t1] "=&r"(t1)
+                             : [u] "r"(u), [l] "r"(last2)
+                             : "cc", "memory");
+        }
+        if (f <= last2) { /* n odd: one left */
+            *f = rsb ? u - *r : u + *r;
+        }
+        return;
+    }
+#endif
+    for (size_t k = 0; k < n; k++) {
+        f[k] = rsb ? u - r[k] : u + r[k];
+    }
+}
+
+/* The first sample after init or reset: every operator by the formula. */
+static __attribute__((noinline)) int64_t play_first(struct piezo_play *p, int32_t u_q15)
+{
+    p->primed = 1u;
+    p->u_prev_q15 = u_q15;
+    p->acc_q39 = play_full(p, u_q15);
+    return p->acc_q39;
+}
+
+int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15)
 {
     if (!p->primed) {
-        p->primed = 1u;
-        p->u_prev_q15 = u_q15;
-        p->acc_q39 = play_full(p, u_q15);
-        return p->acc_q39;
+        return play_first(p, u_q15);
     }
     const int32_t u_prev = p->u_prev_q15;
     if (u_q15 == u_prev) {
@@ -460,49 +503,87 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
     int32_t *f = p->f_q15;
     const size_t n_r = c->n_r;
     int64_t acc = p->acc_q39;
-
-    if (c->n_a == 0u) {
-        /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
-         * the operators that move are a prefix in both directions. */
-        /* the step d = new - old decides the break by its sign (one subs
-         * instead of a compare and a subtraction); |u|, r <= 2^20 and
-         * |F| <= 2^21 (play.h), so d cannot overflow */
-        if (u_q15 > u_prev) {
-            for (size_t i = 0; i < n_r; i++) {
-                const int32_t lo = u_q15 - r[i];
-                const int32_t d = lo - f[i];
-                if (d <= 0) {
-                    break;
-                }
-                f[i] = lo;
-                acc += (int64_t)w[i] * d;
-            }
-        } else {
-            for (size_t i = 0; i < n_r; i++) {
-                const int32_t hi = u_q15 + r[i];
-                const int32_t d = hi - f[i];
-                if (d >= 0) {
-                    break;
-                }
-                f[i] = hi;
-                acc += (int64_t)w[i] * d;
-            }
-        }
-        p->acc_q39 = acc;
-        return acc;
+    /* Classical: rising F = max(u - r, F), falling F = min(u + r, F);
+     * the operators that move are a prefix in both directions. The
+     * last sample's run (play.h) moves by d = u - u_prev as one when
+     * the direction holds: d * run_w, then only its stores; the scan
+     * goes on after it. */
+    /* the step d = new - old decides the break by its sign (one subs
+     * instead of a compare and a subtraction); |u|, r <= 2^20 and
+     * |F| <= 2^21 (play.h), so d cannot overflow */
+    const int8_t dir = u_q15 > u_prev ? 1 : -1;
+    size_t i = 0;
+    int64_t run_w = 0;
+    if (dir == p->run_dir) {
+        i = p->run_n;
+        run_w = p->run_w_q24;
+        acc += run_w * (u_q15 - u_prev);
     }
+    p->run_dir = dir;
+    if (dir > 0) {
+        store_run(f, r, i, u_q15, 1);
+        for (; i < n_r; i++) {
+            const int32_t lo = u_q15 - r[i];
+            const int32_t d = lo - f[i];
+            if (d <= 0) {
+                break;
+            }
+            f[i] = lo;
+            acc += (int64_t)w[i] * d;
+            run_w += w[i];
+        }
+    } else {
+        store_run(f, r, i, u_q15, 0);
+        for (; i < n_r; i++) {
+            const int32_t hi = u_q15 + r[i];
+            const int32_t d = hi - f[i];
+            if (d >= 0) {
+                break;
+            }
+            f[i] = hi;
+            acc += (int64_t)w[i] * d;
+            run_w += w[i];
+        }
+    }
+    p->run_n = (uint16_t)i;
+    p->run_w_q24 = run_w;
+    p->acc_q39 = acc;
+    return acc;
+}
+
+int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
+{
+    if (!p->primed) {
+        return play_first(p, u_q15);
+    }
+    const int32_t u_prev = p->u_prev_q15;
+    if (u_q15 == u_prev) {
+        return p->acc_q39; /* the update is idempotent */
+    }
+    p->u_prev_q15 = u_q15;
 
     /* Unparallel, column by column (slope a_j, thresholds ascending); the
      * outputs are stored column by column too (slot j * n_r + i), so that a
      * column's outputs, thresholds and branch constants are walked in step;
      * only the weights (row-major, as given) are read with a stride. */
-    const size_t n_a = c->n_a;
+    const struct piezo_play_coef *c = p->coef;
+    int64_t acc = p->acc_q39;
+    /* rising, F = max(u - r_i, F): the upper branch cannot bind */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+    (void)c;
+    acc = u_q15 > u_prev ? rise_m4(p, acc) : upi_fall_m4(p, acc); /* (they read p and its coefficients) */
+#else
     if (u_q15 > u_prev) {
-        /* F = max(u - r_i, F): the upper branch cannot bind while rising. */
-        acc = rise(f, w, r, n_r, n_a, n_a, u_q15, acc);
+        acc = rise(p->f_q15, c->w_q24, c->r_q15, c->n_r, c->n_a, c->n_a, u_q15, acc);
     } else {
-        acc = upi_fall(c, p->off_q39, f, u_q15, acc);
+        acc = upi_fall(c, p->off_q39, p->f_q15, u_q15, acc);
     }
+#endif
     p->acc_q39 = acc;
     return acc;
+}
+
+int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
+{
+    return p->coef->n_a == 0u ? piezo_play_process_cpi(p, u_q15) : piezo_play_process_upi(p, u_q15);
 }

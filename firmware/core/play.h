@@ -46,6 +46,15 @@
  * init or reset updates every operator. Worst case (every operator moves):
  * linear in the operator count.
  *
+ * Classical banks keep the run of the last sample: the operators that moved
+ * then, 0..run_n-1, hold u_prev - r_i (rising) or u_prev + r_i (falling). A
+ * sample that goes on in the same direction moves each of them by exactly
+ * d = u - u_prev (u - r_i > u_prev - r_i = F_i rising, the mirror falling),
+ * so their part of the sum is d * run_w (run_w = sum of their weights, kept
+ * in int64: |run_w| < 2^8 * 2^31 = 2^39 and |d| <= 2^21, so
+ * |d * run_w| < 2^60; the new sum is the exact one, within the bound below) and they are only stored; the scan goes on
+ * from operator run_n. A reversal starts the run anew from operator 0.
+ *
  * Initial state: every operator output is 0 after init and reset (relaxed,
  * demagnetized actuator at u = 0).
  *
@@ -93,6 +102,9 @@ struct piezo_play {
     int64_t acc_q39;       /* sum_k w_k F_k of the current outputs */
     int32_t u_prev_q15;    /* input of the last sample */
     uint8_t primed;        /* 0 after reset: the next sample updates every operator */
+    int8_t run_dir;        /* classical banks: +1 the last sample rose, -1 fell, 0 none */
+    uint16_t run_n;        /* classical banks: operators 0..run_n-1 hold u_prev -+ r_i */
+    int64_t run_w_q24;     /* classical banks: sum of w_i over those run_n operators */
 };
 
 /*
@@ -115,6 +127,15 @@ void piezo_play_reset(struct piezo_play *p);
  * piezo_play_output().
  */
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15);
+
+/*
+ * The same sample for a bank whose kind the caller knows (the EUPI model and
+ * its inverse: init checked it), without the dispatch: _cpi for a classical
+ * bank (n_a == 0), _upi for an unparallel one (n_a >= 1) or an empty one
+ * (n_r == 0).
+ */
+int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15);
+int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15);
 
 /* Output F_k of operator k = i * n_a + j (row-major, as the weights). */
 static inline int32_t piezo_play_output(const struct piezo_play *p, size_t k)

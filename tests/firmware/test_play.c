@@ -289,6 +289,102 @@ static void test_runs_equal_eager_formula(void **state)
     }
 }
 
+/* The classical scan as it was before the runs (round 12: every sample scans
+ * from operator 0, one multiply-add per moving operator), kept as the oracle
+ * of the runs' sum: the same state (f, acc, u_prev) advanced by the formula's
+ * prefix property alone. */
+static int64_t cpi_scan_oracle(const struct piezo_play_coef *c, int32_t *f, int64_t acc, int32_t u_prev,
+                               int32_t u)
+{
+    for (size_t i = 0; i < c->n_r && u != u_prev; i++) {
+        const int32_t v = u > u_prev ? u - c->r_q15[i] : u + c->r_q15[i];
+        const int32_t d = v - f[i];
+        if (u > u_prev ? d <= 0 : d >= 0) {
+            break;
+        }
+        f[i] = v;
+        acc += (int64_t)c->w_q24[i] * d;
+    }
+    return acc;
+}
+
+/* Classical banks (round 13: the last sample's run moved as one, d * run_w)
+ * against the scan above and against the formula on every operator, every
+ * sample: random walks of long monotone runs of small steps (the run grows
+ * by a few operators a sample), of large steps, pauses, small reversals of
+ * 1-3 LSB inside a run and large ones that wipe the bank; weights of both
+ * signs up to the int32 limits (the run's int64 weight sum); a reset in the
+ * middle of a run. Mutations that fail it: the run's sum off by one operator
+ * (run_n - 1), the run kept across a reversal, the run not dropped by reset. */
+static void test_classical_runs_equal_scan(void **state)
+{
+    (void)state;
+    static int32_t r[PIEZO_PLAY_MAX_OPS], w[PIEZO_PLAY_MAX_OPS];
+    static int32_t eager[PIEZO_PLAY_MAX_OPS], scan[PIEZO_PLAY_MAX_OPS];
+    static const uint16_t shapes[][2] = {{10, 15}, {10, 20}, {1, 15}, {2, 16}, {32, 15}, {256, 20}};
+    lcg_state = 777u;
+    for (size_t s = 0; s < sizeof shapes / sizeof shapes[0]; s++) {
+        const uint16_t n_r = shapes[s][0];
+        const int32_t span = (int32_t)1 << shapes[s][1];
+        int32_t t = 0;
+        for (size_t i = 0; i < n_r; i++) {
+            if (i == 0u || lcg() % 4u != 0u) {
+                t += lcg_range(0, span / (int32_t)n_r);
+            }
+            r[i] = t < span ? t : span;
+        }
+        for (size_t i = 0; i < n_r; i++) {
+            const uint32_t pick = lcg() % 4u; /* the extremes, then any int32 */
+            w[i] = pick == 0u ? INT32_MAX : pick == 1u ? INT32_MIN : (int32_t)(lcg() << 8 ^ lcg());
+        }
+        const struct piezo_play_coef c = {r, NULL, w, n_r, 0u};
+        struct piezo_play p;
+        assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, NULL, 0u), PIEZO_OK);
+        memset(eager, 0, sizeof eager);
+        memset(scan, 0, sizeof scan);
+        int64_t scan_acc = 0;
+        int32_t u = 0, u_prev = 0, dir = 1, left = 0, step = 1;
+        int primed = 0;
+        for (size_t k = 0; k < 20000u; k++) {
+            if (left-- <= 0) {
+                const uint32_t kind = lcg() % 6u;
+                dir = lcg() % 2u ? 1 : -1;
+                left = kind == 0u ? lcg_range(1, 3) : lcg_range(1, 400);
+                step = kind == 1u ? 0 : kind == 2u ? lcg_range(span / 8, span) : lcg_range(1, 1 + span / 512);
+            }
+            const int32_t jitter = lcg() % 32u == 0u ? -dir * lcg_range(1, 3) : 0;
+            int64_t next = (int64_t)u + dir * step + jitter;
+            next = next > span ? span : next < -span ? -span : next;
+            u = (int32_t)next;
+            if (k == 10007u) { /* a reset in the middle of a run */
+                piezo_play_reset(&p);
+                memset(eager, 0, sizeof eager);
+                memset(scan, 0, sizeof scan);
+                scan_acc = 0;
+                primed = 0;
+            }
+            eager_step(&c, eager, u);
+            if (!primed) { /* the first sample: the formula on every operator */
+                memcpy(scan, eager, n_r * sizeof scan[0]);
+                scan_acc = 0;
+                for (size_t q = 0; q < n_r; q++) {
+                    scan_acc += (int64_t)w[q] * eager[q];
+                }
+                primed = 1;
+            } else {
+                scan_acc = cpi_scan_oracle(&c, scan, scan_acc, u_prev, u);
+            }
+            u_prev = u;
+            assert_golden_i32("classical runs: sum", s * 100000u + k, piezo_play_process(&p, u), scan_acc);
+            for (size_t q = 0; q < n_r; q++) {
+                assert_golden_i32("classical runs: output", (s * 100000u + k) * 1000u + q,
+                                  piezo_play_output(&p, q), eager[q]);
+                assert_golden_i32("classical runs: scan", (s * 100000u + k) * 1000u + q, scan[q], eager[q]);
+            }
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -300,6 +396,7 @@ int main(void)
         cmocka_unit_test(test_init_refuses_bad_coefficients),
         cmocka_unit_test(test_branches_by_hand),
         cmocka_unit_test(test_runs_equal_eager_formula),
+        cmocka_unit_test(test_classical_runs_equal_scan),
     };
     return cmocka_run_group_tests_name("play", tests, NULL, NULL);
 }
