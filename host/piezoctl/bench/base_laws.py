@@ -83,7 +83,8 @@ def null_cases(seed: int, n: int, cases=None, settle_s: float = 0.5) -> list:
         fit's CPU time), ``reversal_levels`` and ``plays_allowed`` (what the calibration resolves), ``rows``
         per reveal recording: ``name``, ``rms_nm`` (model minus the noise-free output, settled samples
         inside the calibrated drive range), ``ratio`` (over the noise), ``shape_nm`` (the same without its mean:
-        what is left once a level - the recording's unknown initial state, an offset - is taken out), ``inside`` (fraction of the settled samples scored).
+        what is left once a level - the recording's unknown initial state, an offset - is taken out), ``inside``
+        (fraction of the settled samples scored).
     """
     from ..foreign.cases import case_plan, draw_case, write_case
     from ..io.recording import load_recording
