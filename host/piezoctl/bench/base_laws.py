@@ -80,10 +80,11 @@ def null_cases(seed: int, n: int, cases=None, settle_s: float = 0.5) -> list:
     -------
     list of dict
         Per case: ``id``, ``law``, ``noise_nm`` (sensor noise), ``plane`` (the chosen size), ``cpu_s`` (the
-        fit's CPU time), ``rows`` per reveal recording: ``name``, ``rms_nm`` (model minus the noise-free output,
-        settled samples inside the calibrated drive range), ``ratio`` (over the noise), ``shape_nm`` (the same
-        without its mean: what is left once a level - the recording's unknown initial state, an offset - is
-        taken out), ``inside`` (fraction of the settled samples scored).
+        fit's CPU time), ``reversal_levels`` and ``plays_allowed`` (what the calibration resolves), ``rows``
+        per reveal recording: ``name``, ``rms_nm`` (model minus the noise-free output, settled samples
+        inside the calibrated drive range), ``ratio`` (over the noise), ``shape_nm`` (the same without its mean:
+        what is left once a level - the recording's unknown initial state, an offset - is taken out), ``inside``
+        (fraction of the settled samples scored).
     """
     from ..foreign.cases import case_plan, draw_case, write_case
     from ..io.recording import load_recording
@@ -117,6 +118,7 @@ def null_cases(seed: int, n: int, cases=None, settle_s: float = 0.5) -> list:
                     "plane": f"R{info['plays']} K{info['knots']}" + (
                         f" + Bouc-Wen n={info['bouc_wen'][2] if len(info['bouc_wen']) > 2 else 1:.2f}"
                         if info["bouc_wen"] else ""),
+                    "reversal_levels": int(info["reversal_levels"]), "plays_allowed": list(info["plays_allowed"]),
                     "cpu_s": cpu, "rows": rows})
     return out
 
@@ -137,6 +139,11 @@ def main(argv=None) -> int:
         for c in null_cases(a.nulls, a.n, cases):
             print(f"{c['id']:24s} {c['law']:16s} noise {c['noise_nm']:.1f} nm, {c['plane']}, fit {c['cpu_s']:.1f} s "
                   f"CPU; peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB", flush=True)
+            # round 13: fewer than 2 R reversal levels leave the plane's thresholds above R unidentified
+            print(f"    calibration: {c['reversal_levels']} distinct reversal levels, plays allowed "
+                  f"{c['plays_allowed']}" + (" - the plane (minor loops) is not identified, only the reversible "
+                                             "curve and the column" if max(c['plays_allowed']) == 1 else ""),
+                  flush=True)
             for r in c["rows"]:
                 print(f"    {r['name']:36s} {r['rms_nm']:8.1f} nm  x{r['ratio']:6.1f}; without its mean "
                       f"{r['shape_nm']:8.1f} nm  x{r['shape_nm'] / c['noise_nm']:6.1f}  (inside {r['inside']:.2f})",

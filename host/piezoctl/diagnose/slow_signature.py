@@ -277,6 +277,60 @@ def level_spread_test(designs, es, fold_all, rec, ctx, rows) -> dict | None:
             "f": float(F), "p": p, "varies": bool(p < ALPHA_SIGNATURE)}
 
 
+def offset_after_drift_test(ctx, level) -> dict | None:
+    """Whether the offset's levels exceed what the accepted drift's model leaves as levels (round 13).
+
+    Once ``thermal_drift`` is in the model (``ctx.base["terms"]``), the levels a later offset candidate takes
+    (``level["offset_um"]``, :func:`offset_level_test`'s joint fit, one per sensor-zero column) are first of
+    all what the drift's model leaves: its curve is one setting of a grid of time constants
+    (``ThermalDrift.settings``) with one level for all recordings, so a drift whose time constant lies between
+    two of the grid's leaves a level per recording. How large those levels get is measured on the drift's own
+    curve ``D`` (the model's amplitude, time constant and slope on each recording's clock): ``D`` is refitted
+    by least squares with each neighbouring time constant of the grid (the slope alone counts as the largest;
+    amplitude and slope free) and one common level, and the mean of what that refit leaves over each
+    sensor-zero column's settled samples is a level ``m_ks`` the grid's resolution leaves. With ``s_D^2`` the
+    mean of the ``K`` values ``m_ks^2`` and ``n`` offset levels ``c_s``, ``F = mean(c_s^2) / s_D^2`` is
+    compared with the F distribution with (``n``, ``K``) degrees of freedom; the offset is **within the
+    drift's misfit** (refused) unless its upper tail is below ``ALPHA``: an offset is credited after a drift
+    only with levels the drift's model could not leave. None when no drift was accepted, no offset level was
+    fitted or the grid has no neighbour to measure with.
+    """
+    from scipy import stats as st
+    p = (ctx.base.get("terms") or {}).get("thermal_drift")
+    c = np.asarray((level or {}).get("offset_um", []), float)
+    if not p or c.size == 0 or ctx.n_offset() == 0:
+        return None
+    drift = TERMS["thermal_drift"]
+    tau = float(p["tau_s"])
+    tau = np.inf if tau >= 1e30 else tau
+    grid = sorted({float(t) for t, _ in drift.settings(ctx)})
+    if not grid:
+        return None
+    i = int(np.argmin([abs(np.log(g) - np.log(tau)) if np.isfinite(g) and np.isfinite(tau)
+                       else (0.0 if g == tau else np.inf) for g in grid]))
+    near = [grid[j] for j in (i - 1, i + 1) if 0 <= j < len(grid)]   # the settings either side of the model's
+    if not near:
+        return None
+    sigs = [s for s in ctx.signals if ctx.offset_of(s.index) >= 0]
+    t0 = [drift._t_from(p.get("t0_session_s"), s.t_session) for s in sigs]
+    v = [np.asarray(ctx.valid[s.index], bool) for s in sigs]
+    coef = [float(p["amplitude_um"]), float(p.get("slope_um_per_s", 0.0))]
+    D = np.concatenate([(drift.basis(s.t, tau, a) @ coef)[m] for s, a, m in zip(sigs, t0, v)])
+    col = np.concatenate([np.full(int(np.sum(m)), ctx.offset_of(s.index)) for s, m in zip(sigs, v)])
+    ms = []
+    for g in near:
+        B = np.vstack([drift.basis(s.t, g, a)[m] for s, a, m in zip(sigs, t0, v)])
+        X = np.column_stack([B, np.ones(B.shape[0])])
+        r = D - X @ np.linalg.lstsq(X, D, rcond=None)[0]
+        ms += [float(np.mean(r[col == k])) for k in np.unique(col)]
+    s2 = float(np.mean(np.square(ms)))
+    F = float(np.mean(c ** 2)) / s2 if s2 > 0 else np.inf
+    pv = float(st.f.sf(F, c.size, len(ms))) if np.isfinite(F) else 0.0
+    return {"drift_level_rms_um": float(np.sqrt(s2)), "drift_taus_s": [float(x) for x in near],
+            "drift_f": F, "drift_dof": [int(c.size), len(ms)], "drift_p": pv,
+            "within_drift_misfit": bool(pv >= sg.ALPHA)}
+
+
 def spread_phrase(sp: dict) -> str:
     """The level spread of :func:`level_spread_test`, in words."""
     return (f"the recordings of a session sit at different levels ({', '.join(f'{x:+.3f}' for x in sp['levels_um'])} "
@@ -358,6 +412,9 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
         if n == "sensor_offset":
             out[-1].level = offset_level_test(designs, [level_columns(c) for c in ctxs], es, fold_all, block_all,
                                               rec, ctx.dt, rows, ctx.misfit)
+            after = offset_after_drift_test(ctx, out[-1].level)   # round 13: after an accepted drift
+            if after is not None:
+                out[-1].level.update(after, refused=out[-1].level["refused"] or after["within_drift_misfit"])
     spread = level_spread_test(designs, es, fold_all, rec, ctx, rows)
     for t in out:
         if t.name in ("sensor_offset", "thermal_drift"):
@@ -372,10 +429,14 @@ def level_phrase(lv: dict) -> str:
         why.append(f"its level ({', '.join(f'{x:+.3f}' for x in lv['offset_um'])} um per session) lies within "
                    f"{lv['quantile']:.2f} x the base's own level misfit on calibration histories it did not see "
                    f"({lv['base_level_rms_um']:.3f} um RMS over {lv['histories']} histories)")
+    if lv.get("within_drift_misfit"):
+        why.append(f"its levels lie within what the accepted drift's model leaves as levels ("
+                   f"{lv['drift_level_rms_um']:.4f} um RMS, F = {lv['drift_f']:.2f}, p = {lv['drift_p']:.2f})")
     if lv.get("depends_on_level") and why:
         why.append(f"the residual of its sessions follows the output and drive level (held-out p = {lv['p']:.1e}, "
                    f"folds {lv['fold_ratios'][0]:.3f}/{lv['fold_ratios'][1]:.3f}), which an offset does not")
-    return " and ".join(why) + ": the offset cannot be told from the base's misfit there"
+    return " and ".join(why) + (f": the offset cannot be told from the "
+                                f"{'model' if lv.get('within_drift_misfit') else 'base'}'s misfit there")
 
 
 def _sized(c) -> bool:
