@@ -86,6 +86,11 @@ class Term:
     def applicable(self, ctx) -> bool:
         return True
 
+    def refuses(self, ctx) -> str | None:
+        """Why these data cannot credit the term at all (the candidate is still evaluated and counted among the
+        round's tests, then vetoed with this reason); None: they can."""
+        return None
+
     def settings(self, ctx) -> list:
         return [None]
 
@@ -396,6 +401,13 @@ class AsymmetricHysteresis(Term):
                 if side * (reach - knee) > self.STEP * span:   # the recordings go a grid step beyond the knee
                     out.append((side, float(knee)))
         return out
+
+    def refuses(self, ctx):
+        if len(self.settings(ctx)) > 1:
+            return None
+        return ("the recordings stay inside the calibrated drive range, where the base's non-parametric plane was "
+                "fitted and absorbs any asymmetry of the loop; what an even function of the drive takes there is a "
+                "change since the calibration (a sensor's curve) or the base's own misfit, not the stage's asymmetry")
 
     def refine(self, ctx, setting, level):
         if setting is None:
