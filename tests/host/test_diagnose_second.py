@@ -110,3 +110,15 @@ def test_flexibility_columns_are_the_gain_and_the_neighbour_changes():
     assert np.allclose(flex[:, :2], own)
     assert S._neighbours(ctx, ASYM, None) == []
     assert S.accepted_flexibility(ctx, ASYM, None).shape == (n, 2)
+
+
+def test_inside_the_calibrated_range_the_asymmetric_term_is_refused():
+    """Recordings inside the calibrated range: the base's plane absorbed any asymmetry there, so an even function
+    of the drive the held-out test credits is a change since the calibration (a sensor's curve) or the base's
+    misfit: evaluated (one of the round's tests) and vetoed; beyond the range it is not refused."""
+    ctx = _ctx(np.random.default_rng(9))
+    assert ASYM.refuses(ctx) and TERMS["sensor_nonlinearity"].refuses(ctx) is None
+    c = _evaluate(ctx, ASYM, np.random.default_rng(10), lambda s: 0.3 * (s.u / 0.9) ** 2)
+    assert max(c.fold_ratios) < 0.5 and c.p < c.p_max     # it would pass the held-out test
+    assert not c.significant and c.veto == ASYM.refuses(ctx)
+    assert ASYM.refuses(_narrow(ctx)) is None
