@@ -376,7 +376,10 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                   "signature test of its own (" + ", ".join(CHECKED_TERMS) + ") is tested with both ratios "
                                   f"below {FURTHER_RATIO_MAX:g} instead of {sg.RATIO_MAX} (at the round's level: Holm's "
                                   "step-down over the remaining candidates); when it passes only so, its signature must "
-                                  "hold (a slow signature at alpha / 3, a drive-side transfer check that can test it)",
+                                  "hold (a slow signature at alpha / 3, a drive-side transfer check that can test it); "
+                                  "after the first term every candidate is also nested against the accepted terms' "
+                                  "own flexibility (a free gain on each and the change to its setting's grid "
+                                  "neighbours, refitted on the same fold)",
                      "ratio_max": sg.RATIO_MAX, "ratio_max_further": FURTHER_RATIO_MAX,
                      "further_checked_terms": list(CHECKED_TERMS), "alpha_family": sg.ALPHA, "active_fraction": sg.ACTIVE_FRAC,
                      "unit_correlation_times": sg.UNIT_TAUS, "unit_min_s": sg.UNIT_MIN_S},

@@ -29,7 +29,8 @@ from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",
            "residual", "select", "model_with", "simulate_refined", "hysteresis_nuisance", "slow_nuisance",
-           "dynamics_nuisance", "initial_state_nuisance", "term_nuisance", "best_setting", "train_rows"]
+           "dynamics_nuisance", "initial_state_nuisance", "term_nuisance", "accepted_flexibility", "best_setting",
+           "train_rows"]
 
 
 # Rounds after the first (docs/diagnose.md, "Round 11: the second effect"). The first round's size gates (fold
@@ -111,6 +112,9 @@ class Ctx:
     misfit: dict | None = None      # the base's error on held-out calibration histories (misfit.base_misfit)
     mode_freqs: list | None = None  # where unmodeled_resonance is offered (round 12: the residual transfer's
     #                                 significant peak, signature.mode_frequencies); None: at peak_freqs
+    accepted_flex: np.ndarray | None = None  # (n_settled, m): the accepted terms' own flexibility (their gains and
+    #                                          their settings' grid neighbourhood, accepted_flexibility); a later
+    #                                          candidate is nested against it (round 13)
 
     def offset_columns(self, s) -> np.ndarray:
         """The sensor-zero columns (n, m) of recording ``s``: a constant per sensor session other than the
@@ -408,20 +412,60 @@ def slow_nuisance(ctx):
     return np.hstack([Nh, Ni]), lo, -lo
 
 
-def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True):
+def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True, accepted: bool = True):
     """The nested test's nuisance columns for ``term`` (None: not nested); ``dynamics=False`` leaves out the
     dynamics corrections (the term's setting for the model is chosen without them: they would take part of a
     delay or a pole and bias the setting); ``initial=False`` leaves out the initial-state columns (the same for
     the coefficients: the refined model has no initial state per recording, so a level they took would be
-    missing from its term). The initial-state columns, when taken, come last (bounds: :func:`nuisance_bounds`)."""
+    missing from its term); ``accepted=False`` leaves out the accepted terms' flexibility (``ctx.accepted_flex``,
+    for the same reason). The initial-state columns, when taken, come last (bounds: :func:`nuisance_bounds`)."""
     parts = []
     if term.nested:
         parts.append(hysteresis_nuisance(ctx))
     if term.nested_dynamics and dynamics:
         parts.append(dynamics_nuisance(ctx))
+    if accepted and ctx.accepted_flex is not None:
+        parts.append(ctx.accepted_flex)
     if term.initial_state and initial:
         parts.append(initial_state_nuisance(ctx))
     return np.hstack(parts) if parts else None
+
+
+def _neighbours(ctx, term, st) -> list:
+    """The settings next to ``st`` on ``term``'s grid: its first refinement around ``st`` (half a grid step either
+    side: saturation, the geometric drive-side grids), else the grid's settings before and after ``st``; none for
+    a setting None (a term without one, or the asymmetric term's whole-stroke form)."""
+    if st is None:
+        return []
+    near = list(term.refine(ctx, st, 1))
+    if near:
+        return near
+    grid = term.settings(ctx)
+    keys = [repr(x) for x in grid]
+    if repr(st) not in keys:
+        return []
+    i = keys.index(repr(st))
+    return [grid[j] for j in (i - 1, i + 1) if 0 <= j < len(grid)]
+
+
+def accepted_flexibility(ctx, term, st) -> np.ndarray:
+    """An accepted term's own flexibility (n_settled, m) on the model *without* it (``ctx``): its own regressor
+    columns at its setting ``st`` (a free gain on what it does) and the change of those columns to each grid
+    neighbour of ``st`` (:func:`_neighbours`: the first-order change of its setting). A later candidate is nested
+    against these columns as every candidate is against the base's hysteresis channels: what a refit of the
+    first term's gain and setting on the new data absorbs - a clip level half a grid step off, a slew limit's
+    residual ramps, a rate reference between two grid points - is not credited to a second effect (round 13:
+    an even polynomial of the drive after a saturation, a rate term after a slew limit). Columns that are zero
+    on every settled sample (a neighbour the data never reach) are dropped."""
+    def own(x):
+        d = _design(ctx, term, x).X
+        keep = [j for j in range(d.shape[1]) if j not in term.nuisance_columns(ctx, d.shape[1])]
+        return d[:, keep]
+    x0 = own(st)
+    cols = [x0] + [own(x) - x0 for x in _neighbours(ctx, term, st)]
+    ctx.design_cache.clear()
+    X = np.hstack(cols)
+    return X[:, np.any(X != 0.0, axis=0)]
 
 
 def nuisance_bounds(ctx, term, N, initial: bool = True):
@@ -435,9 +479,9 @@ def nuisance_bounds(ctx, term, N, initial: bool = True):
     return lo, hi
 
 
-def _nuis(ctx, term, train, test, rows, dynamics: bool = True, initial: bool = True):
+def _nuis(ctx, term, train, test, rows, dynamics: bool = True, initial: bool = True, accepted: bool = True):
     """The nuisance as passed to :func:`_fit_predict`: (train rows, test rows, bounds), or None."""
-    N = term_nuisance(ctx, term, dynamics, initial)
+    N = term_nuisance(ctx, term, dynamics, initial, accepted)
     if N is None:
         return None
     return (N[train_rows(train, rows)], N[test], nuisance_bounds(ctx, term, N, initial))
@@ -475,8 +519,9 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         best = best_setting(ctx, term, e, train, test, rows, N)
         best_st.append(best[0])
         pred_after[test] = best[3] - (e[test] - e_before[test])
-        if term.nested_dynamics or term.initial_state:   # the model's setting and coefficients: without the
-            Nm = _nuis(ctx, term, train, test, rows, dynamics=False, initial=False)   # columns it will not have
+        if term.nested_dynamics or term.initial_state or ctx.accepted_flex is not None:   # the model's setting and
+            Nm = _nuis(ctx, term, train, test, rows, dynamics=False, initial=False,    # coefficients: without the
+                       accepted=False)                                                # columns it will not have
             chosen.append(best_setting(ctx, term, e, train, test, rows, Nm))
         else:
             chosen.append(best)
@@ -498,6 +543,8 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     significant = bool(within(max(fold_ratios)) and p < p_max and dbic < 0)
     cr, bands = credited_ratio(rb_res, pred_after[used], rec, ctxs[0].dt, ctxs[0].misfit)
     veto = None
+    if significant and term.refuses(ctxs[0]):   # round 13: data that cannot credit it (Term.refuses)
+        significant, veto = False, term.refuses(ctxs[0])
     if significant and not within(cr):
         significant = False
         veto = (f"its held-out improvement lies within what the base's error on calibration histories it did not "
@@ -621,6 +668,12 @@ def pair_design(ctxs, cands, f):
         lb = np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)
         own = [j for j in range(X.shape[1]) if j not in c.term.nuisance_columns(ctx, X.shape[1])]
         cols.append((X[:, own], lb[own], np.full(len(own), np.inf)))
+    if ctx.accepted_flex is not None:   # the accepted terms' own flexibility, free (term_nuisance), before the
+        k = len(parts) - (1 if any(t.initial_state for t in terms) else 0)   # initial state's bounded gains
+        m = ctx.accepted_flex.shape[1]
+        parts.insert(k, ctx.accepted_flex)
+        lo.insert(k, np.full(m, -np.inf))
+        hi.insert(k, np.full(m, np.inf))
     n = sum(int(np.sum(v)) for v in ctx.valid)
     N = np.hstack(parts) if parts else np.zeros((n, 0))
     return N, np.concatenate(lo) if lo else np.zeros(0), np.concatenate(hi) if hi else np.zeros(0), cols
@@ -843,15 +896,20 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         allmask = fold_all >= 0
         e_all = residual(ctx_all)
         term = best.term
-        N = _nuis(ctx_all, term, allmask, np.zeros(e_all.size, bool), rows, dynamics=False, initial=False)
+        N = _nuis(ctx_all, term, allmask, np.zeros(e_all.size, bool), rows, dynamics=False, initial=False,
+                  accepted=False)
         st, _, _, _, th = best_setting(ctx_all, term, e_all, allmask, np.zeros(e_all.size, bool), rows, N)
         best.setting_all, best.coef_all = st, th
         best.described = term.describe(ctx_all, st, th)
         c_term = np.array(th, float)
         c_term[term.nuisance_columns(ctx_all, c_term.size)] = 0.0  # where the term acts: its own columns only
         best.contrib = [np.asarray(term.regressors(ctx_all, s, st), float) @ c_term for s in ctx_all.signals]
+        flex = [accepted_flexibility(fctx[f], term, best.setting[f]) for f in (0, 1)]   # on the model without it
         ctx_all = rebase(ctx_all, model_with(ctx_all.base, {term.name: term.term(ctx_all, st, th)}), recs)
         fctx = [rebase(fctx[f], best.exact[f]["params"], recs) for f in (0, 1)]
+        for f in (0, 1):
+            prev = fctx[f].accepted_flex
+            fctx[f].accepted_flex = flex[f] if prev is None else np.hstack([prev, flex[f]])
         accepted.append(best)
     clear_output_cache()   # the drive-side settings' H outputs (up to 380 MB) serve the selection only
     return accepted, rounds, ctx_all, fctx

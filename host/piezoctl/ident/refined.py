@@ -46,7 +46,9 @@ Parameters (JSON, physical units where they have one)
     - ``amplifier_slew_limit``: ``v_per_s`` (rate limit of the drive).
     - ``saturation``: ``lo_v``, ``hi_v`` (clip of the drive; null = no limit).
     - ``asymmetric_hysteresis``: ``c2_um``, ``c3_um`` on ``s = (u - mid) / half``
-      with the term's own ``mid_v``, ``half_v``.
+      with the term's own ``mid_v``, ``half_v``; with ``side`` (+1, -1) and
+      ``knee_v`` on ``x = max(side (u - knee_v), 0) / half_v`` instead (one end
+      of the stroke only).
     - ``rate_dependent_hysteresis``: ``gain`` [1] and ``ref_fs_per_s``: the
       hysteretic part of H is scaled by ``1 + gain r / (r + ref)``, r the
       magnitude of the normalized drive rate [FS/s] low-passed at

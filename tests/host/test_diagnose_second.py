@@ -1,0 +1,124 @@
+"""Round 13 (docs/diagnose.md, "Round 13: the second effect, asymmetry and rate"): a later candidate is nested
+against the accepted term's own flexibility, and the asymmetric term's one-sided form beyond the calibrated range."""
+
+import numpy as np
+
+from piezoctl.diagnose import select as S
+from piezoctl.diagnose import significance as sg
+from piezoctl.ident.terms import TERMS, SimState
+
+from test_diagnose_slow import NOISE_UM, _ctx
+
+ROWS = 200_000
+ASYM, SAT = TERMS["asymmetric_hysteresis"], TERMS["saturation"]
+
+
+def _narrow(ctx, lo=-0.5, hi=0.5):
+    """The synthetic session with a calibration that covered only [lo, hi] of the drive (the recordings span
+    -0.9..0.9)."""
+    ctx.cal_u_lo, ctx.cal_u_hi = lo, hi
+    return ctx
+
+
+def _masks(ctx):
+    fold = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
+    block = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+    return fold, block
+
+
+def _soften(s, knee=-0.6, a=0.4, p=2.2):
+    """An extra displacement below ``knee`` growing as the excess to the power ``p`` [um] (one end softer)."""
+    return -a * (np.maximum(knee - s.u, 0.0) / 0.3) ** p
+
+
+def _evaluate(ctx, term, rng, effect, accepted=()):
+    for s in ctx.signals:
+        s.y = s.yb + effect(s) + NOISE_UM * rng.normal(size=s.t.size)
+    fold, block = _masks(ctx)
+    e = S.residual(ctx)
+    return S._evaluate([ctx, ctx], term, [e, e], fold, block, ROWS, sg.ALPHA / 12, S._ratio_max(term, list(accepted)))
+
+
+def test_asymmetric_knees_lie_beyond_the_calibrated_range_only():
+    ctx = _ctx(np.random.default_rng(1))
+    assert ASYM.settings(ctx) == [None]   # calibrated over -1..1: the recordings never leave it
+    st = ASYM.settings(_narrow(ctx))
+    assert st[0] is None and len(st) > 1
+    for side, knee in st[1:]:
+        edge = ctx.cal_u_lo if side < 0 else ctx.cal_u_hi
+        assert side * (knee - edge) >= 0.0               # at or beyond the calibrated edge
+        assert side * ((ctx.u_lo if side < 0 else ctx.u_hi) - knee) > ASYM.STEP * (ctx.u_hi - ctx.u_lo)
+    assert {s for s, _ in st[1:]} == {-1, 1}
+
+
+def test_asymmetric_hinge_model_equals_its_regressors():
+    """The model's part (``apply``) and the regressor (``columns``, G = 1 here) are one function."""
+    ctx = _narrow(_ctx(np.random.default_rng(2)))
+    s = ctx.signals[0]
+    st = (-1, -0.55)
+    coef = np.array([0.3, -0.1, 0.02])   # c2, c3, the intercept (the model's offset)
+    p = ASYM.term(ctx, st, coef)
+    sim = SimState(params={}, t=s.t, dt=s.dt, u=s.u, u2=None, ue=s.u, h=np.zeros(s.u.size))
+    ASYM.apply(p, sim)
+    X = ASYM.regressors(ctx, s, st)
+    assert np.allclose(sim.h, X[:, :2] @ coef[:2])
+    assert np.all(sim.h[s.u >= -0.55] == 0.0) and np.any(sim.h != 0.0)
+    assert p["side"] == -1 and p["knee_v"] == -0.55 and p["_hysteresis"]["offset"] == coef[2]
+
+
+def test_a_softer_end_beyond_the_calibration_is_fitted_by_the_hinge():
+    """An extra below a knee beyond the calibrated range: the whole-stroke polynomial has to bend the calibrated
+    range too; the one-sided form takes it, at a knee near the true one."""
+    ctx = _narrow(_ctx(np.random.default_rng(3)))
+    c = _evaluate(ctx, ASYM, np.random.default_rng(4), _soften)
+    assert c.significant and max(c.fold_ratios) < 0.2, c.fold_ratios
+    for st in c.setting:
+        assert st is not None and st[0] == -1 and abs(st[1] - (-0.6)) < 0.1, c.setting
+
+
+def test_what_the_first_terms_refit_absorbs_is_not_credited_to_a_second():
+    """Saturation accepted at a clip level a grid step off the true one: what it leaves is a one-sided bend
+    at the drive's end, which the asymmetric term fits as a second effect; nested against the first term's own
+    flexibility (its gain and its grid neighbours) it is not credited. A softer *other* end is."""
+    ctx = _narrow(_ctx(np.random.default_rng(5)))
+    sat = SAT.settings(ctx)
+    st0 = next(s for s in sat if s[0] is None and s[1] < 0.8)     # a clip below the top of the drive
+    true = SAT.refine(ctx, st0, 0)[1]                              # the true clip a grid step higher
+    x0 = [np.asarray(SAT.regressors(ctx, s, st0), float)[:, 0] for s in ctx.signals]
+    x1 = [np.asarray(SAT.regressors(ctx, s, true), float)[:, 0] for s in ctx.signals]
+    left = {s.index: x1[s.index] - x0[s.index] for s in ctx.signals}   # what the mis-set clip leaves
+    assert max(float(np.max(np.abs(v))) for v in left.values()) > 20 * NOISE_UM
+    plain = _evaluate(ctx, ASYM, np.random.default_rng(6), lambda s: left[s.index], accepted=["saturation"])
+    assert plain.significant, (plain.fold_ratios, plain.p)
+    flex = S.accepted_flexibility(ctx, SAT, st0)
+    assert flex.shape[1] == 3   # its gain and the change to each of its two neighbours
+    ctx.accepted_flex = flex
+    nested = _evaluate(ctx, ASYM, np.random.default_rng(6), lambda s: left[s.index], accepted=["saturation"])
+    assert not nested.significant and min(nested.fold_ratios) > 0.9, (nested.fold_ratios, nested.p)
+    other = _evaluate(ctx, ASYM, np.random.default_rng(7), lambda s: left[s.index] + _soften(s),
+                      accepted=["saturation"])
+    assert other.significant and max(other.fold_ratios) < 0.5, (other.fold_ratios, other.p)
+
+
+def test_flexibility_columns_are_the_gain_and_the_neighbour_changes():
+    ctx = _narrow(_ctx(np.random.default_rng(8)))
+    st = (-1, -0.5)
+    flex = S.accepted_flexibility(ctx, ASYM, st)
+    n = sum(int(np.sum(v)) for v in ctx.valid)
+    own = np.vstack([ASYM.regressors(ctx, s, st)[v][:, :2] for s, v in zip(ctx.signals, ctx.valid)])
+    assert flex.shape == (n, 6)   # c2, c3 at the knee, and their change to the knees half a step either side
+    assert np.allclose(flex[:, :2], own)
+    assert S._neighbours(ctx, ASYM, None) == []
+    assert S.accepted_flexibility(ctx, ASYM, None).shape == (n, 2)
+
+
+def test_inside_the_calibrated_range_the_asymmetric_term_is_refused():
+    """Recordings inside the calibrated range: the base's plane absorbed any asymmetry there, so an even function
+    of the drive the held-out test credits is a change since the calibration (a sensor's curve) or the base's
+    misfit: evaluated (one of the round's tests) and vetoed; beyond the range it is not refused."""
+    ctx = _ctx(np.random.default_rng(9))
+    assert ASYM.refuses(ctx) and TERMS["sensor_nonlinearity"].refuses(ctx) is None
+    c = _evaluate(ctx, ASYM, np.random.default_rng(10), lambda s: 0.3 * (s.u / 0.9) ** 2)
+    assert max(c.fold_ratios) < 0.5 and c.p < c.p_max     # it would pass the held-out test
+    assert not c.significant and c.veto == ASYM.refuses(ctx)
+    assert ASYM.refuses(_narrow(ctx)) is None
