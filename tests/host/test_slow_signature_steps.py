@@ -113,3 +113,45 @@ def test_creep_candidate_passes_on_the_steps_only_with_the_exact_check_left_to_d
         assert c.significant is passes
         if passes:
             assert c.p < 1e-3 and "after the steps" in c.discrimination
+
+
+def test_without_a_dwell_creep_is_not_named_even_where_its_chain_fits():
+    """Creep's chain takes a slow misfit on all blocks (its unique contribution holds as in round 12), but with no
+    step response to show a tail its signature does not hold, and the attribution vetoes a significant creep
+    candidate (the creep named after a delay on s110-038, s110-053, s111-022)."""
+    from piezoctl.diagnose.select import slow_nuisance
+    from piezoctl.diagnose.slow_signature import attribute, signature_tests
+    rng = np.random.default_rng(8)
+    ctx = _with_dynamics(_ctx(rng))
+    for s in ctx.signals:   # the drive is never held: a small dither on every sample
+        s.u = s.u + 1e-3 * np.sin(0.7 * np.arange(s.u.size))
+        s.y = s.yb + filt(*LP, _creep(s)) + NOISE_UM * rng.normal(size=s.t.size)
+    e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
+    fold = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
+    block = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+    tests = {t.name: t for t in signature_tests([ctx, ctx], [e, e], [slow_nuisance(ctx)] * 2, fold, block, 200000)}
+    creep = tests["creep"]
+    assert creep.step is None and creep.unique_ratio < 0.8 and creep.p < ALPHA_SIGNATURE   # the chain fits
+    assert not creep.holds and not creep.confirms
+    assert "no dwell after a step" in creep.phrase()
+    evals = [_cand("creep", True, 0.4)]
+    attribute(evals, list(tests.values()))
+    assert not evals[0].significant and evals[0].veto
+
+
+def test_with_dwells_the_creep_signature_holds_and_names_creep():
+    from piezoctl.diagnose.select import slow_nuisance
+    from piezoctl.diagnose.slow_signature import attribute, signature_tests
+    rng = np.random.default_rng(9)
+    ctx = _with_dynamics(_ctx(rng))
+    for s in ctx.signals:
+        s.y = s.yb + filt(*LP, _creep(s)) + NOISE_UM * rng.normal(size=s.t.size)
+    e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
+    fold = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
+    block = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+    tests = {t.name: t for t in signature_tests([ctx, ctx], [e, e], [slow_nuisance(ctx)] * 2, fold, block, 200000)}
+    assert tests["creep"].holds and tests["creep"].step["dwells"] == 12
+    assert tests["creep"].as_dict()["step_response"]["p"] < ALPHA_SIGNATURE
+    evals = [_cand("creep", True, 0.4)]
+    attribute(evals, list(tests.values()))
+    assert evals[0].significant and not evals[0].veto
