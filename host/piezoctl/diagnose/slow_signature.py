@@ -42,6 +42,13 @@ recordings. :func:`level_spread_test` compares the levels of a session's recordi
 (an F test); when they vary and the drift's own candidate has the size, the drift's signature holds between the
 recordings; and a drift whose signature holds takes the level the offset's candidate took (the drift's model term
 carries that level, ``ThermalDrift``'s ``level_um``).
+
+Round 13 (docs/diagnose.md, "Round 13: slow effects"): creep is plain in the dwells after the drive's steps and
+hidden everywhere else (the base's own misfit dominates the blocks between the steps). :func:`step_response_test`
+tests creep's columns on the dwells alone, with a level per dwell and a slope per recording as nuisance; it *is*
+creep's signature (no dwell: creep's signature does not hold, and a creep candidate is vetoed), and
+:func:`creep_on_steps` lets a creep candidate that failed its test on all blocks pass on it (Bonferroni over
+the two tests; the exact check still decides).
 """
 
 from __future__ import annotations
