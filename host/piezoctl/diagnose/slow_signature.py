@@ -313,7 +313,7 @@ def creep_on_steps(evals, ctxs, es, fold_all, block_all, rows, log) -> None:
     credit). The exact check (d) on all samples still decides. Round 12's finding: a foreign creep's improvement
     is large but uneven over all blocks (development s110-030: fold ratios 0.40/0.51, p = 3.1e-2), or small on
     all blocks beside a base level misfit of 0.24 um (s108-000: 0.96/0.93), while after the steps it is
-    plain (s110-030: 0.19/0.24 on 7 dwells, p = 1.7e-7; s108-000: 0.06/0.06 on 6 dwells, p = 1.6e-9)."""
+    plain (s110-030: 0.21/0.24 on 7 dwells, p = 2.3e-7; s108-000: 0.05/0.06 on 6 dwells, p = 1.8e-9)."""
     c = next((x for x in evals if x.name == "creep"), None)
     if c is None or c.significant or c.veto:
         return
