@@ -171,10 +171,11 @@ def dwell_ids(ctx, s) -> np.ndarray:
     recording, from the moment the model's dynamics have settled after that step: where the base dynamics' step
     response, scaled by the step of the hysteresis output, stays within the sensor's noise (``_noise_um``) of its
     final value, plus the longest delay the vocabulary offers (``Delay.DELAYS``). Until then a delay, a band limit
-    or the base's own dynamics leave a misfit at the edge; after it, the model's output is constant and what changes in the residual follows the history (creep) or the clock
-    (drift). A dwell is kept when it lasts at least the creep chain's fastest time constant (shorter, its tail
-    cannot be told from a level). The recording's first hold is not a dwell: no step of the recording precedes
-    it (what went before the recording is unknown).
+    or the base's own dynamics leave a misfit at the edge; after it, the model's output is constant and what
+    changes in the residual follows the history (creep) or the clock (drift). A dwell is kept when it lasts at
+    least the creep chain's fastest time constant (shorter, its tail cannot be told from a level). The
+    recording's first hold is not a dwell: no step of the recording precedes it (what went before the recording
+    is unknown).
     """
     from ..dsp import filt
     u = np.asarray(s.u, float)
