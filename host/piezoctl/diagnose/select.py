@@ -24,7 +24,7 @@ from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_s
 from . import significance as sg
 from .misfit import credited_ratio
 from .discriminate import discriminate_group, highpassed, separate
-from .slow_signature import SIGNATURES, attribute, signature_tests
+from .slow_signature import SIGNATURES, attribute, creep_on_steps, signature_tests
 from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",
@@ -868,6 +868,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
                         for t in todo), key=lambda c: c.ratio)
         for c in evals:
             c.selection_round = len(accepted) + 1
+        creep_on_steps(evals, fctx, es, fold_all, block_all, rows, log)   # round 13: creep's test after the steps
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
         _supersede(evals)
         if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term

@@ -42,6 +42,13 @@ recordings. :func:`level_spread_test` compares the levels of a session's recordi
 (an F test); when they vary and the drift's own candidate has the size, the drift's signature holds between the
 recordings; and a drift whose signature holds takes the level the offset's candidate took (the drift's model term
 carries that level, ``ThermalDrift``'s ``level_um``).
+
+Round 13 (docs/diagnose.md, "Round 13: slow effects"): creep is plain in the dwells after the drive's steps and
+hidden everywhere else (the base's own misfit dominates the blocks between the steps). :func:`step_response_test`
+tests creep's columns on the dwells alone, with a level per dwell and a slope per recording as nuisance; it *is*
+creep's signature (no dwell: creep's signature does not hold, and a creep candidate is vetoed), and
+:func:`creep_on_steps` lets a creep candidate that failed its test on all blocks pass on it (Bonferroni over
+the two tests; the exact check still decides).
 """
 
 from __future__ import annotations
@@ -55,7 +62,8 @@ from . import significance as sg
 from .misfit import credited_ratio
 from .solve import lstsq_box, train_rows
 
-__all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute"]
+__all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute",
+           "step_response_test", "creep_on_steps"]
 
 SIGNATURES = ("creep", "thermal_drift", "sensor_offset")
 ALPHA_SIGNATURE = sg.ALPHA / len(SIGNATURES)   # Bonferroni over the three signatures
@@ -77,19 +85,24 @@ class SignatureTest:
     confirms: bool = False   # the same criteria at ALPHA (one pre-specified hypothesis: a passed term's own)
     level: dict | None = None   # sensor_offset: the level dependence within its sessions (offset_level_test)
     spread: dict | None = None  # offset, drift: the levels of a session's recordings (level_spread_test)
+    step: dict | None = None    # creep: its test on the responses to the drive's steps (step_response_test)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "unique_ratio": self.unique_ratio, "fold_ratios": self.fold_ratios,
                 "credited_ratio": self.credited, "p_value": self.p, "n_active": self.n_active,
                 "alpha": ALPHA_SIGNATURE, "holds": self.holds, "alpha_own": sg.ALPHA, "confirms": self.confirms,
                 **({"level_dependence": self.level} if self.level is not None else {}),
-                **({"level_spread": self.spread} if self.spread is not None else {})}
+                **({"level_spread": self.spread} if self.spread is not None else {}),
+                **({"step_response": self.step} if self.name == "creep" else {})}
 
     def phrase(self) -> str:
         verdict = "holds" if self.holds else ("holds as its own term's" if self.confirms else "does not hold")
-        return (f"{self.name} {verdict} (unique ratio {self.unique_ratio:.2f}, "
+        text = (f"{self.name} {verdict} (unique ratio {self.unique_ratio:.2f}, "
                 f"folds {self.fold_ratios[0]:.2f}/{self.fold_ratios[1]:.2f}, credited {self.credited:.2f}, "
-                f"p = {self.p:.1e})")
+                f"p = {self.p:.1e}")
+        if self.name == "creep":
+            text += "; " + step_phrase(self.step)
+        return text + ")"
 
 
 def _session_time(ctx, s) -> np.ndarray:
@@ -137,6 +150,190 @@ def signature_groups(ctx) -> dict:
         C = np.vstack([_centred(G(ctx.base, creep.basis(s.h, taus, s.dt))[v]) for s, v in zip(ctx.signals, ctx.valid)])
         out["creep"] = (C, np.zeros(len(taus)))
     return out
+
+
+STEP_STILL = 1e-6   # the drive is held when a sample changes it by at most this fraction of its span (a float
+#                     written to 9 digits; the steps' ramps change it by far more)
+
+
+def _noise_um(y, still) -> float:
+    """The sensor's noise [um RMS] from the held samples of one recording: the median absolute first difference
+    over 0.6745 sqrt(2) (a robust standard deviation of white noise; a creep tail or a drift moves far less
+    than the noise from one sample to the next)."""
+    d = np.diff(np.asarray(y, float))[still[1:] & still[:-1]]
+    return float(np.median(np.abs(d)) / (0.6745 * np.sqrt(2.0))) if d.size > 10 else 0.0
+
+
+def dwell_ids(ctx, s) -> np.ndarray:
+    """Per sample of recording ``s``: the dwell it belongs to (0, 1, ... within the recording) or -1.
+
+    A dwell is a run of samples where the drive is held (``STEP_STILL``) after the drive stepped within the
+    recording, from the moment the model's dynamics have settled after that step: where the base dynamics' step
+    response, scaled by the step of the hysteresis output, stays within the sensor's noise (``_noise_um``) of its
+    final value, plus the longest delay the vocabulary offers (``Delay.DELAYS``). Until then a delay, a band limit
+    or the base's own dynamics leave a misfit at the edge; after it, the model's output is constant and what
+    changes in the residual follows the history (creep) or the clock (drift). A dwell is kept when it lasts at
+    least the creep chain's fastest time constant (shorter, its tail cannot be told from a level). The
+    recording's first hold is not a dwell: no step of the recording precedes it (what went before the recording
+    is unknown).
+    """
+    from ..dsp import filt
+    u = np.asarray(s.u, float)
+    h = np.asarray(s.h, float)
+    ids = np.full(u.size, -1)
+    if u.size < 3:
+        return ids
+    still = np.abs(np.diff(u, prepend=u[0])) <= STEP_STILL * max(float(np.ptp(u)), 1e-12)
+    still[0] = False
+    noise = _noise_um(s.y, still)
+    b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+    sr = filt(b, a, np.r_[0.0, np.ones(int(round(1.0 / s.dt)))])[1:]   # unit step from rest (filt starts at x[0])
+    dev = np.abs(sr - sr[-1])
+    n_min = int(round(min(TERMS["creep"].TAUS) / s.dt))
+    lag = int(max(TERMS["delay"].DELAYS))   # [samples] a delay as long as the vocabulary offers settles as late
+    edges = np.flatnonzero(np.diff(still.astype(np.int8)) != 0) + 1
+    starts = [0] + list(edges)
+    ends = list(edges) + [u.size]
+    k, h_prev = 0, None
+    for i0, i1 in zip(starts, ends):
+        if not still[i0]:
+            continue
+        if h_prev is not None:
+            step = abs(float(h[i0]) - h_prev)
+            late = np.flatnonzero(dev * step > noise)
+            j0 = i0 + (int(late[-1]) + 1 if late.size else 0) + lag
+            if i1 - j0 >= n_min:
+                ids[j0:i1] = k
+                k += 1
+        h_prev = float(h[i1 - 1])
+    return ids
+
+
+def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
+    """Creep's own signature on the responses to the drive's steps alone (round 13).
+
+    After a step the drive is held; there the model's hysteresis output is constant and, once its dynamics have
+    settled (:func:`dwell_ids`), a creep is the only thing that follows the history: a tail whose amplitude is
+    in proportion to the step and has its sign, with time constants shared by every dwell. The regressors are
+    creep's own (the Kelvin-Voigt deviations through G, gains >= 0, which carry exactly that); the nuisance is a
+    level per dwell (the base's level misfit at that dwell's hysteresis state, an offset, the level a drift has
+    got to) and a slope per recording (a drift within it, the same whatever the step). Both the residual and
+    the regressors are centred per dwell; the gains are fitted on one fold of the ~1 s blocks and predict the
+    other (``before``: the slopes alone refitted on the same fold), and the active-block test of
+    ``significance.active_block_test`` gives p. A delay's or a band limit's misfit lies at the edges, before the
+    dwell starts, and the base's level misfit is a constant within each dwell: neither can take these columns.
+
+    Returns None when fewer than 2 dwells (nothing to share between steps), else a dict: ``dwells``, ``ratio``
+    and ``fold_ratios`` (held-out RMS after / before on the dwell samples), ``p``, ``n_active``,
+    ``rms_before_um``, ``gains`` (per fold, per time constant).
+    """
+    ctx = ctxs[0]
+    creep = TERMS["creep"]
+    taus = creep.taus(ctx)
+    if not taus:
+        return None
+    dw, tt, rec = [], [], []
+    off = 0
+    for i, (s, v) in enumerate(zip(ctx.signals, ctx.valid)):
+        ids = dwell_ids(ctx, s)
+        ids = np.where(ids >= 0, ids + off, -1)
+        off = max(off, int(ids.max()) + 1)
+        dw.append(ids[v])
+        tt.append((np.arange(s.t.size) * s.dt)[v])
+        rec.append(np.full(int(np.sum(v)), i))
+    dw, tt, rec = np.concatenate(dw), np.concatenate(tt), np.concatenate(rec)
+    m = (dw >= 0) & (fold_all >= 0)
+    ids = np.unique(dw[m])
+    if ids.size < 2:
+        return None
+    dwm, fa, ba, ra = dw[m], fold_all[m], block_all[m], rec[m]
+    order = np.argsort(dwm, kind="stable")
+    bounds = np.flatnonzero(np.diff(dwm[order])) + 1
+
+    def centred(X):
+        X = np.array(X, float, copy=True)
+        for seg in np.split(order, bounds):
+            X[seg] -= X[seg].mean(axis=0)
+        return X
+
+    recs = np.unique(ra)
+    T = centred(np.column_stack([np.where(ra == r, tt[m], 0.0) for r in recs]))
+    nT = T.shape[1]
+    before = np.zeros(m.sum())
+    corr = np.zeros(m.sum())
+    gains = []
+    for f in (0, 1):
+        c = ctxs[f]
+        C = np.vstack([G(c.base, creep.basis(s.h, taus, s.dt))[v] for s, v in zip(c.signals, c.valid)])[m]
+        X = np.hstack([T, centred(C)])
+        e = centred(es[f][m][:, None])[:, 0]
+        train, test = fa == f, fa == 1 - f
+        idx = train_rows(train, rows)
+        lo = np.concatenate([np.full(nT, -np.inf), np.zeros(len(taus))])
+        th0 = lstsq_box(T[idx], e[idx], lo[:nT], np.full(nT, np.inf))
+        th = lstsq_box(X[idx], e[idx], lo, np.full(lo.size, np.inf))
+        before[test] = e[test] - T[test] @ th0
+        corr[test] = X[test] @ th - T[test] @ th0
+        gains.append([float(x) for x in th[nT:]])
+    after = before - corr
+    fr = []
+    for f in (0, 1):
+        sel = fa == 1 - f
+        sb = float(np.sum(before[sel] ** 2))
+        fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    sb = float(np.sum(before ** 2))
+    units = sg.test_units(before, ba, ra, ctx.dt, corr)
+    _, p, n_act = sg.active_block_test(before, after, corr, ba, units)
+    return {"dwells": int(ids.size), "ratio": float(np.sqrt(np.sum(after ** 2) / sb)) if sb > 0 else 1.0,
+            "fold_ratios": fr, "p": float(p), "n_active": int(n_act),
+            "rms_before_um": float(np.sqrt(sb / max(before.size, 1))), "taus_s": list(taus), "gains": gains}
+
+
+def _step_holds(st, level) -> bool:
+    """The step-response test holds at ``level``: p below it and the held-out error lower in each fold."""
+    return bool(st is not None and st["p"] < level and max(st["fold_ratios"]) < 1.0)
+
+
+def step_phrase(st) -> str:
+    """The step-response test of :func:`step_response_test`, in words."""
+    if st is None:
+        return "no dwell after a step of the drive, so its tail after the steps cannot be tested"
+    return (f"after the steps, on {st['dwells']} dwells: ratio {st['ratio']:.2f}, folds {st['fold_ratios'][0]:.2f}/"
+            f"{st['fold_ratios'][1]:.2f}, p = {st['p']:.1e}")
+
+
+def creep_on_steps(evals, ctxs, es, fold_all, block_all, rows, log) -> None:
+    """Creep's own test also on the responses to the steps (round 13), for a creep candidate that failed its
+    test on all blocks.
+
+    :func:`step_response_test` tests the same hypothesis on the samples it concerns: the dwells after each step,
+    where creep acts and the model's output is constant. The two p values are combined by Bonferroni,
+    ``p = 2 min(p_all, p_steps)``, against the round's level; the size criteria (fold ratios at most the
+    candidate's gate) hold on all blocks (with the credited ratio and a lower BIC, as before) *or* on the dwells
+    (where neither the base's level misfit nor a delay's edge can take creep's columns, so there is no misfit to
+    credit). The exact check (d) on all samples still decides. Round 12's finding: a foreign creep's improvement
+    is large but uneven over all blocks (development s110-030: fold ratios 0.40/0.51, p = 3.1e-2), or small on
+    all blocks beside a base level misfit of 0.24 um (s108-000: 0.96/0.93), while after the steps it is
+    plain (s110-030: 0.21/0.24 on 7 dwells, p = 2.3e-7; s108-000: 0.05/0.06 on 6 dwells, p = 1.8e-9)."""
+    c = next((x for x in evals if x.name == "creep"), None)
+    if c is None or c.significant or c.veto:
+        return
+    within = (lambda x: x <= c.ratio_max) if c.ratio_max < 1.0 else (lambda x: x < c.ratio_max)
+    st = step_response_test(ctxs, es, fold_all, block_all, rows)
+    if st is None:
+        return
+    sized_all = within(max(c.fold_ratios)) and within(c.credited) and c.dbic < 0
+    sized_steps = within(max(st["fold_ratios"])) and max(st["fold_ratios"]) < 1.0
+    p = min(1.0, 2.0 * min(c.p, st["p"]))
+    log(f"    creep after the steps: {step_phrase(st)}; combined p = {p:.1e} (level {c.p_max:.1e}), sized on all "
+        f"blocks {sized_all}, on the dwells {sized_steps}")
+    if p < c.p_max and (sized_all or sized_steps):
+        c.discrimination = (f"Creep's held-out test on all blocks gave p = {c.p:.1e} (fold ratios "
+                            f"{c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f}); on the responses to the drive's steps "
+                            f"alone ({step_phrase(st)}); combined (Bonferroni) p = {p:.1e}"
+                            + ("" if sized_all else ", sized on the dwells") + ".")
+        c.p = p
+        c.significant = True
 
 
 def level_columns(ctx) -> np.ndarray:
@@ -409,6 +606,11 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
         out.append(SignatureTest(name=n, unique_ratio=ratio, fold_ratios=fr, credited=float(cr), p=float(p),
                                  n_active=int(n_act), holds=bool(better and p < ALPHA_SIGNATURE),
                                  confirms=bool(better and p < sg.ALPHA)))
+        if n == "creep":   # round 13: creep's signature is its tail after the steps (step_response_test)
+            st = step_response_test(ctxs, es, fold_all, block_all, rows)
+            out[-1].step = st
+            out[-1].holds = _step_holds(st, ALPHA_SIGNATURE)
+            out[-1].confirms = _step_holds(st, sg.ALPHA)
         if n == "sensor_offset":
             out[-1].level = offset_level_test(designs, [level_columns(c) for c in ctxs], es, fold_all, block_all,
                                               rec, ctx.dt, rows, ctx.misfit)
@@ -536,7 +738,8 @@ def attribute(evals, tests) -> str | None:
                      f"that level and the drift's own trend beyond it (fold ratios {chosen.fold_ratios[0]:.2f}/"
                      f"{chosen.fold_ratios[1]:.2f}) are the drift's")
         chosen.significant = True
-        chosen.discrimination = "Attribution: " + text + "."
+        own = chosen.discrimination + " " if chosen.name == "creep" and chosen.discrimination else ""
+        chosen.discrimination = own + "Attribution: " + text + "."   # creep_on_steps' sentence kept
     for c in passed:
         if c is not chosen:
             c.significant = False
