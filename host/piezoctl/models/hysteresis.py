@@ -228,7 +228,9 @@ def _sum_of_pl(knots_list, values_list):
     return kn, vals
 
 
-_PLANE_BLOCK = 16384   # samples per block of plane_parts' fused play + interpolation (16 plays: 2 MB)
+# samples per block of plane_parts' fused play + interpolation (16 plays: 8 MB). Round 13: 65,536 instead of 16,384,
+# 8 to 10 % less time on s0-017's drives (8 and 16 plays; fewer calls and runs cut at block ends), the same floats
+_PLANE_BLOCK = 65536
 
 
 def plane_parts(hp: dict, v, hysteretic: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
