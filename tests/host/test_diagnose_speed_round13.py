@@ -1,0 +1,111 @@
+"""The diagnosis' faster parts of round 13 against what they replaced, bit for bit (issue 12 item 6,
+docs/diagnose-speed.md "Round 13").
+
+- ``significance.unique_labels``: ``np.unique`` of a label array by its runs when it is non-decreasing;
+- ``locate.residual_autocorrelation``: the first lags by one dot product each instead of ``np.correlate``'s
+  full correlation;
+- ``terms.G_of_h``: ``G(ctx.base, s.h)`` kept per signal and model, recomputed for another model or signal;
+- ``hysteresis.plane_parts`` with its larger blocks: the same H as one block (the recursion restarts exactly).
+"""
+
+import types
+
+import numpy as np
+import pytest
+
+from piezoctl.diagnose import locate
+from piezoctl.diagnose import significance as sg
+from piezoctl.ident import terms
+from piezoctl.models import hysteresis as hy
+
+
+def _labels(rng, n, sort):
+    x = rng.integers(-3, 40, n)
+    return np.sort(x) if sort else x
+
+
+@pytest.mark.parametrize("sort", [True, False])
+@pytest.mark.parametrize("n", [1, 2, 7, 500, 20_000])
+def test_unique_labels_equals_np_unique(sort, n):
+    rng = np.random.default_rng(n + sort)
+    x = _labels(rng, n, sort)
+    for flags in [(False, False, False), (True, False, True), (False, True, False), (True, True, True)]:
+        got = sg.unique_labels(x, *flags)
+        ref = np.unique(x, *flags)
+        got = got if isinstance(got, tuple) else (got,)
+        ref = ref if isinstance(ref, tuple) else (ref,)
+        assert len(got) == len(ref)
+        for a, b in zip(got, ref):
+            assert a.shape == b.shape and np.array_equal(a, b)
+
+
+def test_unique_labels_falls_back_for_floats_and_2d():
+    x = np.array([0.0, 0.0, 1.0, 3.0])
+    assert np.array_equal(sg.unique_labels(x), np.unique(x))
+    y = np.array([[2, 1], [1, 0]])
+    assert np.array_equal(sg.unique_labels(y), np.unique(y))
+
+
+def _old_autocorrelation(r, dt, max_lag=25, max_n=20000):
+    """``locate.residual_autocorrelation`` as of a961178 (round 12): the full ``np.correlate``."""
+    step = max(1, int(round(1e-3 / dt)))
+    rd = np.asarray(r)[::step]
+    n = rd.size
+    if n < 64:
+        return None
+    m = min(n, max_n)
+    rr = rd - rd.mean()
+    ac = np.correlate(rr[:m], rr[:m], "full")
+    ac = ac[m - 1: m + max_lag] / (ac[m - 1] or 1.0)
+    return np.arange(ac.size) * step * dt, ac, 2.58 / np.sqrt(n)
+
+
+@pytest.mark.parametrize("n", [640, 12_345, 400_000])
+def test_residual_autocorrelation_bit_for_bit(n):
+    rng = np.random.default_rng(n)
+    r = np.cumsum(rng.normal(size=n)) * 1e-3 + rng.normal(size=n) * 1e-4   # slow and white parts, as a residual
+    new, old = locate.residual_autocorrelation(r, 1e-4), _old_autocorrelation(r, 1e-4)
+    for a, b in zip(new, old):
+        assert np.array_equal(np.asarray(a), np.asarray(b))
+    assert locate.residual_autocorrelation(r[:500], 1e-4) is None   # 50 decimated samples: too few, as before
+
+
+def _ctx_and_signal(seed=0):
+    rng = np.random.default_rng(seed)
+    base = {"dynamics": {"b": [0.02, 0.01], "a": [1.0, -0.97]}}
+    s = types.SimpleNamespace(h=np.cumsum(rng.normal(size=5000)))
+    return types.SimpleNamespace(base=base, refit_cache={}), s
+
+
+def test_g_of_h_bit_for_bit_and_kept():
+    ctx, s = _ctx_and_signal()
+    g = terms.G_of_h(ctx, s)
+    assert np.array_equal(g, terms.G(ctx.base, s.h))
+    assert terms.G_of_h(ctx, s) is g                  # kept: the same array
+    assert not g.flags.writeable
+
+
+def test_g_of_h_recomputes_for_another_model_or_signal():
+    ctx, s = _ctx_and_signal()
+    g = terms.G_of_h(ctx, s)
+    ctx.base = {"dynamics": {"b": [0.03], "a": [1.0, -0.97]}}   # another model sharing the dict
+    g2 = terms.G_of_h(ctx, s)
+    assert g2 is not g and np.array_equal(g2, terms.G(ctx.base, s.h))
+    s2 = types.SimpleNamespace(h=s.h * 2.0)
+    g3 = terms.G_of_h(ctx, s2)
+    assert np.array_equal(g3, terms.G(ctx.base, s2.h)) and not np.array_equal(g3, g2)
+
+
+def test_plane_blocks_give_one_blocks_floats(monkeypatch):
+    """The block length only decides where the plays' recursion restarts from its last outputs: the default
+    (65,536) and one block give the same H, bit for bit, on a drive of 200 k samples (four blocks)."""
+    from piezoctl.bench.diagnose_speed import _kernel_inputs, _plane_hp
+    v = _kernel_inputs(200_000)
+    hp = _plane_hp()
+    hy._STATE_CACHE.clear()
+    h_blocks = hy.plane_parts(hp, v, hysteretic=False)[0]
+    monkeypatch.setattr(hy, "_PLANE_BLOCK", 10 ** 7)
+    hy._STATE_CACHE.clear()
+    h_one = hy.plane_parts(hp, v, hysteretic=False)[0]
+    hy._STATE_CACHE.clear()
+    assert hy._PLANE_BLOCK == 10 ** 7 and np.array_equal(h_blocks, h_one)
