@@ -109,3 +109,41 @@ def test_plane_blocks_give_one_blocks_floats(monkeypatch):
     h_one = hy.plane_parts(hp, v, hysteretic=False)[0]
     hy._STATE_CACHE.clear()
     assert hy._PLANE_BLOCK == 10 ** 7 and np.array_equal(h_blocks, h_one)
+
+
+def test_hysteresis_output_of_same_floats_and_skips_the_drive():
+    """A recurring (tag, anchor) finds H without computing its drive again; another anchor (an equal copy), another
+    operator or an emptied cache computes it; the floats are hysteresis_output's."""
+    from piezoctl.bench.diagnose_speed import _kernel_inputs, _plane_hp
+    hy.clear_output_cache()
+    u = _kernel_inputs(50_000)
+    hp = _plane_hp()
+    calls = []
+
+    def make_v(x=u):
+        calls.append(1)
+        return np.clip(x, -0.5, 0.5)
+    h = hy.hysteresis_output_of(hp, ("saturation", "(-0.5, 0.5)"), u, make_v)
+    assert np.array_equal(h, hy.hysteresis_output(hp, np.clip(u, -0.5, 0.5))) and len(calls) == 1
+    assert hy.hysteresis_output_of(hp, ("saturation", "(-0.5, 0.5)"), u, make_v) is h and len(calls) == 1
+    u_copy = u.copy()
+    assert np.array_equal(hy.hysteresis_output_of(hp, ("saturation", "(-0.5, 0.5)"), u_copy,
+                                                  lambda: make_v(u_copy)), h) and len(calls) == 2
+    hp2 = dict(hp, values=[list(np.asarray(x) * 2.0) for x in hp["values"]])
+    h2 = hy.hysteresis_output_of(hp2, ("saturation", "(-0.5, 0.5)"), u, make_v)
+    assert len(calls) == 3 and np.array_equal(h2, hy.hysteresis_output(hp2, np.clip(u, -0.5, 0.5)))
+    hy.clear_output_cache()
+    hy.hysteresis_output_of(hp, ("saturation", "(-0.5, 0.5)"), u, make_v)
+    assert len(calls) == 4
+    hy.clear_output_cache()
+
+
+def test_hysteresis_output_of_unchanged_drive():
+    """make_v returning None (the drive unchanged) gives None, remembered for the tag."""
+    hy.clear_output_cache()
+    u = np.linspace(-1, 1, 1000)
+    calls = []
+    assert hy.hysteresis_output_of({"type": "plane"}, ("x",), u, lambda: calls.append(1)) is None
+    assert hy.hysteresis_output_of({"type": "plane"}, ("x",), u, lambda: calls.append(1)) is None
+    assert len(calls) == 1
+    hy.clear_output_cache()
