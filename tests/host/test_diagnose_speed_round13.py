@@ -147,3 +147,22 @@ def test_hysteresis_output_of_unchanged_drive():
     assert hy.hysteresis_output_of({"type": "plane"}, ("x",), u, lambda: calls.append(1)) is None
     assert len(calls) == 1
     hy.clear_output_cache()
+
+
+def test_hysteresis_output_of_one_tag_for_several_recordings():
+    """One tag (a term's setting) on several recordings' drives: each recording keeps its own entry, so a recurring
+    setting skips every recording's drive (round 13's first version keyed the tag alone: the recordings evicted
+    each other and 1027 of 1029 drives on s0-017 were recomputed)."""
+    hy.clear_output_cache()
+    hp = {"type": "plane", "r": [0.0, 0.3], "knots": [[-1.0, 1.0], [-0.7, 0.7]], "values": [[0.0, 2.0], [0.0, 0.5]]}
+    us = [np.sin(np.linspace(0, 20, 3000) * (k + 1)) for k in range(3)]
+    calls = []
+
+    def make(u):
+        calls.append(1)
+        return np.clip(u, -0.8, 0.8)
+    first = [hy.hysteresis_output_of(hp, ("saturation", "0.8"), u, lambda u=u: make(u)) for u in us]
+    again = [hy.hysteresis_output_of(hp, ("saturation", "0.8"), u, lambda u=u: make(u)) for u in us]
+    assert len(calls) == 3 and all(a is b for a, b in zip(first, again))
+    assert all(np.array_equal(h, hy.hysteresis_output(hp, np.clip(u, -0.8, 0.8))) for h, u in zip(first, us))
+    hy.clear_output_cache()

@@ -375,7 +375,7 @@ def _output(hp: dict, v: np.ndarray, op: str | None = None) -> tuple[np.ndarray,
     return h, key
 
 
-# (operator text, tag) -> (anchor, output key or None): which drive a tag stands for (round 13)
+# (operator text, tag, id(anchor)) -> (anchor, output key or None): which drive a tag stands for (round 13)
 _OUTPUT_ALIAS: dict = {}
 _OUTPUT_ALIAS_MAX = 20_000   # entries (each a few references); emptied when reached
 
@@ -391,7 +391,8 @@ def hysteresis_output_of(hp: dict, tag: tuple, anchor, make_v):
     and each recurrence recomputed the changed drive (a slew limiter, a low-pass, a clip) and its SHA-256 key
     only to find H cached. Emptied with the output cache (:func:`clear_output_cache`)."""
     op = _op_text(hp)
-    a = _OUTPUT_ALIAS.get((op, tag))
+    akey = (op, tag, id(anchor))   # the entry keeps its anchor alive: its id is not reused while it is there
+    a = _OUTPUT_ALIAS.get(akey)
     if a is not None and a[0] is anchor:
         if a[1] is None:
             return None
@@ -403,10 +404,10 @@ def hysteresis_output_of(hp: dict, tag: tuple, anchor, make_v):
     if len(_OUTPUT_ALIAS) >= _OUTPUT_ALIAS_MAX:
         _OUTPUT_ALIAS.clear()
     if v is None:
-        _OUTPUT_ALIAS[(op, tag)] = (anchor, None)
+        _OUTPUT_ALIAS[akey] = (anchor, None)
         return None
     h, key = _output(hp, np.ascontiguousarray(v, dtype=float), op)
-    _OUTPUT_ALIAS[(op, tag)] = (anchor, key)
+    _OUTPUT_ALIAS[akey] = (anchor, key)
     return h
 
 
