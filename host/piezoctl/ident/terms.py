@@ -71,7 +71,7 @@ def G(params: dict, x) -> np.ndarray:
 
 def G_of_h(ctx, s) -> np.ndarray:
     """``G(ctx.base, s.h)``: the current model's dynamics output without the offset [um], the same for every
-    setting of a drive-side term (on s0-017, 815 filterings for a few dozen distinct results), kept in
+    setting of a drive-side term (on s0-017 the drive-side columns filtered it 405 times), kept in
     ``ctx.refit_cache`` with the very objects it was computed from (a hit needs the same ``s`` and ``ctx.base``,
     by identity, so a context that shares the dict with another model or signals recomputes). Read-only."""
     key = ("G(h)", id(s))
