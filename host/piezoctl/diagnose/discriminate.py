@@ -207,12 +207,15 @@ def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> li
             train, test = fold_all == f, fold_all == 1 - f
             idx = train_rows(train, rows)
             for k, keep in (("n", []), ("a", [0]), ("b", [1]), ("ab", [0, 1])):
-                X = np.hstack([N] + [cols[i][0] for i in keep])
+                # the training and test rows of [N, cols...] stacked from each block's rows: the same matrices as
+                # rows of the stacked design, without stacking all ~1 M rows four times per fold
+                parts = [N] + [cols[i][0] for i in keep]
                 lo = np.concatenate([n_lo] + [cols[i][1] for i in keep])
                 hi = np.concatenate([n_hi] + [cols[i][2] for i in keep])
-                if X.shape[1] == 0:
+                if sum(x.shape[1] for x in parts) == 0:
                     continue
-                preds[k][test] = X[test] @ lstsq_box(X[idx], e[idx], lo, hi)
+                th = lstsq_box(np.hstack([x[idx] for x in parts]), e[idx], lo, hi)
+                preds[k][test] = np.hstack([x[test] for x in parts]) @ th
         ev, p = e[used], {k: v[used] for k, v in preds.items()}
         fa, bl, rec_u = fold_all[used], block_all[used], rec[used]
         r = {"name": b.name,

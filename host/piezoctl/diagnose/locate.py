@@ -132,8 +132,11 @@ def residual_autocorrelation(r: np.ndarray, dt: float, max_lag: int = 25, max_n:
         return None
     m = min(n, max_n)
     rr = rd - rd.mean()
-    ac = np.correlate(rr[:m], rr[:m], "full")
-    ac = ac[m - 1: m + max_lag] / (ac[m - 1] or 1.0)
+    x = rr[:m]
+    # lags 0..max_lag only, one dot product each: the same floats as those lags of np.correlate(x, x, "full"),
+    # which computed all 2m - 1 (s0-017: 1.5 s of 71 s under the profiler for three calls)
+    ac = np.array([np.dot(x[k:], x[:m - k]) for k in range(min(max_lag + 1, m))])
+    ac = ac / (ac[0] or 1.0)
     return np.arange(ac.size) * step * dt, ac, 2.58 / np.sqrt(n)
 
 

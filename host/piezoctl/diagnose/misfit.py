@@ -26,6 +26,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal as sig
 
+from .significance import unique_labels
+
 __all__ = ["BANDS", "split_bands", "band_energy", "base_misfit", "credited_ratio"]
 
 BANDS = ("level", "slow", "fast")
@@ -51,7 +53,7 @@ def band_energy(parts, rec, dt: float, f_slow_hz: float) -> np.ndarray:
     """Summed squared band components (3,) [um^2] of the residual ``parts`` (1-d, concatenated recordings
     labelled by ``rec``; each recording's samples contiguous)."""
     e = np.zeros(3)
-    for i in np.unique(rec):
+    for i in unique_labels(rec):
         e += np.sum(split_bands(parts[rec == i], dt, f_slow_hz) ** 2, axis=1)
     return e
 

@@ -36,7 +36,7 @@ import dataclasses
 import numpy as np
 
 from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
-from ..models.hysteresis import hysteresis_groups, hysteresis_output, scale_groups
+from ..models.hysteresis import hysteresis_groups, hysteresis_output, hysteresis_output_of, scale_groups
 
 __all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G"]
 
@@ -67,6 +67,21 @@ class SimState:
 def G(params: dict, x) -> np.ndarray:
     """The model's dynamics G applied to x (along axis 0)."""
     return filt(params["dynamics"]["b"], params["dynamics"]["a"], x)
+
+
+def G_of_h(ctx, s) -> np.ndarray:
+    """``G(ctx.base, s.h)``: the current model's dynamics output without the offset [um], the same for every
+    setting of a drive-side term (on s0-017 the drive-side columns filtered it 405 times), kept in
+    ``ctx.refit_cache`` with the very objects it was computed from (a hit needs the same ``s`` and ``ctx.base``,
+    by identity, so a context that shares the dict with another model or signals recomputes). Read-only."""
+    key = ("G(h)", id(s))
+    hit = ctx.refit_cache.get(key)
+    if hit is not None and hit[0] is s and hit[1] is ctx.base:
+        return hit[2]
+    g = G(ctx.base, s.h)
+    g.setflags(write=False)
+    ctx.refit_cache[key] = (s, ctx.base, g)
+    return g
 
 
 class Term:
@@ -180,6 +195,22 @@ def h_of_drive(ctx, ue, u, h_now) -> np.ndarray:
     return hysteresis_output(ctx.base["hysteresis"], v)   # cached: every setting recurs per fold, round, model
 
 
+def h_of_setting(ctx, tag: tuple, u, h_now, make_ue) -> np.ndarray:
+    """:func:`h_of_drive` of the changed drive ``make_ue()`` [V], which ``tag`` (the term and its setting) and
+    the unchanged drive ``u`` (by identity) determine: when they recur with the same operator and normalization
+    (every fold model, round and the all-data model) and H is still cached, neither the changed drive nor its
+    digest is computed again (``models.hysteresis.hysteresis_output_of``). The same floats as
+    :func:`h_of_drive`."""
+    mid, half = float(ctx.base["u_mid"]), float(ctx.base["u_half"])
+
+    def make_v():
+        ue = make_ue()
+        return None if np.array_equal(ue, u) else (ue - mid) / half
+
+    h = hysteresis_output_of(ctx.base["hysteresis"], tuple(tag) + (mid, half), u, make_v)
+    return h_now if h is None else h
+
+
 # A lag within this many sample periods is the sampled loop's own latency (the ZOH's half sample, the tick's
 # computation, the converters), which a calibration below a few hundred Hz cannot identify: a drive-side term
 # whose low-frequency lag is that small is not offered (a null stage's one-sample latency was named
@@ -210,7 +241,7 @@ class _DriveTerm(Term):
         raise NotImplementedError
 
     def h_with(self, ctx, setting, u, h_now, dt):
-        return h_of_drive(ctx, self.drive(u, setting, dt), u, h_now)
+        return h_of_setting(ctx, (self.name, repr(setting), float(dt)), u, h_now, lambda: self.drive(u, setting, dt))
 
     def refit_dynamics(self, ctx, setting):
         """(b, a) of G refitted on the calibration with this term at ``setting`` in front."""
@@ -230,7 +261,7 @@ class _DriveTerm(Term):
 
     def columns(self, ctx, s, setting):
         b, a = self.refit_dynamics(ctx, setting)
-        return (filt(b, a, self.h_with(ctx, setting, s.u, s.h, s.dt)) - G(ctx.base, s.h))[:, None]
+        return (filt(b, a, self.h_with(ctx, setting, s.u, s.h, s.dt)) - G_of_h(ctx, s))[:, None]
 
     def model_params(self, ctx, setting, coef):
         b, a = self.refit_dynamics(ctx, setting)
@@ -336,7 +367,8 @@ class Saturation(Term):
 
     def columns(self, ctx, s, setting):
         # exact for the current model: H reverses at the limit, not where the command does; coefficient ~1
-        return G(ctx.base, h_of_drive(ctx, self.drive(s.u, *setting), s.u, s.h) - s.h)[:, None]
+        h = h_of_setting(ctx, (self.name, repr(setting)), s.u, s.h, lambda: self.drive(s.u, *setting))
+        return G(ctx.base, h - s.h)[:, None]
 
     def model_params(self, ctx, setting, coef):
         return {"lo_v": setting[0], "hi_v": setting[1]}
