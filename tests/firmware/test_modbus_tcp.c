@@ -6,7 +6,9 @@
 #include <errno.h>
 #include <netinet/in.h>
 #include <poll.h>
+#include <stdint.h>
 #include <string.h>
+#include <time.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -261,20 +263,48 @@ static void test_server_new_client_replaces_the_longest_idle(void **state)
 }
 
 /* A silent connection and a half-sent request are closed after their timeouts. */
+static uint64_t mono_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000u + (uint64_t)ts.tv_nsec / 1000000u;
+}
+
+/* Polls the server until `timed_out` reaches n or 20 s pass. Load on the host only lengthens the wait: each phase
+ * below holds the other timeout out of reach, so a slow poll cannot make the
+ * wrong timer fire. */
+static void poll_until_timed_out(unsigned long n)
+{
+    uint64_t t0 = mono_ms();
+    while (srv.timed_out < n && mono_ms() - t0 < 20000u) {
+        assert_true(piezo_tcp_server_poll(&srv, 5) >= 0);
+    }
+}
+
 static void test_server_times_out_idle_and_half_sent(void **state)
 {
     (void)state;
     uint8_t buf[16];
     const uint8_t half[] = {0, 1, 0, 0, 0, 6, 1, 0x04}; /* 8 of 12 bytes */
-    srv.idle_ms = 700u;
-    srv.partial_ms = 150u;
+
+    /* idle: a silent client is closed (within 20 s: only the idle timer can fire) */
+    srv.idle_ms = 300u;
+    srv.partial_ms = 60000u;
     int idle = connect_client();
-    int part = connect_client(); /* idle has been silent 500 ms by now: closed */
+    poll_until_timed_out(1);
     assert_int_equal(srv.timed_out, 1);
-    assert_int_equal(send(part, half, sizeof half, 0), (ssize_t)sizeof half);
-    assert_true(exchange(part, buf, 1) <= 0); /* closed within partial_ms of its first byte */
-    assert_int_equal(srv.timed_out, 2);
     assert_true(exchange(idle, buf, 1) <= 0);
+
+    /* half sent: closed by the partial timeout (the idle one is out of reach) */
+    srv.idle_ms = 60000u;
+    srv.partial_ms = 150u;
+    int part = connect_client();
+    uint64_t t0 = mono_ms();
+    assert_int_equal(send(part, half, sizeof half, 0), (ssize_t)sizeof half);
+    poll_until_timed_out(2);
+    assert_int_equal(srv.timed_out, 2); /* within 20 s: only the partial timer can fire */
+    assert_true(mono_ms() - t0 >= srv.partial_ms);
+    assert_true(exchange(part, buf, 1) <= 0);
     close(idle);
     close(part);
 }
