@@ -96,6 +96,16 @@ def test_no_dwell_no_test():
     assert _run(ctx, lambda s: filt(*LP, _creep(s)), rng) is None
 
 
+def test_dwells_in_one_fold_no_test():
+    """Every dwell in one fold (foreign s0-017 at full length: 2 dwells, both in fold 1): nothing to fit on in
+    the other, so no test, not a NaN fit (round 13's first version crashed in the block test)."""
+    rng = np.random.default_rng(7)
+    ctx = _with_dynamics(_ctx(rng))
+    ctx.fold = [np.ones_like(f) for f in ctx.fold]
+    r = _run(ctx, lambda s: filt(*LP, _creep(s)), rng)
+    assert r is None
+
+
 def test_creep_candidate_passes_on_the_steps_only_with_the_exact_check_left_to_decide():
     """A creep candidate refused on all blocks (p above the round's level) passes when its tail after the steps
     is plain; one whose dwells show nothing stays refused."""

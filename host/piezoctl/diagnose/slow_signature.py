@@ -223,7 +223,8 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     ``significance.active_block_test`` gives p. A delay's or a band limit's misfit lies at the edges, before the
     dwell starts, and the base's level misfit is a constant within each dwell: neither can take these columns.
 
-    Returns None when fewer than 2 dwells (nothing to share between steps), else a dict: ``dwells``, ``ratio``
+    Returns None when fewer than 2 dwells (nothing to share between steps) or when the dwells all lie in one fold
+    (nothing to fit on, or to test on), else a dict: ``dwells``, ``ratio``
     and ``fold_ratios`` (held-out RMS after / before on the dwell samples), ``p``, ``n_active``,
     ``rms_before_um``, ``gains`` (per fold, per time constant).
     """
@@ -247,6 +248,8 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     if ids.size < 2:
         return None
     dwm, fa, ba, ra = dw[m], fold_all[m], block_all[m], rec[m]
+    if not (np.any(fa == 0) and np.any(fa == 1)):
+        return None   # every dwell in one fold: nothing to fit on, or nothing to test on (s0-017: 2 dwells, 1 fold)
     order = np.argsort(dwm, kind="stable")
     bounds = np.flatnonzero(np.diff(dwm[order])) + 1
 
