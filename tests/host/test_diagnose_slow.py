@@ -63,12 +63,19 @@ def _drift(s, a=0.3, tau=60.0):
     return a * (1 - np.exp(-ts / tau)) + 0.05 * np.sin(2 * np.pi * ts / 70.0)
 
 
-def _run(ctx, effect, rng):
+def _measured(ctx, effect, rng):
+    """Measured output = the model's + ``effect(s)`` [um] + white noise; (residual, fold, block) of the used
+    samples, recordings concatenated."""
     for s in ctx.signals:
         s.y = s.yb + effect(s) + NOISE_UM * rng.normal(size=s.t.size)
     e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
     fold = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
     block = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+    return e, fold, block
+
+
+def _run(ctx, effect, rng):
+    e, fold, block = _measured(ctx, effect, rng)
     return {t.name: t for t in signature_tests([ctx, ctx], [e, e], [slow_nuisance(ctx)] * 2, fold, block, rows=200000)}
 
 

@@ -8,7 +8,7 @@ import pytest
 from piezoctl.diagnose import significance as sg
 from piezoctl.diagnose.slow_signature import (ALPHA_SIGNATURE, creep_on_steps, dwell_ids, step_response_test)
 from piezoctl.dsp import filt
-from test_diagnose_slow import DT, NOISE_UM, _cand, _creep, _ctx
+from test_diagnose_slow import DT, NOISE_UM, _cand, _creep, _ctx, _measured
 
 LP = ([0.2], [1.0, -0.8])   # base dynamics: a first-order lag of 4.5 samples (9 ms at DT), unit DC gain
 
@@ -23,11 +23,7 @@ def _with_dynamics(ctx):
 
 def _run(ctx, effect, rng):
     """Measured output = the model's + ``effect(s)`` (um) + white noise; the step-response test on it."""
-    for s in ctx.signals:
-        s.y = s.yb + effect(s) + NOISE_UM * rng.normal(size=s.t.size)
-    e = np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
-    fold = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
-    block = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+    e, fold, block = _measured(ctx, effect, rng)
     return step_response_test([ctx, ctx], [e, e], fold, block, rows=200000)
 
 
