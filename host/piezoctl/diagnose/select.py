@@ -543,8 +543,9 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     significant = bool(within(max(fold_ratios)) and p < p_max and dbic < 0)
     cr, bands = credited_ratio(rb_res, pred_after[used], rec, ctxs[0].dt, ctxs[0].misfit)
     veto = None
-    if significant and term.refuses(ctxs[0]):   # round 13: data that cannot credit it (Term.refuses)
-        significant, veto = False, term.refuses(ctxs[0])
+    refusal = term.refuses(ctxs[0]) if significant else None   # round 13: data that cannot credit it
+    if refusal:
+        significant, veto = False, refusal
     if significant and not within(cr):
         significant = False
         veto = (f"its held-out improvement lies within what the base's error on calibration histories it did not "
