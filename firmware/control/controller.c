@@ -343,7 +343,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
             u = piezo_sat_q15((int32_t)u - u_xc);
         }
     }
-    u = piezo_limit_process(&c->limit, u);
+    u = piezo_limit_step(&c->limit, u);
     if (c->limit.flags != 0u && run) {
         c->st.clamps++;
     }

@@ -116,26 +116,5 @@ void piezo_limit_reset(piezo_limit_t *l, int16_t start_q15)
 
 int16_t piezo_limit_process(piezo_limit_t *l, int16_t u_q15)
 {
-    const piezo_limit_coef_t *c = l->coef;
-    int32_t u = u_q15;
-    l->flags = 0u;
-    if (u > c->max_q15) {
-        u = c->max_q15;
-        l->flags |= PIEZO_LIMIT_CLAMPED;
-    } else if (u < c->min_q15) {
-        u = c->min_q15;
-        l->flags |= PIEZO_LIMIT_CLAMPED;
-    }
-    if (c->max_step_q15 > 0) {
-        int32_t d = u - l->prev_q15;
-        if (d > c->max_step_q15) {
-            u = l->prev_q15 + c->max_step_q15;
-            l->flags |= PIEZO_LIMIT_SLEWED;
-        } else if (d < -c->max_step_q15) {
-            u = l->prev_q15 - c->max_step_q15;
-            l->flags |= PIEZO_LIMIT_SLEWED;
-        }
-    }
-    l->prev_q15 = (int16_t)u;
-    return (int16_t)u;
+    return piezo_limit_step(l, u_q15);
 }
