@@ -152,7 +152,10 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * g_i = (u - r_i) - hi_i is non-increasing in i (r_{i+1} - r_i = D >= 0
  * raises hi by floor(x + a D) - floor(x) >= floor(a D) >= 0, so g falls by
  * at least D), so once the upper branch wins (u - r < hi) it wins for the
- * rest of the column, which the upper-branch loop finishes at 11 (round 13).
+ * rest of the column, which the upper-branch loop finishes at 11 (round 13),
+ * 10.5 since round 14: a pass's two weights are read at wp and wp + stride
+ * and wp steps once by two strides (an odd count enters at the pair's
+ * second with wp one stride back; wp is reloaded per column).
  * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
@@ -233,7 +236,9 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    bgt    5f\n"
         "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
         "    tst    r12, #4\n"
-        "    bne    4f\n"
+        "    beq    31f\n"
+        "    sub    r4, r4, r5\n"             /* odd: enter at the pair's second, whose weight is [r4 + r5] */
+        "    b      4f\n"
         "31: ldrd   r10, r11, [r1], #8\n"
         "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
@@ -241,8 +246,7 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
+        "    ldr    r12, [r4]\n"              /* the pair's weights at r4 and r4 + r5, */
         "    smlal  r8, r9, r12, r10\n"
         "4:  ldrd   r10, r11, [r1], #8\n"
         "    ldr    r12, [r2]\n"
@@ -251,8 +255,8 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
+        "    ldr    r12, [r4, r5]\n"
+        "    add    r4, r4, r5, lsl #1\n"     /* one step of two strides per pass (r4 is dead at 6) */
         "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    31b\n"
