@@ -360,7 +360,10 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
 /* Cortex-M4: in Thumb-2, 10 instructions per moving operator (two per
  * pass; the break tested on the sign of the step it accumulates) against
- * gcc's 13; test_play and the EUPI golden vectors under QEMU. */
+ * gcc's 13; test_play and the EUPI golden vectors under QEMU. 9.5 since
+ * round 14: a pass's two weights at wp and wp + stride, wp stepped once per
+ * pass (with n_r odd every column enters at a pair's second, so the first
+ * column's weight pointer starts one stride back). */
 
 static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play *p, int64_t acc)
 {
@@ -383,6 +386,9 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play 
         "    lsl    r5, r10, #2\n"
         "    lsls   r12, r12, #2\n"
         "    beq    5f\n"
+        "    tst    r12, #4\n"                /* n_r odd: every column enters at a pair's second, */
+        "    it     ne\n"
+        "    subne  r4, r4, r5\n"              /* whose weight is [r0 + r5]: r4 one stride back */
         "1:  add    r3, r2, r12\n"             /* column */
         "    mov    r1, r11\n"
         "    mov    r0, r4\n"
@@ -394,8 +400,7 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play 
         "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    ldr    r6, [r0]\n"
-        "    add    r0, r0, r5\n"
+        "    ldr    r6, [r0]\n"               /* the pair's weights at r0 and r0 + r5, */
         "    smlal  r8, r9, r6, r7\n"
         "3:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
@@ -403,8 +408,8 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play 
         "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    ldr    r6, [r0]\n"
-        "    add    r0, r0, r5\n"
+        "    ldr    r6, [r0, r5]\n"
+        "    add    r0, r0, r5, lsl #1\n"     /* one step of two strides per pass */
         "    smlal  r8, r9, r6, r7\n"
         "    cmp    r2, r3\n"
         "    bne    2b\n"
