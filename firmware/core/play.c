@@ -162,7 +162,7 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
 struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it updates it */
     uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
     int32_t *f;          /* 4: the column's outputs (column by column) */
-    const int32_t *w;    /* 8: the column's first weight (row-major) */
+    intptr_t w_a;        /* 8: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
     const int32_t *r;    /* 12: thresholds */
     const int32_t *a;    /* 16: the column's slope */
     const int32_t *a_end;/* 20: one past the last slope */
@@ -188,7 +188,7 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
     (void)acc;
     /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
      * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
-     * thresholds in the lower-branch loop (the state's address at [sp]) */
+     * thresholds in the lower-branch loop; the column state at [sp] */
     __asm__ volatile(
         "    push   {r4-r11, lr}\n"
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
@@ -204,6 +204,7 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    ldr    r12, [r1, #8]\n"          /* w */
         "    ldr    r11, [r1, #0]\n"          /* r */
         "    sub    r5, r5, r4, lsl #1\n"
+        "    sub    r12, r12, r10\n"           /* w - a: a column's first weight is a_j's address + it */
         "    add    r1, r10, r7, lsl #2\n"
         "    lsl    r6, r6, #2\n"
         "    lsl    r7, r7, #2\n"
@@ -212,21 +213,21 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    strd   r10, r1, [sp, #16]\n"
         "    strd   r6, r7, [sp, #24]\n"
         "    mov    r5, r7\n"
-        "    mov    r0, sp\n"
         "    cmp    r6, #0\n"
         "    beq    7f\n"
-        "1:  ldr    r10, [r0, #16]\n"          /* column: a_j, the split a u */
+        "1:  ldr    r10, [sp, #16]\n"          /* column: a_j, the split a u */
+        "    ldr    r4, [sp, #8]\n"
+        "    add    r4, r4, r10\n"             /* wp = w + j */
         "    ldr    r11, [r10], #4\n"
-        "    str    r10, [r0, #16]\n"
+        "    str    r10, [sp, #16]\n"
         "    smull  r6, r7, r11, lr\n"
         "    lsr    r10, r6, #24\n"
         "    orr    r7, r10, r7, lsl #8\n"
         "    lsl    r6, r6, #8\n"
-        "    ldrd   r1, r2, [r0, #0]\n"
+        "    ldrd   r1, r2, [sp, #0]\n"
         "    add    r1, r1, r2, lsl #1\n"
-        "    ldr    r3, [r0, #24]\n"
+        "    ldr    r3, [sp, #24]\n"
         "    add    r3, r2, r3\n"
-        "    ldr    r4, [r0, #8]\n"
         "    cmp    r11, #0x1000000\n"
         "    ble    2f\n"
         "    cmp    lr, #0\n"
@@ -261,7 +262,7 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
-        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch: its prefix, one per pass */
+        "5:  ldr    r0, [sp, #12]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r10, r11, [r1], #8\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"            /* hi */
@@ -289,12 +290,8 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    3b\n"                      /* the rest by the upper-branch loop */
-        "6:  mov    r0, sp\n"                  /* next column: fp's starts where this one ends */
-        "    str    r3, [r0, #4]\n"
-        "    ldr    r12, [r0, #8]\n"
-        "    add    r12, r12, #4\n"
-        "    str    r12, [r0, #8]\n"
-        "    ldrd   r10, r11, [r0, #16]\n"
+        "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
+        "    ldrd   r10, r11, [sp, #16]\n"
         "    cmp    r10, r11\n"
         "    bne    1b\n"
         "7:  mov    r0, r8\n"
