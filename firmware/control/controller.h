@@ -170,6 +170,11 @@ typedef struct {
      * drive of the previous tick, the same for both axes); elsewhere the host
      * may write it (register u2_q15). */
     int16_t u2_q15;
+    /* &ff[active] and &set[active], NULL with no table: written with active
+     * (set_active, controller.c: at init, at boot's load and by the tick's
+     * swap), read by the tick's step 5 instead of indexing both arrays */
+    piezo_ff_state_t *ff_act;
+    const piezo_coefset_t *set_act;
 
     /* feedforward tables: the active set, the previous one (rollback) and a
      * free one that a commit fills; the tick swaps a committed set in */
