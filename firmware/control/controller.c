@@ -8,6 +8,11 @@
 #include "piezo_interface.h"
 #include "table_image.h"
 
+/* The tick's own state lies within the first 4 KiB of the instance (an
+ * LDR/STR immediate offset reaches 4095 bytes): the tick addresses it from
+ * the instance pointer, with no base register per 4 KiB (controller.h). */
+typedef char piezo_ctl_tick_state_near_check_t[(offsetof(piezo_ctl_t, wave_on_trigger) < 4096u) ? 1 : -1];
+
 /* The active feedforward set and the tick's pointers to it (ff_act,
  * set_act), always together. */
 static void set_active(piezo_ctl_t *c, int8_t a)
