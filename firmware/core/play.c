@@ -175,6 +175,7 @@ typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, 
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
                                         offsetof(struct piezo_play, f_q15) == 4u &&
                                         offsetof(struct piezo_play, off_q39) == 8u &&
+                                        offsetof(struct piezo_play, acc_q39) == 16u &&
                                         offsetof(struct piezo_play, u_prev_q15) == 24u &&
                                         offsetof(struct piezo_play_coef, r_q15) == 0u &&
                                         offsetof(struct piezo_play_coef, a_q24) == 4u &&
@@ -182,18 +183,16 @@ typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u 
                                         offsetof(struct piezo_play_coef, n_r) == 12u &&
                                         offsetof(struct piezo_play_coef, n_a) == 14u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_play *p, int64_t acc)
+static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct piezo_play *p)
 {
     (void)p;
-    (void)acc;
     /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
      * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
      * thresholds in the lower-branch loop; the column state at [sp] */
     __asm__ volatile(
-        "    push   {r4-r11, lr}\n"
+        "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
-        "    mov    r8, r2\n"
-        "    mov    r9, r3\n"
+        "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    r1, [r0, #0]\n"           /* coef */
         "    ldr    r4, [r0, #4]\n"           /* f */
         "    ldr    r5, [r0, #8]\n"           /* off */
@@ -294,9 +293,11 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    ldrd   r10, r11, [sp, #16]\n"
         "    cmp    r10, r11\n"
         "    bne    1b\n"
-        "7:  mov    r0, r8\n"
+        "7:  add    sp, #32\n"
+        "    ldr    r2, [sp], #4\n"           /* p */
+        "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
+        "    mov    r0, r8\n"
         "    mov    r1, r9\n"
-        "    add    sp, #32\n"
         "    pop    {r4-r11, pc}\n");
 }
 
@@ -362,17 +363,15 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
  * pass (with n_r odd every column enters at a pair's second, so the first
  * column's weight pointer starts one stride back). */
 
-static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play *p, int64_t acc)
+static __attribute__((naked, noinline)) int64_t rise_m4(struct piezo_play *p)
 {
     (void)p;
-    (void)acc;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
      * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
      * r11 thresholds, r12 n_r * 4, lr u */
     __asm__ volatile(
-        "    push   {r4-r11, lr}\n"
-        "    mov    r8, r2\n"
-        "    mov    r9, r3\n"
+        "    push   {r0, r4-r11, lr}\n"       /* p at [sp] */
+        "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    r1, [r0, #0]\n"           /* coef */
         "    ldr    r2, [r0, #4]\n"           /* f */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
@@ -414,7 +413,9 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play 
         "    add    r4, r4, #4\n"
         "    subs   r10, r10, #1\n"
         "    bne    1b\n"
-        "5:  mov    r0, r8\n"
+        "5:  ldr    r2, [sp], #4\n"           /* p */
+        "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
+        "    mov    r0, r8\n"
         "    mov    r1, r9\n"
         "    pop    {r4-r11, pc}\n");
 }
@@ -572,21 +573,21 @@ int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
      * outputs are stored column by column too (slot j * n_r + i), so that a
      * column's outputs, thresholds and branch constants are walked in step;
      * only the weights (row-major, as given) are read with a stride. */
-    const struct piezo_play_coef *c = p->coef;
-    int64_t acc = p->acc_q39;
     /* rising, F = max(u - r_i, F): the upper branch cannot bind */
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    (void)c;
-    acc = u_q15 > u_prev ? rise_m4(p, acc) : upi_fall_m4(p, acc); /* (they read p and its coefficients) */
+    /* they read p, its coefficients and acc_q39 and store acc_q39: tail calls */
+    return u_q15 > u_prev ? rise_m4(p) : upi_fall_m4(p);
 #else
+    const struct piezo_play_coef *c = p->coef;
+    int64_t acc = p->acc_q39;
     if (u_q15 > u_prev) {
         acc = rise(p->f_q15, c->w_q24, c->r_q15, c->n_r, c->n_a, c->n_a, u_q15, acc);
     } else {
         acc = upi_fall(c, p->off_q39, p->f_q15, u_q15, acc);
     }
-#endif
     p->acc_q39 = acc;
     return acc;
+#endif
 }
 
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
