@@ -81,9 +81,13 @@ void piezo_biquad_reset(piezo_biquad_t *f)
 int16_t piezo_biquad_process(piezo_biquad_t *f, int16_t x_q15)
 {
     const piezo_biquad_coef_t *c = f->coef;
+    /* - a1 y1 - a2 y2 as products of -a1 and -a2, each one multiply-accumulate
+     * (SMLAL) instead of a multiply and a 64-bit subtraction: the same
+     * integer, since init (and the register map's check before any write)
+     * holds |a1|, |a2| < 4 * 2^24, so their negatives fit int32 */
     int64_t acc = ((int64_t)c->b0_q24 * x_q15 + (int64_t)c->b1_q24 * f->x1_q15 +
-                   (int64_t)c->b2_q24 * f->x2_q15) * PIEZO_Q16_ONE -
-                  (int64_t)c->a1_q24 * f->y1_q31 - (int64_t)c->a2_q24 * f->y2_q31;
+                   (int64_t)c->b2_q24 * f->x2_q15) * PIEZO_Q16_ONE +
+                  (int64_t)(-c->a1_q24) * f->y1_q31 + (int64_t)(-c->a2_q24) * f->y2_q31;
     int32_t y31 = piezo_sat_i32(piezo_rshift_rnd64(acc, 24u));
     f->x2_q15 = f->x1_q15;
     f->x1_q15 = x_q15;
