@@ -407,17 +407,20 @@ static int16_t __attribute__((noinline)) ff_rkp(piezo_ff_state_t *ff, const piez
 
 int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15, int16_t u_applied_q15)
 {
-    switch (cs->kind) {
-    case PIEZO_TABLE_KIND_KP_DCC:
+    /* the kinds tested in this order, not by a switch: gcc's switch tested
+     * the RKP and EUPI kinds before the DCC (issue 15, round 14) */
+    const uint16_t kind = cs->kind;
+    if (kind == PIEZO_TABLE_KIND_KP_DCC) {
         ff->dcc.u_last_q15 = u_applied_q15;
         return piezo_dcc_process(&ff->dcc, piezo_line_q15(r_q15, cs->y_to_u_gain_q24, cs->y_offset_q15));
-    case PIEZO_TABLE_KIND_RKP:
-        return ff_rkp(ff, cs, r_q15, u_applied_q15);
-    case PIEZO_TABLE_KIND_EUPI_INVERSE:
-        return piezo_eupi_inv_process(&ff->inv, r_q15);
-    default:
-        return piezo_line_q15(r_q15, cs->open_loop_gain_q24, cs->open_loop_offset_q15);
     }
+    if (kind == PIEZO_TABLE_KIND_EUPI_INVERSE) {
+        return piezo_eupi_inv_process(&ff->inv, r_q15);
+    }
+    if (kind == PIEZO_TABLE_KIND_RKP) {
+        return ff_rkp(ff, cs, r_q15, u_applied_q15);
+    }
+    return piezo_line_q15(r_q15, cs->open_loop_gain_q24, cs->open_loop_offset_q15);
 }
 
 uint16_t piezo_xcset_load(piezo_xcset_t *xs, struct piezo_xc *st, const uint8_t *img, uint32_t len)

@@ -8,6 +8,20 @@
 #include "piezo_interface.h"
 #include "table_image.h"
 
+/* The tick's own state lies within the first 4 KiB of the instance (an
+ * LDR/STR immediate offset reaches 4095 bytes): the tick addresses it from
+ * the instance pointer, with no base register per 4 KiB (controller.h). */
+typedef char piezo_ctl_tick_state_near_check_t[(offsetof(piezo_ctl_t, wave_on_trigger) < 4096u) ? 1 : -1];
+
+/* The active feedforward set and the tick's pointers to it (ff_act,
+ * set_act), always together. */
+static void set_active(piezo_ctl_t *c, int8_t a)
+{
+    c->active = a;
+    c->ff_act = a >= 0 ? &c->ff[a] : NULL;
+    c->set_act = a >= 0 ? &c->set[a] : NULL;
+}
+
 int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
 {
     int rc;
@@ -18,7 +32,7 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
     }
     memset(c, 0, sizeof *c);
     c->cfg = *cfg;
-    c->active = -1;
+    set_active(c, -1);
     c->pending = -1;
     c->previous = -1;
     c->xc_active = -1;
@@ -96,7 +110,7 @@ uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io)
         (r = check_stage(c, &info)) != PIEZO_TABLE_REASON_OK || (r = load_spare(c, &info, &spare, 1)) != PIEZO_TABLE_REASON_OK) {
         return r;
     }
-    c->active = spare; /* before the first tick: no swap needed */
+    set_active(c, spare); /* before the first tick: no swap needed */
     /* the previous table, kept loaded so a rollback needs no flash read */
     len = piezo_store_load(&c->store, 1, c->staged, sizeof c->staged);
     if (len != 0u && piezo_table_check(c->staged, len, &info) == PIEZO_TABLE_REASON_OK &&
@@ -252,7 +266,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         c->boundary_req = 0u; /* before the requests are read: one published meanwhile sets it again */
         pend = c->pending;
         if (pend >= 0) {
-            c->active = pend;
+            set_active(c, pend);
             c->pending = -1;
         }
         pend = c->xc_pending;
@@ -312,13 +326,13 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 5. feedforward (of the shaped, inverted early reference) */
     if (run && mode != PIEZO_MODE_FEEDBACK) {
-        const int8_t a = c->active; /* (volatile: read once) */
-        if (mode == PIEZO_MODE_DIRECT || a < 0) {
+        piezo_ff_state_t *const ff = c->ff_act; /* &ff[active]: no index arithmetic per tick */
+        if (mode == PIEZO_MODE_DIRECT || ff == NULL) {
             u_ff = r_ahead; /* DIRECT, or no table: the reference is the drive */
         } else if (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK) {
-            u_ff = piezo_ff_process(&c->ff[a], &c->set[a], r_ahead, c->limit.prev_q15);
+            u_ff = piezo_ff_process(ff, c->set_act, r_ahead, c->limit.prev_q15);
         } else {
-            u_ff = piezo_line_q15(r_ahead, c->set[a].open_loop_gain_q24, c->set[a].open_loop_offset_q15);
+            u_ff = piezo_line_q15(r_ahead, c->set_act->open_loop_gain_q24, c->set_act->open_loop_offset_q15);
         }
     }
 
@@ -343,7 +357,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
             u = piezo_sat_q15((int32_t)u - u_xc);
         }
     }
-    u = piezo_limit_process(&c->limit, u);
+    u = piezo_limit_step(&c->limit, u);
     if (c->limit.flags != 0u && run) {
         c->st.clamps++;
     }

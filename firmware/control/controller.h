@@ -170,6 +170,34 @@ typedef struct {
      * drive of the previous tick, the same for both axes); elsewhere the host
      * may write it (register u2_q15). */
     int16_t u2_q15;
+    /* &ff[active] and &set[active], NULL with no table: written with active
+     * (set_active, controller.c: at init, at boot's load and by the tick's
+     * swap), read by the tick's step 5 instead of indexing both arrays */
+    piezo_ff_state_t *ff_act;
+    const piezo_coefset_t *set_act;
+
+    /* The tick's own state, here near the start: the tick addresses it from
+     * the instance pointer without a base register per 4 KiB (issue 15,
+     * round 14); the large arrays follow. */
+    piezo_pid_t pid;
+    piezo_biquad_t notch;
+    piezo_limit_t limit;
+    piezo_rec_t rec;
+    int16_t sig[PIEZO_SIG_N];
+    int16_t y_prev_q15;
+    uint16_t bad_run;
+    uint16_t overrun_run;
+    uint8_t have_y;
+    volatile int8_t xc_active; /* the coupling slot in use (xset, xc below), -1 = none */
+    int16_t xc_q15;            /* last compensation term u_xc (drive, q15) */
+    piezo_wave_t wave;
+    /* the learned feedforward's slots (wave_ff, below): the one played and
+     * the one the tick takes over */
+    volatile int8_t wave_ff_active;  /* slot played, -1 = none */
+    volatile int8_t wave_ff_pending; /* committed slot for the tick, PIEZO_CTL_WAVE_FF_OFF, or -1 */
+    uint32_t wave_ff_phase;          /* phase of r_ahead; restarts with the wave */
+    int16_t wave_ff_q15;             /* last correction added to the feedforward reference */
+    volatile uint8_t wave_on_trigger; /* 1: start the wave when the recorder triggers */
 
     /* feedforward tables: the active set, the previous one (rollback) and a
      * free one that a commit fills; the tick swaps a committed set in */
@@ -185,11 +213,9 @@ typedef struct {
      * store keeps the feedforward table) */
     piezo_xcset_t xset[3];
     struct piezo_xc xc[3];
-    volatile int8_t xc_active;
     volatile int8_t xc_pending;
     int8_t xc_previous;
     uint8_t last_commit_xc;    /* 1: the last good commit was a coupling table (rollback acts on it) */
-    int16_t xc_q15;            /* last compensation term u_xc (drive, q15) */
 
     /* staged bank: the image being uploaded */
     uint8_t staged[PIEZO_TABLE_MAX_BYTES];
@@ -205,7 +231,6 @@ typedef struct {
     uint8_t have_store;
 
     piezo_wave_cfg_t wave_cfg;
-    piezo_wave_t wave;
     piezo_wave_tone_t tones[PIEZO_WAVE_MAX_TONES];
     int16_t levels_q15[PIEZO_CTL_WAVE_MAX_LEVELS];
     uint32_t durations[PIEZO_CTL_WAVE_MAX_LEVELS];
@@ -213,29 +238,15 @@ typedef struct {
      * one a commit fills), swapped at the tick boundary like the tables */
     int16_t wave_ff_staged_q15[PIEZO_CTL_WAVE_FF_MAX];
     piezo_ctl_wave_ff_t wave_ff[2];
-    volatile int8_t wave_ff_active;  /* slot played, -1 = none */
-    volatile int8_t wave_ff_pending; /* committed slot for the tick, PIEZO_CTL_WAVE_FF_OFF, or -1 */
-    uint32_t wave_ff_phase;          /* phase of r_ahead; restarts with the wave */
-    int16_t wave_ff_q15;             /* last correction added to the feedforward reference */
-    volatile uint8_t wave_on_trigger; /* 1: start the wave when the recorder triggers */
+    /* (the slots' indices and phase are with the tick's state, above) */
 
-    piezo_rec_t rec;
     int16_t rec_buf[PIEZO_CTL_REC_SAMPLES];
-
-    piezo_pid_t pid;
-    piezo_biquad_t notch;
-    piezo_limit_t limit;
 
     int16_t ref_fifo[PIEZO_CTL_MAX_PREVIEW]; /* the reference, preview_ticks behind */
     uint8_t fifo_pos;
     int16_t shaper_hist[2u * PIEZO_CTL_MAX_SHAPER + 1u]; /* early reference history */
     uint8_t shaper_pos;
     piezo_fir_t dyninv;        /* the dynamics inverse's history (the shaped early reference) */
-    int16_t sig[PIEZO_SIG_N];
-    int16_t y_prev_q15;
-    uint16_t bad_run;
-    uint16_t overrun_run;
-    uint8_t have_y;
 } piezo_ctl_t;
 
 /** Initialize with a configuration; no table, disarmed, IDLE. Returns a piezo_err code. */

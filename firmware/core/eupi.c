@@ -106,17 +106,7 @@ void piezo_eupi_reset(struct piezo_eupi *m)
 int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
                             int16_t u_q15)
 {
-    const int64_t c0 = (int64_t)p0_q24 * PIEZO_Q15_ONE; /* Q39; no << of a negative */
-    if (n_p == 0u) {
-        return c0;
-    }
-    /* h = p_Np; h = h * u + p_m down to m = 2; P = p0 + (h * u) * u. */
-    int32_t h = p_q24[n_p - 1u];
-    for (size_t m = n_p - 1u; m > 0u; m--) {
-        h = (int32_t)(piezo_mul_rshift_rnd(h, u_q15, 15u) + p_q24[m - 1u]);
-    }
-    const int32_t hu = (int32_t)piezo_mul_rshift_rnd(h, u_q15, 15u);
-    return piezo_mlal(c0, hu, u_q15); /* (no 64 x 64 multiply: fixed_q.h) */
+    return piezo_eupi_poly_q39_inline(p_q24, n_p, p0_q24, u_q15);
 }
 
 int16_t piezo_eupi_process(struct piezo_eupi *m, int16_t u_q15)

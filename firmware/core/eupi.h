@@ -44,6 +44,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "fixed_q.h"
 #include "piezo_err.h"
 #include "play.h"
 
@@ -93,6 +94,24 @@ int16_t piezo_eupi_process(struct piezo_eupi *m, int16_t u_q15);
 /* P(u) in Q39 by Horner (see Rounding above); exact for n_p == 0. */
 int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
                             int16_t u_q15);
+/* The same, inline: the inverse's sample (eupi_inv.c) runs it without a call
+ * (issue 15, round 14: the call, its register saves and argument moves cost
+ * about as much as the polynomial's own multiplies). */
+static inline int64_t piezo_eupi_poly_q39_inline(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
+                                                 int16_t u_q15)
+{
+    const int64_t c0 = (int64_t)p0_q24 * PIEZO_Q15_ONE; /* Q39; no << of a negative */
+    if (n_p == 0u) {
+        return c0;
+    }
+    /* h = p_Np; h = h * u + p_m down to m = 2; P = p0 + (h * u) * u. */
+    int32_t h = p_q24[n_p - 1u];
+    for (size_t m = n_p - 1u; m > 0u; m--) {
+        h = (int32_t)(piezo_mul_rshift_rnd(h, u_q15, 15u) + p_q24[m - 1u]);
+    }
+    const int32_t hu = (int32_t)piezo_mul_rshift_rnd(h, u_q15, 15u);
+    return piezo_mlal(c0, hu, u_q15); /* (no 64 x 64 multiply: fixed_q.h) */
+}
 
 /* Checks of the G_UPI + P part common to the model and its inverse. */
 int piezo_eupi_check_upi_poly(const struct piezo_play_coef *upi,

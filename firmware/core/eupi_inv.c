@@ -62,7 +62,7 @@ int16_t piezo_eupi_inv_process(struct piezo_eupi_inv *c, int16_t yr_q15)
     const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
     /* G2(k) = G_UPI[u] + P(u) - k_ex u, kept in Q39 for the next sample. */
     int64_t g2 = piezo_play_process_upi(&c->upi, u);
-    g2 += piezo_eupi_poly_q39(k->p_q24, k->n_p, k->p0_q24, u);
+    g2 += piezo_eupi_poly_q39_inline(k->p_q24, k->n_p, k->p0_q24, u);
     g2 -= piezo_mul32(k->kex_q24, u); /* (no 64 x 64 multiply: fixed_q.h) */
     c->g2_q39 = g2;
     return u;

@@ -81,9 +81,13 @@ void piezo_biquad_reset(piezo_biquad_t *f)
 int16_t piezo_biquad_process(piezo_biquad_t *f, int16_t x_q15)
 {
     const piezo_biquad_coef_t *c = f->coef;
+    /* - a1 y1 - a2 y2 as products of -a1 and -a2, each one multiply-accumulate
+     * (SMLAL) instead of a multiply and a 64-bit subtraction: the same
+     * integer, since init (and the register map's check before any write)
+     * holds |a1|, |a2| < 4 * 2^24, so their negatives fit int32 */
     int64_t acc = ((int64_t)c->b0_q24 * x_q15 + (int64_t)c->b1_q24 * f->x1_q15 +
-                   (int64_t)c->b2_q24 * f->x2_q15) * PIEZO_Q16_ONE -
-                  (int64_t)c->a1_q24 * f->y1_q31 - (int64_t)c->a2_q24 * f->y2_q31;
+                   (int64_t)c->b2_q24 * f->x2_q15) * PIEZO_Q16_ONE +
+                  (int64_t)(-c->a1_q24) * f->y1_q31 + (int64_t)(-c->a2_q24) * f->y2_q31;
     int32_t y31 = piezo_sat_i32(piezo_rshift_rnd64(acc, 24u));
     f->x2_q15 = f->x1_q15;
     f->x1_q15 = x_q15;
@@ -116,26 +120,5 @@ void piezo_limit_reset(piezo_limit_t *l, int16_t start_q15)
 
 int16_t piezo_limit_process(piezo_limit_t *l, int16_t u_q15)
 {
-    const piezo_limit_coef_t *c = l->coef;
-    int32_t u = u_q15;
-    l->flags = 0u;
-    if (u > c->max_q15) {
-        u = c->max_q15;
-        l->flags |= PIEZO_LIMIT_CLAMPED;
-    } else if (u < c->min_q15) {
-        u = c->min_q15;
-        l->flags |= PIEZO_LIMIT_CLAMPED;
-    }
-    if (c->max_step_q15 > 0) {
-        int32_t d = u - l->prev_q15;
-        if (d > c->max_step_q15) {
-            u = l->prev_q15 + c->max_step_q15;
-            l->flags |= PIEZO_LIMIT_SLEWED;
-        } else if (d < -c->max_step_q15) {
-            u = l->prev_q15 - c->max_step_q15;
-            l->flags |= PIEZO_LIMIT_SLEWED;
-        }
-    }
-    l->prev_q15 = (int16_t)u;
-    return (int16_t)u;
+    return piezo_limit_step(l, u_q15);
 }

@@ -152,14 +152,17 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * g_i = (u - r_i) - hi_i is non-increasing in i (r_{i+1} - r_i = D >= 0
  * raises hi by floor(x + a D) - floor(x) >= floor(a D) >= 0, so g falls by
  * at least D), so once the upper branch wins (u - r < hi) it wins for the
- * rest of the column, which the upper-branch loop finishes at 11 (round 13).
+ * rest of the column, which the upper-branch loop finishes at 11 (round 13),
+ * 10.5 since round 14: a pass's two weights are read at wp and wp + stride
+ * and wp steps once by two strides (an odd count enters at the pair's
+ * second with wp one stride back; wp is reloaded per column).
  * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
 struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it updates it */
     uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
     int32_t *f;          /* 4: the column's outputs (column by column) */
-    const int32_t *w;    /* 8: the column's first weight (row-major) */
+    intptr_t w_a;        /* 8: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
     const int32_t *r;    /* 12: thresholds */
     const int32_t *a;    /* 16: the column's slope */
     const int32_t *a_end;/* 20: one past the last slope */
@@ -172,6 +175,7 @@ typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, 
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
                                         offsetof(struct piezo_play, f_q15) == 4u &&
                                         offsetof(struct piezo_play, off_q39) == 8u &&
+                                        offsetof(struct piezo_play, acc_q39) == 16u &&
                                         offsetof(struct piezo_play, u_prev_q15) == 24u &&
                                         offsetof(struct piezo_play_coef, r_q15) == 0u &&
                                         offsetof(struct piezo_play_coef, a_q24) == 4u &&
@@ -179,18 +183,16 @@ typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u 
                                         offsetof(struct piezo_play_coef, n_r) == 12u &&
                                         offsetof(struct piezo_play_coef, n_a) == 14u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_play *p, int64_t acc)
+static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct piezo_play *p)
 {
     (void)p;
-    (void)acc;
     /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
      * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
-     * thresholds in the lower-branch loop (the state's address at [sp]) */
+     * thresholds in the lower-branch loop; the column state at [sp] */
     __asm__ volatile(
-        "    push   {r4-r11, lr}\n"
+        "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
-        "    mov    r8, r2\n"
-        "    mov    r9, r3\n"
+        "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    r1, [r0, #0]\n"           /* coef */
         "    ldr    r4, [r0, #4]\n"           /* f */
         "    ldr    r5, [r0, #8]\n"           /* off */
@@ -201,6 +203,7 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    ldr    r12, [r1, #8]\n"          /* w */
         "    ldr    r11, [r1, #0]\n"          /* r */
         "    sub    r5, r5, r4, lsl #1\n"
+        "    sub    r12, r12, r10\n"           /* w - a: a column's first weight is a_j's address + it */
         "    add    r1, r10, r7, lsl #2\n"
         "    lsl    r6, r6, #2\n"
         "    lsl    r7, r7, #2\n"
@@ -209,21 +212,21 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    strd   r10, r1, [sp, #16]\n"
         "    strd   r6, r7, [sp, #24]\n"
         "    mov    r5, r7\n"
-        "    mov    r0, sp\n"
         "    cmp    r6, #0\n"
         "    beq    7f\n"
-        "1:  ldr    r10, [r0, #16]\n"          /* column: a_j, the split a u */
+        "1:  ldr    r10, [sp, #16]\n"          /* column: a_j, the split a u */
+        "    ldr    r4, [sp, #8]\n"
+        "    add    r4, r4, r10\n"             /* wp = w + j */
         "    ldr    r11, [r10], #4\n"
-        "    str    r10, [r0, #16]\n"
+        "    str    r10, [sp, #16]\n"
         "    smull  r6, r7, r11, lr\n"
         "    lsr    r10, r6, #24\n"
         "    orr    r7, r10, r7, lsl #8\n"
         "    lsl    r6, r6, #8\n"
-        "    ldrd   r1, r2, [r0, #0]\n"
+        "    ldrd   r1, r2, [sp, #0]\n"
         "    add    r1, r1, r2, lsl #1\n"
-        "    ldr    r3, [r0, #24]\n"
+        "    ldr    r3, [sp, #24]\n"
         "    add    r3, r2, r3\n"
-        "    ldr    r4, [r0, #8]\n"
         "    cmp    r11, #0x1000000\n"
         "    ble    2f\n"
         "    cmp    lr, #0\n"
@@ -233,7 +236,9 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    bgt    5f\n"
         "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
         "    tst    r12, #4\n"
-        "    bne    4f\n"
+        "    beq    31f\n"
+        "    sub    r4, r4, r5\n"             /* odd: enter at the pair's second, whose weight is [r4 + r5] */
+        "    b      4f\n"
         "31: ldrd   r10, r11, [r1], #8\n"
         "    ldr    r12, [r2]\n"
         "    adds   r10, r10, r6\n"
@@ -241,8 +246,7 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
+        "    ldr    r12, [r4]\n"              /* the pair's weights at r4 and r4 + r5, */
         "    smlal  r8, r9, r12, r10\n"
         "4:  ldrd   r10, r11, [r1], #8\n"
         "    ldr    r12, [r2]\n"
@@ -251,13 +255,13 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
+        "    ldr    r12, [r4, r5]\n"
+        "    add    r4, r4, r5, lsl #1\n"     /* one step of two strides per pass (r4 is dead at 6) */
         "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
-        "5:  ldr    r0, [r0, #12]\n"           /* with the lower branch: its prefix, one per pass */
+        "5:  ldr    r0, [sp, #12]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r10, r11, [r1], #8\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"            /* hi */
@@ -285,17 +289,15 @@ static __attribute__((naked, noinline)) int64_t upi_fall_m4(const struct piezo_p
         "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    3b\n"                      /* the rest by the upper-branch loop */
-        "6:  mov    r0, sp\n"                  /* next column: fp's starts where this one ends */
-        "    str    r3, [r0, #4]\n"
-        "    ldr    r12, [r0, #8]\n"
-        "    add    r12, r12, #4\n"
-        "    str    r12, [r0, #8]\n"
-        "    ldrd   r10, r11, [r0, #16]\n"
+        "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
+        "    ldrd   r10, r11, [sp, #16]\n"
         "    cmp    r10, r11\n"
         "    bne    1b\n"
-        "7:  mov    r0, r8\n"
+        "7:  add    sp, #32\n"
+        "    ldr    r2, [sp], #4\n"           /* p */
+        "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
+        "    mov    r0, r8\n"
         "    mov    r1, r9\n"
-        "    add    sp, #32\n"
         "    pop    {r4-r11, pc}\n");
 }
 
@@ -356,19 +358,20 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
 /* Cortex-M4: in Thumb-2, 10 instructions per moving operator (two per
  * pass; the break tested on the sign of the step it accumulates) against
- * gcc's 13; test_play and the EUPI golden vectors under QEMU. */
+ * gcc's 13; test_play and the EUPI golden vectors under QEMU. 9.5 since
+ * round 14: a pass's two weights at wp and wp + stride, wp stepped once per
+ * pass (with n_r odd every column enters at a pair's second, so the first
+ * column's weight pointer starts one stride back). */
 
-static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play *p, int64_t acc)
+static __attribute__((naked, noinline)) int64_t rise_m4(struct piezo_play *p)
 {
     (void)p;
-    (void)acc;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
      * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
      * r11 thresholds, r12 n_r * 4, lr u */
     __asm__ volatile(
-        "    push   {r4-r11, lr}\n"
-        "    mov    r8, r2\n"
-        "    mov    r9, r3\n"
+        "    push   {r0, r4-r11, lr}\n"       /* p at [sp] */
+        "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    r1, [r0, #0]\n"           /* coef */
         "    ldr    r2, [r0, #4]\n"           /* f */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
@@ -379,6 +382,9 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play 
         "    lsl    r5, r10, #2\n"
         "    lsls   r12, r12, #2\n"
         "    beq    5f\n"
+        "    tst    r12, #4\n"                /* n_r odd: every column enters at a pair's second, */
+        "    it     ne\n"
+        "    subne  r4, r4, r5\n"              /* whose weight is [r0 + r5]: r4 one stride back */
         "1:  add    r3, r2, r12\n"             /* column */
         "    mov    r1, r11\n"
         "    mov    r0, r4\n"
@@ -390,8 +396,7 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play 
         "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    ldr    r6, [r0]\n"
-        "    add    r0, r0, r5\n"
+        "    ldr    r6, [r0]\n"               /* the pair's weights at r0 and r0 + r5, */
         "    smlal  r8, r9, r6, r7\n"
         "3:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
@@ -399,8 +404,8 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play 
         "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    ldr    r6, [r0]\n"
-        "    add    r0, r0, r5\n"
+        "    ldr    r6, [r0, r5]\n"
+        "    add    r0, r0, r5, lsl #1\n"     /* one step of two strides per pass */
         "    smlal  r8, r9, r6, r7\n"
         "    cmp    r2, r3\n"
         "    bne    2b\n"
@@ -408,7 +413,9 @@ static __attribute__((naked, noinline)) int64_t rise_m4(const struct piezo_play 
         "    add    r4, r4, #4\n"
         "    subs   r10, r10, #1\n"
         "    bne    1b\n"
-        "5:  mov    r0, r8\n"
+        "5:  ldr    r2, [sp], #4\n"           /* p */
+        "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
+        "    mov    r0, r8\n"
         "    mov    r1, r9\n"
         "    pop    {r4-r11, pc}\n");
 }
@@ -566,21 +573,21 @@ int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
      * outputs are stored column by column too (slot j * n_r + i), so that a
      * column's outputs, thresholds and branch constants are walked in step;
      * only the weights (row-major, as given) are read with a stride. */
-    const struct piezo_play_coef *c = p->coef;
-    int64_t acc = p->acc_q39;
     /* rising, F = max(u - r_i, F): the upper branch cannot bind */
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    (void)c;
-    acc = u_q15 > u_prev ? rise_m4(p, acc) : upi_fall_m4(p, acc); /* (they read p and its coefficients) */
+    /* they read p, its coefficients and acc_q39 and store acc_q39: tail calls */
+    return u_q15 > u_prev ? rise_m4(p) : upi_fall_m4(p);
 #else
+    const struct piezo_play_coef *c = p->coef;
+    int64_t acc = p->acc_q39;
     if (u_q15 > u_prev) {
         acc = rise(p->f_q15, c->w_q24, c->r_q15, c->n_r, c->n_a, c->n_a, u_q15, acc);
     } else {
         acc = upi_fall(c, p->off_q39, p->f_q15, u_q15, acc);
     }
-#endif
     p->acc_q39 = acc;
     return acc;
+#endif
 }
 
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)

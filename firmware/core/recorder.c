@@ -104,7 +104,8 @@ typedef char piezo_rec_max_channels_check_t[(PIEZO_REC_MAX_CHANNELS == 8u) ? 1 :
 static void store(piezo_rec_t *r, const int16_t *signals_q15)
 {
     const uint8_t *sig = r->cfg.signal;
-    int16_t *frame = r->buf_q15 + (size_t)r->write * r->cfg.n_channels;
+    const uint32_t w = r->write, cap = r->capacity;
+    int16_t *frame = r->buf_q15 + (size_t)w * r->cfg.n_channels;
     /* one copy per channel, without a loop (n_channels is 1..8, configure) */
     switch (r->cfg.n_channels) {
     case 8: frame[7] = signals_q15[sig[7]]; /* fall through */
@@ -116,48 +117,54 @@ static void store(piezo_rec_t *r, const int16_t *signals_q15)
     case 2: frame[1] = signals_q15[sig[1]]; /* fall through */
     default: frame[0] = signals_q15[sig[0]]; break;
     }
-    if (++r->write == r->capacity) {
-        r->write = 0u;
-    }
-    if (r->filled < r->capacity) {
+    /* write and filled from registers: the frame's stores cannot change them
+     * (gcc would otherwise reload them after the int16 stores) */
+    r->write = (w + 1u == cap) ? 0u : w + 1u;
+    if (r->filled < cap) {
         r->filled++;
     }
 }
 
 void piezo_rec_process(piezo_rec_t *r, const int16_t *signals_q15)
 {
-    if (r->state != PIEZO_REC_ARMED && r->state != PIEZO_REC_TRIGGERED) {
+    uint8_t state = r->state;
+    /* ARMED (1) or TRIGGERED (2) as one unsigned compare */
+    if ((uint8_t)(state - PIEZO_REC_ARMED) > (uint8_t)(PIEZO_REC_TRIGGERED - PIEZO_REC_ARMED)) {
         return;
     }
+    /* decimation: decim_count ticks still to skip before the next frame, a
+     * countdown from decimation - 1 (0 with decimation 1: every tick); the
+     * frames are those of the count-up it replaced, ticks 0, d, 2d, ... after
+     * an arm or a ring's trigger, which both set it to 0 */
     if (r->decim_count != 0u) {
-        if (++r->decim_count == r->cfg.decimation) {
-            r->decim_count = 0u;
-        }
+        r->decim_count--;
         return;
     }
-    if (r->cfg.decimation > 1u) {
-        r->decim_count = 1u;
-    }
-    if (r->state == PIEZO_REC_ARMED &&
-        (r->cfg.trigger == PIEZO_REC_RISING || r->cfg.trigger == PIEZO_REC_FALLING)) {
-        int16_t v = signals_q15[r->cfg.trigger_signal];
-        int16_t lvl = r->cfg.trigger_level_q15;
-        if (r->have_last &&
-            ((r->cfg.trigger == PIEZO_REC_RISING && r->last_trigger_q15 < lvl && v >= lvl) ||
-             (r->cfg.trigger == PIEZO_REC_FALLING && r->last_trigger_q15 > lvl && v <= lvl))) {
-            piezo_rec_trigger(r);
+    r->decim_count = (uint16_t)(r->cfg.decimation - 1u);
+    if (state == PIEZO_REC_ARMED) {
+        if (r->cfg.trigger == PIEZO_REC_RISING || r->cfg.trigger == PIEZO_REC_FALLING) {
+            int16_t v = signals_q15[r->cfg.trigger_signal];
+            int16_t lvl = r->cfg.trigger_level_q15;
+            if (r->have_last &&
+                ((r->cfg.trigger == PIEZO_REC_RISING && r->last_trigger_q15 < lvl && v >= lvl) ||
+                 (r->cfg.trigger == PIEZO_REC_FALLING && r->last_trigger_q15 > lvl && v <= lvl))) {
+                piezo_rec_trigger(r); /* from ARMED: always to TRIGGERED */
+                state = PIEZO_REC_TRIGGERED;
+            }
+            r->last_trigger_q15 = v;
+            r->have_last = 1u;
         }
-        r->last_trigger_q15 = v;
-        r->have_last = 1u;
     }
     store(r, signals_q15);
-    if (r->state == PIEZO_REC_TRIGGERED) {
-        r->written++; /* after the store: a reader never sees a counted frame half written */
-        if (r->cfg.ring == 0u && --r->post_left == 0u) {
-            r->state = PIEZO_REC_DONE;
-        }
+    if (state != PIEZO_REC_TRIGGERED) {
+        return; /* still armed: a pretrigger frame */
+    }
+    r->written++; /* after the store: a reader never sees a counted frame half written */
+    if (r->cfg.ring == 0u && --r->post_left == 0u) {
+        r->state = PIEZO_REC_DONE;
     }
 }
+
 
 uint32_t piezo_rec_frames(const piezo_rec_t *r)
 {

@@ -62,7 +62,7 @@ typedef struct {
     uint32_t filled;           /* frames held, <= capacity */
     uint32_t post_left;        /* frames still to record after the trigger */
     uint32_t written;          /* frames stored since the trigger (wraps at 2^32) */
-    uint16_t decim_count;
+    uint16_t decim_count;      /* ticks still to skip before the next frame (counts down) */
     int16_t last_trigger_q15;
     uint8_t have_last;
 } piezo_rec_t;

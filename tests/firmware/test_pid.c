@@ -190,6 +190,58 @@ static void test_pid_matches_int64_formula(void **state)
     }
 }
 
+/* The notch's recurrence against the int64 formula it was first written as
+ * (b0 x + b1 x1 + b2 x2) 2^16 - a1 y1 - a2 y2, rounded by 24 bits and
+ * saturated to int32, the output rshift_rnd(y31, 16) saturated to q15: the
+ * kernel forms -a1 y1 and -a2 y2 as products of the negated coefficients
+ * (issue 15, round 14). Coefficients anywhere in init's range (-4, 4) in q24,
+ * the extremes included, inputs with runs, jumps and extremes, states
+ * preloaded anywhere in q31. */
+static void test_notch_matches_int64_formula(void **state)
+{
+    uint32_t seed = 11u;
+    const int32_t lim = 4 * (int32_t)PIEZO_Q24_ONE - 1;
+    (void)state;
+    for (int trial = 0; trial < 400; trial++) {
+        piezo_biquad_coef_t c;
+        int32_t *k[5] = {&c.b0_q24, &c.b1_q24, &c.b2_q24, &c.a1_q24, &c.a2_q24};
+        for (int i = 0; i < 5; i++) {
+            const uint32_t m = lcg32(&seed);
+            /* the edges now and then, else anywhere in (-lim, lim) at any scale */
+            *k[i] = (m & 7u) == 0u ? ((m & 8u) ? lim : -lim) : (int32_t)(lcg32(&seed) >> 5) - (1 << 26);
+            *k[i] >>= (m >> 28) & 7u;
+        }
+        piezo_biquad_t f;
+        assert_int_equal(piezo_biquad_init(&f, &c), PIEZO_OK);
+        f.x1_q15 = (int16_t)(lcg32(&seed) >> 16);
+        f.x2_q15 = (int16_t)(lcg32(&seed) >> 16);
+        f.y1_q31 = (int32_t)lcg32(&seed);
+        f.y2_q31 = (int32_t)lcg32(&seed);
+        int16_t x = 0;
+        for (int n = 0; n < 200; n++) {
+            const uint32_t m = lcg32(&seed);
+            if ((m & 15u) == 0u) {
+                x = (int16_t)(m >> 16);
+            } else if ((m & 15u) == 1u) {
+                x = (m & 16u) ? INT16_MAX : INT16_MIN;
+            } else {
+                x = (int16_t)(x + (int16_t)((int32_t)(m >> 16) >> 6));
+            }
+            const int64_t acc = ((int64_t)c.b0_q24 * x + (int64_t)c.b1_q24 * f.x1_q15 + (int64_t)c.b2_q24 * f.x2_q15) *
+                                    PIEZO_Q16_ONE -
+                                (int64_t)c.a1_q24 * f.y1_q31 - (int64_t)c.a2_q24 * f.y2_q31;
+            const int32_t y31 = piezo_sat_i32(piezo_rshift_rnd64(acc, 24u));
+            const int32_t y1 = f.y1_q31;
+            const int16_t x1 = f.x1_q15;
+            assert_int_equal(piezo_biquad_process(&f, x), piezo_sat_q15(piezo_rshift_rnd64(y31, 16u)));
+            assert_int_equal(f.y1_q31, y31);
+            assert_int_equal(f.y2_q31, y1);
+            assert_int_equal(f.x1_q15, x);
+            assert_int_equal(f.x2_q15, x1);
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -198,6 +250,7 @@ int main(void)
         cmocka_unit_test(test_notch_rejects_its_frequency_and_passes_dc),
         cmocka_unit_test(test_limiter_clamps_and_slews),
         cmocka_unit_test(test_notch_output_rounding_matches_int64),
+        cmocka_unit_test(test_notch_matches_int64_formula),
         cmocka_unit_test(test_pid_matches_int64_formula),
     };
     return cmocka_run_group_tests_name("pid", tests, NULL, NULL);

@@ -218,6 +218,128 @@ static void test_every_channel_count_stores_its_signals(void **state)
     }
 }
 
+/* The recorder's tick as it was written before issue 15's round 14 (the
+ * decimation counted up, the state read again after the store), kept here as
+ * the oracle of test_tick_matches_the_count_up_form. Only piezo_rec_trigger of
+ * the library is used: it is unchanged and acts on the oracle's own copy. */
+static void oracle_store(piezo_rec_t *r, const int16_t *s)
+{
+    int16_t *frame = r->buf_q15 + (size_t)r->write * r->cfg.n_channels;
+    for (uint8_t i = 0; i < r->cfg.n_channels; i++) {
+        frame[i] = s[r->cfg.signal[i]];
+    }
+    if (++r->write == r->capacity) {
+        r->write = 0u;
+    }
+    if (r->filled < r->capacity) {
+        r->filled++;
+    }
+}
+
+static void oracle_process(piezo_rec_t *r, const int16_t *s)
+{
+    if (r->state != PIEZO_REC_ARMED && r->state != PIEZO_REC_TRIGGERED) {
+        return;
+    }
+    if (r->decim_count != 0u) {
+        if (++r->decim_count == r->cfg.decimation) {
+            r->decim_count = 0u;
+        }
+        return;
+    }
+    if (r->cfg.decimation > 1u) {
+        r->decim_count = 1u;
+    }
+    if (r->state == PIEZO_REC_ARMED &&
+        (r->cfg.trigger == PIEZO_REC_RISING || r->cfg.trigger == PIEZO_REC_FALLING)) {
+        int16_t v = s[r->cfg.trigger_signal];
+        int16_t lvl = r->cfg.trigger_level_q15;
+        if (r->have_last &&
+            ((r->cfg.trigger == PIEZO_REC_RISING && r->last_trigger_q15 < lvl && v >= lvl) ||
+             (r->cfg.trigger == PIEZO_REC_FALLING && r->last_trigger_q15 > lvl && v <= lvl))) {
+            piezo_rec_trigger(r);
+        }
+        r->last_trigger_q15 = v;
+        r->have_last = 1u;
+    }
+    oracle_store(r, s);
+    if (r->state == PIEZO_REC_TRIGGERED) {
+        r->written++;
+        if (r->cfg.ring == 0u && --r->post_left == 0u) {
+            r->state = PIEZO_REC_DONE;
+        }
+    }
+}
+
+static uint32_t lcg_next(uint32_t *x)
+{
+    *x = *x * 1664525u + 1013904223u;
+    return *x >> 8;
+}
+
+/* The tick (decimation by a countdown, the state kept in a register) against
+ * the oracle above: random configurations (1-8 channels, decimation 1-5, every
+ * trigger, pretrigger, ring), random arms, software triggers and resets
+ * between ticks, a signal that crosses the trigger level both ways; after every
+ * tick the state, the counters and the whole buffer must be the oracle's. */
+static void test_tick_matches_the_count_up_form(void **state)
+{
+    (void)state;
+    enum { NS = 6, LEN = 40 };
+    uint32_t x = 12345u;
+    for (int trial = 0; trial < 400; trial++) {
+        int16_t buf[LEN], obuf[LEN];
+        piezo_rec_t r, o;
+        piezo_rec_cfg_t c = {0};
+        c.n_channels = (uint8_t)(1u + lcg_next(&x) % 8u);
+        for (uint8_t i = 0; i < c.n_channels; i++) {
+            c.signal[i] = (uint8_t)(lcg_next(&x) % NS);
+        }
+        c.decimation = (uint16_t)(1u + lcg_next(&x) % 5u);
+        c.trigger = (uint8_t)(lcg_next(&x) % 4u);
+        c.trigger_signal = (uint8_t)(lcg_next(&x) % NS);
+        c.trigger_level_q15 = (int16_t)((int32_t)(lcg_next(&x) % 200u) - 100);
+        c.ring = (uint8_t)(lcg_next(&x) % 2u);
+        c.pretrigger = c.ring ? 0u : lcg_next(&x) % 3u;
+        for (int i = 0; i < LEN; i++) {
+            buf[i] = obuf[i] = -7;
+        }
+        assert_int_equal(piezo_rec_init(&r, buf, LEN, NS), PIEZO_OK);
+        assert_int_equal(piezo_rec_configure(&r, &c), PIEZO_OK);
+        o = r;
+        o.buf_q15 = obuf;
+        for (int k = 0; k < 300; k++) {
+            uint32_t ev = lcg_next(&x) % 64u;
+            int16_t sig[NS];
+            if (ev == 0u) {
+                piezo_rec_arm(&r);
+                piezo_rec_arm(&o);
+            } else if (ev == 1u) {
+                piezo_rec_trigger(&r);
+                piezo_rec_trigger(&o);
+            } else if (ev == 2u) {
+                piezo_rec_reset(&r);
+                piezo_rec_reset(&o);
+            }
+            for (int s = 0; s < NS; s++) {
+                /* a triangle of period 40 ticks between -190 and 190, shifted per signal */
+                int t = (k + 7 * s) % 40;
+                sig[s] = (int16_t)((t < 20 ? t : 40 - t) * 19 - 190);
+            }
+            piezo_rec_process(&r, sig);
+            oracle_process(&o, sig);
+            assert_int_equal(r.state, o.state);
+            assert_int_equal(r.write, o.write);
+            assert_int_equal(r.filled, o.filled);
+            assert_int_equal(r.written, o.written);
+            assert_int_equal(r.post_left, o.post_left);
+            assert_int_equal(r.have_last, o.have_last);
+            assert_int_equal(r.last_trigger_q15, o.last_trigger_q15);
+            assert_memory_equal(buf, obuf, sizeof buf);
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -229,6 +351,7 @@ int main(void)
         cmocka_unit_test(test_ring_refuses_pretrigger),
         cmocka_unit_test(test_written_counts_a_plain_capture),
         cmocka_unit_test(test_every_channel_count_stores_its_signals),
+        cmocka_unit_test(test_tick_matches_the_count_up_form),
     };
     return cmocka_run_group_tests_name("recorder", tests, NULL, NULL);
 }
