@@ -488,8 +488,11 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
             psi[p] = r;
         }
         if (p > j && o < out_end) {
-            *o++ = (struct piezo_dcc_run){csum, r, (int16_t)n1, (uint16_t)j, (uint16_t)end,
-                                          (uint16_t)(p - j)};
+            o->csum = csum; /* field by field: the spare is left alone */
+            o->lvl = r;
+            o->thr = (int16_t)n1;
+            o->k = (uint16_t)(p - j);
+            o++;
         }
     }
     dcc->cur ^= 1u;
@@ -591,8 +594,11 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
             }
         }
         if (q < end && o < out_end) {
-            *o++ = (struct piezo_dcc_run){csum, r, (int16_t)n2, (uint16_t)pos, (uint16_t)end,
-                                          (uint16_t)(end - q)};
+            o->csum = csum; /* field by field: the spare is left alone */
+            o->lvl = r;
+            o->thr = (int16_t)n2;
+            o->k = (uint16_t)(end - q);
+            o++;
         }
     }
     dcc->cur ^= 1u;

@@ -116,9 +116,9 @@ struct piezo_dcc_run {
     int32_t csum;      /* sum of c_j over the k operators (|.| <= sum |c_j| < 2^31) */
     int32_t lvl;       /* their common psi */
     int16_t thr;       /* the row's n1 / the column's n2 */
-    uint16_t first;    /* falling: the row's first index; rising: the column's first position */
-    uint16_t end;      /* one past the row's last index / the column's last position */
-    uint16_t k;        /* operators in the run */
+    uint16_t k;        /* operators in the run (the line's own bounds come from row_start /
+                        * col_start: round 14 dropped the run's copies, which nothing read) */
+    uint32_t spare;    /* never written or read: 16 bytes a run, indexed by a shift */
 };
 
 /* Caller-owned instance; the coefficients may be shared, the state may not. */

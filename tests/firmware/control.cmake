@@ -11,3 +11,5 @@ piezo_add_cmocka_test(test_regmap SOURCES test_regmap.c LIBS piezo_control FIXTU
 piezo_add_cmocka_test(params_store SOURCES params_store.c nor_flash.c LIBS piezo_control)
 # The wave's learned feedforward (iterative learning control's table).
 piezo_add_cmocka_test(test_wave_ff SOURCES test_wave_ff.c LIBS piezo_control)
+# The RKP kind through piezo_ff_process against the RKP and DCC kernels called directly.
+piezo_add_cmocka_test(test_ff_rkp SOURCES test_ff_rkp.c LIBS piezo_control GOLDEN rkp)
