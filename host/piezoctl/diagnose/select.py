@@ -788,7 +788,7 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
                       "check ran")
             continue
         if check is not None:
-            c.signature_check = check(c)
+            c.signature_check = check(c) or c.signature_check   # a check of its own (coupling's) is kept
             if c.below_gates and c.name not in SIGNATURES and not (c.signature_check or {}).get("testable", False):
                 c.veto = ("after the first term it passed only below the first round's size gates, where its "
                           "signature must hold, and its signature check has no informative bin to test it on")
@@ -840,6 +840,26 @@ def _slow_beyond_gates(evals, log):
                 log(f"    {c.name}: {c.veto}")
 
 
+def _coupling_motion(evals, fctx, es, fold_all, block_all, rows, log):
+    """A significant ``cross_coupling`` candidate is kept only when its improvement follows the other axis'
+    *motion*, beyond that axis' level per recording and the slow terms (``coupling_signature.motion_test``, at
+    ``significance.ALPHA``); vetoed otherwise (round 14: a drift taken by the columns of the one recording where
+    the other axis moved, development s111-016)."""
+    c = next((x for x in evals if x.name == "cross_coupling" and x.significant and not x.veto), None)
+    if c is None:
+        return
+    from .coupling_signature import motion_phrase, motion_test
+    mt = motion_test(fctx, es, [slow_nuisance(x) for x in fctx], c.setting, fold_all, block_all, rows)
+    c.signature_check = {"passed": mt["holds"], "testable": True, "motion": mt,
+                         "reason": ("its improvement does not follow the other axis' motion: " + motion_phrase(mt)
+                                    + f" (level {mt['alpha']:g})"),
+                         "figures": {"motion_ratio": mt["ratio"], "motion_p": mt["p"]}}
+    log(f"    cross_coupling motion: {motion_phrase(mt)}: " + ("holds" if mt["holds"] else "does not hold"))
+    if not mt["holds"]:
+        c.significant = False
+        c.veto = c.signature_check["reason"]
+
+
 @blas_threads(1)   # small BLAS calls: a second thread only waits for a busy core (dsp.blas_threads)
 def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f_band=None):
     """Forward selection: per round every remaining term is evaluated (cross-validated, nested), the drive-side
@@ -880,6 +900,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
                     log(f"    {t.name} level dependence: p {t.level['p']:.1e}, folds {t.level['fold_ratios'][0]:.3f}/"
                         f"{t.level['fold_ratios'][1]:.3f}" + (" (depends on the level)" if t.level["depends_on_level"] else ""))
             _slow_beyond_gates(evals, log)
+        _coupling_motion(evals, fctx, es, fold_all, block_all, rows, log)   # round 14: it follows u2's motion
         rounds.append(evals)
         check = None
         if f_band is not None:   # the drive-side terms' frequency-domain shape on the current model (signature.py)

@@ -662,13 +662,23 @@ def _precedence(tests, passed, sized=()) -> list:
     the one hypothesis that the named term's signature is its own). Round 12: the drift's also holds *between*
     the recordings when the levels of a session's recordings vary beyond the base's misfit (``level_spread``, at
     ``ALPHA_SIGNATURE``) and the drift's own candidate, a curve on the session clock, meets its size criteria
-    (``sized``): the levels follow the clock, which one constant per session cannot do."""
+    (``sized``): the levels follow the clock, which one constant per session cannot do.
+
+    Round 14: a holding creep goes before the offset too, for the drift's reason: creep's signature columns are
+    centred per recording (:func:`signature_groups`), so the level a creep leaves in each recording - its state
+    when the recording began - is the offset's column's, and the offset's unique contribution then holds as
+    well; creep's own signature (the step-locked tail of :func:`step_response_test`) is what no offset can make.
+    Development s112-030 (creep, Coleman-Hodgdon): creep's own test 0.30/0.62 (p 4.8e-9) and its tail after the
+    steps 0.04 (p 2.4e-9), the offset's unique ratio 0.18 against creep's 0.33: named ``sensor_offset`` first.
+    Between the drift and creep the unique ratio decides, as before."""
     order = sorted((t for t in tests if t.holds or (t.confirms and t.name in passed)
                     or (t.name == "thermal_drift" and _varies(t) and t.name in sized)), key=lambda t: t.unique_ratio)
     names = [t.name for t in order]
-    if "thermal_drift" in names and "sensor_offset" in names:
-        names.remove("thermal_drift")
-        names.insert(names.index("sensor_offset"), "thermal_drift")
+    if "sensor_offset" in names:
+        leave = [n for n in names[names.index("sensor_offset") + 1:] if n in ("thermal_drift", "creep")]
+        names = [n for n in names if n not in leave]
+        i = names.index("sensor_offset")
+        names[i:i] = leave
     return names
 
 
