@@ -154,7 +154,9 @@ def test_check_in_context_reads_the_current_model_and_caches_the_transfer():
     b = sig.check_in_context(ctx, "amplifier_bandwidth", 150.0, F_BAND, cache)
     assert b["passed"] and "transfer" in cache
     d = sig.check_in_context(ctx, "delay", 8.0, F_BAND, cache)
-    assert d["figures"]["bins_informative"] == cache["transfer"].k
+    # the delay's shape is tested up to the band the drives excite (round 14), on the cached transfer's bins there
+    assert d["figures"]["drive_band_hz"] == pytest.approx(sig.drive_band_hz(xs, DT))
+    assert d["figures"]["bins_informative"] == sig.within_band(cache["transfer"], d["figures"]["drive_band_hz"]).k
     assert sig.check_in_context(ctx, "creep", None, F_BAND, cache) is None
 
 
@@ -168,3 +170,56 @@ def test_setting_of_a_candidate_without_a_numeric_setting():
     assert _setting_of(C()) == 4.0
     C.setting = [(300.0, 0.01), (310.0, 0.02)]
     assert _setting_of(C()) == (300.0, 0.01)
+
+
+def test_drive_band_is_where_the_drive_rate_energy_lies():
+    t = np.arange(N) * DT
+    assert sig.drive_band_hz([np.sin(2 * np.pi * 50.0 * t)], DT) == pytest.approx(50.0, abs=1.0)
+    assert sig.drive_band_hz([np.zeros(8)], DT) == 0.0   # too short: no band
+
+
+def _band_limited(seed, f_cut=150.0):
+    """A model output whose drive's rate lies below about ``f_cut`` [Hz] (a fourth-order low-passed noise, as a
+    reveal's fast sines and smoothed triangle), plus a faint broadband part (a triangle's harmonics) that leaves
+    informative bins up to kHz but under 1 % of the rate's energy."""
+    rng = np.random.default_rng(seed)
+    b, a = sps.butter(4, f_cut, fs=1.0 / DT)
+    return 200.0 * sps.lfilter(b, a, rng.standard_normal(N)) + 0.05 * rng.standard_normal(N)
+
+
+def _delay_behind_a_mode(d):
+    """The drive delayed by ``d`` samples, through a mode of the stage at 1.1 kHz (damping 0.05) the model lacks."""
+    xs = [_band_limited(s) for s in (1, 2)]
+    ys = [_noisy(_mode(_delay(x, d), 1100.0, 0.05), s) for x, s in zip(xs, (1, 2))]
+    tr = sig.transfer(xs, ys, DT)
+    s2, _ = sig.dispersion(tr, F_BAND)
+    return xs, tr, s2
+
+
+def test_delay_is_tested_up_to_the_drive_band():
+    """Round 14 (development case s112-053): a 0.8 ms delay in front of a stage whose own mode at 1.1 kHz the
+    model lacks. On every informative bin (to 4 kHz) the mode's phase above it decides F and the delay fails; up to
+    the drive's band the transfer is the delay's and the check finds it."""
+    xs, tr, s2 = _delay_behind_a_mode(8)
+    f_drive = sig.drive_band_hz(xs, DT)
+    assert 200.0 < f_drive < 500.0
+    assert not sig.check_delay(tr, s2, F_BAND, DT)["passed"]
+    r = sig.check_delay(tr, s2, F_BAND, DT, f_drive)
+    assert r["passed"], r["reason"]
+    assert r["figures"]["f_max_hz"] <= f_drive and r["figures"]["drive_band_hz"] == f_drive
+    assert abs(r["figures"]["delay_s"] / DT - 8.0) <= 1.0
+
+
+def test_latency_and_a_mode_fail_the_delay_check_up_to_the_drive_band():
+    """A null: the loop's one-sample latency and the same unmodeled mode; up to the drive's band the check still
+    finds no delay beyond the latency."""
+    xs, tr, s2 = _delay_behind_a_mode(1)
+    r = sig.check_delay(tr, s2, F_BAND, DT, sig.drive_band_hz(xs, DT))
+    assert r["testable"] and not r["passed"]
+
+
+def test_delay_check_uses_every_bin_when_the_drive_band_holds_too_few():
+    xs, ys, tr, s2 = _case(lambda x: _delay(x, 8))
+    assert not np.any((tr.f > 10.0) & (tr.f <= 10.5))
+    r = sig.check_delay(tr, s2, 5.0, DT, 10.5)   # one bin (10 Hz) up to this drive band: too few
+    assert r["figures"]["bins_informative"] == tr.k and r["passed"]
