@@ -86,9 +86,10 @@ BW_GAMMA_RATIOS = (-0.6, -0.3, 0.0, 0.3, 0.6)                    # gamma / beta;
 BW_EXPONENTS = (0.6, 1.0, 1.6, 2.5)      # Bouc-Wen exponents n of the grid (Nelder-Mead refines log n); a Duhem law
                                          # has no return-point memory, so its exponent is not a Preisach density
 BW_EXPONENT_RANGE = (0.3, 5.0)           # n is kept inside this range by the refinement
-BW_START_FRACTIONS = (-0.9, -0.5, 0.5, 0.9)   # the column's state at rest, as a fraction of its limit h_u (and 0):
-                                              # unknown (the stage's history before the recording); a Duhem state
-                                              # that never saturates inside the range remembers it throughout
+BW_START_FRACTIONS = ()   # the column's state at rest, as a fraction of its limit h_u, searched besides 0 when given
+                          # (round 11: -0.9, -0.5, 0.5, 0.9). Off since round 12: a Duhem state that never saturates
+                          # remembers its start through every recording, a slow level the slow attribution shares with
+                          # creep and a drift (own cases: creep p 1.0e-2, a drift named beside a sensor curve)
 CV_BLOCKS = 32           # interleaved blocks per calibration recording in the size cross-validation
 SIZE_TOLERANCE = 1.02    # the smallest size within 2 % of the best cross-validated error is chosen
 ORDERS = (0, 2, 4, 6)
@@ -622,9 +623,10 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
               for P, v, r, p in zip(Pk, vk, rows, pos)]
         return _cv_score(Xh, yr, hfolds, lay, ridges, sign, HOLDOUT_SEGMENTS)
 
-    # the Bouc-Wen column's shape, with the reversible curve alone (R = 1): a grid over (beta, n) at gamma = 0 and
-    # h0 = 0, the start states and then the gamma ratios at the best of it, then Nelder-Mead on
-    # (log beta, gamma / beta, log n, h0 / h_u): 96 evaluations (the exponent-1 search had 75)
+    # the Bouc-Wen column's shape, with the reversible curve alone (R = 1), scored on held-out histories: a grid over
+    # (beta, n) at gamma = 0 and h0 = 0, the start states (when searched) and then the gamma ratios at the best of
+    # it, then Nelder-Mead on (log beta, gamma / beta, log n[, h0 / h_u]): 92 evaluations (96 with the start states;
+    # the exponent-1 search had 75)
     def bw_shape(z):
         beta, gr = float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95))
         n = float(np.clip(np.exp(z[2]), *BW_EXPONENT_RANGE))
@@ -641,10 +643,16 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
     grid += [(bw_score(z), z) for z in ((z0[0], g, z0[2], z0[3]) for g in BW_GAMMA_RATIOS if g != 0.0)]
     sc0, z0 = min(grid)
     z0 = np.array(z0)
-    sol = optimize.minimize(bw_score, z0, method="Nelder-Mead",
+    steps = [0.25, 0.15, 0.2, 0.2] if BW_START_FRACTIONS else [0.25, 0.15, 0.2]   # the start state refined when searched
+    free = len(steps)
+
+    def bw_score_free(x):
+        return bw_score(np.concatenate([x, z0[free:]]))
+    sol = optimize.minimize(bw_score_free, z0[:free], method="Nelder-Mead",
                             options={"maxfev": 60, "xatol": 0.01, "fatol": 1e-4 * sc0,
-                                     "initial_simplex": [z0, z0 + [0.25, 0, 0, 0], z0 + [0, 0.15, 0, 0],
-                                                         z0 + [0, 0, 0.2, 0], z0 + [0, 0, 0, 0.2]]})
+                                     "initial_simplex": [z0[:free]] + [z0[:free] + np.eye(free)[i] * st
+                                                                       for i, st in enumerate(steps)]})
+    sol.x = np.concatenate([sol.x, z0[free:]])
     z = sol.x if sol.fun < sc0 else z0
     best_bw = (None, bw_shape(z))
     # thresholds the calibration's reversals can resolve: at least two reversal levels per play threshold
