@@ -62,3 +62,18 @@ def test_plane_with_an_exponent_n_column_uses_it():
     h, hyst = hysteresis_parts(hp, v)
     h1, _ = hysteresis_parts({**hp, "bw": {"beta": 2.0, "gamma": 0.4, "c_h": 1.5}}, v)   # n absent: 1
     assert np.allclose(h - h1, 1.5 * (_bouc_wen_h_n(v, 2.0, 0.4, 0.0, 2.0) - _bouc_wen_h(v, 2.0, 0.4, 0.0)))
+
+
+def test_groups_of_a_plane_with_an_exponent_n_column_sum_to_its_output():
+    """The nested tests' nuisance (``hysteresis_groups``) refits the base's own groups: with an exponent n != 1
+    the Bouc-Wen group must be the model's own column (it was the n = 1 column, so the groups did not sum to H)."""
+    from piezoctl.models.hysteresis import hysteresis_groups
+    v = _drive(4, 3000)
+    hp = {"type": "plane", "r": [0.0, 0.5], "knots": [[-1.0, 0.0, 1.0], [-0.5, 0.5]],
+          "values": [[0.0, 1.0, 2.0], [0.0, 0.3]], "offset": 0.0, "v_rest": 0.0, "v_lo": -1.0, "v_hi": 1.0,
+          "bw": {"beta": 2.0, "gamma": 0.4, "n": 2.5, "h0": 0.1, "c_h": 1.5}}
+    h, _ = hysteresis_parts(hp, v)
+    G = hysteresis_groups(hp, v)
+    assert G.shape[1] == 3
+    assert np.allclose(G[:, 2], 1.5 * bouc_wen_h(v, 2.0, 0.4, 0.0, 2.5, 0.1))
+    assert np.allclose(G.sum(axis=1), h - np.mean(h - G.sum(axis=1)))

@@ -608,7 +608,8 @@ def hysteresis_groups(hp: dict, v) -> np.ndarray:
     cols = [c for c in (rev, hys) if c is not None]
     bw = hp.get("bw")
     if bw:
-        cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0))))
+        cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
+                                                  float(bw.get("n", 1.0)), float(bw.get("h0", 0.0))))
     return np.column_stack(cols)
 
 
