@@ -63,7 +63,7 @@ from .misfit import credited_ratio
 from .solve import lstsq_box, train_rows
 
 __all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute",
-           "step_response_test", "creep_on_steps"]
+           "step_response_test", "creep_on_steps", "drift_beyond_plane_test"]
 
 SIGNATURES = ("creep", "thermal_drift", "sensor_offset")
 ALPHA_SIGNATURE = sg.ALPHA / len(SIGNATURES)   # Bonferroni over the three signatures
@@ -86,6 +86,7 @@ class SignatureTest:
     level: dict | None = None   # sensor_offset: the level dependence within its sessions (offset_level_test)
     spread: dict | None = None  # offset, drift: the levels of a session's recordings (level_spread_test)
     step: dict | None = None    # creep: its test on the responses to the drive's steps (step_response_test)
+    plane: dict | None = None   # drift: its trend beyond the base's plane refitted on the data (drift_beyond_plane_test)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "unique_ratio": self.unique_ratio, "fold_ratios": self.fold_ratios,
@@ -93,7 +94,8 @@ class SignatureTest:
                 "alpha": ALPHA_SIGNATURE, "holds": self.holds, "alpha_own": sg.ALPHA, "confirms": self.confirms,
                 **({"level_dependence": self.level} if self.level is not None else {}),
                 **({"level_spread": self.spread} if self.spread is not None else {}),
-                **({"step_response": self.step} if self.name == "creep" else {})}
+                **({"step_response": self.step} if self.name == "creep" else {}),
+                **({"beyond_plane": self.plane} if self.plane is not None else {})}
 
     def phrase(self) -> str:
         verdict = "holds" if self.holds else ("holds as its own term's" if self.confirms else "does not hold")
@@ -102,6 +104,8 @@ class SignatureTest:
                 f"p = {self.p:.1e}")
         if self.name == "creep":
             text += "; " + step_phrase(self.step)
+        if self.plane is not None:
+            text += "; " + plane_phrase(self.plane)
         return text + ")"
 
 
@@ -531,6 +535,106 @@ def offset_after_drift_test(ctx, level) -> dict | None:
             "within_drift_misfit": bool(pv >= sg.ALPHA)}
 
 
+PLANE_TEST_SAMPLES = 60_000   # the settled samples :func:`drift_beyond_plane_test` uses at most (every k-th one):
+#                               the plane's whole basis (up to about a hundred columns) at 10 kHz over a minute
+#                               would take a few hundred MB; a trend over seconds needs no more than ~1 kHz
+
+
+def _plane_columns(ctx, pos) -> np.ndarray:
+    """The base's whole linear hysteresis basis (``models.hysteresis.hysteresis_features``: every play's hat
+    basis and the Bouc-Wen column for a plane) through the base dynamics, at positions ``pos`` of the stacked
+    settled samples; filtered and picked one block of columns at a time (never the full-rate matrix)."""
+    from ..dsp import filt
+    from ..models.hysteresis import hysteresis_features, plane_feature_blocks
+    hp = ctx.base["hysteresis"]
+    b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+    out, off = [], 0
+    for s, v in zip(ctx.signals, ctx.valid):
+        idx = np.flatnonzero(v)
+        mine = pos[(pos >= off) & (pos < off + idx.size)] - off
+        off += idx.size
+        at = idx[mine]
+        blocks = plane_feature_blocks(hp, s.v) if hp.get("type", "pi") == "plane" else [hysteresis_features(hp, s.v)[0]]
+        out.append(np.hstack([filt(b, a, B)[at] for B in blocks]))
+    return np.vstack(out)
+
+
+def drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows) -> dict | None:
+    """The drift's trend within the recordings beyond a refit of the base's whole plane on the new data (round 14).
+
+    A drift follows the session clock whatever the drive did; the base's misfit follows the drive. On a
+    reveal recording whose drive's envelope changes over time (a growing or decaying sweep, a walk that wanders
+    to one end) the base's misfit there changes with the envelope too, and so leaves a trend within the
+    recording that the drift's columns take (round 13: new3's base left the own offset case's 14.5 s recording
+    2.96 nm RMS beyond a level and a 12 nm/min slope, and the drift was named first). Calibration histories do
+    not measure that (they are of the calibration's kinds; there the base left no slow misfit at all), so the
+    trend is tested against the base's own flexibility refitted on the reveal recordings themselves: every
+    weight of the plane (each play's hat basis, the Bouc-Wen column; ``hysteresis_features``) free, through the
+    base dynamics, fitted on the training fold of the ~1 s blocks like every nuisance here. A trend those
+    weights remove is a function of the drive's history, i.e. the base's; what is left follows the clock.
+
+    The drift's columns (``signature_groups``) are added to the nuisance of :func:`signature_tests` (its columns
+    ``designs[f][0]``), a level per recording (the drift is tested within the recordings, as there), creep's
+    columns and the plane's; fitted on fold f and scored on fold 1 - f, on every k-th settled sample
+    (``PLANE_TEST_SAMPLES``). The drift *survives the refit* when the active-block test of
+    ``significance.active_block_test`` gives p < ``ALPHA_SIGNATURE`` and the held-out error is lower in each fold;
+    it *survives at its own level* with p < ``ALPHA`` (the same two levels as the signature's ``holds`` and
+    ``confirms``). Both are thresholds of a test, not read from a case.
+
+    Returns None when there is no drift group, else a dict: ``ratio``, ``fold_ratios``, ``p``, ``n_active``,
+    ``columns`` (the plane's), ``stride``, ``holds``, ``confirms``.
+    """
+    if "thermal_drift" not in designs[0][3]:
+        return None
+    ctx = ctxs[0]
+    used = np.flatnonzero(fold_all >= 0)
+    if used.size == 0:
+        return None
+    stride = int(np.ceil(used.size / PLANE_TEST_SAMPLES))
+    pos = used[::stride]
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])[pos]
+    levels = (rec[:, None] == np.arange(ctx.n_rec)[None, :]).astype(float)
+    fa, ba = fold_all[pos], block_all[pos]
+    planes = {}
+    red, full, e = np.zeros(pos.size), np.zeros(pos.size), np.zeros(pos.size)
+    for f in (0, 1):
+        N, n_lo, n_hi, groups = designs[f]
+        key = id(ctxs[f].base["hysteresis"])
+        if key not in planes:
+            planes[key] = _plane_columns(ctxs[f], pos)
+        P = planes[key]
+        keep = [n for n in ("creep",) if n in groups]
+        X = np.hstack([N[pos], levels, P] + [groups[n][0][pos] for n in keep])
+        lo = np.concatenate([n_lo, np.full(levels.shape[1] + P.shape[1], -np.inf)] + [groups[n][1] for n in keep])
+        hi = np.concatenate([n_hi, np.full(levels.shape[1] + P.shape[1], np.inf)]
+                            + [np.full(groups[n][0].shape[1], np.inf) for n in keep])
+        D, d_lo = groups["thermal_drift"]
+        train, test = fa == f, fa == 1 - f
+        red[test] = _fit(X, es[f][pos], lo, hi, train, test, rows)
+        full[test] = _fit(np.hstack([X, D[pos]]), es[f][pos], np.concatenate([lo, d_lo]),
+                          np.concatenate([hi, np.full(D.shape[1], np.inf)]), train, test, rows)
+        e[test] = es[f][pos][test]
+    before, after, corr = e - red, e - full, full - red
+    fr = []
+    for f in (0, 1):
+        sel = fa == 1 - f
+        sb = float(np.sum(before[sel] ** 2))
+        fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    sb = float(np.sum(before ** 2))
+    units = sg.test_units(before, ba, rec, ctx.dt * stride, corr)
+    _, p, n_act = sg.active_block_test(before, after, corr, ba, units)
+    lower = max(fr) < 1.0
+    return {"ratio": float(np.sqrt(np.sum(after ** 2) / sb)) if sb > 0 else 1.0, "fold_ratios": fr, "p": float(p),
+            "n_active": int(n_act), "columns": int(next(iter(planes.values())).shape[1]), "stride": stride,
+            "holds": bool(lower and p < ALPHA_SIGNATURE), "confirms": bool(lower and p < sg.ALPHA)}
+
+
+def plane_phrase(pt: dict) -> str:
+    """The drift's test beyond the refitted plane (:func:`drift_beyond_plane_test`), in words."""
+    return (f"beyond the base's plane refitted on these recordings ({pt['columns']} weights free): ratio "
+            f"{pt['ratio']:.2f}, folds {pt['fold_ratios'][0]:.2f}/{pt['fold_ratios'][1]:.2f}, p = {pt['p']:.1e}")
+
+
 def spread_phrase(sp: dict) -> str:
     """The level spread of :func:`level_spread_test`, in words."""
     return (f"the recordings of a session sit at different levels ({', '.join(f'{x:+.3f}' for x in sp['levels_um'])} "
@@ -614,6 +718,13 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
             out[-1].step = st
             out[-1].holds = _step_holds(st, ALPHA_SIGNATURE)
             out[-1].confirms = _step_holds(st, sg.ALPHA)
+        if n == "thermal_drift" and (out[-1].holds or out[-1].confirms):
+            # round 14: the trend within the recordings only beyond the base's plane refitted on them
+            pt = drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows)
+            if pt is not None:
+                out[-1].plane = pt
+                out[-1].holds = out[-1].holds and pt["holds"]
+                out[-1].confirms = out[-1].confirms and pt["confirms"]
         if n == "sensor_offset":
             out[-1].level = offset_level_test(designs, [level_columns(c) for c in ctxs], es, fold_all, block_all,
                                               rec, ctx.dt, rows, ctx.misfit)

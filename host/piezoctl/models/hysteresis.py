@@ -42,7 +42,7 @@ from .play import play_outputs
 
 __all__ = ["bouc_wen_h", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
            "hysteresis_output", "hysteresis_output_of", "clear_output_cache",
-           "poly_clamped", "hysteresis_features", "add_to_features", "hysteresis_channels",
+           "poly_clamped", "hysteresis_features", "plane_feature_blocks", "add_to_features", "hysteresis_channels",
            "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span"]
 
 _STATE_CACHE: "collections.OrderedDict" = collections.OrderedDict()
@@ -496,14 +496,10 @@ def hysteresis_features(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
     v = np.asarray(v, float)
     kind = hp.get("type", "pi")
     if kind == "plane":
-        P = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
-        F = np.hstack([hat_basis(P[:, j], kn)[:, 1:] for j, kn in enumerate(hp["knots"])])
+        F = np.hstack(list(plane_feature_blocks(hp, v)))
         th = np.concatenate([np.asarray(vals[1:], float) - float(vals[0]) for vals in hp["values"]])
-        bw = hp.get("bw")
-        if bw:
-            hb = bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
-                            float(bw.get("n", 1.0)), float(bw.get("h0", 0.0)))
-            F, th = np.column_stack([F, hb]), np.append(th, float(bw["c_h"]))
+        if hp.get("bw"):
+            th = np.append(th, float(hp["bw"]["c_h"]))
         return F, th
     vc = np.clip(v, float(hp.get("v_lo", -1.0)), float(hp.get("v_hi", 1.0)))
     if kind == "bouc_wen":
@@ -513,6 +509,20 @@ def hysteresis_features(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
         H = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
         th = list(map(float, hp["w"]))
     return np.column_stack([H, vc, vc ** 2, vc ** 3]), np.array(th + list(hp["poly"])[:3], float)
+
+
+def plane_feature_blocks(hp: dict, v):
+    """The columns of :func:`hysteresis_features` for a ``plane`` operator, one block at a time: each play's hat
+    basis (n, K - 1), then the Bouc-Wen column (n, 1) when there is one. A caller that filters or decimates
+    each block at once never holds the whole (n, k) matrix at full rate (k up to about a hundred)."""
+    v = np.asarray(v, float)
+    P = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
+    for j, kn in enumerate(hp["knots"]):
+        yield hat_basis(P[:, j], kn)[:, 1:]
+    bw = hp.get("bw")
+    if bw:
+        yield bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
+                         float(bw.get("n", 1.0)), float(bw.get("h0", 0.0)))[:, None]
 
 
 def add_to_features(hp: dict, dtheta) -> dict:
