@@ -540,13 +540,45 @@ PLANE_TEST_SAMPLES = 60_000   # the settled samples :func:`drift_beyond_plane_te
 #                               would take a few hundred MB; a trend over seconds needs no more than ~1 kHz
 
 
-def _plane_columns(ctx, pos) -> np.ndarray:
-    """The base's whole linear hysteresis basis (``models.hysteresis.hysteresis_features``: every play's hat
-    basis and the Bouc-Wen column for a plane) through the base dynamics, at positions ``pos`` of the stacked
-    settled samples; filtered and picked one block of columns at a time (never the full-rate matrix)."""
-    from ..dsp import filt
-    from ..models.hysteresis import hysteresis_features, plane_feature_blocks
+def refit_plane(ctx) -> dict:
+    """The plane the base's family offers for a refit on the recordings of ``ctx``: the largest size of
+    ``ident.base.PLANE_PLAYS`` x ``PLANE_KNOTS`` those recordings resolve (as the base's size choice on the
+    calibration: at least 2 R distinct reversal levels, ``ident.base.reversal_levels``, over their settled
+    samples), each play's knots across the span its output covers there (``PlaneLayout``), and the base's
+    Bouc-Wen column when it has one. A ``plane`` operator dict (knot values zero: only its features are used).
+    The base's own size was chosen on the calibration's reversals; a reveal recording reverses elsewhere, and
+    a rate-independent hysteresis of the drive there is any function in this family, not only the base's."""
+    from ..ident.base import PLANE_KNOTS, PLANE_PLAYS, PlaneLayout, reversal_levels
+    from ..models.hysteresis import play_states
     hp = ctx.base["hysteresis"]
+    v_rest = float(hp.get("v_rest", 0.0))
+    vs = [np.asarray(s.v, float) for s in ctx.signals]
+    k0s = [int(np.flatnonzero(m)[0]) if np.any(m) else 0 for m in ctx.valid]   # the first settled sample
+    n_rev = reversal_levels(vs, k0s)
+    R = max(r for r in PLANE_PLAYS if r == 1 or 2 * r <= n_rev)
+    r_all = np.arange(R) / R
+    lo, hi = np.full(R, np.inf), np.full(R, -np.inf)
+    for v, m in zip(vs, ctx.valid):
+        P = play_states(v, r_all, v_rest)[np.asarray(m, bool)]
+        if P.size:
+            lo, hi = np.minimum(lo, P.min(axis=0)), np.maximum(hi, P.max(axis=0))
+    lay = PlaneLayout(R, PLANE_KNOTS[-1], list(zip(lo, hi)), r_all)
+    out = {"type": "plane", "r": list(lay.r), "knots": [list(k) for k in lay.knots],
+           "values": [[0.0] * len(k) for k in lay.knots], "v_rest": v_rest, "offset": 0.0,
+           "v_lo": -1.0, "v_hi": 1.0, "reversal_levels": n_rev}
+    if hp.get("bw"):
+        out["bw"] = dict(hp["bw"])
+    return out
+
+
+def _plane_columns(ctx, pos, hp=None) -> np.ndarray:
+    """The linear hysteresis basis of ``hp`` (default :func:`refit_plane`; ``models.hysteresis.
+    hysteresis_features``: every play's hat basis and the Bouc-Wen column) through the base dynamics, at positions
+    ``pos`` of the stacked settled samples; filtered and picked one block of columns at a time (never the
+    full-rate matrix)."""
+    from ..dsp import filt
+    from ..models.hysteresis import plane_feature_blocks
+    hp = refit_plane(ctx) if hp is None else hp
     b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
     out, off = [], 0
     for s, v in zip(ctx.signals, ctx.valid):
@@ -554,8 +586,7 @@ def _plane_columns(ctx, pos) -> np.ndarray:
         mine = pos[(pos >= off) & (pos < off + idx.size)] - off
         off += idx.size
         at = idx[mine]
-        blocks = plane_feature_blocks(hp, s.v) if hp.get("type", "pi") == "plane" else [hysteresis_features(hp, s.v)[0]]
-        out.append(np.hstack([filt(b, a, B)[at] for B in blocks]))
+        out.append(np.hstack([filt(b, a, B)[at] for B in plane_feature_blocks(hp, s.v)]))
     return np.vstack(out)
 
 
@@ -569,9 +600,13 @@ def drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows) -> dic
     2.96 nm RMS beyond a level and a 12 nm/min slope, and the drift was named first). Calibration histories do
     not measure that (they are of the calibration's kinds; there the base left no slow misfit at all), so the
     trend is tested against the base's own flexibility refitted on the reveal recordings themselves: every
-    weight of the plane (each play's hat basis, the Bouc-Wen column; ``hysteresis_features``) free, through the
-    base dynamics, fitted on the training fold of the ~1 s blocks like every nuisance here. A trend those
-    weights remove is a function of the drive's history, i.e. the base's; what is left follows the clock.
+    weight of the largest plane of the base's family those recordings resolve (:func:`refit_plane`: each play's
+    hat basis, the base's Bouc-Wen column) free, through the base dynamics, fitted on the training fold of the
+    ~1 s blocks like every nuisance here. A trend those weights remove is a function of the drive's history, a
+    rate-independent hysteresis, i.e. the base's; what is left follows the clock. (The base's own plane alone is
+    not enough: round 14, the own offset case's base is R1 K6 with the column, 7 weights, chosen on the
+    calibration's reversals, and a steps recording's per-dwell levels are a history the calibration never
+    showed; with them free the trend of 16 nm/min still held at p = 1.6e-5.)
 
     The drift's columns (``signature_groups``) are added to the nuisance of :func:`signature_tests` (its columns
     ``designs[f][0]``), a level per recording (the drift is tested within the recordings, as there), creep's
@@ -582,7 +617,8 @@ def drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows) -> dic
     ``confirms``). Both are thresholds of a test, not read from a case.
 
     Returns None when there is no drift group, else a dict: ``ratio``, ``fold_ratios``, ``p``, ``n_active``,
-    ``columns`` (the plane's), ``stride``, ``holds``, ``confirms``.
+    ``columns`` (the plane's), ``plays`` and ``reversal_levels`` (of :func:`refit_plane`), ``stride``, ``holds``,
+    ``confirms``.
     """
     if "thermal_drift" not in designs[0][3]:
         return None
@@ -601,8 +637,9 @@ def drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows) -> dic
         N, n_lo, n_hi, groups = designs[f]
         key = id(ctxs[f].base["hysteresis"])
         if key not in planes:
-            planes[key] = _plane_columns(ctxs[f], pos)
-        P = planes[key]
+            hp_r = refit_plane(ctxs[f])
+            planes[key] = (_plane_columns(ctxs[f], pos, hp_r), hp_r)
+        P, hp_r = planes[key]
         keep = [n for n in ("creep",) if n in groups]
         X = np.hstack([N[pos], levels, P] + [groups[n][0][pos] for n in keep])
         lo = np.concatenate([n_lo, np.full(levels.shape[1] + P.shape[1], -np.inf)] + [groups[n][1] for n in keep])
@@ -625,13 +662,15 @@ def drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows) -> dic
     _, p, n_act = sg.active_block_test(before, after, corr, ba, units)
     lower = max(fr) < 1.0
     return {"ratio": float(np.sqrt(np.sum(after ** 2) / sb)) if sb > 0 else 1.0, "fold_ratios": fr, "p": float(p),
-            "n_active": int(n_act), "columns": int(next(iter(planes.values())).shape[1]), "stride": stride,
+            "n_active": int(n_act), "columns": int(P.shape[1]), "plays": len(hp_r["r"]),
+            "reversal_levels": int(hp_r["reversal_levels"]), "stride": stride,
             "holds": bool(lower and p < ALPHA_SIGNATURE), "confirms": bool(lower and p < sg.ALPHA)}
 
 
 def plane_phrase(pt: dict) -> str:
     """The drift's test beyond the refitted plane (:func:`drift_beyond_plane_test`), in words."""
-    return (f"beyond the base's plane refitted on these recordings ({pt['columns']} weights free): ratio "
+    return (f"beyond a plane of the base's family refitted on these recordings ({pt['plays']} plays, "
+            f"{pt['columns']} weights free): ratio "
             f"{pt['ratio']:.2f}, folds {pt['fold_ratios'][0]:.2f}/{pt['fold_ratios'][1]:.2f}, p = {pt['p']:.1e}")
 
 
