@@ -34,10 +34,7 @@ Fit (``fit_base``):
    plane's size ``(R, K)`` and the weight of a roughness penalty (squared
    second differences of each play's function) are chosen from ``PLANE_PLAYS`` x
    ``PLANE_KNOTS`` x ``RIDGES`` (and with or without one Bouc-Wen column, its
-   shape - beta, gamma, the exponent n and the state h0 it starts in at rest -
-   searched on the reversible curve alone: a Duhem element has no return-point
-   memory, so no Preisach density reaches it, and one that never saturates inside
-   the range remembers its start) by the held-out RMS error (the
+   shape searched on the reversible curve alone) by the held-out RMS error (the
    smallest size within 2 % of the best). Only play counts R the calibration
    can resolve are offered: at least 2 R distinct reversal levels
    (:func:`reversal_levels`); a periodic calibration (two levels) gets R = 1,
@@ -83,13 +80,6 @@ PLANE_KNOTS = (6, 12, 24)  # K: knots across the full normalized range [-1, 1] (
 RIDGES = (1e-6, 1e-4, 1e-2, 1e-1, 1.0)   # weights of the roughness penalty (relative to the data's Gram diagonal)
 BW_BETAS = tuple(float(x) for x in np.geomspace(0.5, 40.0, 7))   # Bouc-Wen column shapes [1/normalized drive]
 BW_GAMMA_RATIOS = (-0.6, -0.3, 0.0, 0.3, 0.6)                    # gamma / beta; Nelder-Mead refines
-BW_EXPONENTS = (0.6, 1.0, 1.6, 2.5)      # Bouc-Wen exponents n of the grid (Nelder-Mead refines log n); a Duhem law
-                                         # has no return-point memory, so its exponent is not a Preisach density
-BW_EXPONENT_RANGE = (0.3, 5.0)           # n is kept inside this range by the refinement
-BW_START_FRACTIONS = ()   # the column's state at rest, as a fraction of its limit h_u, searched besides 0 when given
-                          # (round 11: -0.9, -0.5, 0.5, 0.9). Off since round 12: a Duhem state that never saturates
-                          # remembers its start through every recording, a slow level the slow attribution shares with
-                          # creep and a drift (own cases: creep p 1.0e-2, a drift named beside a sensor curve)
 CV_BLOCKS = 32           # interleaved blocks per calibration recording in the size cross-validation
 SIZE_TOLERANCE = 1.02    # the smallest size within 2 % of the best cross-validated error is chosen
 ORDERS = (0, 2, 4, 6)
@@ -125,7 +115,7 @@ class PlaneLayout:
 
     def __init__(self, n_plays: int, n_knots: int, spans, r_all, bw=None):
         self.n_plays, self.n_knots = n_plays, n_knots
-        self.bw = bw     # (beta, gamma, n, h0) of the optional Bouc-Wen column, or None
+        self.bw = bw     # (beta, gamma) of the optional Bouc-Wen column, or None
         self.r, self.knots, self.index = [], [], []
         for j in range(n_plays):
             r = j / n_plays
@@ -150,9 +140,8 @@ class PlaneLayout:
 
 
 def _bw_state(v, bw, v_rest):
-    """The Bouc-Wen column's state along ``v``; ``bw`` = (beta, gamma[, n[, h0]]) (n = 1, h0 = 0 when absent)."""
     from ..models.hysteresis import bouc_wen_h
-    return bouc_wen_h(v, bw[0], bw[1], v_rest, bw[2] if len(bw) > 2 else 1.0, bw[3] if len(bw) > 3 else 0.0)
+    return bouc_wen_h(v, bw[0], bw[1], v_rest)
 
 
 def plane_columns(P, layout: PlaneLayout, rows=None, v=None, v_rest=0.0) -> np.ndarray:
@@ -528,19 +517,18 @@ def _gram(blocks):
     return A, b, sum(float(y @ y) for _, y in blocks), sum(y.size for _, y in blocks)
 
 
-def _cv_score(Xs, yr, folds, layout, ridge_list, sign=0.0, n_folds=2):
-    """Held-out RMS [um] of the ``n_folds``-fold fit for each ridge in ``ridge_list`` (plays monotone in ``sign``):
-    each fold k (rows with ``folds == k``) is predicted by the fit on the other folds."""
-    grams = [_gram([(X[f == k], y[f == k]) for X, y, f in zip(Xs, yr, folds)]) for k in range(n_folds)]
-    A_all, b_all = sum(g[0] for g in grams), sum(g[1] for g in grams)
+def _cv_score(Xs, yr, folds, layout, ridge_list, sign=0.0):
+    """Held-out RMS [um] of the 2-fold fit for each ridge in ``ridge_list`` (plays monotone in ``sign``)."""
+    grams = [_gram([(X[f == k], y[f == k]) for X, y, f in zip(Xs, yr, folds)]) for k in (0, 1)]
     Om = smoothness_penalty(layout, Xs[0].shape[1] - layout.n_cols)
     out = []
     for ridge in ridge_list:
         sse, n = 0.0, 0
-        for k in range(n_folds):
-            th = _plane_solve(A_all - grams[k][0], b_all - grams[k][1], ridge, Om, layout, sign)
+        for k in (0, 1):
+            A, b, _, _ = grams[k]
+            th = _plane_solve(A, b, ridge, Om, layout, sign)
             for X, y, f in zip(Xs, yr, folds):
-                t = f == k
+                t = f != k
                 sse += float(np.sum((X[t] @ th - y[t]) ** 2))
                 n += int(np.sum(t))
         out.append(float(np.sqrt(sse / max(n, 1))))
@@ -611,50 +599,20 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
         return [np.column_stack([plane_columns(P, lay, p, v, v_rest), T[r], np.ones(r.size)])
                 for P, v, T, r, p in zip(Pk, vk, Ts, rows, pos)]
 
-    # held-out histories (as ``_holdout_histories``): quarter k of every recording's settled part is predicted by
-    # the fit on the other three quarters, with no trend columns (a trend fitted on three quarters says nothing
-    # of the fourth). Interleaved blocks share their histories with the fold that predicts them; a column whose
-    # shape is chosen on them fits the calibration's own loops (round 11: Coleman-Hodgdon laws got worse)
-    hfolds = [np.minimum((r - k0) * HOLDOUT_SEGMENTS // max(n - k0, 1), HOLDOUT_SEGMENTS - 1)
-              for n, k0, r in zip(ns, k0s, rows)]
-
-    def history_score(lay, ridges):
-        Xh = [np.column_stack([plane_columns(P, lay, p, v, v_rest), np.ones(r.size)])
-              for P, v, r, p in zip(Pk, vk, rows, pos)]
-        return _cv_score(Xh, yr, hfolds, lay, ridges, sign, HOLDOUT_SEGMENTS)
-
-    # the Bouc-Wen column's shape, with the reversible curve alone (R = 1), scored on held-out histories: a grid over
-    # (beta, n) at gamma = 0 and h0 = 0, the start states (when searched) and then the gamma ratios at the best of
-    # it, then Nelder-Mead on (log beta, gamma / beta, log n[, h0 / h_u]): 92 evaluations (96 with the start states;
-    # the exponent-1 search had 75)
-    def bw_shape(z):
-        beta, gr = float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95))
-        n = float(np.clip(np.exp(z[2]), *BW_EXPONENT_RANGE))
-        hu = (beta * (1.0 + gr)) ** (-1.0 / n)
-        return beta, gr * beta, n, float(np.clip(z[3], -0.99, 0.99)) * hu
-
+    # the Bouc-Wen column's shape, with the reversible curve alone (R = 1): a grid, then Nelder-Mead on
+    # (log beta, gamma / beta)
     def bw_score(z):
-        lay = PlaneLayout(1, PLANE_KNOTS[0], spans, r_all, bw=bw_shape(z))
-        return min(history_score(lay, RIDGES[:2]))
-    grid = [(bw_score(z), z) for z in ((np.log(b), 0.0, np.log(n), 0.0) for b in BW_BETAS for n in BW_EXPONENTS)]
-    sc0, z0 = min(grid)
-    grid += [(bw_score(z), z) for z in ((z0[0], 0.0, z0[2], f) for f in BW_START_FRACTIONS)]
-    sc0, z0 = min(grid)
-    grid += [(bw_score(z), z) for z in ((z0[0], g, z0[2], z0[3]) for g in BW_GAMMA_RATIOS if g != 0.0)]
+        beta, gr = float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95))
+        lay = PlaneLayout(1, PLANE_KNOTS[0], spans, r_all, bw=(beta, gr * beta))
+        return min(_cv_score(design(lay), yr, folds, lay, RIDGES[:2], sign))
+    grid = [(bw_score((np.log(b), g)), (np.log(b), g)) for b in BW_BETAS for g in BW_GAMMA_RATIOS]
     sc0, z0 = min(grid)
     z0 = np.array(z0)
-    steps = [0.25, 0.15, 0.2, 0.2] if BW_START_FRACTIONS else [0.25, 0.15, 0.2]   # the start state refined when searched
-    free = len(steps)
-
-    def bw_score_free(x):
-        return bw_score(np.concatenate([x, z0[free:]]))
-    sol = optimize.minimize(bw_score_free, z0[:free], method="Nelder-Mead",
-                            options={"maxfev": 60, "xatol": 0.01, "fatol": 1e-4 * sc0,
-                                     "initial_simplex": [z0[:free]] + [z0[:free] + np.eye(free)[i] * st
-                                                                       for i, st in enumerate(steps)]})
-    sol.x = np.concatenate([sol.x, z0[free:]])
+    sol = optimize.minimize(bw_score, z0, method="Nelder-Mead",
+                            options={"maxfev": 40, "xatol": 0.01, "fatol": 1e-4 * sc0,
+                                     "initial_simplex": [z0, z0 + [0.25, 0.0], z0 + [0.0, 0.15]]})
     z = sol.x if sol.fun < sc0 else z0
-    best_bw = (None, bw_shape(z))
+    best_bw = (None, (float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95)) * float(np.exp(z[0]))))
     # thresholds the calibration's reversals can resolve: at least two reversal levels per play threshold
     n_rev = reversal_levels(vs, k0s)
     plays = [R for R in PLANE_PLAYS if R == 1 or 2 * R <= n_rev]
@@ -671,20 +629,8 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
     # the smallest plane (fewest columns, then the largest ridge) within SIZE_TOLERANCE of the best
     ok = [t for t in table if t["cv_rmse_um"] <= SIZE_TOLERANCE * best]
     pick = min(ok, key=lambda t: (t["columns"], -t["ridge"]))
-    column_check = None
-    if pick["bouc_wen"] is not None:
-        # the column is kept only when it also predicts held-out histories better than the same plane without it
-        # (by more than SIZE_TOLERANCE, the rule that prefers the smaller model above)
-        lay_c = PlaneLayout(pick["plays"], pick["knots"], spans, r_all, bw=pick["bouc_wen"])
-        lay_0 = PlaneLayout(pick["plays"], pick["knots"], spans, r_all)
-        column_check = {"with_um": min(history_score(lay_c, RIDGES)), "without_um": min(history_score(lay_0, RIDGES))}
-        if column_check["without_um"] <= SIZE_TOLERANCE * column_check["with_um"]:
-            plain = [t for t in table if t["bouc_wen"] is None]
-            best0 = min(t["cv_rmse_um"] for t in plain)
-            pick = min((t for t in plain if t["cv_rmse_um"] <= SIZE_TOLERANCE * best0),
-                       key=lambda t: (t["columns"], -t["ridge"]))
     return (PlaneLayout(pick["plays"], pick["knots"], spans, r_all, bw=pick["bouc_wen"]), pick["ridge"],
-            {"reversal_levels": n_rev, "plays_allowed": plays, "table": table, "column_check": column_check})
+            {"reversal_levels": n_rev, "plays_allowed": plays, "table": table})
 
 
 def _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba=None, max_rows=MAX_ROWS, sign=0.0):
@@ -864,12 +810,11 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
             "values": [v.tolist() for v in vals], "offset": float(th[-1]), "v_rest": float(v_rest),
             "v_lo": -1.0, "v_hi": 1.0}
     if layout.bw:
-        hyst["bw"] = {"beta": float(layout.bw[0]), "gamma": float(layout.bw[1]), "n": float(layout.bw[2]),
-                      "h0": float(layout.bw[3]), "c_h": float(th[layout.n_plane])}
+        hyst["bw"] = {"beta": float(layout.bw[0]), "gamma": float(layout.bw[1]), "c_h": float(th[layout.n_plane])}
     info = {"plane": {"plays": layout.n_plays, "knots": layout.n_knots, "ridge": ridge, "columns": layout.n_cols,
                       "bouc_wen": layout.bw,
                       "cv_table": table["table"], "reversal_levels": table["reversal_levels"],
-                      "plays_allowed": table["plays_allowed"], "column_check": table["column_check"],
+                      "plays_allowed": table["plays_allowed"],
                       "quasi_static_fraction": float(sum(int(q.sum()) for q in qs) /
                                                      max(sum(v.size - k0 for v, k0 in zip(vs, k0s)), 1))},
             "dynamics_order": order, "cv_sim_rmse_um": {str(k): v for k, v in scores.items()},
