@@ -8,7 +8,9 @@ recording, upwards in each as a warm-up's) must not be credited to a drift; a tr
 clock) under the same drives must be, alone and on top of that misfit."""
 
 import numpy as np
+import pytest
 
+from piezoctl.diagnose import slow_signature
 from piezoctl.diagnose.select import Ctx, Signals, make_masks, slow_nuisance
 from piezoctl.diagnose.slow_signature import drift_beyond_plane_test, signature_groups, signature_tests
 from piezoctl.models.hysteresis import hysteresis_parts, interp_linear_ext, play_states
@@ -51,6 +53,12 @@ def _ctx():
     return ctx
 
 
+@pytest.fixture
+def plane_on(monkeypatch):
+    """The test decides the drift's signature (``DRIFT_BEYOND_PLANE``; off in the default, round 14)."""
+    monkeypatch.setattr(slow_signature, "DRIFT_BEYOND_PLANE", True)
+
+
 def _curvature(s):
     """The base's misfit: the widest play's curve bent (0.3 p^2 um at the plane's knots, linear between them: a
     function of the drive's history alone, in the span of the plane's basis but not of its three groups' gains).
@@ -78,7 +86,7 @@ def _run(effect, seed):
     return ctx, e, fold, block, designs
 
 
-def test_a_base_misfit_that_trends_with_the_envelope_is_refused():
+def test_a_base_misfit_that_trends_with_the_envelope_is_refused(plane_on):
     ctx, e, fold, block, designs = _run(_curvature, 1)
     tests = {t.name: t for t in signature_tests([ctx, ctx], [e, e], [slow_nuisance(ctx)] * 2, fold, block, 200000)}
     drift = tests["thermal_drift"]
@@ -93,7 +101,7 @@ def test_a_base_misfit_that_trends_with_the_envelope_is_refused():
     assert drift.unique_ratio < 0.95 and drift.p < 1e-3   # what the within test alone credited (0.89, p 7e-5)
 
 
-def test_a_true_drift_under_the_same_drives_is_kept():
+def test_a_true_drift_under_the_same_drives_is_kept(plane_on):
     ctx, e, fold, block, designs = _run(_warm_up, 2)
     pt = drift_beyond_plane_test([ctx, ctx], [e, e], designs, fold, block, 200000)
     assert pt["holds"] and pt["confirms"], pt
@@ -115,3 +123,10 @@ def test_no_drift_group_no_test():
     ctx, e, fold, block, designs = _run(_warm_up, 4)
     designs = [(N, lo, hi, {k: g for k, g in grp.items() if k != "thermal_drift"}) for N, lo, hi, grp in designs]
     assert drift_beyond_plane_test([ctx, ctx], [e, e], designs, fold, block, 200000) is None
+
+
+def test_off_by_default_the_signature_is_the_within_test_alone():
+    ctx, e, fold, block, designs = _run(_curvature, 1)
+    tests = {t.name: t for t in signature_tests([ctx, ctx], [e, e], [slow_nuisance(ctx)] * 2, fold, block, 200000)}
+    assert not slow_signature.DRIFT_BEYOND_PLANE
+    assert tests["thermal_drift"].plane is None and tests["thermal_drift"].holds   # round 13's verdict
