@@ -49,6 +49,12 @@ tests creep's columns on the dwells alone, with a level per dwell and a slope pe
 creep's signature (no dwell: creep's signature does not hold, and a creep candidate is vetoed), and
 :func:`creep_on_steps` lets a creep candidate that failed its test on all blocks pass on it (Bonferroni over
 the two tests; the exact check still decides).
+
+Round 14 (docs/diagnose.md, "Round 14: the base"): :func:`drift_beyond_plane_test` tests the drift's trend within
+the recordings beyond a plane of the base's family refitted on them (:func:`refit_plane`): a trend a function of
+the drive's history removes is the base's. Measured, not the default (``DRIFT_BEYOND_PLANE``): with every weight of
+that plane free a steps recording's per-dwell levels are the plane's, and a synthetic warm-up under random steps
+is refused.
 """
 
 from __future__ import annotations
@@ -63,7 +69,7 @@ from .misfit import credited_ratio
 from .solve import lstsq_box, train_rows
 
 __all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute",
-           "step_response_test", "creep_on_steps", "drift_beyond_plane_test"]
+           "step_response_test", "creep_on_steps", "drift_beyond_plane_test", "refit_plane", "DRIFT_BEYOND_PLANE"]
 
 SIGNATURES = ("creep", "thermal_drift", "sensor_offset")
 ALPHA_SIGNATURE = sg.ALPHA / len(SIGNATURES)   # Bonferroni over the three signatures
