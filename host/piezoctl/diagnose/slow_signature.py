@@ -49,6 +49,12 @@ tests creep's columns on the dwells alone, with a level per dwell and a slope pe
 creep's signature (no dwell: creep's signature does not hold, and a creep candidate is vetoed), and
 :func:`creep_on_steps` lets a creep candidate that failed its test on all blocks pass on it (Bonferroni over
 the two tests; the exact check still decides).
+
+Round 14 (docs/diagnose.md, "Round 14: the base"): :func:`drift_beyond_plane_test` tests the drift's trend within
+the recordings beyond a plane of the base's family refitted on them (:func:`refit_plane`): a trend a function of
+the drive's history removes is the base's. Measured, not the default (``DRIFT_BEYOND_PLANE``): with every weight of
+that plane free a steps recording's per-dwell levels are the plane's, and a synthetic warm-up under random steps
+is refused.
 """
 
 from __future__ import annotations
@@ -63,7 +69,7 @@ from .misfit import credited_ratio
 from .solve import lstsq_box, train_rows
 
 __all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute",
-           "step_response_test", "creep_on_steps"]
+           "step_response_test", "creep_on_steps", "drift_beyond_plane_test", "refit_plane", "DRIFT_BEYOND_PLANE"]
 
 SIGNATURES = ("creep", "thermal_drift", "sensor_offset")
 ALPHA_SIGNATURE = sg.ALPHA / len(SIGNATURES)   # Bonferroni over the three signatures
@@ -86,6 +92,7 @@ class SignatureTest:
     level: dict | None = None   # sensor_offset: the level dependence within its sessions (offset_level_test)
     spread: dict | None = None  # offset, drift: the levels of a session's recordings (level_spread_test)
     step: dict | None = None    # creep: its test on the responses to the drive's steps (step_response_test)
+    plane: dict | None = None   # drift: its trend beyond the base's plane refitted on the data (drift_beyond_plane_test)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "unique_ratio": self.unique_ratio, "fold_ratios": self.fold_ratios,
@@ -93,7 +100,8 @@ class SignatureTest:
                 "alpha": ALPHA_SIGNATURE, "holds": self.holds, "alpha_own": sg.ALPHA, "confirms": self.confirms,
                 **({"level_dependence": self.level} if self.level is not None else {}),
                 **({"level_spread": self.spread} if self.spread is not None else {}),
-                **({"step_response": self.step} if self.name == "creep" else {})}
+                **({"step_response": self.step} if self.name == "creep" else {}),
+                **({"beyond_plane": self.plane} if self.plane is not None else {})}
 
     def phrase(self) -> str:
         verdict = "holds" if self.holds else ("holds as its own term's" if self.confirms else "does not hold")
@@ -102,6 +110,8 @@ class SignatureTest:
                 f"p = {self.p:.1e}")
         if self.name == "creep":
             text += "; " + step_phrase(self.step)
+        if self.plane is not None:
+            text += "; " + plane_phrase(self.plane)
         return text + ")"
 
 
@@ -531,6 +541,147 @@ def offset_after_drift_test(ctx, level) -> dict | None:
             "within_drift_misfit": bool(pv >= sg.ALPHA)}
 
 
+DRIFT_BEYOND_PLANE = False   # round 14: :func:`drift_beyond_plane_test` decides the drift's signature (off: measured,
+#                              not the default; docs/diagnose.md "Round 14: the base")
+PLANE_TEST_SAMPLES = 60_000   # the settled samples :func:`drift_beyond_plane_test` uses at most (every k-th one):
+#                               the plane's whole basis (up to about a hundred columns) at 10 kHz over a minute
+#                               would take a few hundred MB; a trend over seconds needs no more than ~1 kHz
+
+
+def refit_plane(ctx) -> dict:
+    """The plane the base's family offers for a refit on the recordings of ``ctx``: the largest size of
+    ``ident.base.PLANE_PLAYS`` x ``PLANE_KNOTS`` those recordings resolve (as the base's size choice on the
+    calibration: at least 2 R distinct reversal levels, ``ident.base.reversal_levels``, over their settled
+    samples), each play's knots across the span its output covers there (``PlaneLayout``), and the base's
+    Bouc-Wen column when it has one. A ``plane`` operator dict (knot values zero: only its features are used).
+    The base's own size was chosen on the calibration's reversals; a reveal recording reverses elsewhere, and
+    a rate-independent hysteresis of the drive there is any function in this family, not only the base's."""
+    from ..ident.base import PLANE_KNOTS, PLANE_PLAYS, PlaneLayout, reversal_levels
+    from ..models.hysteresis import play_states
+    hp = ctx.base["hysteresis"]
+    v_rest = float(hp.get("v_rest", 0.0))
+    vs = [np.asarray(s.v, float) for s in ctx.signals]
+    k0s = [int(np.flatnonzero(m)[0]) if np.any(m) else 0 for m in ctx.valid]   # the first settled sample
+    n_rev = reversal_levels(vs, k0s)
+    R = max(r for r in PLANE_PLAYS if r == 1 or 2 * r <= n_rev)
+    r_all = np.arange(R) / R
+    lo, hi = np.full(R, np.inf), np.full(R, -np.inf)
+    for v, m in zip(vs, ctx.valid):
+        P = play_states(v, r_all, v_rest)[np.asarray(m, bool)]
+        if P.size:
+            lo, hi = np.minimum(lo, P.min(axis=0)), np.maximum(hi, P.max(axis=0))
+    lay = PlaneLayout(R, PLANE_KNOTS[-1], list(zip(lo, hi)), r_all)
+    out = {"type": "plane", "r": list(lay.r), "knots": [list(k) for k in lay.knots],
+           "values": [[0.0] * len(k) for k in lay.knots], "v_rest": v_rest, "offset": 0.0,
+           "v_lo": -1.0, "v_hi": 1.0, "reversal_levels": n_rev}
+    if hp.get("bw"):
+        out["bw"] = dict(hp["bw"])
+    return out
+
+
+def _plane_columns(ctx, pos, hp=None) -> np.ndarray:
+    """The linear hysteresis basis of ``hp`` (default :func:`refit_plane`; ``models.hysteresis.
+    hysteresis_features``: every play's hat basis and the Bouc-Wen column) through the base dynamics, at positions
+    ``pos`` of the stacked settled samples; filtered and picked one block of columns at a time (never the
+    full-rate matrix)."""
+    from ..dsp import filt
+    from ..models.hysteresis import plane_feature_blocks
+    hp = refit_plane(ctx) if hp is None else hp
+    b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+    out, off = [], 0
+    for s, v in zip(ctx.signals, ctx.valid):
+        idx = np.flatnonzero(v)
+        mine = pos[(pos >= off) & (pos < off + idx.size)] - off
+        off += idx.size
+        at = idx[mine]
+        out.append(np.hstack([filt(b, a, B)[at] for B in plane_feature_blocks(hp, s.v)]))
+    return np.vstack(out)
+
+
+def drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows) -> dict | None:
+    """The drift's trend within the recordings beyond a refit of the base's whole plane on the new data (round 14).
+
+    A drift follows the session clock whatever the drive did; the base's misfit follows the drive. On a
+    reveal recording whose drive's envelope changes over time (a growing or decaying sweep, a walk that wanders
+    to one end) the base's misfit there changes with the envelope too, and so leaves a trend within the
+    recording that the drift's columns take (round 13: new3's base left the own offset case's 14.5 s recording
+    2.96 nm RMS beyond a level and a 12 nm/min slope, and the drift was named first). Calibration histories do
+    not measure that (they are of the calibration's kinds; there the base left no slow misfit at all), so the
+    trend is tested against the base's own flexibility refitted on the reveal recordings themselves: every
+    weight of the largest plane of the base's family those recordings resolve (:func:`refit_plane`: each play's
+    hat basis, the base's Bouc-Wen column) free, through the base dynamics, fitted on the training fold of the
+    ~1 s blocks like every nuisance here. A trend those weights remove is a function of the drive's history, a
+    rate-independent hysteresis, i.e. the base's; what is left follows the clock. (The base's own plane alone is
+    not enough: round 14, the own offset case's base is R1 K6 with the column, 7 weights, chosen on the
+    calibration's reversals, and a steps recording's per-dwell levels are a history the calibration never
+    showed; with them free the trend of 16 nm/min still held at p = 1.6e-5.)
+
+    The drift's columns (``signature_groups``) are added to the nuisance of :func:`signature_tests` (its columns
+    ``designs[f][0]``), a level per recording (the drift is tested within the recordings, as there), creep's
+    columns and the plane's; fitted on fold f and scored on fold 1 - f, on every k-th settled sample
+    (``PLANE_TEST_SAMPLES``). The drift *survives the refit* when the active-block test of
+    ``significance.active_block_test`` gives p < ``ALPHA_SIGNATURE`` and the held-out error is lower in each fold;
+    it *survives at its own level* with p < ``ALPHA`` (the same two levels as the signature's ``holds`` and
+    ``confirms``). Both are thresholds of a test, not read from a case.
+
+    Returns None when there is no drift group, else a dict: ``ratio``, ``fold_ratios``, ``p``, ``n_active``,
+    ``columns`` (the plane's), ``plays`` and ``reversal_levels`` (of :func:`refit_plane`), ``stride``, ``holds``,
+    ``confirms``.
+    """
+    if "thermal_drift" not in designs[0][3]:
+        return None
+    ctx = ctxs[0]
+    used = np.flatnonzero(fold_all >= 0)
+    if used.size == 0:
+        return None
+    stride = int(np.ceil(used.size / PLANE_TEST_SAMPLES))
+    pos = used[::stride]
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])[pos]
+    levels = (rec[:, None] == np.arange(ctx.n_rec)[None, :]).astype(float)
+    fa, ba = fold_all[pos], block_all[pos]
+    planes = {}
+    red, full, e = np.zeros(pos.size), np.zeros(pos.size), np.zeros(pos.size)
+    for f in (0, 1):
+        N, n_lo, n_hi, groups = designs[f]
+        key = id(ctxs[f].base["hysteresis"])
+        if key not in planes:
+            hp_r = refit_plane(ctxs[f])
+            planes[key] = (_plane_columns(ctxs[f], pos, hp_r), hp_r)
+        P, hp_r = planes[key]
+        keep = [n for n in ("creep",) if n in groups]
+        X = np.hstack([N[pos], levels, P] + [groups[n][0][pos] for n in keep])
+        lo = np.concatenate([n_lo, np.full(levels.shape[1] + P.shape[1], -np.inf)] + [groups[n][1] for n in keep])
+        hi = np.concatenate([n_hi, np.full(levels.shape[1] + P.shape[1], np.inf)]
+                            + [np.full(groups[n][0].shape[1], np.inf) for n in keep])
+        D, d_lo = groups["thermal_drift"]
+        train, test = fa == f, fa == 1 - f
+        red[test] = _fit(X, es[f][pos], lo, hi, train, test, rows)
+        full[test] = _fit(np.hstack([X, D[pos]]), es[f][pos], np.concatenate([lo, d_lo]),
+                          np.concatenate([hi, np.full(D.shape[1], np.inf)]), train, test, rows)
+        e[test] = es[f][pos][test]
+    before, after, corr = e - red, e - full, full - red
+    fr = []
+    for f in (0, 1):
+        sel = fa == 1 - f
+        sb = float(np.sum(before[sel] ** 2))
+        fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    sb = float(np.sum(before ** 2))
+    units = sg.test_units(before, ba, rec, ctx.dt * stride, corr)
+    _, p, n_act = sg.active_block_test(before, after, corr, ba, units)
+    lower = max(fr) < 1.0
+    return {"ratio": float(np.sqrt(np.sum(after ** 2) / sb)) if sb > 0 else 1.0, "fold_ratios": fr, "p": float(p),
+            "n_active": int(n_act), "columns": int(P.shape[1]), "plays": len(hp_r["r"]),
+            "reversal_levels": int(hp_r["reversal_levels"]), "stride": stride,
+            "holds": bool(lower and p < ALPHA_SIGNATURE), "confirms": bool(lower and p < sg.ALPHA)}
+
+
+def plane_phrase(pt: dict) -> str:
+    """The drift's test beyond the refitted plane (:func:`drift_beyond_plane_test`), in words."""
+    return (f"beyond a plane of the base's family refitted on these recordings ({pt['plays']} plays, "
+            f"{pt['columns']} weights free): ratio "
+            f"{pt['ratio']:.2f}, folds {pt['fold_ratios'][0]:.2f}/{pt['fold_ratios'][1]:.2f}, p = {pt['p']:.1e}")
+
+
 def spread_phrase(sp: dict) -> str:
     """The level spread of :func:`level_spread_test`, in words."""
     return (f"the recordings of a session sit at different levels ({', '.join(f'{x:+.3f}' for x in sp['levels_um'])} "
@@ -614,6 +765,13 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
             out[-1].step = st
             out[-1].holds = _step_holds(st, ALPHA_SIGNATURE)
             out[-1].confirms = _step_holds(st, sg.ALPHA)
+        if DRIFT_BEYOND_PLANE and n == "thermal_drift" and (out[-1].holds or out[-1].confirms):
+            # round 14: the trend within the recordings only beyond the base's plane refitted on them
+            pt = drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows)
+            if pt is not None:
+                out[-1].plane = pt
+                out[-1].holds = out[-1].holds and pt["holds"]
+                out[-1].confirms = out[-1].confirms and pt["confirms"]
         if n == "sensor_offset":
             out[-1].level = offset_level_test(designs, [level_columns(c) for c in ctxs], es, fold_all, block_all,
                                               rec, ctx.dt, rows, ctx.misfit)

@@ -29,6 +29,7 @@ operator on one drive many times with different weights.
 
 from __future__ import annotations
 
+import bisect
 import collections
 import hashlib
 import json
@@ -41,7 +42,7 @@ from .play import play_outputs
 
 __all__ = ["bouc_wen_h", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
            "hysteresis_output", "hysteresis_output_of", "clear_output_cache",
-           "poly_clamped", "hysteresis_features", "add_to_features", "hysteresis_channels",
+           "poly_clamped", "hysteresis_features", "plane_feature_blocks", "add_to_features", "hysteresis_channels",
            "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span"]
 
 _STATE_CACHE: "collections.OrderedDict" = collections.OrderedDict()
@@ -84,17 +85,83 @@ def _peek_state(kind: str, params: tuple, v: np.ndarray):
     return None
 
 
-def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray:
-    """Hysteretic state of a Bouc-Wen element (see :func:`_bouc_wen_h`), cached: read-only result."""
-    return _cached_state("bw", (float(beta), float(gamma), float(v_rest)), v,
-                         lambda x: _bouc_wen_h(x, float(beta), float(gamma), float(v_rest)))
+def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 1.0, h0: float = 0.0) -> np.ndarray:
+    """Hysteretic state of a Bouc-Wen element of exponent ``n`` (see :func:`_bouc_wen_h`; ``n != 1``:
+    :func:`_bouc_wen_h_n`) starting at state ``h0`` at ``v_rest``, cached: read-only result."""
+    if float(n) == 1.0:
+        return _cached_state("bw", (float(beta), float(gamma), float(v_rest), float(h0)), v,
+                             lambda x: _bouc_wen_h(x, float(beta), float(gamma), float(v_rest), float(h0)))
+    return _cached_state("bwn", (float(beta), float(gamma), float(v_rest), float(n), float(h0)), v,
+                         lambda x: _bouc_wen_h_n(x, float(beta), float(gamma), float(v_rest), float(n), float(h0)))
 
 
-def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray:
+BW_TABLE_POINTS = 16001  # points of the tabulated run solution of a Bouc-Wen element with n != 1
+
+
+def _bouc_wen_table(beta: float, gamma: float, n: float):
+    """(h, L): the ascending run solution of ``dh/dL = 1 - |h|^n (beta sign(h) + gamma)`` from the descending
+    limit ``-h_u`` to the ascending one ``h_u = (beta + gamma)^(-1/n)``, as the path length L [normalized drive]
+    needed to reach each h. L(h) is the integral of 1 / g(h); it is evaluated by the trapezoid rule in
+    ``q = log(h_u - h)`` (uniform q: the grid crowds where 1 / g diverges logarithmically at h_u), down to
+    ``h_u - h = 1e-12 h_u`` (dq = 0.002: the table's interpolation error is about 1e-5 of h_u)."""
+    hu = (beta + gamma) ** (-1.0 / n)
+    q = np.linspace(np.log(2.0 * hu), np.log(1e-12 * hu), BW_TABLE_POINTS)
+    h = hu - np.exp(q)
+    g = 1.0 - np.abs(h) ** n * (beta * np.sign(h) + gamma)
+    f = np.exp(q) / np.maximum(g, 1e-300)          # dL/dq up to the sign: |dh/dq| / g
+    L = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.abs(np.diff(q)))])
+    return h, L
+
+
+def _bouc_wen_h_n(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 2.0,
+                  h_start: float = 0.0) -> np.ndarray:
+    """Hysteretic state h of a Bouc-Wen element of exponent ``n`` (alpha = 1) along the drive path v.
+
+    ``dh = dv - |h|^n (beta sign(h dv) + gamma) |dv|`` (``beta > |gamma|``), starting at h = ``h_start`` at
+    ``v_rest`` (clipped inside the limits +-h_u); n = 1
+    is :func:`_bouc_wen_h`. Rate independent and autonomous within a monotone run: an ascending run moves h
+    along the tabulated solution (:func:`_bouc_wen_table`) by the path length travelled, a descending run does
+    the same on -h (the law is odd). The Python loop runs over turning points (one scalar lookup each); the
+    samples are filled by one interpolation."""
+    hgrid, Lgrid = _bouc_wen_table(beta, gamma, n)
+    v = np.concatenate([[v_rest], np.asarray(v, float)])
+    dv = np.diff(v)
+    h0 = float(np.clip(h_start, hgrid[0], hgrid[-1]))
+    out = np.full(dv.size, h0)
+    nz = np.flatnonzero(dv != 0.0)
+    if nz.size == 0:
+        return out
+    sgn = np.sign(dv[nz])
+    starts = nz[np.concatenate([[0], np.flatnonzero(sgn[1:] != sgn[:-1]) + 1])]
+    ends = np.append(starts[1:], dv.size)
+    path = np.concatenate([[0.0], np.cumsum(np.abs(dv))])
+    sd = np.sign(dv[starts])
+    # per run: the table position at its start (L0) from the state the previous run ended in
+    hl, Ll = hgrid.tolist(), Lgrid.tolist()
+
+    def lookup(x, xs, ys):     # scalar linear interpolation, clamped (np.interp costs more per scalar call)
+        i = min(max(bisect.bisect_right(xs, x) - 1, 0), len(xs) - 2)
+        f = min(max((x - xs[i]) / (xs[i + 1] - xs[i]), 0.0), 1.0) if xs[i + 1] > xs[i] else 0.0
+        return ys[i] + f * (ys[i + 1] - ys[i])
+
+    L0 = np.empty(starts.size)
+    runlen = (path[ends] - path[starts]).tolist()
+    for k, (s, dl) in enumerate(zip(sd.tolist(), runlen)):
+        L0[k] = lookup(s * h0, hl, Ll)
+        h0 = s * lookup(L0[k] + dl, Ll, hl)
+    run = np.repeat(np.arange(starts.size), ends - starts)
+    first = starts[0]
+    Ls = L0[run] + path[first + 1:] - path[starts[run]]
+    out[first:] = sd[run] * np.interp(Ls, Lgrid, hgrid)
+    return out
+
+
+def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, h_start: float = 0.0) -> np.ndarray:
     """Hysteretic state h of a Bouc-Wen element with alpha = 1 along the drive path v.
 
-    ``dh = dv - beta |dv| h - gamma dv |h|`` (``beta > |gamma|``), starting at h = 0 at
-    ``v_rest``. Rate independent: within a monotone run of the drive (direction s) h is a
+    ``dh = dv - beta |dv| h - gamma dv |h|`` (``beta > |gamma|``), starting at h = ``h_start`` at
+    ``v_rest`` (clipped inside the limits +-1 / (beta + gamma)). Rate independent: within a monotone run of
+    the drive (direction s) h is a
     closed-form function of the path length L travelled in the run,
     ``h = heq + (h0 - heq) exp(-k L)``, ``k = beta + s sign(h) gamma``, ``heq = s / k``;
     when h starts against the direction it reaches zero after
@@ -103,7 +170,9 @@ def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray
     """
     v = np.concatenate([[v_rest], np.asarray(v, float)])
     dv = np.diff(v)
-    out = np.zeros(dv.size)
+    kp, km = beta + gamma, beta - gamma
+    h0 = float(np.clip(h_start, -(1.0 - 1e-9) / kp, (1.0 - 1e-9) / kp))
+    out = np.full(dv.size, h0)
     nz = np.flatnonzero(dv != 0.0)
     if nz.size == 0:
         return out
@@ -112,9 +181,7 @@ def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0) -> np.ndarray
     starts = nz[np.concatenate([[0], np.flatnonzero(sgn[1:] != sgn[:-1]) + 1])]
     ends = np.append(starts[1:], dv.size)
     path = np.cumsum(np.abs(dv))
-    h0 = 0.0
     hs = []
-    kp, km = beta + gamma, beta - gamma
     sds = np.sign(dv[starts]).tolist()
     p0s = np.concatenate([[0.0], path])[starts].tolist()
     for a, b, sd, p0 in zip(starts.tolist(), ends.tolist(), sds, p0s):
@@ -280,7 +347,8 @@ def plane_parts(hp: dict, v, hysteretic: bool = True) -> tuple[np.ndarray, np.nd
                 hyst -= interp_linear_ext(v, knots[j], values[j])
     bw = hp.get("bw")
     if bw:
-        hb = float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), v_rest)
+        hb = float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), v_rest, float(bw.get("n", 1.0)),
+                                           float(bw.get("h0", 0.0)))
         h += hb
         if hyst is not None:
             hyst += hb
@@ -428,13 +496,10 @@ def hysteresis_features(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
     v = np.asarray(v, float)
     kind = hp.get("type", "pi")
     if kind == "plane":
-        P = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
-        F = np.hstack([hat_basis(P[:, j], kn)[:, 1:] for j, kn in enumerate(hp["knots"])])
+        F = np.hstack(list(plane_feature_blocks(hp, v)))
         th = np.concatenate([np.asarray(vals[1:], float) - float(vals[0]) for vals in hp["values"]])
-        bw = hp.get("bw")
-        if bw:
-            hb = bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)))
-            F, th = np.column_stack([F, hb]), np.append(th, float(bw["c_h"]))
+        if hp.get("bw"):
+            th = np.append(th, float(hp["bw"]["c_h"]))
         return F, th
     vc = np.clip(v, float(hp.get("v_lo", -1.0)), float(hp.get("v_hi", 1.0)))
     if kind == "bouc_wen":
@@ -444,6 +509,20 @@ def hysteresis_features(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
         H = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
         th = list(map(float, hp["w"]))
     return np.column_stack([H, vc, vc ** 2, vc ** 3]), np.array(th + list(hp["poly"])[:3], float)
+
+
+def plane_feature_blocks(hp: dict, v):
+    """The columns of :func:`hysteresis_features` for a ``plane`` operator, one block at a time: each play's hat
+    basis (n, K - 1), then the Bouc-Wen column (n, 1) when there is one. A caller that filters or decimates
+    each block at once never holds the whole (n, k) matrix at full rate (k up to about a hundred)."""
+    v = np.asarray(v, float)
+    P = play_states(v, np.asarray(hp["r"], float), float(hp.get("v_rest", 0.0)))
+    for j, kn in enumerate(hp["knots"]):
+        yield hat_basis(P[:, j], kn)[:, 1:]
+    bw = hp.get("bw")
+    if bw:
+        yield bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
+                         float(bw.get("n", 1.0)), float(bw.get("h0", 0.0)))[:, None]
 
 
 def add_to_features(hp: dict, dtheta) -> dict:
@@ -484,7 +563,8 @@ def hysteresis_channels(hp: dict, v) -> np.ndarray:
     bw = hp.get("bw")
     if bw:
         cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]),
-                                                  float(hp.get("v_rest", 0.0))))
+                                                  float(hp.get("v_rest", 0.0)), float(bw.get("n", 1.0)),
+                                                  float(bw.get("h0", 0.0))))
     return np.column_stack(cols)
 
 
@@ -538,7 +618,8 @@ def hysteresis_groups(hp: dict, v) -> np.ndarray:
     cols = [c for c in (rev, hys) if c is not None]
     bw = hp.get("bw")
     if bw:
-        cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0))))
+        cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
+                                                  float(bw.get("n", 1.0)), float(bw.get("h0", 0.0))))
     return np.column_stack(cols)
 
 
