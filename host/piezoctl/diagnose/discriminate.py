@@ -15,21 +15,23 @@ import numpy as np
 from scipy import signal as sps
 from scipy import stats
 
-__all__ = ["calibration_band_hz", "highpassed", "discriminate_group", "ALPHA_DISC"]
+__all__ = ["rate_band_hz", "calibration_band_hz", "highpassed", "discriminate_group", "ALPHA_DISC"]
 
 ALPHA_DISC = 0.01
 
 
-def calibration_band_hz(cal, k0s) -> float:
-    """Frequency [Hz] below which 99 % of the calibration drive's rate (du/dt) energy lies."""
+def rate_band_hz(drives) -> float:
+    """Frequency [Hz] below which 99 % of the drives' rate (du/dt) energy lies, pooled over recordings.
+
+    ``drives``: per recording, ``(u, dt)``: its settled drive [V] and sample period [s]; recordings of fewer than
+    17 samples are left out (0.0 when none is left)."""
     f_all, p_all = [], []
-    for r, k0 in zip(cal, k0s):
-        du = np.diff(np.asarray(r.u, float)[k0:])
+    for u, dt in drives:
+        du = np.diff(np.asarray(u, float))
         if du.size < 16:
             continue
-        p = np.abs(np.fft.rfft(du)) ** 2
-        f_all.append(np.fft.rfftfreq(du.size, r.dt))
-        p_all.append(p)
+        f_all.append(np.fft.rfftfreq(du.size, dt))
+        p_all.append(np.abs(np.fft.rfft(du)) ** 2)
     if not f_all:
         return 0.0
     f = np.concatenate(f_all)
@@ -37,6 +39,11 @@ def calibration_band_hz(cal, k0s) -> float:
     o = np.argsort(f)
     c = np.cumsum(p[o])
     return float(f[o][np.searchsorted(c, 0.99 * c[-1])])
+
+
+def calibration_band_hz(cal, k0s) -> float:
+    """Frequency [Hz] below which 99 % of the calibration drive's rate (du/dt) energy lies (:func:`rate_band_hz`)."""
+    return rate_band_hz((np.asarray(r.u, float)[k0:], r.dt) for r, k0 in zip(cal, k0s))
 
 
 def highpassed(ctx, ys, fc):

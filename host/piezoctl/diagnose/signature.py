@@ -48,6 +48,7 @@ import numpy as np
 from scipy import stats
 
 from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
+from .discriminate import rate_band_hz
 
 __all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies", "model_notches", "NOTCH_DAMPING",
            "dispersion", "drive_band_hz", "within_band", "check_delay", "check_bandwidth", "check_mode", "check_slew",
@@ -334,22 +335,9 @@ def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label):
 
 def drive_band_hz(us, dt: float) -> float:
     """[Hz] the frequency below which 99 % of the drives' rate (du/dt) energy lies, pooled over the recordings
-    (``us``: per recording, the settled drive [V]): the band the recordings excite, by the same definition as the
-    calibration's band (``discriminate.calibration_band_hz``)."""
-    f_all, p_all = [], []
-    for u in us:
-        du = np.diff(np.asarray(u, float))
-        if du.size < 16:
-            continue
-        f_all.append(np.fft.rfftfreq(du.size, dt))
-        p_all.append(np.abs(np.fft.rfft(du)) ** 2)
-    if not f_all:
-        return 0.0
-    f = np.concatenate(f_all)
-    p = np.concatenate(p_all)
-    o = np.argsort(f)
-    c = np.cumsum(p[o])
-    return float(f[o][np.searchsorted(c, 0.99 * c[-1])])
+    (``us``: per recording, the settled drive [V]; ``dt`` [s]): the band the recordings excite, by the calibration
+    band's definition (``discriminate.rate_band_hz``)."""
+    return rate_band_hz((u, dt) for u in us)
 
 
 def within_band(tr: Transfer, f_top: float) -> Transfer:
