@@ -98,6 +98,19 @@ def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 1.0
 BW_TABLE_POINTS = 16001  # points of the tabulated run solution of a Bouc-Wen element with n != 1
 
 
+def _monotone_runs(v, v_rest: float):
+    """(dv, starts, ends): the drive's steps from ``v_rest`` [V] and its monotone runs, run k being the steps
+    ``starts[k]:ends[k]``. A run starts at the first nonzero step and at every change of direction; zero steps belong
+    to the run before them. ``starts`` is empty when the drive never moves."""
+    dv = np.diff(np.concatenate([[v_rest], np.asarray(v, float)]))
+    nz = np.flatnonzero(dv != 0.0)
+    if nz.size == 0:
+        return dv, nz, nz
+    sgn = np.sign(dv[nz])
+    starts = nz[np.concatenate([[0], np.flatnonzero(sgn[1:] != sgn[:-1]) + 1])]
+    return dv, starts, np.append(starts[1:], dv.size)
+
+
 def _bouc_wen_table(beta: float, gamma: float, n: float):
     """(h, L): the ascending run solution of ``dh/dL = 1 - |h|^n (beta sign(h) + gamma)`` from the descending
     limit ``-h_u`` to the ascending one ``h_u = (beta + gamma)^(-1/n)``, as the path length L [normalized drive]
@@ -124,16 +137,11 @@ def _bouc_wen_h_n(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 
     the same on -h (the law is odd). The Python loop runs over turning points (one scalar lookup each); the
     samples are filled by one interpolation."""
     hgrid, Lgrid = _bouc_wen_table(beta, gamma, n)
-    v = np.concatenate([[v_rest], np.asarray(v, float)])
-    dv = np.diff(v)
+    dv, starts, ends = _monotone_runs(v, v_rest)
     h0 = float(np.clip(h_start, hgrid[0], hgrid[-1]))
     out = np.full(dv.size, h0)
-    nz = np.flatnonzero(dv != 0.0)
-    if nz.size == 0:
+    if starts.size == 0:
         return out
-    sgn = np.sign(dv[nz])
-    starts = nz[np.concatenate([[0], np.flatnonzero(sgn[1:] != sgn[:-1]) + 1])]
-    ends = np.append(starts[1:], dv.size)
     path = np.concatenate([[0.0], np.cumsum(np.abs(dv))])
     sd = np.sign(dv[starts])
     # per run: the table position at its start (L0) from the state the previous run ended in
@@ -168,18 +176,12 @@ def _bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, h_start: floa
     ``l0 = log(1 - h0 / heq) / k`` and continues with ``k = beta + gamma``. Evaluated
     exactly at every sample, one run at a time (a drive step of any size is exact).
     """
-    v = np.concatenate([[v_rest], np.asarray(v, float)])
-    dv = np.diff(v)
+    dv, starts, ends = _monotone_runs(v, v_rest)
     kp, km = beta + gamma, beta - gamma
     h0 = float(np.clip(h_start, -(1.0 - 1e-9) / kp, (1.0 - 1e-9) / kp))
     out = np.full(dv.size, h0)
-    nz = np.flatnonzero(dv != 0.0)
-    if nz.size == 0:
+    if starts.size == 0:
         return out
-    sgn = np.sign(dv[nz])
-    # run starts: first nonzero step and every change of direction; zero steps belong to the run before them
-    starts = nz[np.concatenate([[0], np.flatnonzero(sgn[1:] != sgn[:-1]) + 1])]
-    ends = np.append(starts[1:], dv.size)
     path = np.cumsum(np.abs(dv))
     hs = []
     sds = np.sign(dv[starts]).tolist()
