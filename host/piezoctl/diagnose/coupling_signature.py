@@ -130,11 +130,7 @@ def motion_test(ctxs, es, nuisances, settings, fold_all, block_all, rows) -> dic
         e[fold_all == 1 - f] = es[f][fold_all == 1 - f]
     used = fold_all >= 0
     before, after, corr = (e - small)[used], (e - big)[used], (big - small)[used]
-    fr = []
-    for f in (0, 1):
-        sel = fold_all[used] == 1 - f
-        sb = float(np.sum(before[sel] ** 2))
-        fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    fr = sg.fold_ratios(before, after, fold_all[used])
     sb = float(np.sum(before ** 2))
     units = sg.test_units(before, block_all[used], rec[used], ctx0.dt, corr)
     _, p, n_act = sg.active_block_test(before, after, corr, block_all[used], units)

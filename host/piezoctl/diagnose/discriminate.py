@@ -127,11 +127,7 @@ def beyond_test(e, p_small, p_big, fold_all, block_all, rec, dt) -> dict:
     """
     from . import significance as sg
     before, after, corr = e - p_small, e - p_big, p_big - p_small
-    fr = []
-    for f in (0, 1):
-        sel = fold_all == 1 - f
-        sb = float(np.sum(before[sel] ** 2))
-        fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    fr = sg.fold_ratios(before, after, fold_all)
     if not np.any(corr):
         return {"p": 1.0, "fold_ratios": fr, "n_active": 0, "significant": False}
     units = sg.test_units(before, block_all, rec, dt, corr)

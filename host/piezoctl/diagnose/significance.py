@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-__all__ = ["RATIO_MAX", "WORSEN_MAX", "ALPHA", "ACTIVE_FRAC", "ACTIVE_PCT", "UNIT_TAUS", "UNIT_MIN_S", "active_block_test",
+__all__ = ["fold_ratios", "RATIO_MAX", "WORSEN_MAX", "ALPHA", "ACTIVE_FRAC", "ACTIVE_PCT", "UNIT_TAUS", "UNIT_MIN_S", "active_block_test",
            "test_units", "energy_corr_time", "effective_n", "bic_delta"]
 
 RATIO_MAX = 0.8
@@ -146,6 +146,19 @@ def test_units(before: np.ndarray, blocks: np.ndarray, rec: np.ndarray, dt: floa
         units[b0:b0 + n] = nxt + (np.arange(n) * k) // n
         nxt += k
     return units
+
+
+def fold_ratios(before: np.ndarray, after: np.ndarray, fold: np.ndarray) -> list[float]:
+    """Held-out RMS ratio after / before on each fold's test half: element f is over the rows of ``fold == 1 - f``
+    (the fold fitted on fold f is tested on the other); 1.0 where ``before`` is zero there.
+
+    ``before``, ``after``: residuals [um] on the rows; ``fold``: each row's fold (0 or 1)."""
+    out = []
+    for f in (0, 1):
+        sel = fold == 1 - f
+        sb = float(np.sum(before[sel] ** 2))
+        out.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    return out
 
 
 def bic_delta(sse_before: float, sse_after: float, n_eff: float, k: int) -> float:

@@ -289,11 +289,7 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
         corr[test] = X[test] @ th - T[test] @ th0
         gains.append([float(x) for x in th[nT:]])
     after = before - corr
-    fr = []
-    for f in (0, 1):
-        sel = fa == 1 - f
-        sb = float(np.sum(before[sel] ** 2))
-        fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    fr = sg.fold_ratios(before, after, fa)
     sb = float(np.sum(before ** 2))
     units = sg.test_units(before, ba, ra, ctx.dt, corr)
     _, p, n_act = sg.active_block_test(before, after, corr, ba, units)
@@ -660,11 +656,7 @@ def drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows) -> dic
                           np.concatenate([hi, np.full(D.shape[1], np.inf)]), train, test, rows)
         e[test] = es[f][pos][test]
     before, after, corr = e - red, e - full, full - red
-    fr = []
-    for f in (0, 1):
-        sel = fa == 1 - f
-        sb = float(np.sum(before[sel] ** 2))
-        fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+    fr = sg.fold_ratios(before, after, fa)
     sb = float(np.sum(before ** 2))
     units = sg.test_units(before, ba, rec, ctx.dt * stride, corr)
     _, p, n_act = sg.active_block_test(before, after, corr, ba, units)
@@ -746,11 +738,7 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
         full = predict(names, True) if within else full_all
         before, after = (e - red)[used], (e - full)[used]
         corr = (full - red)[used]
-        fr = []
-        for f in (0, 1):
-            sel = fold_all[used] == 1 - f
-            sb = float(np.sum(before[sel] ** 2))
-            fr.append(float(np.sqrt(np.sum(after[sel] ** 2) / sb)) if sb > 0 else 1.0)
+        fr = sg.fold_ratios(before, after, fold_all[used])
         sb = float(np.sum(before ** 2))
         ratio = float(np.sqrt(np.sum(after ** 2) / sb)) if sb > 0 else 1.0
         units = sg.test_units(before, block_all[used], rec[used], ctx.dt, corr)
