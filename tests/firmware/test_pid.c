@@ -136,6 +136,20 @@ static uint32_t lcg32(uint32_t *s)
     return *s;
 }
 
+/* One step of the tests' input walk from the random word m: a jump anywhere
+ * (1 in 16), an extreme (1 in 16), else a small step, so that runs of one
+ * sign drive the state into saturation and out. */
+static int16_t walk_step(int16_t v, uint32_t m)
+{
+    if ((m & 15u) == 0u) {
+        return (int16_t)(m >> 16);
+    }
+    if ((m & 15u) == 1u) {
+        return (m & 16u) ? INT16_MAX : INT16_MIN;
+    }
+    return (int16_t)(v + (int16_t)((int32_t)(m >> 16) >> 6));
+}
+
 static void test_pid_matches_int64_formula(void **state)
 {
     uint32_t seed = 7u;
@@ -174,14 +188,7 @@ static void test_pid_matches_int64_formula(void **state)
         int16_t e = 0;
         for (int k = 0; k < 400; k++) {
             /* runs of one sign (into saturation and out), jumps, extremes */
-            const uint32_t m = lcg32(&seed);
-            if ((m & 15u) == 0u) {
-                e = (int16_t)(m >> 16);
-            } else if ((m & 15u) == 1u) {
-                e = (m & 16u) ? INT16_MAX : INT16_MIN;
-            } else {
-                e = (int16_t)(e + (int16_t)((int32_t)(m >> 16) >> 6));
-            }
+            e = walk_step(e, lcg32(&seed));
             const int16_t want = ref_pid(&r, &c, e);
             assert_int_equal(piezo_pid_process(&p, e), want);
             assert_true(p.integ_q39 == r.integ);
@@ -219,14 +226,7 @@ static void test_notch_matches_int64_formula(void **state)
         f.y2_q31 = (int32_t)lcg32(&seed);
         int16_t x = 0;
         for (int n = 0; n < 200; n++) {
-            const uint32_t m = lcg32(&seed);
-            if ((m & 15u) == 0u) {
-                x = (int16_t)(m >> 16);
-            } else if ((m & 15u) == 1u) {
-                x = (m & 16u) ? INT16_MAX : INT16_MIN;
-            } else {
-                x = (int16_t)(x + (int16_t)((int32_t)(m >> 16) >> 6));
-            }
+            x = walk_step(x, lcg32(&seed));
             const int64_t acc = ((int64_t)c.b0_q24 * x + (int64_t)c.b1_q24 * f.x1_q15 + (int64_t)c.b2_q24 * f.x2_q15) *
                                     PIEZO_Q16_ONE -
                                 (int64_t)c.a1_q24 * f.y1_q31 - (int64_t)c.a2_q24 * f.y2_q31;
