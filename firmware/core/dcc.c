@@ -81,6 +81,7 @@ enum piezo_err piezo_dcc_init(struct piezo_dcc *dcc, const struct piezo_dcc_coef
     dcc->psi_q15 = psi_q15;
     dcc->order = order;
     dcc->const_w = 0u;
+    dcc->runs = 0u;
     dcc->c_abs_31 = 0u;
     dcc->csum = 0;
     dcc->n1_sorted = 1u;
@@ -154,6 +155,7 @@ void piezo_dcc_const_weights(struct piezo_dcc *dcc)
     dcc->c_abs_31 = (uint8_t)(cabs <= INT32_MAX);
     dcc->kacc = kacc;
     dcc->const_w = 1u;
+    dcc->runs = (uint8_t)(dcc->c_abs_31 && dcc->n_rows != 0u && dcc->n_cols != 0u);
     dcc->n_run = 0u;
     /* the prefix sums, only if every entry is the one these weights give */
     dcc->psum = NULL;
@@ -500,6 +502,328 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
     return dk;
 }
 
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/*
+ * Cortex-M4: dcc_fall_runs' row loop in Thumb-2 (round 15), the same
+ * integers as the C loop below, which other targets compile and which
+ * piezo_dcc_ops_update_c keeps on this one for test_dcc (random walks on
+ * L = 10, 20, 30, with and without the prefix sums, both forms compared
+ * operator by operator and in the kept sum every tick). gcc's loop keeps
+ * about a dozen of the row's values on the stack and reloads them (40 to
+ * 60 instructions per row visited, round 14); here the row's state lives
+ * in registers and the per-tick constants in a frame of their own, one
+ * load each where a row uses them. It does the whole falling step of
+ * dcc_ops with runs after the reversal's bookkeeping (piezo_dcc_ops_update,
+ * a tail call): the band's first row (first_row_above's answer, walked from
+ * the hint one row at a time: at most n_rows <= 32 steps, one or none on a
+ * smooth drive), the rows, the runs out, kacc and v_prev.
+ *
+ * r4 &row_start[k + 1] once a row is read, r5 psi, r7:r8 dk, r9 the old
+ * run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
+ * r3 r, lr the run's weight sum; r6, ip scratch.
+ * Frame: [sp] th (n1), #4 v, #8 v_prev, #12 xsat, #16 slope, #20 rmax,
+ * #24 old_end, #28 out_end, #32 psum, #36 &row_start[n_rows], #40 r10
+ * while a block's end is searched, #44 out, #48 dcc (pushed r0).
+ */
+typedef char piezo_dcc_fall_m4_layout_check_t[
+    (offsetof(struct piezo_dcc, coeffs) == 0u && offsetof(struct piezo_dcc, psi_q15) == 4u &&
+     offsetof(struct piezo_dcc, v_prev_q15) == 34u && offsetof(struct piezo_dcc, n_run) == 43u &&
+     offsetof(struct piezo_dcc, cur) == 44u && offsetof(struct piezo_dcc, n_rows) == 46u &&
+     offsetof(struct piezo_dcc, kacc) == 24u && offsetof(struct piezo_dcc, row_cur) == 47u &&
+     offsetof(struct piezo_dcc, psum) == 52u && offsetof(struct piezo_dcc, row_start) == 56u &&
+     offsetof(struct piezo_dcc, run) == 188u && sizeof(struct piezo_dcc_run) == 16u &&
+     offsetof(struct piezo_dcc_run, csum) == 0u && offsetof(struct piezo_dcc_run, lvl) == 4u &&
+     offsetof(struct piezo_dcc_run, thr) == 8u && offsetof(struct piezo_dcc_run, k) == 10u &&
+     PIEZO_DCC_RUNS == 4u && offsetof(struct piezo_dcc_coeffs, grid) == 0u &&
+     offsetof(struct piezo_kp_grid, n1_q15) == 0u && offsetof(struct piezo_kp_grid, rmax_q15) == 12u &&
+     offsetof(struct piezo_kp_grid, slope_q16) == 16u && offsetof(struct piezo_kp_grid, xsat_q15) == 20u &&
+     offsetof(struct piezo_dcc_coeffs, c_q24) == 24u) ? 1 : -1];
+
+static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, int32_t v)
+{
+    (void)dcc;
+    (void)v;
+    __asm__ volatile(
+        /* psi[r0 .. r2) = r3 (index bounds; four per pass, as fill_i32);
+         * clobbers r0, r6, ip */
+        "    .macro dcc_fill\n"
+        "    add    r0, r5, r0, lsl #2\n"
+        "    add    ip, r5, r2, lsl #2\n"
+        "    sub    r6, ip, #12\n"
+        "    cmp    r0, r6\n"
+        "    bhs    2f\n"
+        "1:  strd   r3, r3, [r0], #8\n"
+        "    strd   r3, r3, [r0], #8\n"
+        "    cmp    r0, r6\n"
+        "    blo    1b\n"
+        "2:  sub    r6, ip, r0\n"
+        "    cmp    r6, #8\n"
+        "    blt    3f\n"
+        "    strd   r3, r3, [r0], #8\n"
+        "3:  cmp    r0, ip\n"
+        "    it     lo\n"
+        "    strlo  r3, [r0]\n"
+        "    .endm\n"
+        /* r2 = row_block_end(psi, r0, r1, r6): gallop from the row's end,
+         * then bisect; clobbers ip (hi), lr (step, mid), r10 */
+        "    .macro dcc_block_end\n"
+        "    sub    ip, r1, #1\n"
+        "    ldr    r10, [r5, ip, lsl #2]\n"
+        "    mov    r2, r1\n"
+        "    cmp    r10, r6\n"
+        "    beq    9f\n"
+        "    mov    lr, #1\n"
+        "4:  sub    r2, ip, lr\n"
+        "    cmp    r2, r0\n"
+        "    ble    5f\n"
+        "    ldr    r10, [r5, r2, lsl #2]\n"
+        "    cmp    r10, r6\n"
+        "    beq    6f\n"
+        "    mov    ip, r2\n"
+        "    lsl    lr, lr, #1\n"
+        "    b      4b\n"
+        "5:  mov    r2, r0\n"
+        "6:  add    r2, r2, #1\n"
+        "7:  cmp    r2, ip\n"
+        "    bge    9f\n"
+        "    add    lr, r2, ip\n"
+        "    asr    lr, lr, #1\n"
+        "    ldr    r10, [r5, lr, lsl #2]\n"
+        "    cmp    r10, r6\n"
+        "    ite    eq\n"
+        "    addeq  r2, lr, #1\n"
+        "    movne  ip, lr\n"
+        "    b      7b\n"
+        "9:\n"
+        "    .endm\n"
+
+        "    push   {r0, r4-r11, lr}\n"
+        "    sub    sp, #48\n"
+        "    ldr    ip, [r0, #0]\n"          /* coeffs */
+        "    ldr    lr, [ip, #0]\n"          /* n1 */
+        "    str    lr, [sp, #0]\n"
+        "    str    r1, [sp, #4]\n"          /* v */
+        "    ldrsh  lr, [r0, #34]\n"         /* v_prev */
+        "    str    lr, [sp, #8]\n"
+        "    ldr    r6, [ip, #20]\n"         /* xsat */
+        "    str    r6, [sp, #12]\n"
+        "    ldr    lr, [ip, #16]\n"         /* slope */
+        "    str    lr, [sp, #16]\n"
+        "    ldrsh  lr, [ip, #12]\n"         /* rmax */
+        "    str    lr, [sp, #20]\n"
+        "    ldr    r11, [ip, #24]\n"        /* c */
+        "    ldr    r5, [r0, #4]\n"          /* psi */
+        "    ldr    lr, [r0, #52]\n"         /* psum */
+        "    str    lr, [sp, #32]\n"
+        "    add    r4, r0, #56\n"           /* row_start */
+        "    ldrb   r3, [r0, #46]\n"         /* n_rows */
+        "    add    lr, r4, r3, lsl #1\n"
+        "    str    lr, [sp, #36]\n"
+        /* the band's first row (first_row_above: the first whose n1 exceeds
+         * v - xsat), walked from the last falling tick's */
+        "    sub    r6, r1, r6\n"            /* t = v - xsat */
+        "    ldr    lr, [ip, #0]\n"          /* n1 */
+        "    ldrb   r2, [r0, #47]\n"         /* k = row_cur */
+        "10: cbz    r2, 11f\n"
+        "    add    r9, r4, r2, lsl #1\n"
+        "    ldrh   r9, [r9, #-2]\n"
+        "    ldrsh  r9, [lr, r9, lsl #1]\n"
+        "    cmp    r9, r6\n"
+        "    ble    11f\n"
+        "    subs   r2, r2, #1\n"           /* row k - 1 exceeds t */
+        "    b      10b\n"
+        "11: cmp    r2, r3\n"
+        "    bge    12f\n"
+        "    ldrh   r9, [r4, r2, lsl #1]\n"
+        "    ldrsh  r9, [lr, r9, lsl #1]\n"
+        "    cmp    r9, r6\n"
+        "    bgt    12f\n"
+        "    adds   r2, r2, #1\n"           /* row k does not */
+        "    b      11b\n"
+        "12: strb   r2, [r0, #47]\n"
+        "    add    r4, r4, r2, lsl #1\n"    /* &row_start[k] */
+        "    ldrb   r3, [r0, #44]\n"         /* cur */
+        "    add    r9, r0, #188\n"
+        "    eor    r2, r3, #1\n"
+        "    add    r10, r9, r2, lsl #6\n"   /* out = run[cur ^ 1] */
+        "    add    r9, r9, r3, lsl #6\n"    /* old = run[cur] */
+        "    str    r10, [sp, #44]\n"
+        "    add    lr, r10, #64\n"
+        "    str    lr, [sp, #28]\n"         /* out_end */
+        "    ldrb   lr, [r0, #43]\n"         /* n_run */
+        "    add    lr, r9, lr, lsl #4\n"
+        "    str    lr, [sp, #24]\n"         /* old_end */
+        "    movs   r7, #0\n"
+        "    movs   r8, #0\n"
+        "    ldr    ip, [sp, #36]\n"
+        "    cmp    r4, ip\n"
+        "    bhs    .Ldf_done\n"
+
+        ".Ldf_row:\n"
+        "    ldrh   r0, [r4], #2\n"          /* j */
+        "    ldrh   r1, [r4]\n"              /* end */
+        "    ldr    lr, [sp, #0]\n"
+        "    ldrsh  r2, [lr, r0, lsl #1]\n"  /* n1 */
+        "    ldr    lr, [sp, #8]\n"
+        "    cmp    r2, lr\n"
+        "    bge    .Ldf_done\n"             /* n1 >= v_prev (x <= dv): psi = 0 by (A) */
+        "    ldr    lr, [sp, #4]\n"
+        "    subs   r3, lr, r2\n"            /* x = v - n1 */
+        "    ldr    lr, [sp, #12]\n"
+        "    cmp    r3, lr\n"
+        "    bge    .Ldf_sat\n"
+        "    cmp    r3, #0\n"
+        "    ble    .Ldf_zero\n"
+        "    ldr    lr, [sp, #16]\n"
+        "    mul    r3, r3, lr\n"
+        "    add    r3, r3, #32768\n"
+        "    asrs   r3, r3, #16\n"
+        "    b      .Ldf_ridge\n"
+        ".Ldf_sat:\n"
+        "    ldr    r3, [sp, #20]\n"
+        "    b      .Ldf_ridge\n"
+        ".Ldf_zero:\n"
+        "    movs   r3, #0\n"
+        ".Ldf_ridge:\n"
+        "    ldr    lr, [sp, #24]\n"         /* old_end */
+        ".Ldf_old:\n"
+        "    cmp    r9, lr\n"
+        "    bhs    .Ldf_norun\n"
+        "    ldrsh  ip, [r9, #8]\n"
+        "    cmp    ip, r2\n"
+        "    bge    .Ldf_old_ge\n"
+        "    add    r9, r9, #16\n"
+        "    b      .Ldf_old\n"
+        ".Ldf_old_ge:\n"
+        "    bne    .Ldf_norun\n"
+        /* the row's run moves as one */
+        "    ldr    lr, [r9, #0]\n"          /* csum */
+        "    ldr    ip, [r9, #4]\n"          /* lvl */
+        "    ldrh   r2, [r9, #10]\n"         /* k */
+        "    add    r9, r9, #16\n"
+        "    add    r2, r0, r2\n"            /* p = j + k */
+        "    cmp    r3, ip\n"
+        "    beq    .Ldf_run_same\n"
+        "    sub    ip, r3, ip\n"
+        "    smlal  r7, r8, ip, lr\n"
+        "    dcc_fill\n"
+        ".Ldf_run_same:\n"
+        "    mov    r0, r2\n"
+        "    b      .Ldf_scan\n"
+
+        ".Ldf_norun:\n"
+        "    ldr    ip, [sp, #32]\n"         /* psum */
+        "    cmp    ip, #0\n"
+        "    beq    .Ldf_plain\n"
+        "    ldr    r6, [r5, r0, lsl #2]\n"  /* psi[j] */
+        "    ldr    lr, [sp, #20]\n"
+        "    cmp    r6, lr\n"
+        "    bne    .Ldf_diag\n"
+        /* a row entering the band with its first operators at rmax */
+        "    str    r10, [sp, #40]\n"
+        "    dcc_block_end\n"
+        "    ldr    r10, [sp, #40]\n"
+        "    ldr    ip, [sp, #32]\n"
+        "    ldr    lr, [ip, r2, lsl #2]\n"
+        "    ldr    ip, [ip, r0, lsl #2]\n"
+        "    sub    lr, lr, ip\n"            /* csum = psum[e] - psum[j] */
+        "    sub    ip, r3, r6\n"
+        "    smlal  r7, r8, ip, lr\n"        /* (r - rmax) csum */
+        "    dcc_fill\n"
+        "    mov    r0, r2\n"
+        "    b      .Ldf_scan\n"
+
+        ".Ldf_diag:\n"                        /* r6 = psi[j] */
+        "    sub    ip, r1, r0\n"
+        "    cmp    ip, #3\n"
+        "    blt    .Ldf_plain\n"
+        "    add    ip, r5, r0, lsl #2\n"
+        "    ldrd   lr, ip, [ip, #4]\n"      /* psi[j + 1], psi[j + 2] */
+        "    cmp    lr, r3\n"
+        "    ble    .Ldf_plain\n"
+        "    cmp    lr, ip\n"
+        "    bne    .Ldf_plain\n"
+        /* the first operator alone, then the block equal to the next */
+        "    sub    r6, r3, r6\n"
+        "    ldr    ip, [r11, r0, lsl #2]\n"
+        "    smlal  r7, r8, r6, ip\n"        /* (r - psi[j]) c[j] */
+        "    str    r3, [r5, r0, lsl #2]\n"
+        "    mov    r6, lr\n"                /* b */
+        "    add    r0, r0, #1\n"            /* from j + 1 */
+        "    str    r10, [sp, #40]\n"
+        "    dcc_block_end\n"
+        "    sub    r6, r3, r6\n"            /* r - b */
+        "    ldr    ip, [sp, #32]\n"
+        "    ldr    lr, [ip, r2, lsl #2]\n"  /* psum[e] */
+        "    add    ip, ip, r0, lsl #2\n"
+        "    ldr    r10, [ip]\n"             /* psum[j + 1] */
+        "    sub    r10, lr, r10\n"
+        "    smlal  r7, r8, r6, r10\n"       /* (r - b) (psum[e] - psum[j + 1]) */
+        "    ldr    ip, [ip, #-4]\n"
+        "    sub    lr, lr, ip\n"            /* csum = psum[e] - psum[j] */
+        "    ldr    r10, [sp, #40]\n"
+        "    dcc_fill\n"
+        "    mov    r0, r2\n"
+        "    b      .Ldf_scan\n"
+
+        ".Ldf_plain:\n"
+        "    mov    lr, #0\n"
+        /* the row's next operators join while psi > r */
+        ".Ldf_scan:\n"
+        "    cmp    r0, r1\n"
+        "    bge    .Ldf_scan_end\n"
+        ".Ldf_scan_op:\n"
+        "    ldr    ip, [r5, r0, lsl #2]\n"
+        "    subs   ip, r3, ip\n"
+        "    bge    .Ldf_scan_end\n"         /* psi <= r: the rest of the row stays */
+        "    ldr    r2, [r11, r0, lsl #2]\n"
+        "    smlal  r7, r8, ip, r2\n"
+        "    add    lr, lr, r2\n"
+        "    str    r3, [r5, r0, lsl #2]\n"
+        "    adds   r0, r0, #1\n"
+        "    cmp    r0, r1\n"
+        "    blt    .Ldf_scan_op\n"
+        ".Ldf_scan_end:\n"
+        "    ldrh   r1, [r4, #-2]\n"         /* j */
+        "    subs   r2, r0, r1\n"            /* operators that moved */
+        "    ble    .Ldf_next\n"
+        "    ldr    ip, [sp, #28]\n"
+        "    cmp    r10, ip\n"
+        "    bhs    .Ldf_next\n"
+        "    ldr    ip, [sp, #0]\n"
+        "    ldrsh  ip, [ip, r1, lsl #1]\n"  /* n1 */
+        "    str    lr, [r10, #0]\n"
+        "    str    r3, [r10, #4]\n"
+        "    strh   ip, [r10, #8]\n"
+        "    strh   r2, [r10, #10]\n"
+        "    add    r10, r10, #16\n"
+        ".Ldf_next:\n"
+        "    ldr    ip, [sp, #36]\n"
+        "    cmp    r4, ip\n"
+        "    blo    .Ldf_row\n"
+
+        ".Ldf_done:\n"
+        "    ldr    r0, [sp, #48]\n"
+        "    ldrb   r1, [r0, #44]\n"
+        "    eor    r1, r1, #1\n"
+        "    strb   r1, [r0, #44]\n"         /* cur ^= 1 */
+        "    ldr    r1, [sp, #44]\n"
+        "    sub    r1, r10, r1\n"
+        "    lsr    r1, r1, #4\n"
+        "    strb   r1, [r0, #43]\n"         /* n_run */
+        "    ldrd   r2, r3, [r0, #24]\n"
+        "    adds   r2, r2, r7\n"
+        "    adc    r3, r3, r8\n"
+        "    strd   r2, r3, [r0, #24]\n"     /* kacc += dk (runs: const_w) */
+        "    ldr    r1, [sp, #4]\n"
+        "    strh   r1, [r0, #34]\n"         /* v_prev = v */
+        "    add    sp, #48\n"
+        "    pop    {r2, r4-r11, pc}\n"
+        "    .purgem dcc_fill\n"
+        "    .purgem dcc_block_end\n");
+}
+#endif
+
 /*
  * Rising to v with runs: in a column (one n2; its order positions by index,
  * i.e. by n1) psi is non-increasing in n1, so the operators that move,
@@ -607,7 +931,7 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
 }
 
 /*
- * Advance the operators with v; return the change of sum_j psi_j c_j.
+ * Advance the operators with v; sum_j psi_j c_j kept in kacc (const_w).
  *
  * psi_j is the KP operator (dcc.h): rising psi = max(psi, r(v - n2)),
  * falling psi = min(psi, r(v - n1)), Psi_j = v - psi_j. Only operators that
@@ -621,7 +945,7 @@ static int64_t dcc_rise_runs(struct piezo_dcc *dcc, int32_t v)
  * Rising to v: a move needs r(v - n2) > 0 (n2 < v) and psi < rmax
  * (n2 > v_prev - xsat by B); one range of the n2 order.
  */
-static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
+static __attribute__((noinline)) void dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
 {
     const struct piezo_kp_grid *g = &dcc->coeffs->grid;
     const int32_t *c = dcc->coeffs->c_q24;
@@ -633,7 +957,7 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
     int64_t dk = 0;
 
     if (dv == 0) {
-        return 0;
+        return;
     }
     const int8_t dir = dv > 0 ? 1 : -1;
     if (dir != dcc->dir) { /* reversal: where it happened (kept for the record) */
@@ -644,7 +968,8 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
     if (dcc->const_w && dcc->n_rows != 0u && dcc->n_cols != 0u && dcc->c_abs_31) {
         dk = dir > 0 ? dcc_rise_runs(dcc, v) : dcc_fall_runs(dcc, v, dv);
         dcc->v_prev_q15 = v_q15;
-        return dk;
+        dcc->kacc += dk; /* the runs need const_w */
+        return;
     }
     /* Operators with the same threshold share x and the ridge r: r is
      * computed once per threshold, each operator then costs a compare (and
@@ -704,15 +1029,34 @@ static int64_t dcc_ops(struct piezo_dcc *dcc, int16_t v_q15)
         }
     }
     dcc->v_prev_q15 = v_q15;
-    return dk;
+    if (dcc->const_w) {
+        dcc->kacc += dk;
+    }
+}
+
+void piezo_dcc_ops_update_c(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    dcc_ops(dcc, v_q15);
 }
 
 void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
 {
-    const int64_t dk = dcc_ops(dcc, v_q15);
-    if (dcc->const_w) {
-        dcc->kacc += dk;
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+    /* falling with runs: the whole step in Thumb-2 (a tail call) */
+    if (v_q15 == dcc->v_prev_q15) {
+        return;
     }
+    if (v_q15 < dcc->v_prev_q15 && dcc->runs) {
+        if (dcc->dir != -1) { /* reversal, as dcc_ops */
+            dcc->xi_q15 = dcc->v_prev_q15;
+            dcc->dir = -1;
+            dcc->n_run = 0u;
+        }
+        dcc_fall_m4(dcc, v_q15);
+        return;
+    }
+#endif
+    piezo_dcc_ops_update_c(dcc, v_q15);
 }
 
 int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)

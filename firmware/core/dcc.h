@@ -144,6 +144,8 @@ struct piezo_dcc {
     uint8_t row_cur;     /* the falling band's first row at the last falling tick (a hint) */
     uint8_t n_cols;      /* columns (equal n2) in the order array, at most PIEZO_DCC_MAX_ROWS; else 0 */
     uint8_t col_cur;     /* the rising band's first column at the last rising tick (a hint) */
+    uint8_t runs;        /* const_w, c_abs_31, n_rows and n_cols all non-zero: the runs apply
+                          * (the Cortex-M4's falling step tests this one byte) */
     const int32_t *psum; /* coeffs->csum_q24 when checked by piezo_dcc_const_weights (else NULL):
                           * a row's (column's) operators at rmax (at 0) join in one step */
     uint16_t row_start[PIEZO_DCC_MAX_ROWS + 1u]; /* first index of each row, then n_ops */
@@ -192,6 +194,11 @@ static inline int32_t piezo_dcc_cpsi(const struct piezo_dcc *dcc, uint16_t j)
 
 /** Advance the compensation operators with input v (the law does this itself). */
 void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15);
+
+/** The same with the C kernels only: on the Cortex-M4 the reference of the
+ * Thumb-2 falling rows (test_dcc compares the two); elsewhere the same as
+ * piezo_dcc_ops_update. */
+void piezo_dcc_ops_update_c(struct piezo_dcc *dcc, int16_t v_q15);
 
 /** One tick of the law: operators with u[k-1], then u[k] (q15, saturated). */
 int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15);
