@@ -440,6 +440,72 @@ static void test_runs_on_random_walks(void **state)
     }
 }
 
+/* The step piezo_dcc_ops_update takes (on the Cortex-M4 the falling rows
+ * in Thumb-2, round 15) against the C step (piezo_dcc_ops_update_c), two
+ * instances on one plane and walk: every operator, the kept sum, the runs
+ * and the hints every tick. Elsewhere both are the C step (the test then
+ * checks only that the two entry points agree). Returns the falling ticks
+ * that took the runs. */
+static unsigned step_check(uint16_t L, uint32_t seed, size_t n, int sums)
+{
+    walk_rng = seed;
+    struct piezo_dcc_coeffs dc = walk_plane(L);
+    struct piezo_dcc d, e;
+    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    if (sums) {
+        assert_int_equal(with_sums(&d, &dc), 1);
+    }
+    assert_int_equal(piezo_dcc_init(&e, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    piezo_dcc_const_weights(&d);
+    piezo_dcc_const_weights(&e);
+    assert_true(d.runs && e.runs && (sums ? d.psum == sums_a : d.psum == NULL));
+    struct walk w = {.v = dc.grid.nmin_q15, .dir = 1, .left = 0, .step = 0};
+    unsigned falls = 0;
+    for (size_t k = 0; k < n; k++) {
+        const int16_t v = walk_next(&w);
+        falls += v < d.v_prev_q15;
+        piezo_dcc_ops_update(&d, v);
+        piezo_dcc_ops_update_c(&e, v);
+        for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+            if (d.psi_q15[j] != e.psi_q15[j]) {
+                fail_msg("L %u seed %lu tick %lu v %d operator %u: psi %ld, C step %ld", (unsigned)L,
+                         (unsigned long)seed, (unsigned long)k, v, (unsigned)j, (long)d.psi_q15[j],
+                         (long)e.psi_q15[j]);
+            }
+        }
+        if (d.kacc != e.kacc || d.v_prev_q15 != e.v_prev_q15 || d.xi_q15 != e.xi_q15 || d.dir != e.dir ||
+            d.n_run != e.n_run || d.cur != e.cur || d.row_cur != e.row_cur || d.col_cur != e.col_cur) {
+            fail_msg("L %u seed %lu tick %lu: state (kacc %lld, n_run %u, cur %u, row %u) against the C "
+                     "step's (%lld, %u, %u, %u)",
+                     (unsigned)L, (unsigned long)seed, (unsigned long)k, (long long)d.kacc, d.n_run, d.cur,
+                     d.row_cur, (long long)e.kacc, e.n_run, e.cur, e.row_cur);
+        }
+        for (uint8_t i = 0; i < d.n_run; i++) {
+            const struct piezo_dcc_run *a = &d.run[d.cur][i], *b = &e.run[e.cur][i];
+            if (a->csum != b->csum || a->lvl != b->lvl || a->thr != b->thr || a->k != b->k) {
+                fail_msg("L %u seed %lu tick %lu run %u: (%ld, %ld, %d, %u) against (%ld, %ld, %d, %u)",
+                         (unsigned)L, (unsigned long)seed, (unsigned long)k, (unsigned)i, (long)a->csum,
+                         (long)a->lvl, a->thr, a->k, (long)b->csum, (long)b->lvl, b->thr, b->k);
+            }
+        }
+    }
+    return falls;
+}
+
+static void test_step_matches_c_step(void **state)
+{
+    (void)state;
+    static const uint16_t planes[] = {10u, 20u, 30u};
+    for (size_t i = 0; i < N_OF(planes); i++) {
+        for (uint32_t seed = 3u; seed <= 4u; seed++) {
+            for (int sums = 0; sums <= 1; sums++) {
+                const unsigned falls = step_check(planes[i], seed * 7919u + planes[i], 20000u, sums);
+                assert_true(falls >= 5000u); /* about half the ticks fall */
+            }
+        }
+    }
+}
+
 static enum piezo_err init_with(const struct piezo_dcc_coeffs *c, size_t n_state)
 {
     struct piezo_dcc d;
@@ -484,6 +550,7 @@ int main(void)
         cmocka_unit_test(test_init_refuses_bad_coefficients),
         cmocka_unit_test(test_row_and_column_table_limits),
         cmocka_unit_test(test_runs_on_random_walks),
+        cmocka_unit_test(test_step_matches_c_step),
         cmocka_unit_test(test_prefix_sums_checked),
     };
     return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);
