@@ -822,6 +822,298 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    .purgem dcc_fill\n"
         "    .purgem dcc_block_end\n");
 }
+
+/*
+ * Cortex-M4: dcc_rise_runs in Thumb-2 (round 15), the same integers; test_dcc
+ * compares it with the C step as the falling one. A column's operators are
+ * reached through the order array, so the column's bounds, its run's start
+ * and the scans are pointers into it (an entry's low halfword the index, the
+ * high one n2); the prefix sums of the n2 order are read at the same offset
+ * from an order pointer (psum + n_ops + 1 - order, in bytes).
+ *
+ * r4 &col_start[k + 1] once a column is read, r5 psi, r7:r8 dk, r9 the old
+ * run, r11 c; in a column r0 the position (pointer), r1 the column's end, r2
+ * n2 then scratch, r3 r, r6 q (where the moving suffix starts), lr the
+ * run's weight sum; r10, ip scratch. Frame: [sp] order, #4 v, #8 xsat, #12
+ * slope, #16 rmax, #20 old_end, #24 out_end, #28 psum, #32
+ * &col_start[n_cols], #36 the sums' offset, #40 n2, #44 the next run out,
+ * #48 r4 and #52 r9 while a zero block is stored, #56 out, #64 dcc.
+ */
+typedef char piezo_dcc_rise_m4_layout_check_t[
+    (offsetof(struct piezo_dcc, order) == 8u && offsetof(struct piezo_dcc, n2_banded) == 41u &&
+     offsetof(struct piezo_dcc, n_cols) == 48u && offsetof(struct piezo_dcc, col_cur) == 49u &&
+     offsetof(struct piezo_dcc, col_start) == 122u && offsetof(struct piezo_kp_grid, n_ops) == 8u) ? 1 : -1];
+
+static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, int32_t v)
+{
+    (void)dcc;
+    (void)v;
+    __asm__ volatile(
+        /* psi[ord entries [p, r1)] = r3, two per pass (as scatter_i32);
+         * clobbers p, b (the last pair's bound), t0, t1 */
+        "    .macro dcc_scatter p, b, t0, t1\n"
+        "    sub    \\b, r1, #4\n"
+        "    cmp    \\p, \\b\n"
+        "    bhs    2f\n"
+        "1:  ldrh   \\t0, [\\p], #4\n"
+        "    ldrh   \\t1, [\\p], #4\n"
+        "    str    r3, [r5, \\t0, lsl #2]\n"
+        "    str    r3, [r5, \\t1, lsl #2]\n"
+        "    cmp    \\p, \\b\n"
+        "    blo    1b\n"
+        "2:  cmp    \\p, r1\n"
+        "    bhs    3f\n"
+        "    ldrh   \\t0, [\\p]\n"
+        "    str    r3, [r5, \\t0, lsl #2]\n"
+        "3:\n"
+        "    .endm\n"
+
+        "    push   {r0, r4-r11, lr}\n"
+        "    sub    sp, #64\n"
+        "    ldr    ip, [r0, #0]\n"          /* coeffs */
+        "    ldr    r10, [r0, #8]\n"         /* order */
+        "    str    r10, [sp, #0]\n"
+        "    str    r1, [sp, #4]\n"          /* v */
+        "    ldr    r6, [ip, #20]\n"         /* xsat */
+        "    str    r6, [sp, #8]\n"
+        "    ldr    lr, [ip, #16]\n"         /* slope */
+        "    str    lr, [sp, #12]\n"
+        "    ldrsh  lr, [ip, #12]\n"         /* rmax */
+        "    str    lr, [sp, #16]\n"
+        "    ldr    r11, [ip, #24]\n"        /* c */
+        "    ldr    r5, [r0, #4]\n"          /* psi */
+        "    ldr    lr, [r0, #52]\n"         /* psum */
+        "    str    lr, [sp, #28]\n"
+        "    ldrh   r2, [ip, #8]\n"          /* n_ops */
+        "    add    lr, lr, r2, lsl #2\n"
+        "    add    lr, lr, #4\n"
+        "    sub    lr, lr, r10\n"
+        "    str    lr, [sp, #36]\n"         /* psum + n_ops + 1 - order (bytes) */
+        "    add    r4, r0, #122\n"          /* col_start */
+        "    ldrb   r3, [r0, #48]\n"         /* n_cols */
+        "    add    lr, r4, r3, lsl #1\n"
+        "    str    lr, [sp, #32]\n"
+        /* the band's first column (first_col_above: the first whose n2
+         * exceeds v_prev - xsat; every column without n2_banded), walked
+         * from the last rising tick's */
+        "    movs   r2, #0\n"
+        "    ldrb   lr, [r0, #41]\n"         /* n2_banded */
+        "    cmp    lr, #0\n"
+        "    beq    13f\n"
+        "    ldrsh  lr, [r0, #34]\n"         /* v_prev */
+        "    sub    r6, lr, r6\n"            /* t = v_prev - xsat */
+        "    ldrb   r2, [r0, #49]\n"         /* k = col_cur */
+        "10: cbz    r2, 11f\n"
+        "    add    r9, r4, r2, lsl #1\n"
+        "    ldrh   r9, [r9, #-2]\n"
+        "    add    r9, r10, r9, lsl #2\n"
+        "    ldrsh  r9, [r9, #2]\n"
+        "    cmp    r9, r6\n"
+        "    ble    11f\n"
+        "    subs   r2, r2, #1\n"           /* column k - 1 exceeds t */
+        "    b      10b\n"
+        "11: cmp    r2, r3\n"
+        "    bge    12f\n"
+        "    ldrh   r9, [r4, r2, lsl #1]\n"
+        "    add    r9, r10, r9, lsl #2\n"
+        "    ldrsh  r9, [r9, #2]\n"
+        "    cmp    r9, r6\n"
+        "    bgt    12f\n"
+        "    adds   r2, r2, #1\n"           /* column k does not */
+        "    b      11b\n"
+        "12: strb   r2, [r0, #49]\n"
+        "13: add    r4, r4, r2, lsl #1\n"    /* &col_start[k] */
+        "    ldrb   r3, [r0, #44]\n"         /* cur */
+        "    add    r9, r0, #188\n"
+        "    eor    r2, r3, #1\n"
+        "    add    r10, r9, r2, lsl #6\n"   /* out = run[cur ^ 1] */
+        "    add    r9, r9, r3, lsl #6\n"    /* old = run[cur] */
+        "    str    r10, [sp, #56]\n"
+        "    str    r10, [sp, #44]\n"
+        "    add    lr, r10, #64\n"
+        "    str    lr, [sp, #24]\n"         /* out_end */
+        "    ldrb   lr, [r0, #43]\n"         /* n_run */
+        "    add    lr, r9, lr, lsl #4\n"
+        "    str    lr, [sp, #20]\n"         /* old_end */
+        "    movs   r7, #0\n"
+        "    movs   r8, #0\n"
+        "    ldr    ip, [sp, #32]\n"
+        "    cmp    r4, ip\n"
+        "    bhs    .Ldr_done\n"
+
+        ".Ldr_col:\n"
+        "    ldrh   r0, [r4], #2\n"          /* pos */
+        "    ldrh   r1, [r4]\n"              /* end */
+        "    ldr    ip, [sp, #0]\n"
+        "    add    r0, ip, r0, lsl #2\n"
+        "    add    r1, ip, r1, lsl #2\n"
+        "    ldrsh  r2, [r0, #2]\n"          /* n2 */
+        "    str    r2, [sp, #40]\n"
+        "    ldr    lr, [sp, #4]\n"
+        "    subs   r3, lr, r2\n"            /* x = v - n2 */
+        "    ble    .Ldr_done\n"             /* n2 >= v from here on: r = 0 */
+        "    ldr    lr, [sp, #8]\n"
+        "    cmp    r3, lr\n"
+        "    bge    .Ldr_sat\n"
+        "    ldr    lr, [sp, #12]\n"
+        "    mul    r3, r3, lr\n"
+        "    add    r3, r3, #32768\n"
+        "    asrs   r3, r3, #16\n"
+        "    b      .Ldr_ridge\n"
+        ".Ldr_sat:\n"
+        "    ldr    r3, [sp, #16]\n"
+        ".Ldr_ridge:\n"
+        "    ldr    lr, [sp, #20]\n"         /* old_end */
+        ".Ldr_old:\n"
+        "    cmp    r9, lr\n"
+        "    bhs    .Ldr_norun\n"
+        "    ldrsh  ip, [r9, #8]\n"
+        "    cmp    ip, r2\n"
+        "    bge    .Ldr_old_ge\n"
+        "    add    r9, r9, #16\n"
+        "    b      .Ldr_old\n"
+        ".Ldr_old_ge:\n"
+        "    bne    .Ldr_norun\n"
+        /* the column's run moves as one */
+        "    ldr    lr, [r9, #0]\n"          /* csum */
+        "    ldr    ip, [r9, #4]\n"          /* lvl */
+        "    ldrh   r2, [r9, #10]\n"         /* k */
+        "    add    r9, r9, #16\n"
+        "    sub    r2, r1, r2, lsl #2\n"    /* q: the run's first position */
+        "    cmp    r3, ip\n"
+        "    beq    .Ldr_join\n"
+        "    sub    ip, r3, ip\n"
+        "    smlal  r7, r8, ip, lr\n"
+        "    mov    r6, r2\n"
+        "    dcc_scatter r6, r0, ip, r10\n"
+        "    ldrh   r0, [r4, #-2]\n"         /* pos again */
+        "    ldr    ip, [sp, #0]\n"
+        "    add    r0, ip, r0, lsl #2\n"
+        ".Ldr_join:\n"                        /* the operators before the run join */
+        "    mov    r6, r2\n"
+        "    cmp    r6, r0\n"
+        "    bls    .Ldr_rec\n"
+        "20: ldrh   ip, [r6, #-4]!\n"
+        "    ldr    r10, [r5, ip, lsl #2]\n"
+        "    subs   r10, r3, r10\n"
+        "    ble    21f\n"                   /* psi >= r */
+        "    str    r3, [r5, ip, lsl #2]\n"
+        "    ldr    ip, [r11, ip, lsl #2]\n"
+        "    smlal  r7, r8, r10, ip\n"
+        "    add    lr, lr, ip\n"
+        "    cmp    r6, r0\n"
+        "    bhi    20b\n"
+        "    b      .Ldr_rec\n"
+        "21: add    r6, r6, #4\n"
+        "    b      .Ldr_rec\n"
+
+        ".Ldr_norun:\n"
+        "    mov    lr, #0\n"
+        /* operators that do not move, then (a suffix) all that do */
+        "22: cmp    r0, r1\n"
+        "    bhs    23f\n"
+        "    ldrh   ip, [r0]\n"
+        "    ldr    ip, [r5, ip, lsl #2]\n"
+        "    cmp    ip, r3\n"
+        "    blt    23f\n"
+        "    add    r0, r0, #4\n"
+        "    b      22b\n"
+        "23: mov    r6, r0\n"                /* q */
+        "    mov    r2, r1\n"                /* z: from z on at 0 */
+        "    ldr    ip, [sp, #28]\n"
+        "    cmp    ip, #0\n"
+        "    beq    .Ldr_each\n"
+        "    cmp    r0, r1\n"
+        "    bhs    .Ldr_each\n"
+        "    ldrh   ip, [r1, #-4]\n"
+        "    ldr    ip, [r5, ip, lsl #2]\n"
+        "    cmp    ip, #0\n"
+        "    bne    .Ldr_each\n"
+        /* its last operators at 0: their first by bisection */
+        "    mov    r2, r0\n"
+        "    mov    r10, r0\n"
+        "    ldrh   ip, [r0]\n"
+        "    ldr    ip, [r5, ip, lsl #2]\n"
+        "    cmp    ip, #0\n"
+        "    beq    25f\n"
+        "    add    r2, r0, #4\n"
+        "    sub    r10, r1, #4\n"
+        "24: cmp    r2, r10\n"
+        "    bhs    25f\n"
+        "    sub    ip, r10, r2\n"
+        "    lsr    ip, ip, #3\n"
+        "    add    ip, r2, ip, lsl #2\n"    /* mid */
+        "    ldrh   lr, [ip]\n"
+        "    ldr    lr, [r5, lr, lsl #2]\n"
+        "    cmp    lr, #0\n"
+        "    ite    eq\n"
+        "    moveq  r10, ip\n"
+        "    addne  r2, ip, #4\n"
+        "    b      24b\n"
+        "25: ldr    ip, [sp, #36]\n"
+        "    ldr    lr, [r1, ip]\n"
+        "    ldr    ip, [r2, ip]\n"
+        "    sub    lr, lr, ip\n"            /* csum = their weights' sum */
+        "    smlal  r7, r8, r3, lr\n"        /* r csum */
+        "    str    r4, [sp, #48]\n"
+        "    str    r9, [sp, #52]\n"
+        "    mov    r9, r2\n"
+        "    dcc_scatter r9, r4, ip, r10\n"
+        "    ldr    r4, [sp, #48]\n"
+        "    ldr    r9, [sp, #52]\n"
+        ".Ldr_each:\n"                        /* [e, z) move one by one */
+        "    cmp    r0, r2\n"
+        "    bhs    .Ldr_rec\n"
+        "    ldrh   ip, [r0], #4\n"
+        "    ldr    r10, [r5, ip, lsl #2]\n"
+        "    sub    r10, r3, r10\n"
+        "    str    r3, [r5, ip, lsl #2]\n"
+        "    ldr    ip, [r11, ip, lsl #2]\n"
+        "    smlal  r7, r8, r10, ip\n"
+        "    add    lr, lr, ip\n"
+        "    b      .Ldr_each\n"
+
+        ".Ldr_rec:\n"                         /* the run out: [q, end) */
+        "    sub    r2, r1, r6\n"
+        "    cmp    r2, #0\n"
+        "    ble    .Ldr_next\n"
+        "    ldr    r10, [sp, #44]\n"
+        "    ldr    ip, [sp, #24]\n"
+        "    cmp    r10, ip\n"
+        "    bhs    .Ldr_next\n"
+        "    lsr    r2, r2, #2\n"
+        "    ldr    ip, [sp, #40]\n"
+        "    str    lr, [r10, #0]\n"
+        "    str    r3, [r10, #4]\n"
+        "    strh   ip, [r10, #8]\n"
+        "    strh   r2, [r10, #10]\n"
+        "    add    r10, r10, #16\n"
+        "    str    r10, [sp, #44]\n"
+        ".Ldr_next:\n"
+        "    ldr    ip, [sp, #32]\n"
+        "    cmp    r4, ip\n"
+        "    blo    .Ldr_col\n"
+
+        ".Ldr_done:\n"
+        "    ldr    r0, [sp, #64]\n"
+        "    ldrb   r1, [r0, #44]\n"
+        "    eor    r1, r1, #1\n"
+        "    strb   r1, [r0, #44]\n"         /* cur ^= 1 */
+        "    ldr    r1, [sp, #44]\n"
+        "    ldr    r2, [sp, #56]\n"
+        "    sub    r1, r1, r2\n"
+        "    lsr    r1, r1, #4\n"
+        "    strb   r1, [r0, #43]\n"         /* n_run */
+        "    ldrd   r2, r3, [r0, #24]\n"
+        "    adds   r2, r2, r7\n"
+        "    adc    r3, r3, r8\n"
+        "    strd   r2, r3, [r0, #24]\n"     /* kacc += dk */
+        "    ldr    r1, [sp, #4]\n"
+        "    strh   r1, [r0, #34]\n"         /* v_prev = v */
+        "    add    sp, #64\n"
+        "    pop    {r2, r4-r11, pc}\n"
+        "    .purgem dcc_scatter\n");
+}
 #endif
 
 /*
@@ -1042,17 +1334,22 @@ void piezo_dcc_ops_update_c(struct piezo_dcc *dcc, int16_t v_q15)
 void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
 {
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    /* falling with runs: the whole step in Thumb-2 (a tail call) */
+    /* with runs: the whole step in Thumb-2 (a tail call) */
     if (v_q15 == dcc->v_prev_q15) {
         return;
     }
-    if (v_q15 < dcc->v_prev_q15 && dcc->runs) {
-        if (dcc->dir != -1) { /* reversal, as dcc_ops */
+    if (dcc->runs) {
+        const int8_t dir = v_q15 > dcc->v_prev_q15 ? 1 : -1;
+        if (dir != dcc->dir) { /* reversal, as dcc_ops */
             dcc->xi_q15 = dcc->v_prev_q15;
-            dcc->dir = -1;
+            dcc->dir = dir;
             dcc->n_run = 0u;
         }
-        dcc_fall_m4(dcc, v_q15);
+        if (dir > 0) {
+            dcc_rise_m4(dcc, v_q15);
+        } else {
+            dcc_fall_m4(dcc, v_q15);
+        }
         return;
     }
 #endif
