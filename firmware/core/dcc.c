@@ -1331,10 +1331,11 @@ void piezo_dcc_ops_update_c(struct piezo_dcc *dcc, int16_t v_q15)
     dcc_ops(dcc, v_q15);
 }
 
-void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
+/* The operators' step (the law's own call inlines it: one call less). */
+static inline __attribute__((always_inline)) void ops_update(struct piezo_dcc *dcc, int16_t v_q15)
 {
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    /* with runs: the whole step in Thumb-2 (a tail call) */
+    /* with runs: the whole step in Thumb-2 */
     if (v_q15 == dcc->v_prev_q15) {
         return;
     }
@@ -1353,13 +1354,18 @@ void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
         return;
     }
 #endif
-    piezo_dcc_ops_update_c(dcc, v_q15);
+    dcc_ops(dcc, v_q15);
+}
+
+void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    ops_update(dcc, v_q15);
 }
 
 int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
 {
     const int16_t v = dcc->u_last_q15;
-    piezo_dcc_ops_update(dcc, v);
+    ops_update(dcc, v);
     /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
     int64_t acc;
     if (dcc->const_w) {
