@@ -513,8 +513,8 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * 60 instructions per row visited, round 14); here the row's state lives
  * in registers and the per-tick constants in a frame of their own, one
  * load each where a row uses them. It does the whole falling step of
- * dcc_ops with runs after the reversal's bookkeeping (piezo_dcc_ops_update,
- * a tail call): the band's first row (first_row_above's answer, walked from
+ * dcc_ops with runs after the reversal's bookkeeping (ops_update, below):
+ * the band's first row (first_row_above's answer, walked from
  * the hint one row at a time: at most n_rows <= 32 steps, one or none on a
  * smooth drive), the rows, the runs out, kacc and v_prev.
  *
