@@ -1368,7 +1368,10 @@ int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
     ops_update(dcc, v);
     /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
     int64_t acc;
-    if (dcc->const_w) {
+    if (dcc->runs) {
+        /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product */
+        acc = (int64_t)v * (int32_t)dcc->csum - dcc->kacc;
+    } else if (dcc->const_w) {
         acc = (int64_t)v * dcc->csum - dcc->kacc;
     } else {
         const int32_t *c = dcc->coeffs->c_q24;
