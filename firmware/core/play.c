@@ -493,15 +493,12 @@ static __attribute__((noinline)) int64_t play_first(struct piezo_play *p, int32_
     return p->acc_q39;
 }
 
-int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15)
+/* The classical bank's step for a primed bank and a new input (the caller
+ * tested both): the C that other targets compile, and the reference of the
+ * Cortex-M4's cpi_m4 (piezo_play_process_cpi_c, test_play). */
+static inline __attribute__((always_inline)) int64_t cpi_step(struct piezo_play *p, int32_t u_q15)
 {
-    if (!p->primed) {
-        return play_first(p, u_q15);
-    }
     const int32_t u_prev = p->u_prev_q15;
-    if (u_q15 == u_prev) {
-        return p->acc_q39; /* the update is idempotent */
-    }
     p->u_prev_q15 = u_q15;
 
     const struct piezo_play_coef *c = p->coef;
@@ -556,6 +553,158 @@ int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15)
     p->run_w_q24 = run_w;
     p->acc_q39 = acc;
     return acc;
+}
+
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Cortex-M4: cpi_step in Thumb-2, the same integers. gcc's C (91 at the
+ * reference's worst tick 127: a falling run of 9 and one operator tested)
+ * spends 11 on the run's d * run_w (a 64 x 64 product), re-derives the scan's
+ * three pointers from the index (8) and saves and reloads two of them on the
+ * stack; here the run's product is UMLAL plus MLA on the high word (d > 0
+ * rising; falling d < 0, read unsigned as d + 2^32, so the low word of run_w
+ * comes off the high word once more), the store loop leaves the pointers
+ * where the scan starts, and the tick's state stays in registers.
+ * r0 p, r1 u, r2 d then scratch, r3:r8 run_w (low, high), r4:r5 acc, r6 r,
+ * r7 w, r9 i, r10 the stores' last pair bound then scratch, r11 scratch,
+ * ip f, lr n_r. No call inside: nine registers pushed. */
+static __attribute__((naked, noinline)) int64_t cpi_m4(struct piezo_play *p, int32_t u_q15)
+{
+    (void)p;
+    (void)u_q15;
+    __asm__ volatile(
+        "    push   {r4-r11, lr}\n"
+        "    ldr    r2, [r0, #24]\n"          /* u_prev */
+        "    ldr    r3, [r0, #0]\n"           /* coef */
+        "    str    r1, [r0, #24]\n"          /* u_prev = u */
+        "    ldrd   r4, r5, [r0, #16]\n"      /* acc */
+        "    ldr    ip, [r0, #4]\n"           /* f */
+        "    ldr    r6, [r3, #0]\n"           /* r */
+        "    ldr    r7, [r3, #8]\n"           /* w */
+        "    ldrh   lr, [r3, #12]\n"          /* n_r */
+        "    ldrsb  r8, [r0, #29]\n"          /* run_dir */
+        "    movs   r9, #0\n"                 /* i = 0, run_w = 0 unless the run holds */
+        "    movs   r3, #0\n"
+        "    subs   r2, r1, r2\n"             /* d = u - u_prev, never 0 here */
+        "    ble    20f\n"
+        /* rising: F = max(u - r, F) */
+        "    cmp    r8, #1\n"
+        "    beq    11f\n"
+        "    movs   r8, #1\n"
+        "    strb   r8, [r0, #29]\n"          /* run_dir = 1 */
+        "    movs   r8, #0\n"
+        "    b      15f\n"
+        "11: ldrh   r9, [r0, #30]\n"          /* i = run_n */
+        "    ldrd   r3, r8, [r0, #32]\n"      /* run_w */
+        "    umlal  r4, r5, r3, r2\n"         /* acc += run_w d (d > 0) */
+        "    mla    r5, r8, r2, r5\n"
+        "    add    r10, ip, r9, lsl #2\n"
+        "    sub    r10, r10, #4\n"           /* f + i - 1: a pair fits while ip < r10 */
+        "    cmp    ip, r10\n"
+        "    bhs    13f\n"
+        "12: ldrd   r2, r11, [r6], #8\n"      /* the run's stores, two a pass */
+        "    sub    r2, r1, r2\n"
+        "    sub    r11, r1, r11\n"
+        "    strd   r2, r11, [ip], #8\n"
+        "    cmp    ip, r10\n"
+        "    blo    12b\n"
+        "13: bhi    14f\n"                    /* i odd: one left */
+        "    ldr    r2, [r6], #4\n"
+        "    sub    r2, r1, r2\n"
+        "    str    r2, [ip], #4\n"
+        "14: add    r7, r7, r9, lsl #2\n"     /* w + i */
+        "15: cmp    r9, lr\n"                 /* the scan from i */
+        "    bhs    30f\n"
+        "    ldr    r2, [r6], #4\n"
+        "    ldr    r10, [ip]\n"
+        "    sub    r2, r1, r2\n"             /* lo = u - r_i */
+        "    subs   r10, r2, r10\n"           /* d_i = lo - F_i */
+        "    ble    30f\n"
+        "    str    r2, [ip], #4\n"
+        "    ldr    r11, [r7], #4\n"
+        "    smlal  r4, r5, r11, r10\n"       /* acc += w_i d_i */
+        "    adds   r3, r3, r11\n"            /* run_w += w_i */
+        "    adc    r8, r8, r11, asr #31\n"
+        "    adds   r9, #1\n"
+        "    b      15b\n"
+        /* falling: F = min(u + r, F) */
+        "20: cmp    r8, #-1\n"
+        "    beq    21f\n"
+        "    mov    r8, #-1\n"
+        "    strb   r8, [r0, #29]\n"          /* run_dir = -1 */
+        "    movs   r8, #0\n"
+        "    b      25f\n"
+        "21: ldrh   r9, [r0, #30]\n"
+        "    ldrd   r3, r8, [r0, #32]\n"
+        "    umlal  r4, r5, r3, r2\n"         /* d < 0 read as d + 2^32: */
+        "    mla    r5, r8, r2, r5\n"
+        "    sub    r5, r5, r3\n"             /* less run_w's low word times 2^32 */
+        "    add    r10, ip, r9, lsl #2\n"
+        "    sub    r10, r10, #4\n"
+        "    cmp    ip, r10\n"
+        "    bhs    23f\n"
+        "22: ldrd   r2, r11, [r6], #8\n"
+        "    add    r2, r1, r2\n"
+        "    add    r11, r1, r11\n"
+        "    strd   r2, r11, [ip], #8\n"
+        "    cmp    ip, r10\n"
+        "    blo    22b\n"
+        "23: bhi    24f\n"
+        "    ldr    r2, [r6], #4\n"
+        "    add    r2, r1, r2\n"
+        "    str    r2, [ip], #4\n"
+        "24: add    r7, r7, r9, lsl #2\n"
+        "25: cmp    r9, lr\n"
+        "    bhs    30f\n"
+        "    ldr    r2, [r6], #4\n"
+        "    ldr    r10, [ip]\n"
+        "    add    r2, r1, r2\n"             /* hi = u + r_i */
+        "    subs   r10, r2, r10\n"           /* d_i = hi - F_i */
+        "    bge    30f\n"
+        "    str    r2, [ip], #4\n"
+        "    ldr    r11, [r7], #4\n"
+        "    smlal  r4, r5, r11, r10\n"
+        "    adds   r3, r3, r11\n"
+        "    adc    r8, r8, r11, asr #31\n"
+        "    adds   r9, #1\n"
+        "    b      25b\n"
+        "30: strh   r9, [r0, #30]\n"          /* run_n, run_w, acc */
+        "    strd   r3, r8, [r0, #32]\n"
+        "    strd   r4, r5, [r0, #16]\n"
+        "    mov    r0, r4\n"
+        "    mov    r1, r5\n"
+        "    pop    {r4-r11, pc}\n");
+}
+/* cpi_m4 reads the instance's run fields directly */
+typedef char piezo_play_run_layout_check_t[(offsetof(struct piezo_play, primed) == 28u &&
+                                            offsetof(struct piezo_play, run_dir) == 29u &&
+                                            offsetof(struct piezo_play, run_n) == 30u &&
+                                            offsetof(struct piezo_play, run_w_q24) == 32u) ? 1 : -1];
+#endif
+
+int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15)
+{
+    if (!p->primed) {
+        return play_first(p, u_q15);
+    }
+    if (u_q15 == p->u_prev_q15) {
+        return p->acc_q39; /* the update is idempotent */
+    }
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+    return cpi_m4(p, u_q15);
+#else
+    return cpi_step(p, u_q15);
+#endif
+}
+
+int64_t piezo_play_process_cpi_c(struct piezo_play *p, int32_t u_q15)
+{
+    if (!p->primed) {
+        return play_first(p, u_q15);
+    }
+    if (u_q15 == p->u_prev_q15) {
+        return p->acc_q39;
+    }
+    return cpi_step(p, u_q15);
 }
 
 int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)

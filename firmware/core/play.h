@@ -136,6 +136,10 @@ int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15);
  */
 int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15);
 int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15);
+/* The classical bank with the C step only: on the Cortex-M4 the reference of
+ * the Thumb-2 step (test_play compares the two); elsewhere the same as
+ * piezo_play_process_cpi. */
+int64_t piezo_play_process_cpi_c(struct piezo_play *p, int32_t u_q15);
 
 /* Output F_k of operator k = i * n_a + j (row-major, as the weights). */
 static inline int32_t piezo_play_output(const struct piezo_play *p, size_t k)

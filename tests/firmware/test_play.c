@@ -385,6 +385,70 @@ static void test_classical_runs_equal_scan(void **state)
     }
 }
 
+/* The classical step as this target runs it (on the Cortex-M4 the Thumb-2
+ * cpi_m4, round 15) against the C step (piezo_play_process_cpi_c) from the
+ * same state: the walks of test_classical_runs_equal_scan (long runs, pauses,
+ * small and large reversals, weights at the int32 extremes so that the run's
+ * int64 sum and d * run_w use their high words), banks of 1, 2, 9, 10, 11, 32
+ * and 256 thresholds (odd and even runs for the paired stores), and every
+ * field of the instance compared after every sample: the sum, each output,
+ * u_prev, run_dir, run_n and run_w. On sil and sanitize both entries are the
+ * C step. */
+static void test_cpi_step_matches_c_step(void **state)
+{
+    (void)state;
+    static int32_t r[PIEZO_PLAY_MAX_OPS], w[PIEZO_PLAY_MAX_OPS];
+    static int32_t f_c[PIEZO_PLAY_MAX_OPS];
+    static const uint16_t shapes[][2] = {{10, 15}, {9, 16}, {11, 20}, {1, 15}, {2, 16}, {32, 15}, {256, 20}};
+    lcg_state = 4242u;
+    for (size_t s = 0; s < sizeof shapes / sizeof shapes[0]; s++) {
+        const uint16_t n_r = shapes[s][0];
+        const int32_t span = (int32_t)1 << shapes[s][1];
+        int32_t t = 0;
+        for (size_t i = 0; i < n_r; i++) {
+            if (i == 0u || lcg() % 4u != 0u) {
+                t += lcg_range(0, span / (int32_t)n_r);
+            }
+            r[i] = t < span ? t : span;
+        }
+        for (size_t i = 0; i < n_r; i++) {
+            const uint32_t pick = lcg() % 4u;
+            w[i] = pick == 0u ? INT32_MAX : pick == 1u ? INT32_MIN : (int32_t)(lcg() << 8 ^ lcg());
+        }
+        const struct piezo_play_coef c = {r, NULL, w, n_r, 0u};
+        struct piezo_play p, q;
+        assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, NULL, 0u), PIEZO_OK);
+        assert_int_equal(piezo_play_init(&q, &c, f_c, PIEZO_PLAY_MAX_OPS, NULL, 0u), PIEZO_OK);
+        int32_t u = 0, dir = 1, left = 0, step = 1;
+        size_t runs_kept = 0u;
+        for (size_t k = 0; k < 20000u; k++) {
+            if (left-- <= 0) {
+                const uint32_t kind = lcg() % 6u;
+                dir = lcg() % 2u ? 1 : -1;
+                left = kind == 0u ? lcg_range(1, 3) : lcg_range(1, 400);
+                step = kind == 1u ? 0 : kind == 2u ? lcg_range(span / 8, span) : lcg_range(1, 1 + span / 512);
+            }
+            const int32_t jitter = lcg() % 32u == 0u ? -dir * lcg_range(1, 3) : 0;
+            int64_t next = (int64_t)u + dir * step + jitter;
+            next = next > span ? span : next < -span ? -span : next;
+            u = (int32_t)next;
+            const size_t at = s * 100000u + k;
+            runs_kept += p.run_n > 0u && p.run_dir == (u > p.u_prev_q15 ? 1 : -1) && u != p.u_prev_q15;
+            assert_golden_i32("cpi step: sum", at, piezo_play_process_cpi(&p, u), piezo_play_process_cpi_c(&q, u));
+            assert_golden_i32("cpi step: acc", at, p.acc_q39, q.acc_q39);
+            assert_golden_i32("cpi step: u_prev", at, p.u_prev_q15, q.u_prev_q15);
+            assert_golden_i32("cpi step: run_dir", at, p.run_dir, q.run_dir);
+            assert_golden_i32("cpi step: run_n", at, p.run_n, q.run_n);
+            assert_golden_i32("cpi step: run_w", at, p.run_w_q24, q.run_w_q24);
+            for (size_t i = 0; i < n_r; i++) {
+                assert_golden_i32("cpi step: output", at * 1000u + i, f_buf[i], f_c[i]);
+            }
+        }
+        /* the walk moved runs as one often enough to test them */
+        assert_true(runs_kept >= 1000u);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -397,6 +461,7 @@ int main(void)
         cmocka_unit_test(test_branches_by_hand),
         cmocka_unit_test(test_runs_equal_eager_formula),
         cmocka_unit_test(test_classical_runs_equal_scan),
+        cmocka_unit_test(test_cpi_step_matches_c_step),
     };
     return cmocka_run_group_tests_name("play", tests, NULL, NULL);
 }
