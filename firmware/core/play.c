@@ -565,15 +565,15 @@ static inline __attribute__((always_inline)) int64_t cpi_step(struct piezo_play 
  * comes off the high word once more), the store loop leaves the pointers
  * where the scan starts, and the tick's state stays in registers.
  * r0 p, r1 u, r2 d then scratch, r3:r8 run_w (low, high), r4:r5 acc, r6 r,
- * r7 w, r9 i, r10 the stores' last pair bound then scratch, r11 scratch,
+ * r7 w, r9 i, r10 the stores' bound then scratch, r11 scratch,
  * ip f, lr n_r. No call inside: nine registers pushed. */
-static __attribute__((naked, noinline)) int64_t cpi_m4(struct piezo_play *p, int32_t u_q15)
+static __attribute__((naked, noinline)) int64_t cpi_m4(struct piezo_play *p, int32_t u_q15, int32_t u_prev_q15)
 {
     (void)p;
     (void)u_q15;
+    (void)u_prev_q15;
     __asm__ volatile(
         "    push   {r4-r11, lr}\n"
-        "    ldr    r2, [r0, #24]\n"          /* u_prev */
         "    ldr    r3, [r0, #0]\n"           /* coef */
         "    str    r1, [r0, #24]\n"          /* u_prev = u */
         "    ldrd   r4, r5, [r0, #16]\n"      /* acc */
@@ -597,21 +597,33 @@ static __attribute__((naked, noinline)) int64_t cpi_m4(struct piezo_play *p, int
         "    ldrd   r3, r8, [r0, #32]\n"      /* run_w */
         "    umlal  r4, r5, r3, r2\n"         /* acc += run_w d (d > 0) */
         "    mla    r5, r8, r2, r5\n"
-        "    add    r10, ip, r9, lsl #2\n"
-        "    sub    r10, r10, #4\n"           /* f + i - 1: a pair fits while ip < r10 */
+        "    add    r10, ip, r9, lsl #2\n"   /* f + i */
+        "    sub    r10, r10, #12\n"          /* four fit while ip < r10 */
         "    cmp    ip, r10\n"
         "    bhs    13f\n"
-        "12: ldrd   r2, r11, [r6], #8\n"      /* the run's stores, two a pass */
+        "12: ldmia  r6!, {r2, r3, r8, r11}\n" /* the run's stores, four a pass */
         "    sub    r2, r1, r2\n"
+        "    sub    r3, r1, r3\n"
+        "    sub    r8, r1, r8\n"
         "    sub    r11, r1, r11\n"
-        "    strd   r2, r11, [ip], #8\n"
+        "    stmia  ip!, {r2, r3, r8, r11}\n"
         "    cmp    ip, r10\n"
         "    blo    12b\n"
-        "13: bhi    14f\n"                    /* i odd: one left */
-        "    ldr    r2, [r6], #4\n"
-        "    sub    r2, r1, r2\n"
-        "    str    r2, [ip], #4\n"
-        "14: add    r7, r7, r9, lsl #2\n"     /* w + i */
+        "13: add    r10, r10, #12\n"
+        "    sub    r2, r10, ip\n"           /* bytes left: 0, 4, 8 or 12 */
+        "    cmp    r2, #8\n"
+        "    blo    14f\n"
+        "    ldrd   r3, r8, [r6], #8\n"
+        "    sub    r3, r1, r3\n"
+        "    sub    r8, r1, r8\n"
+        "    strd   r3, r8, [ip], #8\n"
+        "    subs   r2, r2, #8\n"
+        "14: cbz    r2, 18f\n"
+        "    ldr    r3, [r6], #4\n"
+        "    sub    r3, r1, r3\n"
+        "    str    r3, [ip], #4\n"
+        "18: ldrd   r3, r8, [r0, #32]\n"      /* run_w again */
+        "    add    r7, r7, r9, lsl #2\n"     /* w + i */
         "15: cmp    r9, lr\n"                 /* the scan from i */
         "    bhs    30f\n"
         "    ldr    r2, [r6], #4\n"
@@ -638,21 +650,33 @@ static __attribute__((naked, noinline)) int64_t cpi_m4(struct piezo_play *p, int
         "    umlal  r4, r5, r3, r2\n"         /* d < 0 read as d + 2^32: */
         "    mla    r5, r8, r2, r5\n"
         "    sub    r5, r5, r3\n"             /* less run_w's low word times 2^32 */
-        "    add    r10, ip, r9, lsl #2\n"
-        "    sub    r10, r10, #4\n"
+        "    add    r10, ip, r9, lsl #2\n"   /* f + i */
+        "    sub    r10, r10, #12\n"          /* four fit while ip < r10 */
         "    cmp    ip, r10\n"
         "    bhs    23f\n"
-        "22: ldrd   r2, r11, [r6], #8\n"
+        "22: ldmia  r6!, {r2, r3, r8, r11}\n" /* the run's stores, four a pass */
         "    add    r2, r1, r2\n"
+        "    add    r3, r1, r3\n"
+        "    add    r8, r1, r8\n"
         "    add    r11, r1, r11\n"
-        "    strd   r2, r11, [ip], #8\n"
+        "    stmia  ip!, {r2, r3, r8, r11}\n"
         "    cmp    ip, r10\n"
         "    blo    22b\n"
-        "23: bhi    24f\n"
-        "    ldr    r2, [r6], #4\n"
-        "    add    r2, r1, r2\n"
-        "    str    r2, [ip], #4\n"
-        "24: add    r7, r7, r9, lsl #2\n"
+        "23: add    r10, r10, #12\n"
+        "    sub    r2, r10, ip\n"           /* bytes left: 0, 4, 8 or 12 */
+        "    cmp    r2, #8\n"
+        "    blo    24f\n"
+        "    ldrd   r3, r8, [r6], #8\n"
+        "    add    r3, r1, r3\n"
+        "    add    r8, r1, r8\n"
+        "    strd   r3, r8, [ip], #8\n"
+        "    subs   r2, r2, #8\n"
+        "24: cbz    r2, 28f\n"
+        "    ldr    r3, [r6], #4\n"
+        "    add    r3, r1, r3\n"
+        "    str    r3, [ip], #4\n"
+        "28: ldrd   r3, r8, [r0, #32]\n"      /* run_w again */
+        "    add    r7, r7, r9, lsl #2\n"     /* w + i */
         "25: cmp    r9, lr\n"
         "    bhs    30f\n"
         "    ldr    r2, [r6], #4\n"
@@ -683,14 +707,15 @@ typedef char piezo_play_run_layout_check_t[(offsetof(struct piezo_play, primed) 
 
 int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15)
 {
+    const int32_t u_prev = p->u_prev_q15;
     if (!p->primed) {
         return play_first(p, u_q15);
     }
-    if (u_q15 == p->u_prev_q15) {
+    if (u_q15 == u_prev) {
         return p->acc_q39; /* the update is idempotent */
     }
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    return cpi_m4(p, u_q15);
+    return cpi_m4(p, u_q15, u_prev);
 #else
     return cpi_step(p, u_q15);
 #endif
