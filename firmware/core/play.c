@@ -183,7 +183,7 @@ typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u 
                                         offsetof(struct piezo_play_coef, n_r) == 12u &&
                                         offsetof(struct piezo_play_coef, n_a) == 14u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) int64_t upi_fall_m4(struct piezo_play *p)
+static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_play *p)
 {
     (void)p;
     /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
@@ -363,7 +363,7 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
  * pass (with n_r odd every column enters at a pair's second, so the first
  * column's weight pointer starts one stride back). */
 
-static __attribute__((naked, noinline)) int64_t rise_m4(struct piezo_play *p)
+static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play *p)
 {
     (void)p;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
@@ -485,7 +485,8 @@ static inline void store_run(int32_t *f, const int32_t *r, size_t n, int32_t u, 
 }
 
 /* The first sample after init or reset: every operator by the formula. */
-static __attribute__((noinline)) int64_t play_first(struct piezo_play *p, int32_t u_q15)
+/* used: the Cortex-M4 entries below branch to it from assembly */
+static __attribute__((noinline, used)) int64_t play_first(struct piezo_play *p, int32_t u_q15)
 {
     p->primed = 1u;
     p->u_prev_q15 = u_q15;
@@ -567,7 +568,7 @@ static inline __attribute__((always_inline)) int64_t cpi_step(struct piezo_play 
  * r0 p, r1 u, r2 d then scratch, r3:r8 run_w (low, high), r4:r5 acc, r6 r,
  * r7 w, r9 i, r10 the stores' bound then scratch, r11 scratch,
  * ip f, lr n_r. No call inside: nine registers pushed. */
-static __attribute__((naked, noinline)) int64_t cpi_m4(struct piezo_play *p, int32_t u_q15, int32_t u_prev_q15)
+static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *p, int32_t u_q15, int32_t u_prev_q15)
 {
     (void)p;
     (void)u_q15;
@@ -705,21 +706,36 @@ typedef char piezo_play_run_layout_check_t[(offsetof(struct piezo_play, primed) 
                                             offsetof(struct piezo_play, run_w_q24) == 32u) ? 1 : -1];
 #endif
 
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Cortex-M4: the two entries' tests in Thumb-2, branching to their steps
+ * (gcc's C saved and restored r4 around them: 8 and 11 instructions at the
+ * reference's worst tick, here 5 and 8). The same tests as the C below. */
+__attribute__((naked)) int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15)
+{
+    (void)p;
+    (void)u_q15;
+    __asm__ volatile(
+        "    ldrb   r3, [r0, #28]\n"          /* primed */
+        "    ldr    r2, [r0, #24]\n"          /* u_prev, cpi_m4's third argument */
+        "    cbz    r3, 1f\n"
+        "    cmp    r2, r1\n"
+        "    bne.w  cpi_m4\n"
+        "    ldrd   r0, r1, [r0, #16]\n"      /* the update is idempotent: acc */
+        "    bx     lr\n"
+        "1:  b.w    play_first\n");
+}
+#else
 int64_t piezo_play_process_cpi(struct piezo_play *p, int32_t u_q15)
 {
-    const int32_t u_prev = p->u_prev_q15;
     if (!p->primed) {
         return play_first(p, u_q15);
     }
-    if (u_q15 == u_prev) {
+    if (u_q15 == p->u_prev_q15) {
         return p->acc_q39; /* the update is idempotent */
     }
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    return cpi_m4(p, u_q15, u_prev);
-#else
     return cpi_step(p, u_q15);
-#endif
 }
+#endif
 
 int64_t piezo_play_process_cpi_c(struct piezo_play *p, int32_t u_q15)
 {
@@ -732,6 +748,29 @@ int64_t piezo_play_process_cpi_c(struct piezo_play *p, int32_t u_q15)
     return cpi_step(p, u_q15);
 }
 
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* rise_m4 and upi_fall_m4 read p, its coefficients and acc_q39 and store
+ * acc_q39; the entry stores u_prev. Unparallel, column by column (slope a_j,
+ * thresholds ascending); the outputs are stored column by column too (slot
+ * j * n_r + i); rising, F = max(u - r_i, F): the upper branch cannot bind. */
+__attribute__((naked)) int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
+{
+    (void)p;
+    (void)u_q15;
+    __asm__ volatile(
+        "    ldrb   r3, [r0, #28]\n"          /* primed */
+        "    ldr    r2, [r0, #24]\n"          /* u_prev */
+        "    cbz    r3, 1f\n"
+        "    cmp    r1, r2\n"
+        "    beq    2f\n"
+        "    str    r1, [r0, #24]\n"          /* u_prev = u */
+        "    bgt.w  rise_m4\n"
+        "    b.w    upi_fall_m4\n"
+        "2:  ldrd   r0, r1, [r0, #16]\n"      /* the update is idempotent: acc */
+        "    bx     lr\n"
+        "1:  b.w    play_first\n");
+}
+#else
 int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
 {
     if (!p->primed) {
@@ -748,10 +787,6 @@ int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
      * column's outputs, thresholds and branch constants are walked in step;
      * only the weights (row-major, as given) are read with a stride. */
     /* rising, F = max(u - r_i, F): the upper branch cannot bind */
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    /* they read p, its coefficients and acc_q39 and store acc_q39: tail calls */
-    return u_q15 > u_prev ? rise_m4(p) : upi_fall_m4(p);
-#else
     const struct piezo_play_coef *c = p->coef;
     int64_t acc = p->acc_q39;
     if (u_q15 > u_prev) {
@@ -761,8 +796,8 @@ int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
     }
     p->acc_q39 = acc;
     return acc;
-#endif
 }
+#endif
 
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
 {
