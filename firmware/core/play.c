@@ -214,8 +214,7 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    mov    r5, r7\n"
         "    cmp    r6, #0\n"
         "    beq    7f\n"
-        "1:  ldr    r10, [sp, #16]\n"          /* column: a_j, the split a u */
-        "    ldr    r4, [sp, #8]\n"
+        "1:  ldr    r4, [sp, #8]\n"           /* column (r10 = &a_j: the set-up's or 6's): a_j, the split a u */
         "    add    r4, r4, r10\n"             /* wp = w + j */
         "    ldr    r11, [r10], #4\n"
         "    str    r10, [sp, #16]\n"
