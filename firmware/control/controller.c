@@ -289,6 +289,12 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     /* 2-3. sensor */
     y = read_sensor(c, adc[0]);
     y2 = piezo_sat_q15(piezo_mul_rshift_rnd(adc[1] - g->adc_zero, g->sensor_gain_q16, 16u)); /* (one SMULL: fixed_q.h) */
+    /* each signal goes to sig[] (the recorder's and the register map's copy,
+     * step 9) as soon as it is final: nothing in the tick reads sig[] after
+     * the boundary's servo switch, and a value stored here needs no register
+     * or stack slot across the calls below */
+    c->sig[PIEZO_SIG_Y] = y;
+    c->sig[PIEZO_SIG_Y2] = y2;
     if (c->st.faults != 0u) {
         c->st.armed = 0u; /* any fault disarms */
     }
@@ -305,6 +311,8 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
             c->fifo_pos = 0u;
         }
     }
+    c->sig[PIEZO_SIG_REF] = r;
+    c->sig[PIEZO_SIG_ERR] = piezo_sat_q15((int32_t)r - y);
     /* 4b. the wave's learned feedforward, in sync with it (controller.h):
      *     r_ahead + c(phase), and for the error r + c(phase - preview) */
     r_loop = r;
@@ -335,6 +343,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
             u_ff = piezo_line_q15(r_ahead, c->set_act->open_loop_gain_q24, c->set_act->open_loop_offset_q15);
         }
     }
+    c->sig[PIEZO_SIG_FF] = u_ff;
 
     /* 6. feedback */
     if (run && (mode == PIEZO_MODE_FF_FEEDBACK || mode == PIEZO_MODE_FEEDBACK)) {
@@ -344,6 +353,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
             u_fb = piezo_biquad_process(&c->notch, u_fb);
         }
     }
+    c->sig[PIEZO_SIG_FB] = u_fb;
 
     /* 7-8. sum, clamp, slew limit (also while ramping down after a disarm), DAC */
     u = run ? piezo_sat_q15((int32_t)u_ff + u_fb) : g->u_safe_q15;
@@ -370,14 +380,8 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         *dac = code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code);
     }
 
-    /* 9. recorder and status */
-    c->sig[PIEZO_SIG_REF] = r;
-    c->sig[PIEZO_SIG_Y] = y;
+    /* 9. recorder and status (REF, Y, ERR, FF, FB, Y2 are in sig[] already) */
     c->sig[PIEZO_SIG_U] = u;
-    c->sig[PIEZO_SIG_ERR] = piezo_sat_q15((int32_t)r - y);
-    c->sig[PIEZO_SIG_FF] = u_ff;
-    c->sig[PIEZO_SIG_FB] = u_fb;
-    c->sig[PIEZO_SIG_Y2] = y2;
     c->sig[PIEZO_SIG_U2] = c->u2_q15;
     rec_was = c->rec.state;
     piezo_rec_process(&c->rec, c->sig);
