@@ -252,6 +252,9 @@ static int16_t wave_ff_at(const piezo_ctl_wave_ff_t *t, uint32_t ph)
     return (int16_t)(a + piezo_rshift_rnd64((int64_t)(b - a) * frac, 16u));
 }
 
+/* a mode's bit in the tick's mask of the running mode */
+#define MODE_BIT(m) (1u << (m))
+
 void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 {
     const piezo_ctl_cfg_t *g = &c->cfg;
@@ -259,6 +262,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     int8_t pend;
     uint8_t mode = c->mode, rec_was;
     int run, wave_on;
+    uint32_t mb;
 
     /* 1. a committed table takes over only here, between two ticks; one
      *    flag says whether anything waits (most ticks: one load and branch) */
@@ -298,7 +302,12 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     if (c->st.faults != 0u) {
         c->st.armed = 0u; /* any fault disarms */
     }
-    run = c->st.armed && mode != PIEZO_MODE_IDLE;
+    /* the mode as one bit (1 << mode), none when disarmed: each test of the
+     * mode below is one mask (mode <= PIEZO_MODE_DIRECT always: the only
+     * writers are init, piezo_ctl_set_mode and servo_switch); IDLE's bit is in
+     * no mask */
+    mb = c->st.armed ? 1u << mode : 0u;
+    run = (mb & ~MODE_BIT(PIEZO_MODE_IDLE)) != 0u;
 
     /* 4. reference: r_ahead for the feedforward, r (preview_ticks later) for the rest */
     wave_on = c->ref_source == PIEZO_REF_WAVE && c->wave.running != 0u; /* (no call: the tick runs from RAM) */
@@ -333,20 +342,21 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     }
 
     /* 5. feedforward (of the shaped, inverted early reference) */
-    if (run && mode != PIEZO_MODE_FEEDBACK) {
+    {
         piezo_ff_state_t *const ff = c->ff_act; /* &ff[active]: no index arithmetic per tick */
-        if (mode == PIEZO_MODE_DIRECT || ff == NULL) {
-            u_ff = r_ahead; /* DIRECT, or no table: the reference is the drive */
-        } else if (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK) {
+        if ((mb & (MODE_BIT(PIEZO_MODE_FEEDFORWARD) | MODE_BIT(PIEZO_MODE_FF_FEEDBACK))) != 0u && ff != NULL) {
             u_ff = piezo_ff_process(ff, c->set_act, r_ahead, c->limit.prev_q15);
-        } else {
+        } else if ((mb & MODE_BIT(PIEZO_MODE_OPEN_LOOP)) != 0u && ff != NULL) {
             u_ff = piezo_line_q15(r_ahead, c->set_act->open_loop_gain_q24, c->set_act->open_loop_offset_q15);
+        } else if ((mb & (MODE_BIT(PIEZO_MODE_OPEN_LOOP) | MODE_BIT(PIEZO_MODE_FEEDFORWARD) |
+                          MODE_BIT(PIEZO_MODE_FF_FEEDBACK) | MODE_BIT(PIEZO_MODE_DIRECT))) != 0u) {
+            u_ff = r_ahead; /* DIRECT, or no table: the reference is the drive */
         }
     }
     c->sig[PIEZO_SIG_FF] = u_ff;
 
     /* 6. feedback */
-    if (run && (mode == PIEZO_MODE_FF_FEEDBACK || mode == PIEZO_MODE_FEEDBACK)) {
+    if ((mb & (MODE_BIT(PIEZO_MODE_FF_FEEDBACK) | MODE_BIT(PIEZO_MODE_FEEDBACK))) != 0u) {
         int16_t e = piezo_sat_q15((int32_t)r_loop - y);
         u_fb = piezo_pid_process(&c->pid, e);
         if (g->notch_on) {
@@ -361,8 +371,8 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     if (c->xc_active >= 0) {
         const piezo_xcset_t *xs = &c->xset[c->xc_active];
         int16_t u_xc = piezo_xc_process(&c->xc[c->xc_active], c->u2_q15, xs->x_source ? y2 : y);
-        if (run && !g->xcouple_bypass &&
-            (mode == PIEZO_MODE_FEEDFORWARD || mode == PIEZO_MODE_FF_FEEDBACK || mode == PIEZO_MODE_FEEDBACK)) {
+        if (!g->xcouple_bypass && (mb & (MODE_BIT(PIEZO_MODE_FEEDFORWARD) | MODE_BIT(PIEZO_MODE_FF_FEEDBACK) |
+                                         MODE_BIT(PIEZO_MODE_FEEDBACK))) != 0u) {
             c->xc_q15 = u_xc;
             u = piezo_sat_q15((int32_t)u - u_xc);
         }

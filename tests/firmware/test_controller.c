@@ -385,10 +385,71 @@ static void test_load_image_commits_or_names_the_refusal(void **state)
     assert_true(piezo_ctl_active_crc(&ctl) == crc);
 }
 
+/* The tick's mode dispatch (a mask of the running mode since round 15)
+ * against the rule it implements, written here as plain tests of the mode:
+ * for every mode, armed or not, with and without a table, the first tick's
+ * feedforward and feedback signals. */
+enum { FF_ZERO, FF_REF, FF_LINE, FF_TABLE };
+static int want_ff(uint8_t mode, int armed, int table)
+{
+    if (!armed || mode == PIEZO_MODE_IDLE || mode == PIEZO_MODE_FEEDBACK) {
+        return FF_ZERO;
+    }
+    if (mode == PIEZO_MODE_DIRECT || !table) {
+        return FF_REF;
+    }
+    return mode == PIEZO_MODE_OPEN_LOOP ? FF_LINE : FF_TABLE;
+}
+
+static void test_mode_dispatch_matches_the_rule(void **state)
+{
+    (void)state;
+    const int16_t r = ctl_ref_q15[0];
+    const int32_t y = -1000; /* r - y != 0: the PI's output is not 0 */
+    for (uint8_t mode = PIEZO_MODE_IDLE; mode <= PIEZO_MODE_DIRECT; mode++) {
+        for (int armed = 0; armed <= 1; armed++) {
+            for (int table = 0; table <= 1; table++) {
+                piezo_ctl_cfg_t cfg = unit_cfg();
+                cfg.pid.kp_q24 = 1 << 23; /* 0.5 */
+                assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+                assert_int_equal(piezo_ctl_set_mode(&ctl, mode), PIEZO_OK);
+                if (armed) {
+                    assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+                }
+                if (table) {
+                    assert_int_equal(upload(ctl_dcc_img, CTL_DCC_IMG_LEN), PIEZO_TABLE_REASON_OK);
+                }
+                (void)tick(r, y);
+                int run = armed && mode != PIEZO_MODE_IDLE, k = want_ff(mode, armed, table);
+                int16_t ff = ctl.sig[PIEZO_SIG_FF], fb = ctl.sig[PIEZO_SIG_FB];
+                if (k == FF_ZERO) {
+                    assert_int_equal(ff, 0);
+                } else if (k == FF_REF) {
+                    assert_int_equal(ff, r);
+                } else {
+                    int16_t line = piezo_line_q15(r, ctl.set_act->open_loop_gain_q24,
+                                                  ctl.set_act->open_loop_offset_q15);
+                    assert_true(line != ctl_dcc_u_q15[0]); /* the two are told apart */
+                    assert_int_equal(ff, k == FF_LINE ? line : ctl_dcc_u_q15[0]);
+                }
+                if (run && (mode == PIEZO_MODE_FF_FEEDBACK || mode == PIEZO_MODE_FEEDBACK)) {
+                    assert_true(fb != 0);
+                } else {
+                    assert_int_equal(fb, 0);
+                }
+                if (!run) {
+                    assert_int_equal(ctl.sig[PIEZO_SIG_U], cfg.u_safe_q15);
+                }
+            }
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_dcc_table_drives_bit_exact),
+        cmocka_unit_test(test_mode_dispatch_matches_the_rule),
         cmocka_unit_test(test_eupi_inverse_table_drives_bit_exact),
         cmocka_unit_test(test_refused_images_leave_the_active_table_running),
         cmocka_unit_test(test_commit_needs_unlock_and_an_upload),
