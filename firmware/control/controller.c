@@ -261,7 +261,8 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     int16_t y, y2, r, r_loop, r_ahead, u_ff = 0, u_fb = 0, u;
     int8_t pend;
     uint8_t mode = c->mode, rec_was;
-    int run, wave_on;
+    int run;
+    uint32_t wave_on;
     uint32_t mb;
 
     /* 1. a committed table takes over only here, between two ticks; one
@@ -310,7 +311,9 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     run = (mb & ~MODE_BIT(PIEZO_MODE_IDLE)) != 0u;
 
     /* 4. reference: r_ahead for the feedforward, r (preview_ticks later) for the rest */
-    wave_on = c->ref_source == PIEZO_REF_WAVE && c->wave.running != 0u; /* (no call: the tick runs from RAM) */
+    /* running as it was before this tick's step (the step may end the wave);
+     * the byte itself, not a 0/1 of it (no normalising instructions) */
+    wave_on = (c->ref_source == PIEZO_REF_WAVE) ? c->wave.running : 0u; /* (no call: the tick runs from RAM) */
     r_ahead = (c->ref_source == PIEZO_REF_WAVE) ? piezo_wave_process(&c->wave) : c->setpoint_q15;
     r = r_ahead;
     if (g->preview_ticks != 0u) {
@@ -326,7 +329,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
      *     r_ahead + c(phase), and for the error r + c(phase - preview) */
     r_loop = r;
     c->wave_ff_q15 = 0;
-    if (wave_on && c->wave_ff_active >= 0) {
+    if (wave_on != 0u && c->wave_ff_active >= 0) {
         const piezo_ctl_wave_ff_t *t = &c->wave_ff[c->wave_ff_active];
         c->wave_ff_q15 = wave_ff_at(t, c->wave_ff_phase);
         r_ahead = piezo_sat_q15((int32_t)r_ahead + c->wave_ff_q15);
