@@ -55,6 +55,12 @@ the recordings beyond a plane of the base's family refitted on them (:func:`refi
 the drive's history removes is the base's. Measured, not the default (``DRIFT_BEYOND_PLANE``): with every weight of
 that plane free a steps recording's per-dwell levels are the plane's, and a synthetic warm-up under random steps
 is refused.
+
+Round 15 (docs/diagnose.md, "Round 15: drift, offset and creep"): the levels between the recordings carry each
+history's misfit (a reveal walk sits 0.2 to 2 um off the triangles), so round 12's spread is reported only; the
+drift's signature holds between the blocks when the level *trends* within the recordings on the scale each
+recording's own ~1 s block levels show (:func:`level_trend_test`), and an offset whose recordings cannot exclude a
+drift at the rate that would have reached its level is reported with ``thermal_drift`` as the pair.
 """
 
 from __future__ import annotations
@@ -450,8 +456,9 @@ def level_spread_test(designs, es, fold_all, rec, ctx, rows) -> dict | None:
     It does **not** refuse an offset: ``s_L`` is measured on calibration histories, and a reveal recording of
     another kind can sit much further off (development offset case s110-002: the random walk's level 0.9 um
     from the triangles' against ``s_L`` = 0.008 um; refusing the offset there named ``none`` on two true
-    offsets). It is the drift's evidence *between* the recordings only together with the drift's own candidate
-    (its curve on the session clock) meeting the size criteria (:func:`_precedence`).
+    offsets). Round 12 made it the drift's evidence *between* the recordings together with the drift's own
+    candidate meeting the size criteria; since round 15 it is reported only (the same walk names a drift on an
+    offset: development s113-017, F 41), and :func:`level_trend_test` decides.
     """
     from scipy import stats as st
     if ctx.offset_group is None or not ctx.misfit or not ctx.misfit.get("histories"):
