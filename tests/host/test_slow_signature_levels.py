@@ -82,22 +82,25 @@ def _with_spread(t, varies):
     return t
 
 
-def test_attribute_names_the_sized_drift_whose_session_levels_vary():
-    # s108-001-like: the offset passed and its signature holds, the drift's within the recordings does not, but
-    # the recordings' levels vary beyond the base's misfit and the drift's candidate has the size
+def test_attribute_names_the_sized_drift_whose_level_trends_not_whose_session_levels_vary():
+    # s108-001-like: the offset passed and its signature holds, the drift's within the recordings does not, the
+    # recordings' levels vary beyond the base's misfit and the drift's candidate has the size. Round 12 named the
+    # drift on the spread; round 15 (test_slow_level_trend.py): the spread carries each history's misfit, so it
+    # names the drift only when the level trends within the recordings on their own scale
+    def tests_with(trends):
+        drift, off = _with_spread(_test("thermal_drift", False, 0.8), True), _with_spread(_test("sensor_offset", True, 0.5), True)
+        drift.trend = off.trend = {"trends": trends, "slope_um_per_s": 2e-3, "se_um_per_s": 2e-4, "t": 10.0 if trends else 1.0,
+                                   "dof": 30, "p": 1e-9 if trends else 0.3, "needed_um_per_s": None, "excludes_drift": None}
+        return [_test("creep", False, 1.0), drift, off]
     evals = [_cand("sensor_offset", True, 0.5), _cand("thermal_drift", False, 0.57, p=1.2e-3), _cand("creep", False, 1.0)]
-    tests = [_test("creep", False, 1.0), _with_spread(_test("thermal_drift", False, 0.8), True),
-             _with_spread(_test("sensor_offset", True, 0.5), True)]
-    text = attribute(evals, tests)
+    text = attribute(evals, tests_with(True))
     assert evals[0].name == "thermal_drift" and evals[0].significant, text
-    assert "different levels" in evals[0].discrimination
+    assert "within the recordings moves" in evals[0].discrimination
     off = next(c for c in evals if c.name == "sensor_offset")
     assert not off.significant and off.veto and "attributed to thermal_drift" in off.veto
-    # the same levels within the base's misfit: the offset keeps the name (round 11's verdict)
+    # the same varying levels without a trend: the offset keeps the name
     evals = [_cand("sensor_offset", True, 0.5), _cand("thermal_drift", False, 0.57, p=1.2e-3), _cand("creep", False, 1.0)]
-    tests = [_test("creep", False, 1.0), _with_spread(_test("thermal_drift", False, 0.8), False),
-             _with_spread(_test("sensor_offset", True, 0.5), False)]
-    attribute(evals, tests)
+    attribute(evals, tests_with(False))
     assert evals[0].name == "sensor_offset" and evals[0].significant
 
 

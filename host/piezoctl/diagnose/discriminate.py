@@ -244,16 +244,19 @@ def separation_doc(named_name: str, separation: list | None) -> tuple[dict, str]
     """
     if separation is None:
         return {}, ""
-    alts = [{"name": r["name"], "named_beyond": r["named_beyond"], "alternative_beyond": r["alternative_beyond"],
-             "record_to_separate": separation_hint(named_name, r["name"])}
+    alts = [{"name": r["name"], "named_beyond": r.get("named_beyond"), "alternative_beyond": r.get("alternative_beyond"),
+             "record_to_separate": separation_hint(named_name, r["name"]),
+             **({"reason": r["reason"]} if r.get("reason") else {})}
             for r in separation if r["verdict"] == "inseparable"]
     fields = {"separation": separation, "alternatives": alts}
     if not alts:
         return fields, ""
     text = " ".join(
-        f"The data cannot tell it from {a['name']}: each alone lowers the held-out error, neither beyond the other "
-        f"({named_name} beyond it p = {a['named_beyond']['p']:.1e}, it beyond {named_name} p = "
-        f"{a['alternative_beyond']['p']:.1e}, level {ALPHA_SEPARATE:g}); to separate them record {a['record_to_separate']}."
+        (f"The data cannot tell it from {a['name']}: {a['reason']}; to separate them record {a['record_to_separate']}."
+         if a.get("reason") else   # round 15: a slow pair the levels' trend cannot separate (slow_signature.attribute)
+         f"The data cannot tell it from {a['name']}: each alone lowers the held-out error, neither beyond the other "
+         f"({named_name} beyond it p = {a['named_beyond']['p']:.1e}, it beyond {named_name} p = "
+         f"{a['alternative_beyond']['p']:.1e}, level {ALPHA_SEPARATE:g}); to separate them record {a['record_to_separate']}.")
         for a in alts)
     return fields, text
 

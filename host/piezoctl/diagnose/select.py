@@ -169,6 +169,7 @@ class Candidate:
     #                                           its signature must hold as well)
     selection_round: int = 1                  # the round it was evaluated in (1: on the base)
     separation: list | None = None            # accepted: the pair tests against the round's others (discriminate.separate)
+    slow_alternative: dict | None = None      # sensor_offset: a drift its levels cannot exclude (slow_signature.attribute)
     heldout: tuple | None = None              # (before, correction, fold, block, rec): signature.HELDOUT_CHECKED only
 
     @property
@@ -695,6 +696,11 @@ def _separate(best, evals, fctx, es, fold_all, block_all, rows, log):
         log(f"    pair {best.name}/{r['name']}: {r['verdict']} (alone p {r['named_alone']['p']:.0e}/"
             f"{r['alternative_alone']['p']:.0e}, beyond p {r['named_beyond']['p']:.0e}/"
             f"{r['alternative_beyond']['p']:.0e})")
+    alt = best.slow_alternative   # round 15: a drift the offset's levels cannot exclude (slow_signature.attribute)
+    if alt:
+        best.separation = [r for r in best.separation if r["name"] != alt["name"]] + [
+            {"name": alt["name"], "verdict": "inseparable", "reason": alt["reason"]}]
+        log(f"    pair {best.name}/{alt['name']}: inseparable ({alt['reason']})")
 
 
 def _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check):

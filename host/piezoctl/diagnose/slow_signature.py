@@ -55,6 +55,12 @@ the recordings beyond a plane of the base's family refitted on them (:func:`refi
 the drive's history removes is the base's. Measured, not the default (``DRIFT_BEYOND_PLANE``): with every weight of
 that plane free a steps recording's per-dwell levels are the plane's, and a synthetic warm-up under random steps
 is refused.
+
+Round 15 (docs/diagnose.md, "Round 15: drift, offset and creep"): the levels between the recordings carry each
+history's misfit (a reveal walk sits 0.2 to 2 um off the triangles), so round 12's spread is reported only; the
+drift's signature holds between the blocks when the level *trends* within the recordings on the scale each
+recording's own ~1 s block levels show (:func:`level_trend_test`), and an offset whose recordings cannot exclude a
+drift at the rate that would have reached its level is reported with ``thermal_drift`` as the pair.
 """
 
 from __future__ import annotations
@@ -93,6 +99,7 @@ class SignatureTest:
     spread: dict | None = None  # offset, drift: the levels of a session's recordings (level_spread_test)
     step: dict | None = None    # creep: its test on the responses to the drive's steps (step_response_test)
     plane: dict | None = None   # drift: its trend beyond the base's plane refitted on the data (drift_beyond_plane_test)
+    trend: dict | None = None   # offset, drift: the level's slope within the reveal recordings (level_trend_test)
 
     def as_dict(self) -> dict:
         return {"name": self.name, "unique_ratio": self.unique_ratio, "fold_ratios": self.fold_ratios,
@@ -101,7 +108,8 @@ class SignatureTest:
                 **({"level_dependence": self.level} if self.level is not None else {}),
                 **({"level_spread": self.spread} if self.spread is not None else {}),
                 **({"step_response": self.step} if self.name == "creep" else {}),
-                **({"beyond_plane": self.plane} if self.plane is not None else {})}
+                **({"beyond_plane": self.plane} if self.plane is not None else {}),
+                **({"level_trend": self.trend} if self.trend is not None else {})}
 
     def phrase(self) -> str:
         verdict = "holds" if self.holds else ("holds as its own term's" if self.confirms else "does not hold")
@@ -448,8 +456,9 @@ def level_spread_test(designs, es, fold_all, rec, ctx, rows) -> dict | None:
     It does **not** refuse an offset: ``s_L`` is measured on calibration histories, and a reveal recording of
     another kind can sit much further off (development offset case s110-002: the random walk's level 0.9 um
     from the triangles' against ``s_L`` = 0.008 um; refusing the offset there named ``none`` on two true
-    offsets). It is the drift's evidence *between* the recordings only together with the drift's own candidate
-    (its curve on the session clock) meeting the size criteria (:func:`_precedence`).
+    offsets). Round 12 made it the drift's evidence *between* the recordings together with the drift's own
+    candidate meeting the size criteria; since round 15 it is reported only (the same walk names a drift on an
+    offset: development s113-017, F 41), and :func:`level_trend_test` decides.
     """
     from scipy import stats as st
     if ctx.offset_group is None or not ctx.misfit or not ctx.misfit.get("histories"):
@@ -481,6 +490,121 @@ def level_spread_test(designs, es, fold_all, rec, ctx, rows) -> dict | None:
     return {"levels_um": [float(x) for x in L], "sessions_tested": [int(g) for g in multi], "dof": d,
             "spread_rms_um": float(np.sqrt(q / d)), "base_level_rms_um": float(np.sqrt(s2)), "histories": h,
             "f": float(F), "p": p, "varies": bool(p < ALPHA_SIGNATURE)}
+
+
+TREND_MIN_BLOCKS = 4   # blocks a recording needs for its slope to count: a line and its scatter take three
+
+def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict | None:
+    """Whether the level changes on the session clock *within* the reveal recordings, on the scale each recording
+    shows itself (round 15).
+
+    The level a recording sits at is set by what changes it on the session clock (a drift) and by the base's
+    misfit on that recording's history, which the calibration cannot measure for a history of another kind
+    (round 14: a reveal random walk sits 0.2 to 2 um off the triangles on Coleman-Hodgdon and Maxwell-slip laws,
+    against ``s_L`` of 0.008 to 0.12 um; at full length ``s_L`` can be 0). Within one recording that misfit is
+    one history's, and how far it moves the level from block to block is measured there. So the levels are read
+    per ~1 s block: on each fold, the residual beyond the nuisance and creep's regressors (fitted with a constant
+    per recording, as :func:`level_spread_test`) averaged over each of that fold's blocks. Per recording ``r`` in
+    a sensor-zero column other than the calibration's (with at least ``TREND_MIN_BLOCKS`` blocks) a line in
+    session time gives its slope ``b_r`` and the scatter of its blocks about that line ``s_r^2`` (``n_r - 2``
+    degrees of freedom), so ``var b_r = s_r^2 / Sxx_r``. The slopes are pooled with weights ``1 / var b_r`` (a
+    drift is one curve: its slope has one sign over a reveal of a minute; a walk whose level wanders gets the
+    weight its wander allows) and ``t = b / se`` is compared with Student's t with ``sum (n_r - 2)`` degrees of
+    freedom; the level **trends** when the two-sided p is below ``ALPHA_SIGNATURE`` (a search over the slow
+    signatures). The levels *between* the recordings are not used: they carry each history's misfit.
+
+    The same scale bounds the drift an offset could be: when every recording carries the session clock
+    (``ctx.drift_t0``), a drift that had reached a sensor-zero column's level ``c`` (the mean of its recordings'
+    levels) at a steady rate since the calibration ended would have the slope ``c / t_c`` (``t_c``: the mean
+    session time of that column's blocks after the calibration's end) within the recordings too. The recordings
+    **exclude** that drift when ``|b - c / t_c| > q se`` for every column, ``q`` the two-sided t quantile at
+    ``ALPHA`` / (number of columns). A drift that warmed up and stopped before the reveal is an offset to these
+    data whatever the test; one that is still moving is what the slope sees.
+
+    Returns
+    -------
+    dict or None
+        ``slopes_um_per_s`` (per recording tested), ``slope_um_per_s``, ``se_um_per_s``, ``t``, ``dof``, ``p``,
+        ``trends``; ``levels_um``, ``needed_um_per_s`` and ``excludes_drift`` (None when the session clock is
+        unknown). None when no recording qualifies.
+    """
+    from scipy import stats as st
+    cols = [ctx.offset_of(i) for i in range(ctx.n_rec)]
+    if not any(g >= 0 for g in cols):
+        return None
+    R = (rec[:, None] == np.arange(ctx.n_rec)[None, :]).astype(float)
+    tt = np.concatenate([_session_time(ctx, s)[v] for s, v in zip(ctx.signals, ctx.valid)])
+    blocks, levels = [], []
+    for f in (0, 1):
+        N, n_lo, n_hi, grp = designs[f]
+        keep = [n for n in ("creep",) if n in grp]
+        X = np.hstack([N] + [grp[n][0] for n in keep] + [R])
+        lo = np.concatenate([n_lo] + [grp[n][1] for n in keep] + [np.full(ctx.n_rec, -np.inf)])
+        hi = np.concatenate([n_hi] + [np.full(grp[n][0].shape[1], np.inf) for n in keep] + [np.full(ctx.n_rec, np.inf)])
+        m = fold_all == f
+        th = lstsq_box(X[train_rows(m, rows)], es[f][train_rows(m, rows)], lo, hi)
+        levels.append(th[-ctx.n_rec:])
+        r = es[f] - X[:, :-ctx.n_rec] @ th[:-ctx.n_rec]   # what the level per recording and per block takes
+        for b in np.unique(block_all[m]):
+            mb = m & (block_all == b)
+            blocks.append((int(rec[mb][0]), float(tt[mb].mean()), float(r[mb].mean())))
+    if not blocks:
+        return None
+    B = np.array(blocks)
+    L = 0.5 * (levels[0] + levels[1])
+    slopes, w_sum, wb_sum, dof, tested = [], 0.0, 0.0, 0, []
+    for i in range(ctx.n_rec):
+        m = B[:, 0] == i
+        if cols[i] < 0 or int(np.sum(m)) < TREND_MIN_BLOCKS:
+            continue
+        x = B[m, 1] - B[m, 1].mean()
+        y = B[m, 2] - B[m, 2].mean()
+        sxx = float(np.sum(x * x))
+        if sxx <= 0:
+            continue
+        b = float(np.sum(x * y) / sxx)
+        s2 = float(np.sum((y - b * x) ** 2)) / (int(np.sum(m)) - 2)
+        if s2 <= 0:
+            continue
+        w = sxx / s2
+        slopes.append(b)
+        tested.append(i)
+        w_sum += w
+        wb_sum += w * b
+        dof += int(np.sum(m)) - 2
+    if not tested:
+        return None
+    slope, se = wb_sum / w_sum, 1.0 / np.sqrt(w_sum)
+    t = slope / se
+    p = float(2 * st.t.sf(abs(t), dof))
+    out = {"recordings": tested, "slopes_um_per_s": slopes, "slope_um_per_s": float(slope), "se_um_per_s": float(se),
+           "t": float(t), "dof": dof, "p": p, "trends": bool(p < ALPHA_SIGNATURE),
+           "levels_um": None, "needed_um_per_s": None, "excludes_drift": None}
+    if ctx.drift_t0 is not None and all(s.t_session is not None for s in ctx.signals):
+        ks = sorted({cols[i] for i in tested})
+        q = float(st.t.isf(0.5 * sg.ALPHA / len(ks), dof))
+        lv, need = [], []
+        for k in ks:
+            rs = [i for i in tested if cols[i] == k]
+            c = float(np.mean(L[rs]))
+            tc = float(np.mean(B[np.isin(B[:, 0], rs), 1]))
+            lv.append(c)
+            need.append(c / tc if tc > 0 else np.inf)
+        out.update(levels_um=lv, needed_um_per_s=need, quantile=q,
+                   excludes_drift=bool(all(abs(slope - g) > q * se for g in need)))
+    return out
+
+
+def trend_phrase(tr: dict) -> str:
+    """The level's trend within the recordings (:func:`level_trend_test`), in words."""
+    text = (f"the level within the recordings moves {1e3 * tr['slope_um_per_s']:+.2f} nm/s (+- {1e3 * tr['se_um_per_s']:.2f}"
+            f" on the scatter of each recording's ~1 s block levels about its own line; t = {tr['t']:.1f}, "
+            f"{tr['dof']} dof, p = {tr['p']:.1e})")
+    if tr.get("needed_um_per_s") is not None:
+        text += (f"; a drift reaching the level {', '.join(f'{x:+.3f}' for x in tr['levels_um'])} um at a steady rate "
+                 f"since the calibration would move {', '.join(f'{1e3 * x:+.2f}' for x in tr['needed_um_per_s'])} nm/s, "
+                 + ("which the recordings exclude" if tr["excludes_drift"] else "which the recordings do not exclude"))
+    return text
 
 
 def offset_after_drift_test(ctx, level) -> dict | None:
@@ -767,9 +891,12 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
             if after is not None:
                 out[-1].level.update(after, refused=out[-1].level["refused"] or after["within_drift_misfit"])
     spread = level_spread_test(designs, es, fold_all, rec, ctx, rows)
+    trend = level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) \
+        if any(n in names for n in ("sensor_offset", "thermal_drift")) else None
     for t in out:
         if t.name in ("sensor_offset", "thermal_drift"):
             t.spread = spread
+            t.trend = trend
     return out
 
 
@@ -796,9 +923,10 @@ def _sized(c) -> bool:
     return bool(max(c.fold_ratios) <= sg.RATIO_MAX and c.credited <= sg.RATIO_MAX and c.dbic < 0)
 
 
-def _varies(t) -> bool:
-    """The recordings of a session sit at different levels beyond the base's misfit (:func:`level_spread_test`)."""
-    return bool(t.spread and t.spread.get("varies"))
+def _trends(t) -> bool:
+    """The level moves on the session clock within the reveal recordings, on their own scale
+    (:func:`level_trend_test`)."""
+    return bool(t.trend and t.trend.get("trends"))
 
 
 def _precedence(tests, passed, sized=()) -> list:
@@ -810,6 +938,12 @@ def _precedence(tests, passed, sized=()) -> list:
     ``ALPHA_SIGNATURE``) and the drift's own candidate, a curve on the session clock, meets its size criteria
     (``sized``): the levels follow the clock, which one constant per session cannot do.
 
+    Round 15: that rule 2 is replaced. The levels between the recordings carry each history's misfit, which the
+    base's level misfit on calibration histories does not bound (a reveal walk 0.2 to 2 um off the triangles);
+    the drift's signature holds between the blocks instead when the level trends within the recordings on the
+    scale the recordings show themselves (:func:`level_trend_test`, at ``ALPHA_SIGNATURE``). Development s113-047
+    (drift, generalized PI): slope +1.22 +- 0.06 nm/s, t = 20, where the offsets of seed 113 have |t| <= 1.
+
     Round 14: a holding creep goes before the offset too, for the drift's reason: creep's signature columns are
     centred per recording (:func:`signature_groups`), so the level a creep leaves in each recording - its state
     when the recording began - is the offset's column's, and the offset's unique contribution then holds as
@@ -818,7 +952,7 @@ def _precedence(tests, passed, sized=()) -> list:
     steps 0.04 (p 2.4e-9), the offset's unique ratio 0.18 against creep's 0.33: named ``sensor_offset`` first.
     Between the drift and creep the unique ratio decides, as before."""
     order = sorted((t for t in tests if t.holds or (t.confirms and t.name in passed)
-                    or (t.name == "thermal_drift" and _varies(t) and t.name in sized)), key=lambda t: t.unique_ratio)
+                    or (t.name == "thermal_drift" and _trends(t))), key=lambda t: t.unique_ratio)
     names = [t.name for t in order]
     if "sensor_offset" in names:
         leave = [n for n in names[names.index("sensor_offset") + 1:] if n in ("thermal_drift", "creep")]
@@ -849,6 +983,9 @@ def attribute(evals, tests) -> str | None:
     if spread:
         figures += "; " + spread_phrase(spread).replace("the recordings of a session sit at", "recordings' levels:") \
             + (" (vary)" if spread["varies"] else " (one level within the base's misfit)")
+    trend = next((t.trend for t in tests if t.trend), None)
+    if trend:
+        figures += "; " + trend_phrase(trend)
     chosen = None
     refused = None
     sized = {c.name for c in slow if not c.veto and (c.significant or _sized(c))}
@@ -881,10 +1018,9 @@ def attribute(evals, tests) -> str | None:
         if by[chosen.name].holds or (by[chosen.name].confirms and chosen.significant):
             text = (f"of the slow terms, the signature of {chosen.name} holds beyond the other two and the base's "
                     f"misfit at p < {level:.1e} ({figures})")
-        else:   # round 12: between the recordings (_precedence)
-            text = (f"of the slow terms, the drift's signature holds between the recordings: "
-                    f"{spread_phrase(by[chosen.name].spread)}, and its curve on the session clock meets the size "
-                    f"criteria ({figures})")
+        else:   # round 15: the level's trend within the recordings (_precedence)
+            text = (f"of the slow terms, the drift's signature holds on the recordings' own scale: "
+                    f"{trend_phrase(by[chosen.name].trend)} ({figures})")
         if not chosen.significant and _sized(chosen):
             text += (f"; {passed[0].name} passed its own test (p = {passed[0].p:.1e}), so a slow effect is there, and "
                      f"{chosen.name}'s own candidate meets the size criteria (fold ratios "
@@ -897,6 +1033,14 @@ def attribute(evals, tests) -> str | None:
                      f"that level and the drift's own trend beyond it (fold ratios {chosen.fold_ratios[0]:.2f}/"
                      f"{chosen.fold_ratios[1]:.2f}) are the drift's")
         chosen.significant = True
+        tr = by[chosen.name].trend
+        if chosen.name == "sensor_offset" and tr and tr.get("excludes_drift") is False and not tr["trends"]:
+            # round 15: one level, but a drift still moving at the rate that would have reached it is not excluded
+            # either: the pair is reported (Candidate.slow_alternative; select._separate)
+            chosen.slow_alternative = {"name": "thermal_drift", "reason": (
+                "the level shows no trend within the recordings, but their blocks scatter too much to exclude a "
+                "drift that reached it at a steady rate since the calibration: " + trend_phrase(tr))}
+            text += "; a drift cannot be excluded (" + trend_phrase(tr) + ")"
         own = chosen.discrimination + " " if chosen.name == "creep" and chosen.discrimination else ""
         chosen.discrimination = own + "Attribution: " + text + "."   # creep_on_steps' sentence kept
     for c in passed:
