@@ -1,10 +1,12 @@
 """Round 13 (docs/diagnose.md, "Round 13: the second effect, asymmetry and rate"): a later candidate is nested
-against the accepted term's own flexibility, and the asymmetric term's one-sided form beyond the calibrated range."""
+against the accepted term's own flexibility, and the asymmetric term's one-sided form beyond the calibrated range.
+Round 15 ("Round 15: asymmetry and the sensor curve"): saturation is refused inside the calibrated range too."""
 
 import numpy as np
 
 from piezoctl.diagnose import select as S
 from piezoctl.diagnose import significance as sg
+from piezoctl.ident import terms as T
 from piezoctl.ident.terms import TERMS, SimState
 
 from test_diagnose_slow import NOISE_UM, _ctx
@@ -122,3 +124,24 @@ def test_inside_the_calibrated_range_the_asymmetric_term_is_refused():
     assert max(c.fold_ratios) < 0.5 and c.p < c.p_max     # it would pass the held-out test
     assert not c.significant and c.veto == ASYM.refuses(ctx)
     assert ASYM.refuses(_narrow(ctx)) is None
+
+
+def test_inside_the_calibrated_range_saturation_is_refused():
+    """Round 15: a clip of the drive inside the calibrated range would have clipped the calibration too, and the
+    base's plane fitted on it would stop there as well; what a clip takes on recordings inside that range is a
+    change since the calibration (held-out s114-026: a sensor's curve, reported as `sensor_nonlinearity or
+    saturation`). Evaluated and vetoed with the reason although its held-out test passes; beyond the calibrated
+    range (on either side) it is not refused, and the asymmetric term is refused by the same rule."""
+    ctx = _ctx(np.random.default_rng(9))
+    assert T.beyond_calibrated_sides(ctx, SAT.STEP) == []
+    assert SAT.refuses(ctx) and ASYM.refuses(ctx)
+    st = next(s for s in SAT.settings(ctx) if s[0] is None and s[1] < 0.7)   # a clip well inside the range
+    clip = {s.index: np.asarray(SAT.regressors(ctx, s, st), float)[:, 0] for s in ctx.signals}
+    assert max(float(np.max(np.abs(v))) for v in clip.values()) > 20 * NOISE_UM
+    c = _evaluate(ctx, SAT, np.random.default_rng(11), lambda s: clip[s.index])
+    assert max(c.fold_ratios) < 0.5 and c.p < c.p_max      # it would pass the held-out test
+    assert not c.significant and c.veto == SAT.refuses(ctx)
+    for lo, hi, sides in ((-0.5, 0.95, [-1]), (-0.95, 0.5, [1]), (-0.5, 0.5, [-1, 1])):
+        n = _narrow(ctx, lo, hi)
+        assert T.beyond_calibrated_sides(n, SAT.STEP) == sides
+        assert SAT.refuses(n) is None and ASYM.refuses(n) is None

@@ -344,11 +344,39 @@ class AmplifierSlewLimit(_DriveTerm):
                 f"(amplifier current limit): edges become ramps whose length grows with the step size")
 
 
+def beyond_calibrated_sides(ctx, step: float) -> list:
+    """Sides (-1 low, +1 high) on which the recordings' drive goes more than ``step`` (a fraction of the
+    recordings' drive span) beyond the settled calibration's drive range; [] when no calibrated range is known.
+
+    A property of the stage's drive path that does not change between sessions (a clip, an asymmetric loop) acted
+    on the calibration wherever the calibration drove, and the base's non-parametric plane, fitted on it, took it
+    there: the data can credit such a term only where the recordings drive beyond the calibrated edge."""
+    if ctx.cal_u_hi <= ctx.cal_u_lo:
+        return []
+    span = max(ctx.u_hi - ctx.u_lo, 1e-9)
+    return [side for side, edge, reach in ((-1, ctx.cal_u_lo, ctx.u_lo), (1, ctx.cal_u_hi, ctx.u_hi))
+            if side * (reach - edge) > step * span]
+
+
 class Saturation(Term):
+    """A clip of the drive (the amplifier's rail). Round 15: refused when the recordings stay inside the calibrated
+    drive range (:func:`beyond_calibrated_sides`): a rail inside it clipped the calibration as well and the base's
+    plane, fitted on that, is flat there too; what a clip takes on such recordings is a change since the calibration
+    that flattens one end (a sensor's curve of another session, held-out s114-026: `sensor_nonlinearity or
+    saturation`) or the base's own misfit."""
+
     name = "saturation"
     stage = "drive"
     signature = "residual only beyond a drive threshold, growing with the excess"
     COARSE = tuple(0.025 * i for i in range(15))   # threshold below the largest drive, fraction of the span
+    STEP = 0.025   # the grid step, fraction of the drive span
+
+    def refuses(self, ctx):
+        if beyond_calibrated_sides(ctx, self.STEP):
+            return None
+        return ("the recordings stay inside the calibrated drive range: a rail there clipped the calibration too, and "
+                "the base's non-parametric plane, fitted on it, already stops there; what a clip takes on these "
+                "recordings is a change since the calibration (a sensor's curve) or the base's own misfit")
 
     @staticmethod
     def drive(u, lo, hi):
@@ -362,7 +390,7 @@ class Saturation(Term):
 
     def refine(self, ctx, setting, level):
         lo, hi = setting
-        d = 0.025 * (ctx.u_hi - ctx.u_lo) * 0.5 ** level   # the grid step halved per level
+        d = self.STEP * (ctx.u_hi - ctx.u_lo) * 0.5 ** level   # the grid step halved per level
         return [(lo, hi - d), (lo, hi + d)] if hi is not None else [(lo - d, hi), (lo + d, hi)]
 
     def columns(self, ctx, s, setting):
@@ -435,7 +463,7 @@ class AsymmetricHysteresis(Term):
         return out
 
     def refuses(self, ctx):
-        if len(self.settings(ctx)) > 1:
+        if beyond_calibrated_sides(ctx, self.STEP):   # the same condition as a knee at the edge being offered
             return None
         return ("the recordings stay inside the calibrated drive range, where the base's non-parametric plane was "
                 "fitted and absorbs any asymmetry of the loop; what an even function of the drive takes there is a "
