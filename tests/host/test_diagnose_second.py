@@ -46,11 +46,14 @@ def test_asymmetric_knees_lie_beyond_the_calibrated_range_only():
     assert ASYM.settings(ctx) == [None]   # calibrated over -1..1: the recordings never leave it
     st = ASYM.settings(_narrow(ctx))
     assert st[0] is None and len(st) > 1
-    for side, knee in st[1:]:
+    for side, knee, *backlash in st[1:]:
         edge = ctx.cal_u_lo if side < 0 else ctx.cal_u_hi
         assert side * (knee - edge) >= 0.0               # at or beyond the calibrated edge
         assert side * ((ctx.u_lo if side < 0 else ctx.u_hi) - knee) > ASYM.STEP * (ctx.u_hi - ctx.u_lo)
-    assert {s for s, _ in st[1:]} == {-1, 1}
+        assert all(b > 0 for b in backlash)              # round 15: the play's half-width, when given
+    assert {s[0] for s in st[1:]} == {-1, 1}
+    # every knee with each backlash of the grid (round 15), the instantaneous drive first
+    assert [len(s) for s in st[1:len(ASYM.BACKLASH) + 1]] == [2] + [3] * (len(ASYM.BACKLASH) - 1)
 
 
 def test_asymmetric_hinge_model_equals_its_regressors():
