@@ -145,6 +145,11 @@ def test_inside_the_calibrated_range_saturation_is_refused():
     c = _evaluate(ctx, SAT, np.random.default_rng(11), lambda s: clip[s.index])
     assert max(c.fold_ratios) < 0.5 and c.p < c.p_max      # it would pass the held-out test
     assert not c.significant and c.veto == SAT.refuses(ctx)
+    # a clip 1.5 % as large: fold ratios above the size gate (not significant), yet a pair's alternative by
+    # its p and fold ratios (round 11's rule) unless the refusal vetoes it whether or not it passed
+    weak = _evaluate(ctx, SAT, np.random.default_rng(12), lambda s: 0.015 * clip[s.index])
+    assert weak.p < 0.01 and sg.RATIO_MAX < max(weak.fold_ratios) < 1.0, (weak.p, weak.fold_ratios)
+    assert weak.veto == SAT.refuses(ctx)
     for lo, hi, sides in ((-0.5, 0.95, [-1]), (-0.95, 0.5, [1]), (-0.5, 0.5, [-1, 1])):
         n = _narrow(ctx, lo, hi)
         assert T.beyond_calibrated_sides(n, SAT.STEP) == sides
