@@ -544,7 +544,10 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     significant = bool(within(max(fold_ratios)) and p < p_max and dbic < 0)
     cr, bands = credited_ratio(rb_res, pred_after[used], rec, ctxs[0].dt, ctxs[0].misfit)
     veto = None
-    refusal = term.refuses(ctxs[0]) if significant else None   # round 13: data that cannot credit it
+    # round 13: data that cannot credit it; round 15: vetoed whether or not it passed, so that it is no pair's
+    # alternative either (held-out s114-026: an in-range clip below the round's level, reported as the sensor
+    # curve's inseparable alternative)
+    refusal = term.refuses(ctxs[0])
     if refusal:
         significant, veto = False, refusal
     if significant and not within(cr):

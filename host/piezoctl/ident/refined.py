@@ -48,7 +48,8 @@ Parameters (JSON, physical units where they have one)
     - ``asymmetric_hysteresis``: ``c2_um``, ``c3_um`` on ``s = (u - mid) / half``
       with the term's own ``mid_v``, ``half_v``; with ``side`` (+1, -1) and
       ``knee_v`` on ``x = max(side (u - knee_v), 0) / half_v`` instead (one end
-      of the stroke only).
+      of the stroke only); with ``backlash_v`` (round 15) u is first the play
+      of the drive of that half-width [V], relaxed at the first sample.
     - ``rate_dependent_hysteresis``: ``gain`` [1] and ``ref_fs_per_s``: the
       hysteretic part of H is scaled by ``1 + gain r / (r + ref)``, r the
       magnitude of the normalized drive rate [FS/s] low-passed at

@@ -36,7 +36,7 @@ import dataclasses
 import numpy as np
 
 from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
-from ..models.hysteresis import hysteresis_groups, hysteresis_output, hysteresis_output_of, scale_groups
+from ..models.hysteresis import hysteresis_groups, hysteresis_output, hysteresis_output_of, play_states, scale_groups
 
 __all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G"]
 
@@ -344,11 +344,39 @@ class AmplifierSlewLimit(_DriveTerm):
                 f"(amplifier current limit): edges become ramps whose length grows with the step size")
 
 
+def beyond_calibrated_sides(ctx, step: float) -> list:
+    """Sides (-1 low, +1 high) on which the recordings' drive goes more than ``step`` (a fraction of the
+    recordings' drive span) beyond the settled calibration's drive range; [] when no calibrated range is known.
+
+    A property of the stage's drive path that does not change between sessions (a clip, an asymmetric loop) acted
+    on the calibration wherever the calibration drove, and the base's non-parametric plane, fitted on it, took it
+    there: the data can credit such a term only where the recordings drive beyond the calibrated edge."""
+    if ctx.cal_u_hi <= ctx.cal_u_lo:
+        return []
+    span = max(ctx.u_hi - ctx.u_lo, 1e-9)
+    return [side for side, edge, reach in ((-1, ctx.cal_u_lo, ctx.u_lo), (1, ctx.cal_u_hi, ctx.u_hi))
+            if side * (reach - edge) > step * span]
+
+
 class Saturation(Term):
+    """A clip of the drive (the amplifier's rail). Round 15: refused when the recordings stay inside the calibrated
+    drive range (:func:`beyond_calibrated_sides`): a rail inside it clipped the calibration as well and the base's
+    plane, fitted on that, is flat there too; what a clip takes on such recordings is a change since the calibration
+    that flattens one end (a sensor's curve of another session, held-out s114-026: `sensor_nonlinearity or
+    saturation`) or the base's own misfit."""
+
     name = "saturation"
     stage = "drive"
     signature = "residual only beyond a drive threshold, growing with the excess"
     COARSE = tuple(0.025 * i for i in range(15))   # threshold below the largest drive, fraction of the span
+    STEP = 0.025   # the grid step, fraction of the drive span
+
+    def refuses(self, ctx):
+        if beyond_calibrated_sides(ctx, self.STEP):
+            return None
+        return ("the recordings stay inside the calibrated drive range: a rail there clipped the calibration too, and "
+                "the base's non-parametric plane, fitted on it, already stops there; what a clip takes on these "
+                "recordings is a change since the calibration (a sensor's curve) or the base's own misfit")
 
     @staticmethod
     def drive(u, lo, hi):
@@ -362,7 +390,7 @@ class Saturation(Term):
 
     def refine(self, ctx, setting, level):
         lo, hi = setting
-        d = 0.025 * (ctx.u_hi - ctx.u_lo) * 0.5 ** level   # the grid step halved per level
+        d = self.STEP * (ctx.u_hi - ctx.u_lo) * 0.5 ** level   # the grid step halved per level
         return [(lo, hi - d), (lo, hi + d)] if hi is not None else [(lo - d, hi), (lo + d, hi)]
 
     def columns(self, ctx, s, setting):
@@ -411,12 +439,19 @@ class AsymmetricHysteresis(Term):
     signature = "even function of the drive (loop not point-symmetric), or an extra beyond a knee on one side"
     KNEES = (0.0, 0.025, 0.05, 0.075, 0.1)   # knee beyond the calibrated edge, fraction of the drive span
     STEP = 0.025
+    # Round 15: the extra beyond the knee is part of the loop, so it follows the drive's history: a backlash of
+    # half-width b (a play of the drive) holds it while the drive reverses by up to 2 b. Fractions of the span, in
+    # units of the knee grid's step (0: the instantaneous drive, as in round 13).
+    BACKLASH = (0.0, 0.5 * STEP, STEP, 2 * STEP)
 
     @staticmethod
-    def basis(u, mid, half, side=None, knee=None) -> np.ndarray:
+    def basis(u, mid, half, side=None, knee=None, backlash=0.0) -> np.ndarray:
         if side is None:
             return _square_cube(u, mid, half)
-        x = np.maximum(float(side) * (np.asarray(u, float) - float(knee)), 0.0) / half
+        u = np.asarray(u, float)
+        if backlash and backlash > 0 and u.size:   # the play of the drive, relaxed at the first sample
+            u = play_states(u, [float(backlash)], float(u[0]))[:, 0]
+        x = np.maximum(float(side) * (u - float(knee)), 0.0) / half
         return np.column_stack([x ** 2, x ** 3])
 
     def _span(self, ctx) -> float:
@@ -431,11 +466,11 @@ class AsymmetricHysteresis(Term):
             for q in self.KNEES:
                 knee = edge + side * q * span
                 if side * (reach - knee) > self.STEP * span:   # the recordings go a grid step beyond the knee
-                    out.append((side, float(knee)))
+                    out += [(side, float(knee))] + [(side, float(knee), float(b * span)) for b in self.BACKLASH[1:]]
         return out
 
     def refuses(self, ctx):
-        if len(self.settings(ctx)) > 1:
+        if beyond_calibrated_sides(ctx, self.STEP):   # the same condition as a knee at the edge being offered
             return None
         return ("the recordings stay inside the calibrated drive range, where the base's non-parametric plane was "
                 "fitted and absorbs any asymmetry of the loop; what an even function of the drive takes there is a "
@@ -444,34 +479,41 @@ class AsymmetricHysteresis(Term):
     def refine(self, ctx, setting, level):
         if setting is None:
             return []
-        side, knee = setting
+        side, knee = setting[:2]
         d = self.STEP * self._span(ctx) * 0.5 ** level
-        return [(side, knee - d), (side, knee + d)]
+        return [(side, knee - d) + tuple(setting[2:]), (side, knee + d) + tuple(setting[2:])]
 
     def columns(self, ctx, s, setting):
-        side, knee = (None, None) if setting is None else setting
-        return G(ctx.base, self.basis(s.u, ctx.u_mid_all, ctx.u_half_all, side, knee))
+        side, knee, b = (None, None, 0.0) if setting is None else (tuple(setting) + (0.0,))[:3]
+        return G(ctx.base, self.basis(s.u, ctx.u_mid_all, ctx.u_half_all, side, knee, b))
 
     def model_params(self, ctx, setting, coef):
         out = {"c2_um": float(coef[0]), "c3_um": float(coef[1]), "mid_v": float(ctx.u_mid_all),
                "half_v": float(ctx.u_half_all)}
         if setting is not None:
             out.update(side=int(setting[0]), knee_v=float(setting[1]))
+            if len(setting) > 2 and setting[2] > 0:
+                out["backlash_v"] = float(setting[2])
         return out
 
     def apply(self, p, st):
         st.h = st.h + self.basis(st.ue, float(p["mid_v"]), float(p["half_v"]), p.get("side"),
-                                 p.get("knee_v")) @ [float(p["c2_um"]), float(p["c3_um"])]
+                                 p.get("knee_v"), float(p.get("backlash_v", 0.0))) @ [float(p["c2_um"]),
+                                                                                      float(p["c3_um"])]
 
     def describe_own(self, ctx, setting, coef):
         own = {"c2_um": round(float(coef[0]), 4), "c3_um": round(float(coef[1]), 4)}
         if setting is None:
             return (own, f"the loop is not point-symmetric: an even function of the drive ({coef[0]:+.3f} um s^2) is "
                          f"missing, largest at the ends of the stroke that calibration did not reach")
-        side, knee = setting
-        x = max(side * ((ctx.u_hi if side > 0 else ctx.u_lo) - knee), 0.0) / ctx.u_half_all   # at the end reached
+        side, knee = setting[:2]
+        b = float(setting[2]) if len(setting) > 2 else 0.0
+        # at the end reached (the play lags the drive by its half-width there)
+        x = max(side * ((ctx.u_hi if side > 0 else ctx.u_lo) - side * b - knee), 0.0) / ctx.u_half_all
         extra = float(coef[0] * x ** 2 + coef[1] * x ** 3)
         own.update(side=int(side), knee_v=round(float(knee), 2), extra_at_end_um=round(extra, 4))
+        if b > 0:
+            own["backlash_v"] = round(b, 2)
         where = f"above {knee:.1f} V" if side > 0 else f"below {knee:.1f} V"
         return (own, f"the two ends of the stroke differ: {where}, beyond the calibrated range, the displacement "
                      f"departs from the model by a term growing with the excess ({extra:+.3f} um at the recordings' "
