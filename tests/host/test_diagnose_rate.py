@@ -88,12 +88,14 @@ def _stage(rng):
     return base, t, drives
 
 
-@pytest.mark.parametrize("law", ["width", "none"])
+@pytest.mark.parametrize("law", ["width", "none", "too_wide"])
 def test_a_widening_loop_is_found_and_a_rate_independent_stage_is_not(law):
+    """The term's own law is found at its reference; nothing on a rate-independent stage; and a fit that asks the
+    loop to widen far beyond what rate dependence does (gain 6 at k 0.8: 5.8-fold) is vetoed with the reason."""
     rng = np.random.default_rng(3)
     base, t, drives = _stage(rng)
-    true = {"gain": 1.0, "ref_fs_per_s": 10.0, "width_k": 0.8, "rate_cutoff_hz": 50.0}
-    stage = dict(base, terms={"rate_dependent_hysteresis": true} if law == "width" else {})
+    true = {"gain": 6.0 if law == "too_wide" else 1.0, "ref_fs_per_s": 10.0, "width_k": 0.8, "rate_cutoff_hz": 50.0}
+    stage = dict(base, terms={"rate_dependent_hysteresis": true} if law != "none" else {})
     recs = [Recording(t=t, u=u, y=refined.simulate(stage, t, u) + rng.normal(0, 0.005, t.size), path=f"r{i}.csv")
             for i, u in enumerate(drives)]
     ctx, _, _ = locate(base, recs[3:], recs, [r.path for r in recs], 0.5, 0.5)
@@ -105,8 +107,18 @@ def test_a_widening_loop_is_found_and_a_rate_independent_stage_is_not(law):
     if law == "width":
         assert c.significant and max(c.fold_ratios) < 0.2
         assert all(abs(np.log(st[0] / 10.0)) < np.log(3.0) for st in c.setting)
+    elif law == "too_wide":
+        assert max(c.fold_ratios) < 0.2 and c.p < sg.ALPHA / 12    # it fits, and is refused for its size
+        assert not c.significant and "widen" in c.veto
     else:
         assert not c.significant
+
+
+def test_the_widening_bound():
+    term = TERMS["rate_dependent_hysteresis"]
+    assert term.implausible(None, (3.0, 1.0), [1.8, 0.1]) is None
+    assert term.implausible(None, (3.0, 0.5), [3.6, 0.1]) is None      # 1.8 at k 0.5
+    assert "widen" in term.implausible(None, (30.0, 1.0), [273.0, 0.0])   # two-effect s113-001
 
 
 def test_old_model_files_keep_the_gain_law():
