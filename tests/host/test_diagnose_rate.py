@@ -109,16 +109,23 @@ def test_a_widening_loop_is_found_and_a_rate_independent_stage_is_not(law):
         assert all(abs(np.log(st[0] / 10.0)) < np.log(3.0) for st in c.setting)
     elif law == "too_wide":
         assert max(c.fold_ratios) < 0.2 and c.p < sg.ALPHA / 12    # it fits, and is refused for its size
-        assert not c.significant and "widen" in c.veto
+        assert not c.significant and "wide" in c.veto
     else:
         assert not c.significant
 
 
 def test_the_widening_bound():
+    """The widening is taken at the recordings' fastest settled rate: a large gain at a reference far above every
+    rate the drive reaches is a small widening."""
+    from types import SimpleNamespace
+    t = np.arange(int(FS)) / FS
+    v = 0.8 * np.sin(2 * np.pi * 10 * t)               # up to 50 FS/s
+    ctx = SimpleNamespace(signals=[SimpleNamespace(v=v, dt=1 / FS)], valid=[t > 0.1])
     term = TERMS["rate_dependent_hysteresis"]
-    assert term.implausible(None, (3.0, 1.0), [1.8, 0.1]) is None
-    assert term.implausible(None, (3.0, 0.5), [3.6, 0.1]) is None      # 1.8 at k 0.5
-    assert "widen" in term.implausible(None, (30.0, 1.0), [273.0, 0.0])   # two-effect s113-001
+    assert term.implausible(ctx, (3.0, 1.0), [1.8, 0.1]) is None
+    assert term.implausible(ctx, (3000.0, 1.0), [100.0, 0.1]) is None    # 100 x 50 / 3050 = 1.6
+    assert "wide" in term.implausible(ctx, (30.0, 1.0), [273.0, 0.0])     # two-effect s113-001's gain
+    assert "wide" in term.implausible(ctx, (3.0, 1.0), [3.5, 0.0])
 
 
 def test_old_model_files_keep_the_gain_law():
