@@ -141,3 +141,23 @@ def test_old_model_files_keep_the_gain_law():
                 0.3 * TERMS["rate_dependent_hysteresis"].basis(p["v"], p["hyst"], 1 / FS, 5.0))
     assert np.allclose(y1 - y0, want, rtol=0, atol=1e-9)
     assert np.max(np.abs(want)) > 0.01
+
+
+def test_a_base_without_plays_keeps_the_gain_law():
+    """A plane of the reversible curve and a Bouc-Wen column (the own-stage cases' bases) has no thresholds to
+    widen: the term's settings are the references alone and its columns the old law's, through G."""
+    from types import SimpleNamespace
+    hp = {"type": "plane", "r": [0.0], "knots": [[-1.0, 1.0]], "values": [[-5.0, 5.0]], "offset": 0.0,
+          "v_rest": 0.0, "v_lo": -1.0, "v_hi": 1.0, "bw": {"beta": 2.0, "gamma": 0.4, "c_h": 1.5}}
+    base = {"fs_hz": FS, "u_mid": 75.0, "u_half": 75.0, "hysteresis": hp,
+            "dynamics": {"b": [0.3, 0.2], "a": [1.0, -0.5]}, "terms": {}}
+    t = np.arange(int(FS)) / FS
+    u = 75 + 60 * np.sin(2 * np.pi * 20 * t)
+    p = refined.simulate_parts(base, t, u)
+    term = TERMS["rate_dependent_hysteresis"]
+    ctx = SimpleNamespace(base=base)
+    s = SimpleNamespace(v=p["v"], hyst=p["hyst"], dt=1 / FS)
+    assert term.settings(ctx) == list(term.REFS)
+    want = filt([0.3, 0.2], [1.0, -0.5], term.basis(p["v"], p["hyst"], 1 / FS, 3.0))
+    assert np.allclose(term.columns(ctx, s, 3.0), want) and np.max(np.abs(want)) > 0.1
+    assert "width_k" not in term.model_params(ctx, 3.0, [0.3])

@@ -496,8 +496,9 @@ class RateDependentHysteresis(Term):
     keeps no memory of the rate they moved at. On the development rate misses s114-035 and s114-051 the true extra
     leaves 0.30/0.31 and 0.35/0.39 of the residual (oracle through the selection's test), the gain law
     0.72/0.67 and 0.72/0.75, this law 0.44/0.46 and 0.49/0.54 (docs/diagnose.md, "Round 15: rate dependence").
-    Plays of the base only: a Bouc-Wen column of the plane and the older operator types give no column (the term
-    is then not offered). Model files with ``gain`` and ``ref_fs_per_s`` but no ``width_k`` keep the old law."""
+    Plays of the base only: a Bouc-Wen column of the plane is not widened; a base without plays (the own-stage
+    cases': the reversible curve and a Bouc-Wen column) keeps the old law (``has_plays``). Model files with ``gain``
+    and ``ref_fs_per_s`` but no ``width_k`` keep the old law."""
 
     name = "rate_dependent_hysteresis"
     stage = "hysteresis"
@@ -529,14 +530,23 @@ class RateDependentHysteresis(Term):
         """H with the widened plays minus H [um] (``plane_width_change``)."""
         return plane_width_change(hp, v, self.width(v, dt, ref, k, cutoff))
 
-    def applicable(self, ctx) -> bool:
+    @staticmethod
+    def has_plays(ctx) -> bool:
+        """The base's loop has plays to widen (a plane with a threshold > 0). Without them (a plane of the reversible
+        curve and a Bouc-Wen column, as the own-stage cases' bases are) the term keeps the law before round 15: the
+        hysteretic part - then the Bouc-Wen column, whose loop has no thresholds - scaled at the rate of the moment
+        (settings: the references alone)."""
         hp = ctx.base["hysteresis"]
         return hp.get("type", "pi") == "plane" and any(float(r) > 0 for r in hp["r"])
 
     def settings(self, ctx):
+        if not self.has_plays(ctx):
+            return list(self.REFS)
         return [(ref, k) for k in self.WIDTH_K for ref in self.REFS]
 
     def refine(self, ctx, setting, level):
+        if not isinstance(setting, tuple):
+            return []
         ref, k = setting
         return [(x, k) for x in _geo_refine(self.REFS, ref, level)]
 
@@ -552,7 +562,7 @@ class RateDependentHysteresis(Term):
     MAX_WIDENING = 3.0
 
     def implausible(self, ctx, setting, coef):
-        ref, k = setting
+        ref, k = setting if isinstance(setting, tuple) else (setting, 1.0)   # the gain law: width x (1 + g c)
         r_max = max((float(np.max(drive_rate(s.v, s.dt)[v])) for s, v in zip(ctx.signals, ctx.valid) if np.any(v)),
                     default=0.0)
         w = float(coef[0]) * float(k) * r_max / (r_max + float(ref))
@@ -564,10 +574,14 @@ class RateDependentHysteresis(Term):
                 f"another rate effect (a slew limit, unidentified dynamics)")
 
     def columns(self, ctx, s, setting):
+        if not isinstance(setting, tuple):
+            return G(ctx.base, self.basis(s.v, s.hyst, s.dt, setting))
         ref, k = setting
         return G(ctx.base, self.widened(ctx.base["hysteresis"], s.v, s.dt, ref, k))
 
     def model_params(self, ctx, setting, coef):
+        if not isinstance(setting, tuple):
+            return {"gain": float(coef[0]), "ref_fs_per_s": float(setting), "rate_cutoff_hz": RATE_CUTOFF_HZ}
         ref, k = setting
         return {"gain": float(coef[0]), "ref_fs_per_s": float(ref), "width_k": float(k),
                 "rate_cutoff_hz": RATE_CUTOFF_HZ}
@@ -581,6 +595,11 @@ class RateDependentHysteresis(Term):
             st.h = st.h + float(p["gain"]) * self.basis(st.v, st.hyst, st.dt, float(p["ref_fs_per_s"]), cutoff)
 
     def describe_own(self, ctx, setting, coef):
+        if not isinstance(setting, tuple):
+            vps = setting * ctx.base["u_half"]
+            return ({"gain": round(float(coef[0]), 4), "ref_v_per_s": round(vps, 1)},
+                    f"the hysteresis loop widens with the drive rate (width x (1 + {coef[0]:.2f} r / (r + {vps:.0f} "
+                    f"V/s))); the residual grows with |du/dt| and changes sign with the direction")
         ref, k = setting
         vps = ref * ctx.base["u_half"]
         return ({"gain": round(float(coef[0]), 4), "ref_v_per_s": round(vps, 1), "width_k": k},
