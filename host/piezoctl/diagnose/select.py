@@ -550,6 +550,9 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     refusal = term.refuses(ctxs[0])
     if refusal:
         significant, veto = False, refusal
+    if significant:   # round 15: a fit whose size is not the term's physics (the rate term's widening)
+        veto = next((w for w in (term.implausible(ctxs[0], c[0], c[4]) for c in chosen) if w), None)
+        significant = veto is None
     if significant and not within(cr):
         significant = False
         veto = (f"its held-out improvement lies within what the base's error on calibration histories it did not "

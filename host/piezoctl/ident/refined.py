@@ -50,10 +50,13 @@ Parameters (JSON, physical units where they have one)
       ``knee_v`` on ``x = max(side (u - knee_v), 0) / half_v`` instead (one end
       of the stroke only); with ``backlash_v`` (round 15) u is first the play
       of the drive of that half-width [V], relaxed at the first sample.
-    - ``rate_dependent_hysteresis``: ``gain`` [1] and ``ref_fs_per_s``: the
-      hysteretic part of H is scaled by ``1 + gain r / (r + ref)``, r the
-      magnitude of the normalized drive rate [FS/s] low-passed at
-      ``rate_cutoff_hz``.
+    - ``rate_dependent_hysteresis``: ``gain`` [1], ``ref_fs_per_s`` and
+      ``width_k`` [1] (round 15): every play of the plane has its threshold
+      multiplied by ``1 + width_k r / (r + ref)`` (a play keeps the threshold
+      it last moved with), and H changes by ``gain`` times the change this
+      makes; r the magnitude of the normalized drive rate [FS/s] low-passed
+      at ``rate_cutoff_hz``. Without ``width_k`` (files of rounds up to 14)
+      the hysteretic part of H is scaled by ``1 + gain r / (r + ref)``.
     - ``creep``: ``tau_s`` (list), ``gain`` (list, [1]), ``static_gain`` [1]
       and ``h_ref_um``: ``w + sum g_i (lowpass_tau_i(w) - w) + g_s (w - h_ref)``
       (g_s: the static gain the calibration, faster than the slow terms, did

@@ -43,7 +43,8 @@ from .play import play_outputs
 __all__ = ["bouc_wen_h", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
            "hysteresis_output", "hysteresis_output_of", "clear_output_cache",
            "poly_clamped", "hysteresis_features", "plane_feature_blocks", "add_to_features", "hysteresis_channels",
-           "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span"]
+           "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span", "plays_varying",
+           "plane_width_change"]
 
 _STATE_CACHE: "collections.OrderedDict" = collections.OrderedDict()
 _STATE_CACHE_MAX_SAMPLES = 20_000_000   # about 160 MB of float64
@@ -642,6 +643,65 @@ def scale_groups(hp: dict, gains) -> dict:
     if hp.get("bw"):
         per[n] = g[k]
     return scale_channels(hp, per)
+
+
+def plays_varying(v, R, y0) -> np.ndarray:
+    """Outputs (T, n) of plays whose thresholds vary with time, ``R`` (T, n) [normalized drive], from states
+    ``y0`` (n,).
+
+    Taken one monotone run of the drive at a time: on a rising run each play follows its lower edge
+    ``v - R`` upward (the running maximum from the run's first state) and is held below its upper edge ``v + R``;
+    on a falling run the mirror image. A play therefore keeps the threshold it had when it last moved until the
+    drive pushes it again: the memory holds the loop width of the last motion. With constant thresholds this is
+    the classical play, bit for bit (``play_outputs``)."""
+    v = np.ascontiguousarray(v, dtype=float)
+    R = np.asarray(R, float)
+    T, n = R.shape
+    out = np.empty((T, n))
+    if T == 0:
+        return out
+    d = np.sign(np.diff(v))
+    nz = np.flatnonzero(d != 0)
+    starts = [0]
+    if nz.size:
+        s_nz = d[nz]
+        starts += (nz[np.flatnonzero(s_nz[1:] != s_nz[:-1]) + 1] + 1).tolist()
+    starts.append(T)
+    y = np.asarray(y0, float).reshape(n).copy()
+    for a, b in zip(starts[:-1], starts[1:]):
+        lo = v[a:b, None] - R[a:b]
+        hi = v[a:b, None] + R[a:b]
+        if v[b - 1] >= v[a]:
+            q = np.maximum(np.maximum.accumulate(lo, axis=0), np.minimum(hi[0], y)[None, :])
+            np.minimum(q, hi, out=q)
+        else:
+            q = np.minimum(np.minimum.accumulate(hi, axis=0), np.maximum(lo[0], y)[None, :])
+            np.maximum(q, lo, out=q)
+        out[a:b] = q
+        y = q[-1]
+    return out
+
+
+def plane_width_change(hp: dict, v, width) -> np.ndarray:
+    """Change [um] of a ``plane`` operator's output when every play's threshold is multiplied by ``width`` (T,)
+    [1] at each sample: ``sum_{r_j > 0} F_j(P_{r_j width}(v)) - F_j(P_{r_j}(v))`` (:func:`plays_varying`). The
+    reversible curve (threshold 0) and a Bouc-Wen column are unchanged. Zero for other operator types."""
+    v = np.ascontiguousarray(v, dtype=float)
+    out = np.zeros(v.size)
+    if hp.get("type", "pi") != "plane" or v.size == 0:
+        return out
+    r = np.asarray(hp["r"], float)
+    hyst = np.flatnonzero(r > 0)
+    if hyst.size == 0:
+        return out
+    v_rest = float(hp.get("v_rest", 0.0))
+    P0 = play_states(v, r, v_rest)
+    w = np.asarray(width, float).reshape(-1)
+    P1 = plays_varying(v, w[:, None] * r[None, hyst], np.full(hyst.size, v_rest))
+    for i, j in enumerate(hyst):
+        kn, vals = hp["knots"][j], hp["values"][j]
+        out += interp_linear_ext(P1[:, i], kn, vals) - interp_linear_ext(P0[:, j], kn, vals)
+    return out
 
 
 def initial_state_span(hp: dict, v, v_lo: float, v_hi: float) -> np.ndarray:

@@ -1,0 +1,163 @@
+"""Round 15: the rate term is a rate-dependent loop *width* (the base plane's plays with thresholds that grow with
+the rate they move at), not a rate-dependent gain on the hysteretic part (docs/diagnose.md, "Round 15: rate
+dependence")."""
+
+import numpy as np
+import pytest
+
+from piezoctl.diagnose import select as S
+from piezoctl.diagnose import significance as sg
+from piezoctl.diagnose.run import locate
+from piezoctl.dsp import filt
+from piezoctl.ident import refined
+from piezoctl.ident.terms import TERMS
+from piezoctl.io.recording import Recording
+from piezoctl.models.hysteresis import plane_width_change, plays_varying
+from piezoctl.models.play import play_outputs
+
+FS = 10_000.0
+
+
+def _recursion(v, R, y0):
+    """The play's per-sample recursion with a threshold per sample."""
+    y = np.array(y0, float)
+    out = np.empty(R.shape)
+    for k in range(v.size):
+        y = np.maximum(v[k] - R[k], np.minimum(v[k] + R[k], y))
+        out[k] = y
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_varying_plays_are_the_classical_plays_at_constant_thresholds(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 3000))
+    v = np.cumsum(rng.normal(size=n)) / 20
+    if seed % 2:
+        v = np.round(v, 1)        # holds
+    r = rng.uniform(0, 0.5, 5)
+    y0 = rng.normal(size=5) * 0.2
+    assert np.array_equal(plays_varying(v, np.tile(r, (n, 1)), y0), play_outputs(v, r, y0=y0))
+
+
+def test_varying_plays_follow_the_recursion_while_thresholds_grow():
+    """Thresholds that never shrink: the runs' form is the per-sample recursion exactly."""
+    rng = np.random.default_rng(7)
+    n = 4000
+    v = np.sin(np.linspace(0, 40, n)) * np.linspace(0.3, 1.0, n) + rng.normal(0, 0.01, n)
+    R = np.outer(1 + np.linspace(0, 1.5, n) ** 2, [0.05, 0.2, 0.4])
+    y0 = np.zeros(3)
+    assert np.allclose(plays_varying(v, R, y0), _recursion(v, R, y0), rtol=0, atol=1e-12)
+
+
+def _plane(rng):
+    r = [0.0, 0.1, 0.25, 0.45]
+    knots = [np.linspace(-1.2 + x, 1.2 - x, 9) for x in r]
+    values = [np.concatenate([[0.0], np.cumsum(rng.uniform(0.3, 1.0, k.size - 1))]) - 2.0 for k in knots]
+    return {"type": "plane", "r": r, "knots": [k.tolist() for k in knots], "values": [x.tolist() for x in values],
+            "offset": 0.0, "v_rest": 0.0, "v_lo": -1.0, "v_hi": 1.0}
+
+
+def test_the_width_stays_in_the_memory_after_a_fast_stroke():
+    """A fast stroke up then a slow return: on the slow part the rate factor is 1, yet the plays that last moved
+    fast keep their wider threshold until the drive pushes them again, so the output still differs; a gain on the
+    hysteretic part at the rate of the moment (the law before round 15) is zero there."""
+    hp = _plane(np.random.default_rng(1))
+    dt = 1 / FS
+    up = np.linspace(-0.9, 0.9, 200)             # 0.02 s: 90 FS/s
+    down = np.linspace(0.9, 0.6, 20000)[1:]      # 2 s: 0.15 FS/s
+    v = np.concatenate([np.full(2000, -0.9), up, down])
+    term = TERMS["rate_dependent_hysteresis"]
+    d = term.widened(hp, v, dt, 10.0, 1.0)    # the stroke at 9x ref, the return at 1/60 of it
+    slow = slice(2200 + 5000, 2200 + 9000)       # well after the turn, still inside the widest play's hold
+    assert term.width(v, dt, 10.0, 1.0)[slow].max() < 1.02
+    assert np.min(np.abs(d[slow])) > 0.05 * np.max(np.abs(d))
+    from piezoctl.models.hysteresis import hysteresis_parts
+    old = term.basis(v, hysteresis_parts(hp, v)[1], dt, 10.0)
+    assert np.max(np.abs(old[slow])) < 0.2 * np.min(np.abs(d[slow]))
+
+
+def _stage(rng):
+    """A stage whose plays widen with the rate (the term's own law at ref 10 FS/s, k 0.8), recorded with sines of
+    three rates and a slow triangle; the base is its rate-independent plane."""
+    base = {"fs_hz": FS, "u_mid": 75.0, "u_half": 75.0, "hysteresis": _plane(rng),
+            "dynamics": {"b": [0.3, 0.2], "a": [1.0, -0.5]}, "terms": {}}
+    t = np.arange(int(4 * FS)) / FS
+    drives = [75 + 55 * np.sin(2 * np.pi * f * t) for f in (1.0, 6.0, 25.0)]
+    drives.append(75 + 60 * (2 * np.abs(((t * 0.5) % 1) - 0.5) * 2 - 1))
+    return base, t, drives
+
+
+@pytest.mark.parametrize("law", ["width", "none", "too_wide"])
+def test_a_widening_loop_is_found_and_a_rate_independent_stage_is_not(law):
+    """The term's own law is found at its reference; nothing on a rate-independent stage; and a fit that asks the
+    loop to widen far beyond what rate dependence does (gain 6 at k 0.8: 5.8-fold) is vetoed with the reason."""
+    rng = np.random.default_rng(3)
+    base, t, drives = _stage(rng)
+    true = {"gain": 6.0 if law == "too_wide" else 1.0, "ref_fs_per_s": 10.0, "width_k": 0.8, "rate_cutoff_hz": 50.0}
+    stage = dict(base, terms={"rate_dependent_hysteresis": true} if law != "none" else {})
+    recs = [Recording(t=t, u=u, y=refined.simulate(stage, t, u) + rng.normal(0, 0.005, t.size), path=f"r{i}.csv")
+            for i, u in enumerate(drives)]
+    ctx, _, _ = locate(base, recs[3:], recs, [r.path for r in recs], 0.5, 0.5)
+    fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
+    block_all = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+    e = S.residual(ctx)
+    c = S._evaluate([ctx, ctx], TERMS["rate_dependent_hysteresis"], [e, e], fold_all, block_all, 10 ** 6,
+                    sg.ALPHA / 12)
+    if law == "width":
+        assert c.significant and max(c.fold_ratios) < 0.2
+        assert all(abs(np.log(st[0] / 10.0)) < np.log(3.0) for st in c.setting)
+    elif law == "too_wide":
+        assert max(c.fold_ratios) < 0.2 and c.p < sg.ALPHA / 12    # it fits, and is refused for its size
+        assert not c.significant and "wide" in c.veto
+    else:
+        assert not c.significant
+
+
+def test_the_widening_bound():
+    """The widening is taken at the recordings' fastest settled rate: a large gain at a reference far above every
+    rate the drive reaches is a small widening."""
+    from types import SimpleNamespace
+    t = np.arange(int(FS)) / FS
+    v = 0.8 * np.sin(2 * np.pi * 10 * t)               # up to 50 FS/s
+    ctx = SimpleNamespace(signals=[SimpleNamespace(v=v, dt=1 / FS)], valid=[t > 0.1])
+    term = TERMS["rate_dependent_hysteresis"]
+    assert term.implausible(ctx, (3.0, 1.0), [1.8, 0.1]) is None
+    assert term.implausible(ctx, (3000.0, 1.0), [100.0, 0.1]) is None    # 100 x 50 / 3050 = 1.6
+    assert "wide" in term.implausible(ctx, (30.0, 1.0), [273.0, 0.0])     # two-effect s113-001's gain
+    assert "wide" in term.implausible(ctx, (3.0, 1.0), [3.5, 0.0])
+
+
+def test_old_model_files_keep_the_gain_law():
+    """A model file without ``width_k`` (rounds up to 14) simulates the hysteretic part scaled by the rate."""
+    rng = np.random.default_rng(2)
+    base, t, drives = _stage(rng)
+    u = drives[2]
+    y0 = refined.simulate(base, t, u)
+    old = {"gain": 0.3, "ref_fs_per_s": 5.0, "rate_cutoff_hz": 50.0}
+    y1 = refined.simulate(dict(base, terms={"rate_dependent_hysteresis": old}), t, u)
+    p = refined.simulate_parts(base, t, u)
+    want = filt(base["dynamics"]["b"], base["dynamics"]["a"],
+                0.3 * TERMS["rate_dependent_hysteresis"].basis(p["v"], p["hyst"], 1 / FS, 5.0))
+    assert np.allclose(y1 - y0, want, rtol=0, atol=1e-9)
+    assert np.max(np.abs(want)) > 0.01
+
+
+def test_a_base_without_plays_keeps_the_gain_law():
+    """A plane of the reversible curve and a Bouc-Wen column (the own-stage cases' bases) has no thresholds to
+    widen: the term's settings are the references alone and its columns the old law's, through G."""
+    from types import SimpleNamespace
+    hp = {"type": "plane", "r": [0.0], "knots": [[-1.0, 1.0]], "values": [[-5.0, 5.0]], "offset": 0.0,
+          "v_rest": 0.0, "v_lo": -1.0, "v_hi": 1.0, "bw": {"beta": 2.0, "gamma": 0.4, "c_h": 1.5}}
+    base = {"fs_hz": FS, "u_mid": 75.0, "u_half": 75.0, "hysteresis": hp,
+            "dynamics": {"b": [0.3, 0.2], "a": [1.0, -0.5]}, "terms": {}}
+    t = np.arange(int(FS)) / FS
+    u = 75 + 60 * np.sin(2 * np.pi * 20 * t)
+    p = refined.simulate_parts(base, t, u)
+    term = TERMS["rate_dependent_hysteresis"]
+    ctx = SimpleNamespace(base=base)
+    s = SimpleNamespace(v=p["v"], hyst=p["hyst"], dt=1 / FS)
+    assert term.settings(ctx) == list(term.REFS)
+    want = filt([0.3, 0.2], [1.0, -0.5], term.basis(p["v"], p["hyst"], 1 / FS, 3.0))
+    assert np.allclose(term.columns(ctx, s, 3.0), want) and np.max(np.abs(want)) > 0.1
+    assert "width_k" not in term.model_params(ctx, 3.0, [0.3])
