@@ -437,6 +437,18 @@ def offset_level_test(designs, levels, es, fold_all, block_all, rec, dt, rows, m
     return out
 
 
+def _level_design(design, R):
+    """One fold's design for the levels per recording: the nuisance, creep's regressors when offered, and the
+    recordings' indicator columns ``R`` (free); returns ``X``, ``lo``, ``hi``."""
+    N, n_lo, n_hi, grp = design
+    keep = [n for n in ("creep",) if n in grp]
+    n_rec = R.shape[1]
+    X = np.hstack([N] + [grp[n][0] for n in keep] + [R])
+    lo = np.concatenate([n_lo] + [grp[n][1] for n in keep] + [np.full(n_rec, -np.inf)])
+    hi = np.concatenate([n_hi] + [np.full(grp[n][0].shape[1], np.inf) for n in keep] + [np.full(n_rec, np.inf)])
+    return X, lo, hi
+
+
 def level_spread_test(designs, es, fold_all, rec, ctx, rows) -> dict | None:
     """Whether the recordings of one sensor session sit at one level (round 12).
 
@@ -470,11 +482,7 @@ def level_spread_test(designs, es, fold_all, rec, ctx, rows) -> dict | None:
     R = (rec[:, None] == np.arange(ctx.n_rec)[None, :]).astype(float)
     levels = []
     for f in (0, 1):
-        N, n_lo, n_hi, grp = designs[f]
-        keep = [n for n in ("creep",) if n in grp]
-        X = np.hstack([N] + [grp[n][0] for n in keep] + [R])
-        lo = np.concatenate([n_lo] + [grp[n][1] for n in keep] + [np.full(ctx.n_rec, -np.inf)])
-        hi = np.concatenate([n_hi] + [np.full(grp[n][0].shape[1], np.inf) for n in keep] + [np.full(ctx.n_rec, np.inf)])
+        X, lo, hi = _level_design(designs[f], R)
         idx = train_rows(fold_all == f, rows)
         levels.append(lstsq_box(X[idx], es[f][idx], lo, hi)[-ctx.n_rec:])
     L = 0.5 * (levels[0] + levels[1])
@@ -536,11 +544,7 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
     tt = np.concatenate([_session_time(ctx, s)[v] for s, v in zip(ctx.signals, ctx.valid)])
     blocks, levels = [], []
     for f in (0, 1):
-        N, n_lo, n_hi, grp = designs[f]
-        keep = [n for n in ("creep",) if n in grp]
-        X = np.hstack([N] + [grp[n][0] for n in keep] + [R])
-        lo = np.concatenate([n_lo] + [grp[n][1] for n in keep] + [np.full(ctx.n_rec, -np.inf)])
-        hi = np.concatenate([n_hi] + [np.full(grp[n][0].shape[1], np.inf) for n in keep] + [np.full(ctx.n_rec, np.inf)])
+        X, lo, hi = _level_design(designs[f], R)
         m = fold_all == f
         th = lstsq_box(X[train_rows(m, rows)], es[f][train_rows(m, rows)], lo, hi)
         levels.append(th[-ctx.n_rec:])
