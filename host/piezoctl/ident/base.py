@@ -324,7 +324,7 @@ def plausible(m, band) -> bool:
 
 
 ARX_COND_MAX = 1e12       # largest condition number of the scaled Gram matrix the refined normal equations take
-ARX_REFINE_STEPS = 2      # refinement steps of the normal equations' solution (each gains a factor ~cond(G) eps)
+ARX_REFINE_STEPS = 3      # refinement steps of the normal equations' solution (each gains a factor ~cond(G) eps, down to a floor of about cond(X) eps: the residual is computed in working precision)
 
 
 def _lstsq_qr(X, y):
@@ -346,8 +346,10 @@ def _lstsq(X, y):
     of the rows took 0.8 to 2 s per fit, the Gram matrix and its k x k Cholesky take a few tens of ms. The
     normal equations alone square the condition number (lagged outputs at 10 kHz: cond(X) about 2e4, so an
     error of about 1e-8 relative); each refinement step ``th += G^-1 X'(y - X th)`` shrinks that error by a
-    factor of about cond(G) eps (4e-8 here), so two steps reach the QR's own accuracy (agreement with it to
-    about 1e-12 relative on the foreign cases' ARX designs; tests/host/test_kernels_speed_equivalence.py)."""
+    factor of about cond(G) eps (4e-8 here) down to a floor of about cond(X) eps, since the residual is computed in
+    working precision (round 15: on an AMD EPYC's OpenBLAS, two steps left an order-2 ARX design of cond(X) 5e5 at
+    1.6e-11 from the QR, which the ARX's unit-gain normalization carried to 1.3e-10 in b; a third step 8e-11, a
+    residual in extended precision 3e-13 at three times the cost; tests/host/test_diagnose_speed_equivalence.py)."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
     sc = np.sqrt(np.mean(X ** 2, axis=0))
     sc[sc == 0] = 1.0
