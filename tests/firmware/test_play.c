@@ -308,6 +308,24 @@ static int64_t cpi_scan_oracle(const struct piezo_play_coef *c, int32_t *f, int6
     return acc;
 }
 
+/* A random classical bank for the run tests: n_r nondecreasing thresholds in
+ * [0, span] with repeats (a quarter of the steps are 0), weights at the int32
+ * extremes half the time, then any int32. */
+static void random_bank(int32_t *r, int32_t *w, uint16_t n_r, int32_t span)
+{
+    int32_t t = 0;
+    for (size_t i = 0; i < n_r; i++) {
+        if (i == 0u || lcg() % 4u != 0u) {
+            t += lcg_range(0, span / (int32_t)n_r);
+        }
+        r[i] = t < span ? t : span;
+    }
+    for (size_t i = 0; i < n_r; i++) {
+        const uint32_t pick = lcg() % 4u;
+        w[i] = pick == 0u ? INT32_MAX : pick == 1u ? INT32_MIN : (int32_t)(lcg() << 8 ^ lcg());
+    }
+}
+
 /* Classical banks (round 13: the last sample's run moved as one, d * run_w)
  * against the scan above and against the formula on every operator, every
  * sample: random walks of long monotone runs of small steps (the run grows
@@ -326,17 +344,7 @@ static void test_classical_runs_equal_scan(void **state)
     for (size_t s = 0; s < sizeof shapes / sizeof shapes[0]; s++) {
         const uint16_t n_r = shapes[s][0];
         const int32_t span = (int32_t)1 << shapes[s][1];
-        int32_t t = 0;
-        for (size_t i = 0; i < n_r; i++) {
-            if (i == 0u || lcg() % 4u != 0u) {
-                t += lcg_range(0, span / (int32_t)n_r);
-            }
-            r[i] = t < span ? t : span;
-        }
-        for (size_t i = 0; i < n_r; i++) {
-            const uint32_t pick = lcg() % 4u; /* the extremes, then any int32 */
-            w[i] = pick == 0u ? INT32_MAX : pick == 1u ? INT32_MIN : (int32_t)(lcg() << 8 ^ lcg());
-        }
+        random_bank(r, w, n_r, span);
         const struct piezo_play_coef c = {r, NULL, w, n_r, 0u};
         struct piezo_play p;
         assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, NULL, 0u), PIEZO_OK);
@@ -404,17 +412,7 @@ static void test_cpi_step_matches_c_step(void **state)
     for (size_t s = 0; s < sizeof shapes / sizeof shapes[0]; s++) {
         const uint16_t n_r = shapes[s][0];
         const int32_t span = (int32_t)1 << shapes[s][1];
-        int32_t t = 0;
-        for (size_t i = 0; i < n_r; i++) {
-            if (i == 0u || lcg() % 4u != 0u) {
-                t += lcg_range(0, span / (int32_t)n_r);
-            }
-            r[i] = t < span ? t : span;
-        }
-        for (size_t i = 0; i < n_r; i++) {
-            const uint32_t pick = lcg() % 4u;
-            w[i] = pick == 0u ? INT32_MAX : pick == 1u ? INT32_MIN : (int32_t)(lcg() << 8 ^ lcg());
-        }
+        random_bank(r, w, n_r, span);
         const struct piezo_play_coef c = {r, NULL, w, n_r, 0u};
         struct piezo_play p, q;
         assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, NULL, 0u), PIEZO_OK);
