@@ -308,6 +308,28 @@ static int64_t cpi_scan_oracle(const struct piezo_play_coef *c, int32_t *f, int6
     return acc;
 }
 
+/* The run tests' drive in [-span, span]: runs of 1-3 or 1-400 samples, still,
+ * jumping (span/8 to span a sample) or creeping, with a small reversal one
+ * sample in 32. */
+struct walk {
+    int32_t u, dir, left, step;
+};
+
+static int32_t walk_next(struct walk *w, int32_t span)
+{
+    if (w->left-- <= 0) {
+        const uint32_t kind = lcg() % 6u;
+        w->dir = lcg() % 2u ? 1 : -1;
+        w->left = kind == 0u ? lcg_range(1, 3) : lcg_range(1, 400);
+        w->step = kind == 1u ? 0 : kind == 2u ? lcg_range(span / 8, span) : lcg_range(1, 1 + span / 512);
+    }
+    const int32_t jitter = lcg() % 32u == 0u ? -w->dir * lcg_range(1, 3) : 0;
+    int64_t next = (int64_t)w->u + w->dir * w->step + jitter;
+    next = next > span ? span : next < -span ? -span : next;
+    w->u = (int32_t)next;
+    return w->u;
+}
+
 /* A random classical bank for the run tests: n_r nondecreasing thresholds in
  * [0, span] with repeats (a quarter of the steps are 0), weights at the int32
  * extremes half the time, then any int32. */
@@ -351,19 +373,11 @@ static void test_classical_runs_equal_scan(void **state)
         memset(eager, 0, sizeof eager);
         memset(scan, 0, sizeof scan);
         int64_t scan_acc = 0;
-        int32_t u = 0, u_prev = 0, dir = 1, left = 0, step = 1;
+        int32_t u = 0, u_prev = 0;
+        struct walk wk = {0, 1, 0, 1};
         int primed = 0;
         for (size_t k = 0; k < 20000u; k++) {
-            if (left-- <= 0) {
-                const uint32_t kind = lcg() % 6u;
-                dir = lcg() % 2u ? 1 : -1;
-                left = kind == 0u ? lcg_range(1, 3) : lcg_range(1, 400);
-                step = kind == 1u ? 0 : kind == 2u ? lcg_range(span / 8, span) : lcg_range(1, 1 + span / 512);
-            }
-            const int32_t jitter = lcg() % 32u == 0u ? -dir * lcg_range(1, 3) : 0;
-            int64_t next = (int64_t)u + dir * step + jitter;
-            next = next > span ? span : next < -span ? -span : next;
-            u = (int32_t)next;
+            u = walk_next(&wk, span);
             if (k == 10007u) { /* a reset in the middle of a run */
                 piezo_play_reset(&p);
                 memset(eager, 0, sizeof eager);
@@ -417,19 +431,11 @@ static void test_cpi_step_matches_c_step(void **state)
         struct piezo_play p, q;
         assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, NULL, 0u), PIEZO_OK);
         assert_int_equal(piezo_play_init(&q, &c, f_c, PIEZO_PLAY_MAX_OPS, NULL, 0u), PIEZO_OK);
-        int32_t u = 0, dir = 1, left = 0, step = 1;
+        int32_t u = 0;
+        struct walk wk = {0, 1, 0, 1};
         size_t runs_kept = 0u;
         for (size_t k = 0; k < 20000u; k++) {
-            if (left-- <= 0) {
-                const uint32_t kind = lcg() % 6u;
-                dir = lcg() % 2u ? 1 : -1;
-                left = kind == 0u ? lcg_range(1, 3) : lcg_range(1, 400);
-                step = kind == 1u ? 0 : kind == 2u ? lcg_range(span / 8, span) : lcg_range(1, 1 + span / 512);
-            }
-            const int32_t jitter = lcg() % 32u == 0u ? -dir * lcg_range(1, 3) : 0;
-            int64_t next = (int64_t)u + dir * step + jitter;
-            next = next > span ? span : next < -span ? -span : next;
-            u = (int32_t)next;
+            u = walk_next(&wk, span);
             const size_t at = s * 100000u + k;
             runs_kept += p.run_n > 0u && p.run_dir == (u > p.u_prev_q15 ? 1 : -1) && u != p.u_prev_q15;
             assert_golden_i32("cpi step: sum", at, piezo_play_process_cpi(&p, u), piezo_play_process_cpi_c(&q, u));
