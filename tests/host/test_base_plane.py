@@ -14,17 +14,9 @@ from piezoctl.models.hysteresis import (add_to_features, hat_basis, hysteresis_c
                                         hysteresis_groups, hysteresis_parts, interp_linear_ext, scale_channels,
                                         scale_groups)
 from piezoctl.models.play import play_outputs
+from play_reference import per_sample_plays
 
 FS = 10_000.0
-
-
-def _per_sample_plays(u, r, y0):
-    f = np.array(y0, float)
-    out = np.empty((u.size, r.size))
-    for k in range(u.size):
-        f = np.maximum(u[k] - r, np.minimum(u[k] + r, f))
-        out[k] = f
-    return out
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -36,7 +28,7 @@ def test_plays_by_runs_equal_the_recursion_bit_for_bit(seed):
         u = np.round(u)          # plateaus: zero steps belong to the run before them
     r = rng.uniform(0, 3, 9)
     y0 = rng.normal(size=9) * 2
-    assert np.array_equal(play_outputs(u, r, y0=y0), _per_sample_plays(u, r, y0))
+    assert np.array_equal(play_outputs(u, r, y0=y0), per_sample_plays(u, r, y0))
 
 
 def test_hat_basis_is_a_partition_of_unity_continued_linearly():

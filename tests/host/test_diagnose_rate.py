@@ -14,18 +14,9 @@ from piezoctl.ident.terms import TERMS
 from piezoctl.io.recording import Recording
 from piezoctl.models.hysteresis import plane_width_change, plays_varying
 from piezoctl.models.play import play_outputs
+from play_reference import per_sample_plays
 
 FS = 10_000.0
-
-
-def _recursion(v, R, y0):
-    """The play's per-sample recursion with a threshold per sample."""
-    y = np.array(y0, float)
-    out = np.empty(R.shape)
-    for k in range(v.size):
-        y = np.maximum(v[k] - R[k], np.minimum(v[k] + R[k], y))
-        out[k] = y
-    return out
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -47,7 +38,7 @@ def test_varying_plays_follow_the_recursion_while_thresholds_grow():
     v = np.sin(np.linspace(0, 40, n)) * np.linspace(0.3, 1.0, n) + rng.normal(0, 0.01, n)
     R = np.outer(1 + np.linspace(0, 1.5, n) ** 2, [0.05, 0.2, 0.4])
     y0 = np.zeros(3)
-    assert np.allclose(plays_varying(v, R, y0), _recursion(v, R, y0), rtol=0, atol=1e-12)
+    assert np.allclose(plays_varying(v, R, y0), per_sample_plays(v, R, y0), rtol=0, atol=1e-12)
 
 
 def _plane(rng):
