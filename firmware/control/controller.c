@@ -165,12 +165,28 @@ static int16_t shape(piezo_ctl_t *c, int16_t r)
     return piezo_sat_q15(piezo_rshift_rnd64(acc, 15u));
 }
 
+/* A sensor code's offset d (ADC codes) times the gain (q15 LSB per code,
+ * q16) as q15: sat_q15(rshift_rnd64(d gain, 16)), with the range tested
+ * before the shift. s = d gain + 2^15 lies in int32 iff s >> 16 lies in q15,
+ * so one compare of the high word with the low word's sign, then one shift,
+ * gives the same integer as the 64-bit shift, its range test and the SSAT
+ * (about 5 instructions less per sensor on the Cortex-M4). */
+static inline int16_t sensor_q15(int32_t d, int32_t gain_q16)
+{
+    const int64_t s = (int64_t)d * gain_q16 + ((int64_t)1 << 15);
+    const int32_t lo = (int32_t)s, hi = (int32_t)(s >> 32);
+    if (__builtin_expect(hi == (lo >> 31), 1)) { /* in line: the out-of-range case out of it */
+        return (int16_t)(lo >> 16);
+    }
+    return hi < 0 ? PIEZO_Q15_MIN : PIEZO_Q15_MAX;
+}
+
 /* Sensor plausibility: a code outside the valid range, or a jump no stage can
  * make in one tick. Bad samples hold the last good value. */
 static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
 {
     const piezo_ctl_cfg_t *g = &c->cfg;
-    int16_t y = piezo_sat_q15(piezo_rshift_rnd64((int64_t)(code - g->adc_zero) * g->sensor_gain_q16, 16u));
+    int16_t y = sensor_q15(code - g->adc_zero, g->sensor_gain_q16);
     int32_t jump = (int32_t)y - c->y_prev_q15;
     /* |jump| > max as one unsigned compare: jump + max lies outside [0, 2 max]
      * (max in (0, 32767], |jump| <= 65535: no overflow) */
@@ -293,7 +309,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 2-3. sensor */
     y = read_sensor(c, adc[0]);
-    y2 = piezo_sat_q15(piezo_mul_rshift_rnd(adc[1] - g->adc_zero, g->sensor_gain_q16, 16u)); /* (one SMULL: fixed_q.h) */
+    y2 = sensor_q15(adc[1] - g->adc_zero, g->sensor_gain_q16);
     /* each signal goes to sig[] (the recorder's and the register map's copy,
      * step 9) as soon as it is final: nothing in the tick reads sig[] after
      * the boundary's servo switch, and a value stored here needs no register

@@ -390,6 +390,62 @@ static void test_load_image_commits_or_names_the_refusal(void **state)
  * for every mode, armed or not, with and without a table, the first tick's
  * feedforward and feedback signals. */
 enum { FF_ZERO, FF_REF, FF_LINE, FF_TABLE };
+/* The sensor's scaling, y and y2: sat_q15(rshift_rnd64((code - adc_zero)
+ * gain, 16)) as the int64 formula, for random zeros, gains (both signs, up to
+ * the int32 range) and codes, the saturation's edges included (s = 2^31 - 1,
+ * 2^31, -2^31, -2^31 - 1 before the shift). */
+static uint32_t sensor_lcg(uint32_t *x)
+{
+    *x = *x * 1664525u + 1013904223u;
+    return *x;
+}
+
+static int16_t sensor_formula(int32_t d, int32_t gain)
+{
+    int64_t v = ((int64_t)d * gain + 32768) >> 16;
+    return (int16_t)(v > 32767 ? 32767 : (v < -32768 ? -32768 : v));
+}
+
+static void test_sensor_scale_matches_int64_formula(void **state)
+{
+    (void)state;
+    uint32_t x = 12345u;
+    /* the edges, d and gain: d gain + 2^15 = 2^31 - 1, 2^31, -2^31, -2^31 - 2, -1, 0 */
+    const int32_t edge[][2] = {{INT32_MAX - 32768, 1}, {INT32_MAX - 32767, 1}, {-(1 << 30) - (1 << 14), 2},
+                               {-(1 << 30) - (1 << 14) - 1, 2}, {-32769, 1}, {-32768, 1}};
+    for (int i = 0; i < 2000; i++) {
+        piezo_ctl_cfg_t cfg = unit_cfg();
+        int32_t in[2], dac = 0, d0, d1;
+        uint32_t sh;
+        cfg.adc_zero = (int32_t)(sensor_lcg(&x) >> 8) - (1 << 23);
+        sh = sensor_lcg(&x) % 31u;
+        cfg.sensor_gain_q16 = (int32_t)sensor_lcg(&x) >> sh;
+        cfg.adc_min_ok = INT32_MIN;
+        cfg.adc_max_ok = INT32_MAX;
+        if (i < 6) {
+            cfg.adc_zero = 0;
+            cfg.sensor_gain_q16 = edge[i][1];
+            d0 = d1 = edge[i][0];
+        } else {
+            sh = sensor_lcg(&x) % 32u;
+            d0 = (int32_t)(sensor_lcg(&x) >> sh) - (int32_t)(sensor_lcg(&x) >> 1);
+            sh = sensor_lcg(&x) % 32u;
+            d1 = (int32_t)(sensor_lcg(&x) >> 1) - (int32_t)(sensor_lcg(&x) >> sh);
+        }
+        /* codes whose difference from the zero does not overflow int32 */
+        if ((cfg.adc_zero > 0 && d0 > INT32_MAX - cfg.adc_zero) || (cfg.adc_zero < 0 && d0 < INT32_MIN - cfg.adc_zero) ||
+            (cfg.adc_zero > 0 && d1 > INT32_MAX - cfg.adc_zero) || (cfg.adc_zero < 0 && d1 < INT32_MIN - cfg.adc_zero)) {
+            cfg.adc_zero = 0;
+        }
+        assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+        in[0] = cfg.adc_zero + d0;
+        in[1] = cfg.adc_zero + d1;
+        piezo_ctl_tick(&ctl, in, &dac);
+        assert_int_equal(ctl.sig[PIEZO_SIG_Y], sensor_formula(d0, cfg.sensor_gain_q16));
+        assert_int_equal(ctl.sig[PIEZO_SIG_Y2], sensor_formula(d1, cfg.sensor_gain_q16));
+    }
+}
+
 static int want_ff(uint8_t mode, int armed, int table)
 {
     if (!armed || mode == PIEZO_MODE_IDLE || mode == PIEZO_MODE_FEEDBACK) {
@@ -450,6 +506,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_dcc_table_drives_bit_exact),
         cmocka_unit_test(test_mode_dispatch_matches_the_rule),
+        cmocka_unit_test(test_sensor_scale_matches_int64_formula),
         cmocka_unit_test(test_eupi_inverse_table_drives_bit_exact),
         cmocka_unit_test(test_refused_images_leave_the_active_table_running),
         cmocka_unit_test(test_commit_needs_unlock_and_an_upload),
