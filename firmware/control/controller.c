@@ -42,6 +42,7 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
     c->wave_ff_active = -1;
     c->wave_ff_pending = -1;
     c->wave_cfg.kind = PIEZO_WAVE_OFF;
+    c->ref_stages = piezo_ctl_ref_stages_of(c);
     if ((rc = piezo_pid_init(&c->pid, &c->cfg.pid)) != PIEZO_OK ||
         (rc = piezo_biquad_init(&c->notch, &c->cfg.notch)) != PIEZO_OK ||
         (rc = piezo_limit_init(&c->limit, &c->cfg.limit, cfg->u_safe_q15)) != PIEZO_OK ||
@@ -268,6 +269,18 @@ static int16_t wave_ff_at(const piezo_ctl_wave_ff_t *t, uint32_t ph)
     return (int16_t)(a + piezo_rshift_rnd64((int64_t)(b - a) * frac, 16u));
 }
 
+uint8_t piezo_ctl_ref_stages_of(const piezo_ctl_t *c)
+{
+    const piezo_ctl_cfg_t *g = &c->cfg;
+    return (uint8_t)(g->preview_ticks != 0u || c->wave_ff_active >= 0 || g->shaper_ticks != 0u ||
+                     g->dyninv.n_taps != 0u);
+}
+
+void piezo_ctl_config_changed(piezo_ctl_t *c)
+{
+    c->boundary_req = 1u; /* the tick derives ref_stages (only it writes it after init) */
+}
+
 /* a mode's bit in the tick's mask of the running mode */
 #define MODE_BIT(m) (1u << (m))
 
@@ -300,6 +313,10 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
             c->wave_ff_active = (pend == PIEZO_CTL_WAVE_FF_OFF) ? (int8_t)-1 : pend;
             c->wave_ff_pending = -1;
         }
+        /* the stages before the feedforward: any request (a configuration
+         * change too) may have switched one of them on or off */
+        c->ref_stages = piezo_ctl_ref_stages_of(c);
+        c->wave_ff_q15 = 0;
         if (c->servo_req != 0u) {
             servo_switch(c, c->servo_req);
             c->servo_req = 0u;
@@ -332,33 +349,40 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     wave_on = (c->ref_source == PIEZO_REF_WAVE) ? c->wave.running : 0u; /* (no call: the tick runs from RAM) */
     r_ahead = (c->ref_source == PIEZO_REF_WAVE) ? piezo_wave_process(&c->wave) : c->setpoint_q15;
     r = r_ahead;
-    if (g->preview_ticks != 0u) {
-        r = c->ref_fifo[c->fifo_pos];
-        c->ref_fifo[c->fifo_pos] = r_ahead;
-        if (++c->fifo_pos >= g->preview_ticks) {
-            c->fifo_pos = 0u;
+    r_loop = r;
+    /* 4a-4c. the stages between the reference and the feedforward, none in
+     * most configurations: one test of them all (ref_stages, step 1) */
+    if (c->ref_stages != 0u) {
+        if (g->preview_ticks != 0u) {
+            r = c->ref_fifo[c->fifo_pos];
+            c->ref_fifo[c->fifo_pos] = r_ahead;
+            if (++c->fifo_pos >= g->preview_ticks) {
+                c->fifo_pos = 0u;
+            }
+        }
+        /* 4b. the wave's learned feedforward, in sync with it (controller.h):
+         *     r_ahead + c(phase), and for the error r + c(phase - preview) */
+        r_loop = r;
+        c->wave_ff_q15 = 0;
+        if (wave_on != 0u && c->wave_ff_active >= 0) {
+            const piezo_ctl_wave_ff_t *t = &c->wave_ff[c->wave_ff_active];
+            c->wave_ff_q15 = wave_ff_at(t, c->wave_ff_phase);
+            r_ahead = piezo_sat_q15((int32_t)r_ahead + c->wave_ff_q15);
+            r_loop = piezo_sat_q15((int32_t)r +
+                                   wave_ff_at(t, c->wave_ff_phase - (uint32_t)g->preview_ticks * t->freq_word));
+            c->wave_ff_phase += t->freq_word;
+        }
+
+        /* 4c. shaper, then the dynamics inverse (none with 0 taps: one compare) */
+        r_ahead = shape(c, r_ahead);
+        if (g->dyninv.n_taps != 0u) {
+            r_ahead = piezo_fir_q13_process(&c->dyninv, &g->dyninv, r_ahead);
         }
     }
+    /* (wave_ff_q15 is 0 without the stages: step 1 clears it whenever it
+     * derives ref_stages, before this tick's stages could set it) */
     c->sig[PIEZO_SIG_REF] = r;
     c->sig[PIEZO_SIG_ERR] = piezo_sat_q15((int32_t)r - y);
-    /* 4b. the wave's learned feedforward, in sync with it (controller.h):
-     *     r_ahead + c(phase), and for the error r + c(phase - preview) */
-    r_loop = r;
-    c->wave_ff_q15 = 0;
-    if (wave_on != 0u && c->wave_ff_active >= 0) {
-        const piezo_ctl_wave_ff_t *t = &c->wave_ff[c->wave_ff_active];
-        c->wave_ff_q15 = wave_ff_at(t, c->wave_ff_phase);
-        r_ahead = piezo_sat_q15((int32_t)r_ahead + c->wave_ff_q15);
-        r_loop = piezo_sat_q15((int32_t)r +
-                               wave_ff_at(t, c->wave_ff_phase - (uint32_t)g->preview_ticks * t->freq_word));
-        c->wave_ff_phase += t->freq_word;
-    }
-
-    /* 4c. shaper, then the dynamics inverse (none with 0 taps: one compare) */
-    r_ahead = shape(c, r_ahead);
-    if (g->dyninv.n_taps != 0u) {
-        r_ahead = piezo_fir_q13_process(&c->dyninv, &g->dyninv, r_ahead);
-    }
 
     /* 5. feedforward (of the shaped, inverted early reference) */
     {

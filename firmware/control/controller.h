@@ -198,6 +198,14 @@ typedef struct {
     uint32_t wave_ff_phase;          /* phase of r_ahead; restarts with the wave */
     int16_t wave_ff_q15;             /* last correction added to the feedforward reference */
     volatile uint8_t wave_on_trigger; /* 1: start the wave when the recorder triggers */
+    /* 1: a stage between the reference and the feedforward may act (the
+     * preview, the learned feedforward's slot, the shaper, the dynamics
+     * inverse: piezo_ctl_ref_stages_of); 0: the tick skips them with one test
+     * (issue 15, round 16). Written only by init and the tick's step 1: every
+     * path that changes one of those fields (the configuration: rebind in
+     * regmap.c through piezo_ctl_config_changed; the slot: the tick's swap)
+     * has the tick's next step 1 compute it again. */
+    uint8_t ref_stages;
 
     /* feedforward tables: the active set, the previous one (rollback) and a
      * free one that a commit fills; the tick swaps a committed set in */
@@ -255,6 +263,16 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg);
 /** Attach persistent storage and boot the stored active table, if any.
  *  Returns the reason code of loading it (OK also when there is none). */
 uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io);
+
+/** The configuration (cfg) changed between two ticks: the next tick's step 1
+ *  derives what it caches from it again (ref_stages). Whoever writes cfg
+ *  after init calls it, after the write (regmap.c's rebind). */
+void piezo_ctl_config_changed(piezo_ctl_t *c);
+
+/** What ref_stages should be for the present configuration and slot: 1 when
+ *  the preview, the learned feedforward's slot, the shaper or the dynamics
+ *  inverse is on. */
+uint8_t piezo_ctl_ref_stages_of(const piezo_ctl_t *c);
 
 /** The 10 kHz tick: adc[0] this axis' sensor code, adc[1] the other axis'
  *  (or 0); writes this axis' DAC code. */

@@ -504,6 +504,7 @@ static void rebind(piezo_ctl_t *c)
     (void)piezo_pid_init(&c->pid, &c->cfg.pid);
     (void)piezo_biquad_init(&c->notch, &c->cfg.notch);
     (void)piezo_limit_init(&c->limit, &c->cfg.limit, c->limit.prev_q15);
+    piezo_ctl_config_changed(c); /* the tick's cached view of cfg (ref_stages) */
 }
 
 /* ---------------------------------------------------------------- parameters

@@ -142,6 +142,60 @@ static void test_load_and_defaults_commands(void **state)
     assert_int_equal(ctl.cfg.pid.kp_q24, 3 << 22);
 }
 
+/* One tick; the tick's cached view of the configuration and the learned
+ * feedforward's slot (ref_stages) is then what they say, and is want. */
+static void tick_and_check_ref_stages(uint8_t want)
+{
+    int32_t in[2] = {0, 0}, dac = 0;
+    piezo_ctl_tick(&ctl, in, &dac);
+    assert_int_equal(ctl.ref_stages, piezo_ctl_ref_stages_of(&ctl));
+    assert_int_equal(ctl.ref_stages, want);
+}
+
+/* Every path that changes what ref_stages caches updates it by the next
+ * tick: register writes of the preview, the shaper and the dynamics inverse,
+ * the parameters' defaults and load commands, the boot's load, the learned
+ * feedforward's commit and switch-off (the tick's swap). Each path is taken
+ * once to switch the stages on or off, so one that forgets fails here. */
+static void test_every_path_updates_the_ref_stages(void **state)
+{
+    (void)state;
+    static const int16_t ff[4] = {100, -100, 50, -50};
+    uint16_t fir[4] = {2, 3, 12288, (uint16_t)-4096};
+    erase_all();
+    boot();
+    tick_and_check_ref_stages(0u);
+    unlock();
+    assert_int_equal(write1(PIEZO_HOLDING_PREVIEW_TICKS, 3), 0);
+    tick_and_check_ref_stages(1u);
+    assert_int_equal(write1(PIEZO_HOLDING_PREVIEW_TICKS, 0), 0);
+    tick_and_check_ref_stages(0u);
+    assert_int_equal(write1(PIEZO_HOLDING_SHAPER_TICKS, 2), 0);
+    tick_and_check_ref_stages(1u);
+    assert_int_equal(write1(PIEZO_HOLDING_SHAPER_TICKS, 0), 0);
+    tick_and_check_ref_stages(0u);
+    assert_int_equal(write_regs(PIEZO_HOLDING_DYNINV_TAPS, 4, fir), 0);
+    tick_and_check_ref_stages(1u);
+    assert_int_equal(save(), PIEZO_PARAMS_REASON_OK); /* the dynamics inverse on, in flash */
+    assert_int_equal(write1(PIEZO_HOLDING_PARAMS_COMMAND, PIEZO_PARAMS_CMD_DEFAULTS), 0);
+    tick_and_check_ref_stages(0u);
+    assert_int_equal(write1(PIEZO_HOLDING_PARAMS_COMMAND, PIEZO_PARAMS_CMD_LOAD), 0);
+    assert_int_equal(read_input(PIEZO_INPUT_PARAMS_RESULT, 1), PIEZO_PARAMS_REASON_OK);
+    tick_and_check_ref_stages(1u);
+    assert_int_equal(write1(PIEZO_HOLDING_PARAMS_COMMAND, PIEZO_PARAMS_CMD_DEFAULTS), 0);
+    tick_and_check_ref_stages(0u);
+    assert_int_equal(boot(), PIEZO_PARAMS_REASON_OK); /* init with unit_cfg, then the stored parameters */
+    tick_and_check_ref_stages(1u);
+    unlock();
+    assert_int_equal(write1(PIEZO_HOLDING_PARAMS_COMMAND, PIEZO_PARAMS_CMD_DEFAULTS), 0);
+    tick_and_check_ref_stages(0u);
+    /* the learned feedforward's slot */
+    assert_int_equal(piezo_ctl_wave_ff_commit(&ctl, ff, 4u, 1u << 24), PIEZO_OK);
+    tick_and_check_ref_stages(1u);
+    assert_int_equal(piezo_ctl_wave_ff_off(&ctl), PIEZO_OK);
+    tick_and_check_ref_stages(0u);
+}
+
 /* A power cut after every possible number of storage operations of a save:
  * the next boot runs the old parameters or the new ones, never a mixture,
  * and the old record survives every cut. */
@@ -487,6 +541,7 @@ int main(void)
         cmocka_unit_test(test_nothing_stored_runs_the_defaults),
         cmocka_unit_test(test_save_survives_reboot_and_alternates_slots),
         cmocka_unit_test(test_load_and_defaults_commands),
+        cmocka_unit_test(test_every_path_updates_the_ref_stages),
         cmocka_unit_test(test_power_cut_at_every_step_of_a_save),
         cmocka_unit_test(test_corrupt_record_is_ignored_with_its_reason),
         cmocka_unit_test(test_foreign_or_out_of_range_record_runs_the_defaults),

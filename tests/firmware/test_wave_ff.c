@@ -126,8 +126,10 @@ static void test_the_played_table_is_never_half_written(void **state)
     for (uint32_t k = 0; k < PERIOD_TICKS; k++) {
         assert_int_equal(tick(0), -900);
     }
+    assert_int_equal(ctl.wave_ff_q15, -900);
     assert_int_equal(piezo_ctl_wave_ff_off(&ctl), PIEZO_OK);
     assert_int_equal(tick(0), 0);
+    assert_int_equal(ctl.wave_ff_q15, 0); /* switched off: no correction (the slot's last one gone) */
     assert_int_equal(piezo_ctl_wave_ff_n(&ctl), 0u);
 }
 
