@@ -287,7 +287,7 @@ void piezo_ctl_config_changed(piezo_ctl_t *c)
 void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 {
     const piezo_ctl_cfg_t *g = &c->cfg;
-    int16_t y, y2, r, r_loop, r_ahead, u_ff = 0, u_fb = 0, u;
+    int16_t y, r, r_loop, r_ahead, u_ff = 0, u_fb = 0, u;
     int8_t pend;
     uint8_t mode = c->mode, rec_was;
     int run;
@@ -326,13 +326,13 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 2-3. sensor */
     y = read_sensor(c, adc[0]);
-    y2 = sensor_q15(adc[1] - g->adc_zero, g->sensor_gain_q16);
+    c->sig[PIEZO_SIG_Y2] = sensor_q15(adc[1] - g->adc_zero, g->sensor_gain_q16);
     /* each signal goes to sig[] (the recorder's and the register map's copy,
-     * step 9) as soon as it is final: nothing in the tick reads sig[] after
-     * the boundary's servo switch, and a value stored here needs no register
-     * or stack slot across the calls below */
+     * step 9) as soon as it is final: a value stored here needs no register
+     * or stack slot across the calls below (the coupling, step 7, reads y2
+     * back from sig[]; nothing else in the tick reads sig[] after the
+     * boundary's servo switch) */
     c->sig[PIEZO_SIG_Y] = y;
-    c->sig[PIEZO_SIG_Y2] = y2;
     if (c->st.faults != 0u) {
         c->st.armed = 0u; /* any fault disarms */
     }
@@ -410,15 +410,19 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
 
     /* 7-8. sum, clamp, slew limit (also while ramping down after a disarm), DAC */
     u = run ? piezo_sat_q15((int32_t)u_ff + u_fb) : g->u_safe_q15;
-    c->xc_q15 = 0;
+    /* the term applied, xc_q15, is written here only with a coupling slot:
+     * without one it is 0 since the slot went (init, piezo_ctl_rollback) */
     if (c->xc_active >= 0) {
         const piezo_xcset_t *xs = &c->xset[c->xc_active];
-        int16_t u_xc = piezo_xc_process(&c->xc[c->xc_active], c->u2_q15, xs->x_source ? y2 : y);
+        /* y2 from sig[] (stored at step 3): not kept in a register across the calls */
+        int16_t u_xc = piezo_xc_process(&c->xc[c->xc_active], c->u2_q15, xs->x_source ? c->sig[PIEZO_SIG_Y2] : y),
+                applied = 0;
         if (!g->xcouple_bypass && (mb & (MODE_BIT(PIEZO_MODE_FEEDFORWARD) | MODE_BIT(PIEZO_MODE_FF_FEEDBACK) |
                                          MODE_BIT(PIEZO_MODE_FEEDBACK))) != 0u) {
-            c->xc_q15 = u_xc;
+            applied = u_xc;
             u = piezo_sat_q15((int32_t)u - u_xc);
         }
+        c->xc_q15 = applied;
     }
     u = piezo_limit_step(&c->limit, u);
     if (c->limit.flags != 0u && run) {
@@ -853,6 +857,9 @@ uint16_t piezo_ctl_rollback(piezo_ctl_t *c, uint8_t session)
             c->boundary_req = 1u;
             if (c->xc_pending < 0) {
                 c->xc_active = -1; /* no previous coupling table: compensation off */
+                /* after it (both volatile: in that order): a tick from here on
+                 * no longer writes the term, so it stays 0 */
+                *(volatile int16_t *)&c->xc_q15 = 0;
             }
             c->xc_previous = -1;
             c->last_commit_xc = 0u;

@@ -230,9 +230,20 @@ static void test_coupling_slot_commit_and_rollback(void **state)
     assert_int_equal(piezo_sil_init(&sil, &params, 1u), PIEZO_OK);
     assert_int_equal(piezo_ctl_load_image(c, xc_sil_table, XC_SIL_TABLE_LEN), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
+    /* applied while armed in FEEDFORWARD with the other axis driven: a term */
+    assert_int_equal(piezo_ctl_set_mode(c, PIEZO_MODE_FEEDFORWARD), PIEZO_OK);
+    assert_int_equal(piezo_ctl_set_mode(&sil.ctl[1], PIEZO_MODE_DIRECT), PIEZO_OK);
+    sil.ctl[1].setpoint_q15 = 16000;
+    assert_int_equal(piezo_ctl_arm(c, 1), PIEZO_OK);
+    assert_int_equal(piezo_ctl_arm(&sil.ctl[1], 1), PIEZO_OK);
+    for (uint32_t k = 0; k < 200u; k++) {
+        piezo_sil_tick(&sil);
+    }
+    assert_true(c->xc_q15 != 0);
     assert_int_equal(rollback_s1(c), PIEZO_TABLE_REASON_OK);
     piezo_sil_tick(&sil);
     assert_true(c->xc_active < 0);
+    assert_int_equal(c->xc_q15, 0); /* the slot gone, no term */
     assert_int_equal(piezo_ctl_coupling_crc(c), 0u);
 }
 
