@@ -448,13 +448,20 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         c->ref_source = PIEZO_REF_WAVE;
         c->wave_ff_phase = 0u;
     }
-    c->overrun_run = 0u;
-    c->st.ticks++;
+    c->st.ticks++; /* (ends a run of overruns: piezo_ctl_overrun compares it) */
 }
 
 void piezo_ctl_overrun(piezo_ctl_t *c)
 {
     c->st.overruns++;
+    /* consecutive overruns: no tick completed since the last one. The tick
+     * does not clear the run (a store per tick); the run starts again here
+     * when the tick count moved (it would miss a gap of exactly 2^32 ticks,
+     * 5 days at 10 kHz, between two overruns) */
+    if (c->overrun_tick != c->st.ticks) {
+        c->overrun_tick = c->st.ticks;
+        c->overrun_run = 0u;
+    }
     if (c->cfg.overrun_limit != 0u && ++c->overrun_run >= c->cfg.overrun_limit) {
         c->st.faults |= PIEZO_FAULT_OVERRUN;
     }

@@ -186,7 +186,7 @@ typedef struct {
     int16_t sig[PIEZO_SIG_N];
     int16_t y_prev_q15;
     uint16_t bad_run;
-    uint16_t overrun_run;
+    uint16_t overrun_run;      /* overruns with no tick completed between them */
     uint8_t have_y;
     volatile int8_t xc_active; /* the coupling slot in use (xset, xc below), -1 = none */
     int16_t xc_q15;            /* last compensation term u_xc (drive, q15) */
@@ -237,6 +237,7 @@ typedef struct {
     piezo_ctl_stage_t stage;
     piezo_store_t store;
     uint8_t have_store;
+    uint32_t overrun_tick;     /* st.ticks at the last overrun (piezo_ctl_overrun) */
 
     piezo_wave_cfg_t wave_cfg;
     piezo_wave_tone_t tones[PIEZO_WAVE_MAX_TONES];
