@@ -414,8 +414,8 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
      * without one it is 0 since the slot went (init, piezo_ctl_rollback) */
     if (c->xc_active >= 0) {
         const piezo_xcset_t *xs = &c->xset[c->xc_active];
-        /* y2 from sig[] (stored at step 3): not kept in a register across the calls */
-        int16_t u_xc = piezo_xc_process(&c->xc[c->xc_active], c->u2_q15, xs->x_source ? c->sig[PIEZO_SIG_Y2] : y),
+        /* y or y2 from sig[] (stored at step 3): not kept in a register across the calls */
+        int16_t u_xc = piezo_xc_process(&c->xc[c->xc_active], c->u2_q15, c->sig[xs->x_source ? PIEZO_SIG_Y2 : PIEZO_SIG_Y]),
                 applied = 0;
         if (!g->xcouple_bypass && (mb & (MODE_BIT(PIEZO_MODE_FEEDFORWARD) | MODE_BIT(PIEZO_MODE_FF_FEEDBACK) |
                                          MODE_BIT(PIEZO_MODE_FEEDBACK))) != 0u) {

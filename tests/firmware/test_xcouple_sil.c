@@ -237,7 +237,18 @@ static void test_coupling_slot_commit_and_rollback(void **state)
     assert_int_equal(piezo_ctl_arm(c, 1), PIEZO_OK);
     assert_int_equal(piezo_ctl_arm(&sil.ctl[1], 1), PIEZO_OK);
     for (uint32_t k = 0; k < 200u; k++) {
+        /* the kernel's input: the position the table names (x_source, both
+         * ways here), y or y2 as the tick recorded them; a copy of the
+         * kernel's state, run on them, gives the term the tick applied */
+        static struct piezo_xc before;
+        int16_t want;
+        c->xset[c->xc_active].x_source = (uint8_t)((k / 20u) & 1u);
+        before = c->xc[c->xc_active];
         piezo_sil_tick(&sil);
+        want = piezo_xc_process(&before, c->u2_q15,
+                                c->sig[c->xset[c->xc_active].x_source ? PIEZO_SIG_Y2 : PIEZO_SIG_Y]);
+        assert_int_equal(c->xc_q15, want);
+        assert_true(k < 100u || c->sig[PIEZO_SIG_Y] != c->sig[PIEZO_SIG_Y2]);
     }
     assert_true(c->xc_q15 != 0);
     assert_int_equal(rollback_s1(c), PIEZO_TABLE_REASON_OK);
