@@ -135,8 +135,20 @@ int16_t piezo_wave_process(piezo_wave_t *w)
     if (!w->running) {
         return c->offset_q15;
     }
+    /* the sine, the calibrations' and the scans' wave, tested first: one
+     * compare instead of the switch's range test and table branch, then the
+     * sine-or-triangle test (the same arithmetic as the triangle's case) */
+    if (c->kind == PIEZO_WAVE_SINE) {
+        uint32_t next = w->phase + w->freq;
+        shape = piezo_sine_q15(w->phase);
+        if (next < w->phase) {
+            end_of_cycle(w); /* the accumulator wrapped: one period done */
+        }
+        w->phase = next;
+        return scale_q15(c->offset_q15, c->amplitude_q15, shape);
+    }
     switch (c->kind) {
-    case PIEZO_WAVE_SINE:
+    case PIEZO_WAVE_SINE: /* (above) */
     case PIEZO_WAVE_TRIANGLE: {
         shape = (c->kind == PIEZO_WAVE_SINE) ? piezo_sine_q15(w->phase) : triangle_q15(w->phase);
         uint32_t next = w->phase + w->freq;

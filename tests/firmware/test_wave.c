@@ -28,6 +28,42 @@ static void test_sine_tracks_ideal_within_two_lsb(void **state)
     assert_true(worst <= 2.0);
 }
 
+/* The sine sample by sample: offset + rshift_rnd(amplitude * sine(phase), 15)
+ * in int64, saturated, phase k * freq_word, over random offsets, amplitudes
+ * and words; with cycles the wave ends after that many wraps of the phase
+ * (then the offset). */
+static void test_sine_is_the_table_rule_and_finishes_after_cycles(void **state)
+{
+    (void)state;
+    uint32_t x = 2024u;
+    for (int t = 0; t < 40; t++) {
+        piezo_wave_cfg_t c = {.kind = PIEZO_WAVE_SINE, .cycles = (uint32_t)(t % 4)};
+        piezo_wave_t w;
+        uint32_t phase = 0u, wraps = 0u;
+        x = x * 1664525u + 1013904223u;
+        c.offset_q15 = (int16_t)(x >> 16);
+        x = x * 1664525u + 1013904223u;
+        c.amplitude_q15 = (int16_t)(x >> 16);
+        x = x * 1664525u + 1013904223u;
+        c.freq_word = (x >> (t % 8u)) | 1u;
+        assert_int_equal(piezo_wave_init(&w, &c), PIEZO_OK);
+        for (int k = 0; k < 3000; k++) {
+            int64_t v = (int64_t)c.offset_q15 +
+                        (((int64_t)c.amplitude_q15 * piezo_sine_q15(phase) + (1 << 14)) >> 15);
+            int16_t want = (int16_t)(v > 32767 ? 32767 : (v < -32768 ? -32768 : v));
+            if (c.cycles != 0u && wraps >= c.cycles) {
+                want = c.offset_q15; /* finished */
+            }
+            assert_int_equal(piezo_wave_process(&w), want);
+            if (c.cycles == 0u || wraps < c.cycles) {
+                wraps += (phase + c.freq_word < phase);
+                phase += c.freq_word;
+            }
+            assert_int_equal(piezo_wave_running(&w), c.cycles == 0u || wraps < c.cycles);
+        }
+    }
+}
+
 static void test_triangle_is_exact_and_finishes_after_cycles(void **state)
 {
     (void)state;
@@ -182,6 +218,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_sine_tracks_ideal_within_two_lsb),
+        cmocka_unit_test(test_sine_is_the_table_rule_and_finishes_after_cycles),
         cmocka_unit_test(test_triangle_is_exact_and_finishes_after_cycles),
         cmocka_unit_test(test_chirp_sweeps_and_stops_at_end_frequency),
         cmocka_unit_test(test_multisine_is_sum_of_its_tones),
