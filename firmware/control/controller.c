@@ -22,6 +22,8 @@ static void set_active(piezo_ctl_t *c, int8_t a)
     c->set_act = a >= 0 ? &c->set[a] : NULL;
 }
 
+static uint32_t jump_span_of(const piezo_ctl_t *c);
+
 int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
 {
     int rc;
@@ -43,6 +45,7 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg)
     c->wave_ff_pending = -1;
     c->wave_cfg.kind = PIEZO_WAVE_OFF;
     c->ref_stages = piezo_ctl_ref_stages_of(c);
+    c->jump_span = jump_span_of(c);
     if ((rc = piezo_pid_init(&c->pid, &c->cfg.pid)) != PIEZO_OK ||
         (rc = piezo_biquad_init(&c->notch, &c->cfg.notch)) != PIEZO_OK ||
         (rc = piezo_limit_init(&c->limit, &c->cfg.limit, cfg->u_safe_q15)) != PIEZO_OK ||
@@ -182,6 +185,14 @@ static inline int16_t sensor_q15(int32_t d, int32_t gain_q16)
     return hi < 0 ? PIEZO_Q15_MIN : PIEZO_Q15_MAX;
 }
 
+/* The jump test's bound (jump_span): 2 max_jump when the test is on
+ * (max_jump > 0) and a good sample has been seen, else none (UINT32_MAX:
+ * every jump passes). */
+static uint32_t jump_span_of(const piezo_ctl_t *c)
+{
+    return (c->cfg.max_jump_q15 > 0 && c->have_y) ? 2u * (uint32_t)c->cfg.max_jump_q15 : UINT32_MAX;
+}
+
 /* Sensor plausibility: a code outside the valid range, or a jump no stage can
  * make in one tick. Bad samples hold the last good value. */
 static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
@@ -190,10 +201,12 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
     int16_t y = sensor_q15(code - g->adc_zero, g->sensor_gain_q16);
     int32_t jump = (int32_t)y - c->y_prev_q15;
     /* |jump| > max as one unsigned compare: jump + max lies outside [0, 2 max]
-     * (max in (0, 32767], |jump| <= 65535: no overflow) */
+     * (max in (0, 32767], |jump| <= 65535: no overflow); with the test off,
+     * jump_span is UINT32_MAX and nothing lies above it (the tests of
+     * max_jump > 0 and of have_y are in jump_span, derived when either
+     * changes: init, the tick's step 1, the first good sample) */
     int bad = code < g->adc_min_ok || code > g->adc_max_ok ||
-              (g->max_jump_q15 > 0 && c->have_y &&
-               (uint32_t)(jump + g->max_jump_q15) > 2u * (uint32_t)g->max_jump_q15);
+              (uint32_t)(jump + g->max_jump_q15) > c->jump_span;
     if (bad) {
         if (++c->bad_run >= g->bad_limit) {
             c->bad_run = g->bad_limit;
@@ -203,7 +216,10 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
     }
     c->bad_run = 0u;
     c->y_prev_q15 = y;
-    c->have_y = 1u;
+    if (!c->have_y) {
+        c->have_y = 1u; /* once: the jump test starts with the next sample */
+        c->jump_span = jump_span_of(c);
+    }
     return y;
 }
 
@@ -278,7 +294,7 @@ uint8_t piezo_ctl_ref_stages_of(const piezo_ctl_t *c)
 
 void piezo_ctl_config_changed(piezo_ctl_t *c)
 {
-    c->boundary_req = 1u; /* the tick derives ref_stages (only it writes it after init) */
+    c->boundary_req = 1u; /* the tick derives ref_stages and jump_span (only it writes them after init) */
 }
 
 /* a mode's bit in the tick's mask of the running mode */
@@ -317,6 +333,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
          * change too) may have switched one of them on or off */
         c->ref_stages = piezo_ctl_ref_stages_of(c);
         c->wave_ff_q15 = 0;
+        c->jump_span = jump_span_of(c); /* max_jump may have changed */
         if (c->servo_req != 0u) {
             servo_switch(c, c->servo_req);
             c->servo_req = 0u;

@@ -188,6 +188,11 @@ typedef struct {
     uint16_t bad_run;
     uint16_t overrun_run;      /* overruns with no tick completed between them */
     uint8_t have_y;
+    /* the sensor's jump test, its bound: 2 max_jump, or UINT32_MAX with the
+     * test off or before the first good sample (controller.c, read_sensor);
+     * written only by init and the tick (step 1 derives it again after any
+     * request, a configuration change too: piezo_ctl_config_changed) */
+    uint32_t jump_span;
     volatile int8_t xc_active; /* the coupling slot in use (xset, xc below), -1 = none */
     int16_t xc_q15;            /* last compensation term u_xc (drive, q15) */
     piezo_wave_t wave;
@@ -266,7 +271,7 @@ int piezo_ctl_init(piezo_ctl_t *c, const piezo_ctl_cfg_t *cfg);
 uint16_t piezo_ctl_attach_store(piezo_ctl_t *c, const piezo_storage_t *io);
 
 /** The configuration (cfg) changed between two ticks: the next tick's step 1
- *  derives what it caches from it again (ref_stages). Whoever writes cfg
+ *  derives what it caches from it again (ref_stages, jump_span). Whoever writes cfg
  *  after init calls it, after the write (regmap.c's rebind). */
 void piezo_ctl_config_changed(piezo_ctl_t *c);
 

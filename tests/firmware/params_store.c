@@ -152,8 +152,8 @@ static void tick_and_check_ref_stages(uint8_t want)
     assert_int_equal(ctl.ref_stages, want);
 }
 
-/* Every path that changes what ref_stages caches updates it by the next
- * tick: register writes of the preview, the shaper and the dynamics inverse,
+/* Every path that changes what ref_stages (and jump_span) caches updates it by the next
+ * tick: register writes of the preview, the shaper, the dynamics inverse (and the jump limit),
  * the parameters' defaults and load commands, the boot's load, the learned
  * feedforward's commit and switch-off (the tick's swap). Each path is taken
  * once to switch the stages on or off, so one that forgets fails here. */
@@ -189,6 +189,21 @@ static void test_every_path_updates_the_ref_stages(void **state)
     unlock();
     assert_int_equal(write1(PIEZO_HOLDING_PARAMS_COMMAND, PIEZO_PARAMS_CMD_DEFAULTS), 0);
     tick_and_check_ref_stages(0u);
+    /* the sensor's jump test (jump_span): on by a register write after good
+     * samples, a jump of 1000 is then held; off by the defaults, it passes */
+    {
+        int32_t in[2] = {0, 0}, dac = 0;
+        assert_int_equal(write1(PIEZO_HOLDING_MAX_JUMP_Q15, 100), 0);
+        piezo_ctl_tick(&ctl, in, &dac);
+        in[0] = 1000;
+        piezo_ctl_tick(&ctl, in, &dac);
+        assert_int_equal(ctl.sig[PIEZO_SIG_Y], 0);
+        assert_int_equal(ctl.bad_run, 1);
+        assert_int_equal(write1(PIEZO_HOLDING_PARAMS_COMMAND, PIEZO_PARAMS_CMD_DEFAULTS), 0);
+        piezo_ctl_tick(&ctl, in, &dac);
+        assert_int_equal(ctl.sig[PIEZO_SIG_Y], 1000);
+        assert_int_equal(ctl.bad_run, 0);
+    }
     /* the learned feedforward's slot */
     assert_int_equal(piezo_ctl_wave_ff_commit(&ctl, ff, 4u, 1u << 24), PIEZO_OK);
     tick_and_check_ref_stages(1u);

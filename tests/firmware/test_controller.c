@@ -456,6 +456,56 @@ static void test_sensor_scale_matches_int64_formula(void **state)
     }
 }
 
+/* The sensor's plausibility against the rule written as plain tests: a code
+ * outside [adc_min_ok, adc_max_ok], or, with max_jump > 0 and a good sample
+ * seen, |y - y_prev| > max_jump, holds the last good value; random codes,
+ * and max_jump changed (off, on, negative) between ticks through
+ * piezo_ctl_config_changed, as the register map does. */
+static void test_sensor_plausibility_matches_the_rule(void **state)
+{
+    (void)state;
+    uint32_t x = 777u;
+    for (int run = 0; run < 50; run++) {
+        piezo_ctl_cfg_t cfg = unit_cfg();
+        int16_t y_prev = 0;
+        int have_y = 0;
+        uint16_t bad_run = 0;
+        cfg.bad_limit = 1000;
+        cfg.adc_min_ok = -20000;
+        cfg.adc_max_ok = 20000;
+        cfg.max_jump_q15 = (int16_t)(run % 3 == 0 ? 0 : 50 * run);
+        assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+        for (int k = 0; k < 200; k++) {
+            int32_t in[2] = {0, 0}, dac = 0, code;
+            int bad;
+            if (k % 50 == 49) { /* a configuration change between two ticks */
+                x = x * 1664525u + 1013904223u;
+                ctl.cfg.max_jump_q15 = (int16_t)((int32_t)(x >> 22) - 256); /* -256 .. 767 */
+                piezo_ctl_config_changed(&ctl);
+            }
+            x = x * 1664525u + 1013904223u;
+            code = (int32_t)(x >> 16) - 32768;
+            if ((x & 3u) != 0u) {
+                code = y_prev + (int32_t)((x >> 8) & 1023u) - 512; /* mostly near the last good value */
+            }
+            in[0] = code;
+            piezo_ctl_tick(&ctl, in, &dac);
+            bad = code < cfg.adc_min_ok || code > cfg.adc_max_ok ||
+                  (ctl.cfg.max_jump_q15 > 0 && have_y &&
+                   (code - y_prev > ctl.cfg.max_jump_q15 || y_prev - code > ctl.cfg.max_jump_q15));
+            if (bad) {
+                bad_run++;
+            } else {
+                bad_run = 0;
+                y_prev = (int16_t)code;
+                have_y = 1;
+            }
+            assert_int_equal(ctl.sig[PIEZO_SIG_Y], y_prev);
+            assert_int_equal(ctl.bad_run, bad_run);
+        }
+    }
+}
+
 static int want_ff(uint8_t mode, int armed, int table)
 {
     if (!armed || mode == PIEZO_MODE_IDLE || mode == PIEZO_MODE_FEEDBACK) {
@@ -517,6 +567,7 @@ int main(void)
         cmocka_unit_test(test_dcc_table_drives_bit_exact),
         cmocka_unit_test(test_mode_dispatch_matches_the_rule),
         cmocka_unit_test(test_sensor_scale_matches_int64_formula),
+        cmocka_unit_test(test_sensor_plausibility_matches_the_rule),
         cmocka_unit_test(test_eupi_inverse_table_drives_bit_exact),
         cmocka_unit_test(test_refused_images_leave_the_active_table_running),
         cmocka_unit_test(test_commit_needs_unlock_and_an_upload),
