@@ -405,6 +405,18 @@ static int16_t __attribute__((noinline)) ff_rkp(piezo_ff_state_t *ff, const piez
     return piezo_dcc_process(&ff->dcc, piezo_line_q15(r_q15, cs->y_to_u_gain_q24, cs->y_offset_q15));
 }
 
+/* The kinds after the DCC and the EUPI inverse (the RKP, else the line), out
+ * of line: the line's registers here would make piezo_ff_process() save
+ * registers for every kind (round 16). */
+static int16_t __attribute__((noinline)) ff_rest(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15,
+                                                 int16_t u_applied_q15)
+{
+    if (cs->kind == PIEZO_TABLE_KIND_RKP) {
+        return ff_rkp(ff, cs, r_q15, u_applied_q15);
+    }
+    return piezo_line_q15(r_q15, cs->open_loop_gain_q24, cs->open_loop_offset_q15);
+}
+
 int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_t r_q15, int16_t u_applied_q15)
 {
     /* the kinds tested in this order, not by a switch: gcc's switch tested
@@ -417,10 +429,7 @@ int16_t piezo_ff_process(piezo_ff_state_t *ff, const piezo_coefset_t *cs, int16_
     if (kind == PIEZO_TABLE_KIND_EUPI_INVERSE) {
         return piezo_eupi_inv_process(&ff->inv, r_q15);
     }
-    if (kind == PIEZO_TABLE_KIND_RKP) {
-        return ff_rkp(ff, cs, r_q15, u_applied_q15);
-    }
-    return piezo_line_q15(r_q15, cs->open_loop_gain_q24, cs->open_loop_offset_q15);
+    return ff_rest(ff, cs, r_q15, u_applied_q15);
 }
 
 uint16_t piezo_xcset_load(piezo_xcset_t *xs, struct piezo_xc *st, const uint8_t *img, uint32_t len)
