@@ -437,10 +437,14 @@ static void test_sensor_scale_matches_int64_formula(void **state)
             cfg.sensor_gain_q16 = edge[i][1];
             d0 = d1 = edge[i][0];
         } else {
-            sh = sensor_lcg(&x) % 32u;
-            d0 = (int32_t)(sensor_lcg(&x) >> sh) - (int32_t)(sensor_lcg(&x) >> 1);
-            sh = sensor_lcg(&x) % 32u;
-            d1 = (int32_t)(sensor_lcg(&x) >> 1) - (int32_t)(sensor_lcg(&x) >> sh);
+            /* a difference of two values in [0, 2^31): no int32 overflow; then
+             * a random magnitude */
+            d0 = (int32_t)(sensor_lcg(&x) >> 1);
+            d0 -= (int32_t)(sensor_lcg(&x) >> 1);
+            d0 >>= sensor_lcg(&x) % 32u;
+            d1 = (int32_t)(sensor_lcg(&x) >> 1);
+            d1 -= (int32_t)(sensor_lcg(&x) >> 1);
+            d1 >>= sensor_lcg(&x) % 32u;
         }
         /* codes whose difference from the zero does not overflow int32 */
         if ((cfg.adc_zero > 0 && d0 > INT32_MAX - cfg.adc_zero) || (cfg.adc_zero < 0 && d0 < INT32_MIN - cfg.adc_zero) ||
