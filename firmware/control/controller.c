@@ -11,7 +11,7 @@
 /* The tick's own state lies within the first 4 KiB of the instance (an
  * LDR/STR immediate offset reaches 4095 bytes): the tick addresses it from
  * the instance pointer, with no base register per 4 KiB (controller.h). */
-typedef char piezo_ctl_tick_state_near_check_t[(offsetof(piezo_ctl_t, wave_on_trigger) < 4096u) ? 1 : -1];
+typedef char piezo_ctl_tick_state_near_check_t[(offsetof(piezo_ctl_t, ref_stages) < 4096u) ? 1 : -1];
 
 /* The active feedforward set and the tick's pointers to it (ff_act,
  * set_act), always together. */
@@ -300,7 +300,7 @@ void piezo_ctl_config_changed(piezo_ctl_t *c)
 /* a mode's bit in the tick's mask of the running mode */
 #define MODE_BIT(m) (1u << (m))
 
-void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
+int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
 {
     const piezo_ctl_cfg_t *g = &c->cfg;
     int16_t y, r, r_loop, r_ahead, u_ff = 0, u_fb = 0, u;
@@ -309,6 +309,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
     int run;
     uint32_t wave_on;
     uint32_t mb;
+    int32_t dac; /* returned: no pointer kept and no store through it (round 16) */
 
     /* 1. a committed table takes over only here, between two ticks; one
      *    flag says whether anything waits (most ticks: one load and branch) */
@@ -451,7 +452,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
          * is the clamp of the exact sum: the same code as in int64 */
         int32_t code = piezo_add_sat_i32(g->dac_zero,
                                          (int32_t)piezo_rshift_rnd64((int64_t)u * g->dac_gain_q16, 16u));
-        *dac = code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code);
+        dac = code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code);
     }
 
     /* 9. recorder and status (REF, Y, ERR, FF, FB, Y2 are in sig[] already) */
@@ -466,6 +467,7 @@ void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
         c->wave_ff_phase = 0u;
     }
     c->st.ticks++; /* (ends a run of overruns: piezo_ctl_overrun compares it) */
+    return dac;
 }
 
 void piezo_ctl_overrun(piezo_ctl_t *c)

@@ -281,8 +281,15 @@ void piezo_ctl_config_changed(piezo_ctl_t *c);
 uint8_t piezo_ctl_ref_stages_of(const piezo_ctl_t *c);
 
 /** The 10 kHz tick: adc[0] this axis' sensor code, adc[1] the other axis'
- *  (or 0); writes this axis' DAC code. */
-void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac);
+ *  (or 0); returns this axis' DAC code (the target's tick passes it on in a
+ *  register: no store and load through a pointer, round 16). */
+int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2]);
+
+/** The tick with the DAC code written to *dac. */
+static inline void piezo_ctl_tick(piezo_ctl_t *c, const int32_t adc[2], int32_t *dac)
+{
+    *dac = piezo_ctl_step(c, adc);
+}
 
 /** The target reports that a tick started late or ran past its period. */
 void piezo_ctl_overrun(piezo_ctl_t *c);

@@ -81,10 +81,8 @@ __attribute__((weak)) void piezo_dac_write(int32_t code)
 void piezo_control_tick(void)
 {
     int32_t adc[2];
-    int32_t dac;
     piezo_adc_read(adc);
-    piezo_ctl_tick(&piezo_axis, adc, &dac);
-    piezo_dac_write(dac);
+    piezo_dac_write(piezo_ctl_step(&piezo_axis, adc));
 }
 
 /* Tables persist in flash sectors 10 and 11 (flash_f4.c); the PIL image puts
