@@ -1331,6 +1331,25 @@ void piezo_dcc_ops_update_c(struct piezo_dcc *dcc, int16_t v_q15)
     dcc_ops(dcc, v_q15);
 }
 
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* A tick with runs and a new input: the reversal's three stores (as
+ * dcc_ops), then the whole step in Thumb-2. */
+static inline __attribute__((always_inline)) void runs_step(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    const int8_t dir = v_q15 > dcc->v_prev_q15 ? 1 : -1;
+    if (dir != dcc->dir) { /* reversal, as dcc_ops */
+        dcc->xi_q15 = dcc->v_prev_q15;
+        dcc->dir = dir;
+        dcc->n_run = 0u;
+    }
+    if (dir > 0) {
+        dcc_rise_m4(dcc, v_q15);
+    } else {
+        dcc_fall_m4(dcc, v_q15);
+    }
+}
+#endif
+
 /* The operators' step (the law's own call inlines it: one call less). */
 static inline __attribute__((always_inline)) void ops_update(struct piezo_dcc *dcc, int16_t v_q15)
 {
@@ -1340,17 +1359,7 @@ static inline __attribute__((always_inline)) void ops_update(struct piezo_dcc *d
         return;
     }
     if (dcc->runs) {
-        const int8_t dir = v_q15 > dcc->v_prev_q15 ? 1 : -1;
-        if (dir != dcc->dir) { /* reversal, as dcc_ops */
-            dcc->xi_q15 = dcc->v_prev_q15;
-            dcc->dir = dir;
-            dcc->n_run = 0u;
-        }
-        if (dir > 0) {
-            dcc_rise_m4(dcc, v_q15);
-        } else {
-            dcc_fall_m4(dcc, v_q15);
-        }
+        runs_step(dcc, v_q15);
         return;
     }
 #endif
@@ -1362,11 +1371,41 @@ void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
     ops_update(dcc, v_q15);
 }
 
+/* The law's output from sum_j Psi_j c_j (Q39): the feedthrough, rounded and
+ * saturated; kept as the next tick's input. */
+static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *dcc, int64_t acc,
+                                                             int16_t yd_q15)
+{
+    acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
+    const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    dcc->u_last_q15 = u;
+    return u;
+}
+
 int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
 {
     const int16_t v = dcc->u_last_q15;
-    ops_update(dcc, v);
     /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+    if (dcc->runs) {
+        /* runs tested once for the step and the sum (round 16: gcc tested
+         * the byte again after the step's call) */
+        if (v != dcc->v_prev_q15) {
+            runs_step(dcc, v);
+        }
+        /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product */
+        int64_t acc = (int64_t)v * (int32_t)dcc->csum - dcc->kacc;
+        acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
+        /* |v C|, |kacc| = |sum psi_j c_j| and |yd g| are each below
+         * 2^15 2^31 (|psi_j|, |v|, |yd| <= 2^15; sum |c_j| and g below 2^31),
+         * so |acc| < 2^48 and acc rounded to q15 fits an int32: SSAT alone
+         * clamps it, as piezo_sat_q15 would (4 instructions fewer) */
+        const int16_t u = (int16_t)__builtin_arm_ssat((int32_t)piezo_rshift_rnd64(acc, 24u), 16u);
+        dcc->u_last_q15 = u;
+        return u;
+    }
+#endif
+    ops_update(dcc, v);
     int64_t acc;
     if (dcc->runs) {
         /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product */
@@ -1381,8 +1420,5 @@ int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
             acc += (int64_t)(v - psi[j]) * c[j];
         }
     }
-    acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
-    const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
-    dcc->u_last_q15 = u;
-    return u;
+    return dcc_out(dcc, acc, yd_q15);
 }
