@@ -600,29 +600,24 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    push   {r0, r4-r11, lr}\n"
         "    sub    sp, #48\n"
         "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    lr, [ip, #0]\n"          /* n1 */
-        "    str    lr, [sp, #0]\n"
-        "    str    r1, [sp, #4]\n"          /* v */
-        "    ldrsh  lr, [r0, #34]\n"         /* v_prev */
-        "    str    lr, [sp, #8]\n"
+        "    ldr    r2, [ip, #0]\n"          /* n1 */
+        "    mov    r3, r1\n"                /* v */
+        "    ldrsh  r4, [r0, #34]\n"         /* v_prev */
         "    ldr    r6, [ip, #20]\n"         /* xsat */
-        "    str    r6, [sp, #12]\n"
-        "    ldr    lr, [ip, #16]\n"         /* slope */
-        "    str    lr, [sp, #16]\n"
-        "    ldrsh  lr, [ip, #12]\n"         /* rmax */
-        "    str    lr, [sp, #20]\n"
+        "    ldr    r7, [ip, #16]\n"         /* slope */
+        "    ldrsh  r8, [ip, #12]\n"         /* rmax */
+        "    stm    sp, {r2, r3, r4, r6, r7, r8}\n" /* the frame's first six words in one */
         "    ldr    r11, [ip, #24]\n"        /* c */
         "    ldr    r5, [r0, #4]\n"          /* psi */
-        "    ldr    lr, [r0, #52]\n"         /* psum */
-        "    str    lr, [sp, #32]\n"
+        "    ldr    r9, [r0, #52]\n"         /* psum */
         "    add    r4, r0, #56\n"           /* row_start */
         "    ldrb   r3, [r0, #46]\n"         /* n_rows */
-        "    add    lr, r4, r3, lsl #1\n"
-        "    str    lr, [sp, #36]\n"
+        "    add    r10, r4, r3, lsl #1\n"
+        "    strd   r9, r10, [sp, #32]\n"
         /* the band's first row (first_row_above: the first whose n1 exceeds
          * v - xsat), walked from the last falling tick's */
         "    sub    r6, r1, r6\n"            /* t = v - xsat */
-        "    ldr    lr, [ip, #0]\n"          /* n1 */
+        "    mov    lr, r2\n"                /* n1 */
         "    ldrb   r2, [r0, #47]\n"         /* k = row_cur */
         "10: cbz    r2, 11f\n"
         "    add    r9, r4, r2, lsl #1\n"
@@ -871,15 +866,13 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    push   {r0, r4-r11, lr}\n"
         "    sub    sp, #64\n"
         "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    r10, [r0, #8]\n"         /* order */
-        "    str    r10, [sp, #0]\n"
-        "    str    r1, [sp, #4]\n"          /* v */
+        "    ldr    r2, [r0, #8]\n"          /* order */
+        "    mov    r3, r1\n"                /* v */
         "    ldr    r6, [ip, #20]\n"         /* xsat */
-        "    str    r6, [sp, #8]\n"
-        "    ldr    lr, [ip, #16]\n"         /* slope */
-        "    str    lr, [sp, #12]\n"
-        "    ldrsh  lr, [ip, #12]\n"         /* rmax */
-        "    str    lr, [sp, #16]\n"
+        "    ldr    r7, [ip, #16]\n"         /* slope */
+        "    ldrsh  r8, [ip, #12]\n"         /* rmax */
+        "    stm    sp, {r2, r3, r6, r7, r8}\n" /* the frame's first five words in one */
+        "    mov    r10, r2\n"               /* order */
         "    ldr    r11, [ip, #24]\n"        /* c */
         "    ldr    r5, [r0, #4]\n"          /* psi */
         "    ldr    lr, [r0, #52]\n"         /* psum */
@@ -887,12 +880,11 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    ldrh   r2, [ip, #8]\n"          /* n_ops */
         "    add    lr, lr, r2, lsl #2\n"
         "    add    lr, lr, #4\n"
-        "    sub    lr, lr, r10\n"
-        "    str    lr, [sp, #36]\n"         /* psum + n_ops + 1 - order (bytes) */
+        "    sub    lr, lr, r10\n"           /* psum + n_ops + 1 - order (bytes) */
         "    add    r4, r0, #122\n"          /* col_start */
         "    ldrb   r3, [r0, #48]\n"         /* n_cols */
-        "    add    lr, r4, r3, lsl #1\n"
-        "    str    lr, [sp, #32]\n"
+        "    add    r9, r4, r3, lsl #1\n"
+        "    strd   r9, lr, [sp, #32]\n"
         /* the band's first column (first_col_above: the first whose n2
          * exceeds v_prev - xsat; every column without n2_banded), walked
          * from the last rising tick's */
