@@ -296,7 +296,10 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    pop    {r4-r11, pc}\n");
 }
 
-#else
+#endif
+
+/* The C falling step: what other targets run, and on the Cortex-M4 the
+ * reference of upi_fall_m4 (piezo_play_process_upi_c, test_play). */
 static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
                         int64_t acc)
 {
@@ -340,7 +343,6 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
     }
     return acc;
 }
-#endif
 
 /*
  * Rising, F = max(u - r_i, F) (the upper branch cannot bind while rising):
@@ -415,7 +417,8 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    pop    {r4-r11, pc}\n");
 }
 
-#else
+#endif
+/* The C rising step (the reference of rise_m4, as upi_fall above). */
 static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
                     int32_t u_q15, int64_t acc)
 {
@@ -434,7 +437,6 @@ static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, 
     }
     return acc;
 }
-#endif
 
 /* The classical run's stores: f[k] = u + r[k] falling (rsb == 0), u - r[k]
  * rising (rsb == 1). On Thumb-2 two per pass (ldrd/strd: three
@@ -768,6 +770,12 @@ __attribute__((naked)) int64_t piezo_play_process_upi(struct piezo_play *p, int3
 #else
 int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
 {
+    return piezo_play_process_upi_c(p, u_q15);
+}
+#endif
+
+int64_t piezo_play_process_upi_c(struct piezo_play *p, int32_t u_q15)
+{
     if (!p->primed) {
         return play_first(p, u_q15);
     }
@@ -792,7 +800,6 @@ int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
     p->acc_q39 = acc;
     return acc;
 }
-#endif
 
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
 {
