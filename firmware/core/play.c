@@ -580,8 +580,6 @@ static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *
         "    ldr    r7, [r3, #8]\n"           /* w */
         "    ldrh   lr, [r3, #12]\n"          /* n_r */
         "    ldrsb  r8, [r0, #29]\n"          /* run_dir */
-        "    movs   r9, #0\n"                 /* i = 0, run_w = 0 unless the run holds */
-        "    movs   r3, #0\n"
         "    subs   r2, r1, r2\n"             /* d = u - u_prev, never 0 here */
         "    ble    20f\n"
         /* rising: F = max(u - r, F) */
@@ -590,6 +588,8 @@ static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *
         "    movs   r8, #1\n"
         "    strb   r8, [r0, #29]\n"          /* run_dir = 1 */
         "    movs   r8, #0\n"
+        "    movs   r9, #0\n"                 /* a new run: i = 0, run_w = 0 (round 16: */
+        "    movs   r3, #0\n"                 /* here, not on every tick) */
         "    b      15f\n"
         "11: ldrh   r9, [r0, #30]\n"          /* i = run_n */
         "    ldrd   r3, r8, [r0, #32]\n"      /* run_w */
@@ -642,6 +642,8 @@ static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *
         "    mov    r8, #-1\n"
         "    strb   r8, [r0, #29]\n"          /* run_dir = -1 */
         "    movs   r8, #0\n"
+        "    movs   r9, #0\n"                 /* a new run: i = 0, run_w = 0 (round 16: */
+        "    movs   r3, #0\n"                 /* here, not on every tick) */
         "    b      25f\n"
         "21: ldrh   r9, [r0, #30]\n"
         "    ldrd   r3, r8, [r0, #32]\n"
