@@ -787,11 +787,9 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    bhs    .Ldf_next\n"
         "    ldr    ip, [sp, #0]\n"
         "    ldrsh  ip, [ip, r1, lsl #1]\n"  /* n1 */
-        "    str    lr, [r10, #0]\n"
-        "    str    r3, [r10, #4]\n"
-        "    strh   ip, [r10, #8]\n"
-        "    strh   r2, [r10, #10]\n"
-        "    add    r10, r10, #16\n"
+        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
+        "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
+        "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
         ".Ldf_next:\n"
         "    ldr    ip, [sp, #36]\n"
         "    cmp    r4, ip\n"
@@ -1075,11 +1073,9 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    bhs    .Ldr_next\n"
         "    lsr    r2, r2, #2\n"
         "    ldr    ip, [sp, #40]\n"
-        "    str    lr, [r10, #0]\n"
-        "    str    r3, [r10, #4]\n"
-        "    strh   ip, [r10, #8]\n"
-        "    strh   r2, [r10, #10]\n"
-        "    add    r10, r10, #16\n"
+        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
+        "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
+        "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
         "    str    r10, [sp, #44]\n"
         ".Ldr_next:\n"
         "    ldr    ip, [sp, #32]\n"
