@@ -521,7 +521,8 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * r4 &row_start[k + 1] once a row is read, r5 psi, r7:r8 dk, r9 the old
  * run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
  * r3 r, lr the run's weight sum; r6, ip scratch.
- * Frame: [sp] th (n1), #4 v, #8 v_prev, #12 xsat, #16 slope, #20 rmax,
+ * Frame: [sp] th (n1), #4 v_prev, #8 v, #12 xsat, #16 slope, #20 rmax
+ * (in pairs for a row's two LDRDs, round 16),
  * #24 old_end, #28 out_end, #32 psum, #36 &row_start[n_rows], #40 r10
  * while a block's end is searched, #44 out, #48 dcc (pushed r0).
  */
@@ -601,8 +602,8 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    sub    sp, #48\n"
         "    ldr    ip, [r0, #0]\n"          /* coeffs */
         "    ldr    r2, [ip, #0]\n"          /* n1 */
-        "    mov    r3, r1\n"                /* v */
-        "    ldrsh  r4, [r0, #34]\n"         /* v_prev */
+        "    ldrsh  r3, [r0, #34]\n"         /* v_prev */
+        "    mov    r4, r1\n"                /* v */
         "    ldr    r6, [ip, #20]\n"         /* xsat */
         "    ldr    r7, [ip, #16]\n"         /* slope */
         "    ldrsh  r8, [ip, #12]\n"         /* rmax */
@@ -657,15 +658,13 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         ".Ldf_row:\n"
         "    ldrh   r0, [r4], #2\n"          /* j */
         "    ldrh   r1, [r4]\n"              /* end */
-        "    ldr    lr, [sp, #0]\n"
+        "    ldrd   lr, ip, [sp, #0]\n"      /* th, v_prev */
         "    ldrsh  r2, [lr, r0, lsl #1]\n"  /* n1 */
-        "    ldr    lr, [sp, #8]\n"
-        "    cmp    r2, lr\n"
+        "    cmp    r2, ip\n"
         "    bge    .Ldf_done\n"             /* n1 >= v_prev (x <= dv): psi = 0 by (A) */
-        "    ldr    lr, [sp, #4]\n"
+        "    ldrd   lr, ip, [sp, #8]\n"      /* v, xsat */
         "    subs   r3, lr, r2\n"            /* x = v - n1 */
-        "    ldr    lr, [sp, #12]\n"
-        "    cmp    r3, lr\n"
+        "    cmp    r3, ip\n"
         "    bge    .Ldf_sat\n"
         "    cmp    r3, #0\n"
         "    ble    .Ldf_zero\n"
@@ -808,7 +807,7 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    adds   r2, r2, r7\n"
         "    adc    r3, r3, r8\n"
         "    strd   r2, r3, [r0, #24]\n"     /* kacc += dk (runs: const_w) */
-        "    ldr    r1, [sp, #4]\n"
+        "    ldr    r1, [sp, #8]\n"
         "    strh   r1, [r0, #34]\n"         /* v_prev = v */
         "    add    sp, #48\n"
         "    pop    {r2, r4-r11, pc}\n"
