@@ -522,7 +522,7 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
  * r3 r, lr the run's weight sum; r6, ip scratch.
  * Frame: [sp] th (n1), #4 v_prev, #8 v, #12 xsat, #16 slope, #20 rmax
- * (in pairs for a row's two LDRDs, round 16),
+ * (a row's first four words in one LDM, round 16),
  * #24 old_end, #28 out_end, #32 psum, #36 &row_start[n_rows], #40 r10
  * while a block's end is searched, #44 out, #48 dcc (pushed r0).
  */
@@ -658,13 +658,12 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         ".Ldf_row:\n"
         "    ldrh   r0, [r4], #2\n"          /* j */
         "    ldrh   r1, [r4]\n"              /* end */
-        "    ldrd   lr, ip, [sp, #0]\n"      /* th, v_prev */
-        "    ldrsh  r2, [lr, r0, lsl #1]\n"  /* n1 */
-        "    cmp    r2, ip\n"
+        "    ldm    sp, {r2, r3, ip, lr}\n"  /* th, v_prev, v, xsat in one (round 16) */
+        "    ldrsh  r2, [r2, r0, lsl #1]\n"  /* n1 */
+        "    cmp    r2, r3\n"
         "    bge    .Ldf_done\n"             /* n1 >= v_prev (x <= dv): psi = 0 by (A) */
-        "    ldrd   lr, ip, [sp, #8]\n"      /* v, xsat */
-        "    subs   r3, lr, r2\n"            /* x = v - n1 */
-        "    cmp    r3, ip\n"
+        "    subs   r3, ip, r2\n"            /* x = v - n1 */
+        "    cmp    r3, lr\n"
         "    bge    .Ldf_sat\n"
         "    cmp    r3, #0\n"
         "    ble    .Ldf_zero\n"
@@ -933,16 +932,14 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         ".Ldr_col:\n"
         "    ldrh   r0, [r4], #2\n"          /* pos */
         "    ldrh   r1, [r4]\n"              /* end */
-        "    ldr    ip, [sp, #0]\n"
-        "    add    r0, ip, r0, lsl #2\n"
-        "    add    r1, ip, r1, lsl #2\n"
+        "    ldm    sp, {r2, r3, ip}\n"      /* order, v, xsat in one (round 16) */
+        "    add    r0, r2, r0, lsl #2\n"
+        "    add    r1, r2, r1, lsl #2\n"
         "    ldrsh  r2, [r0, #2]\n"          /* n2 */
         "    str    r2, [sp, #40]\n"
-        "    ldr    lr, [sp, #4]\n"
-        "    subs   r3, lr, r2\n"            /* x = v - n2 */
+        "    subs   r3, r3, r2\n"            /* x = v - n2 */
         "    ble    .Ldr_done\n"             /* n2 >= v from here on: r = 0 */
-        "    ldr    lr, [sp, #8]\n"
-        "    cmp    r3, lr\n"
+        "    cmp    r3, ip\n"
         "    bge    .Ldr_sat\n"
         "    ldr    lr, [sp, #12]\n"
         "    mul    r3, r3, lr\n"
