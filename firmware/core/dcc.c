@@ -521,7 +521,8 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * r4 &row_start[k + 1] once a row is read, r5 psi, r7:r8 dk, r9 the old
  * run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
  * r3 r, lr the run's weight sum; r6, ip scratch.
- * Frame: [sp] th (n1), #4 v, #8 v_prev, #12 xsat, #16 slope, #20 rmax,
+ * Frame: [sp] th (n1), #4 v_prev, #8 v, #12 xsat, #16 slope, #20 rmax
+ * (a row's first four words in one LDM, round 16),
  * #24 old_end, #28 out_end, #32 psum, #36 &row_start[n_rows], #40 r10
  * while a block's end is searched, #44 out, #48 dcc (pushed r0).
  */
@@ -600,29 +601,24 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    push   {r0, r4-r11, lr}\n"
         "    sub    sp, #48\n"
         "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    lr, [ip, #0]\n"          /* n1 */
-        "    str    lr, [sp, #0]\n"
-        "    str    r1, [sp, #4]\n"          /* v */
-        "    ldrsh  lr, [r0, #34]\n"         /* v_prev */
-        "    str    lr, [sp, #8]\n"
+        "    ldr    r2, [ip, #0]\n"          /* n1 */
+        "    ldrsh  r3, [r0, #34]\n"         /* v_prev */
+        "    mov    r4, r1\n"                /* v */
         "    ldr    r6, [ip, #20]\n"         /* xsat */
-        "    str    r6, [sp, #12]\n"
-        "    ldr    lr, [ip, #16]\n"         /* slope */
-        "    str    lr, [sp, #16]\n"
-        "    ldrsh  lr, [ip, #12]\n"         /* rmax */
-        "    str    lr, [sp, #20]\n"
+        "    ldr    r7, [ip, #16]\n"         /* slope */
+        "    ldrsh  r8, [ip, #12]\n"         /* rmax */
+        "    stm    sp, {r2, r3, r4, r6, r7, r8}\n" /* the frame's first six words in one */
         "    ldr    r11, [ip, #24]\n"        /* c */
         "    ldr    r5, [r0, #4]\n"          /* psi */
-        "    ldr    lr, [r0, #52]\n"         /* psum */
-        "    str    lr, [sp, #32]\n"
+        "    ldr    r9, [r0, #52]\n"         /* psum */
         "    add    r4, r0, #56\n"           /* row_start */
         "    ldrb   r3, [r0, #46]\n"         /* n_rows */
-        "    add    lr, r4, r3, lsl #1\n"
-        "    str    lr, [sp, #36]\n"
+        "    add    r10, r4, r3, lsl #1\n"
+        "    strd   r9, r10, [sp, #32]\n"
         /* the band's first row (first_row_above: the first whose n1 exceeds
          * v - xsat), walked from the last falling tick's */
         "    sub    r6, r1, r6\n"            /* t = v - xsat */
-        "    ldr    lr, [ip, #0]\n"          /* n1 */
+        "    mov    lr, r2\n"                /* n1 */
         "    ldrb   r2, [r0, #47]\n"         /* k = row_cur */
         "10: cbz    r2, 11f\n"
         "    add    r9, r4, r2, lsl #1\n"
@@ -662,14 +658,11 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         ".Ldf_row:\n"
         "    ldrh   r0, [r4], #2\n"          /* j */
         "    ldrh   r1, [r4]\n"              /* end */
-        "    ldr    lr, [sp, #0]\n"
-        "    ldrsh  r2, [lr, r0, lsl #1]\n"  /* n1 */
-        "    ldr    lr, [sp, #8]\n"
-        "    cmp    r2, lr\n"
+        "    ldm    sp, {r2, r3, ip, lr}\n"  /* th, v_prev, v, xsat in one (round 16) */
+        "    ldrsh  r2, [r2, r0, lsl #1]\n"  /* n1 */
+        "    cmp    r2, r3\n"
         "    bge    .Ldf_done\n"             /* n1 >= v_prev (x <= dv): psi = 0 by (A) */
-        "    ldr    lr, [sp, #4]\n"
-        "    subs   r3, lr, r2\n"            /* x = v - n1 */
-        "    ldr    lr, [sp, #12]\n"
+        "    subs   r3, ip, r2\n"            /* x = v - n1 */
         "    cmp    r3, lr\n"
         "    bge    .Ldf_sat\n"
         "    cmp    r3, #0\n"
@@ -792,11 +785,9 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    bhs    .Ldf_next\n"
         "    ldr    ip, [sp, #0]\n"
         "    ldrsh  ip, [ip, r1, lsl #1]\n"  /* n1 */
-        "    str    lr, [r10, #0]\n"
-        "    str    r3, [r10, #4]\n"
-        "    strh   ip, [r10, #8]\n"
-        "    strh   r2, [r10, #10]\n"
-        "    add    r10, r10, #16\n"
+        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
+        "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
+        "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
         ".Ldf_next:\n"
         "    ldr    ip, [sp, #36]\n"
         "    cmp    r4, ip\n"
@@ -815,7 +806,7 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    adds   r2, r2, r7\n"
         "    adc    r3, r3, r8\n"
         "    strd   r2, r3, [r0, #24]\n"     /* kacc += dk (runs: const_w) */
-        "    ldr    r1, [sp, #4]\n"
+        "    ldr    r1, [sp, #8]\n"
         "    strh   r1, [r0, #34]\n"         /* v_prev = v */
         "    add    sp, #48\n"
         "    pop    {r2, r4-r11, pc}\n"
@@ -871,15 +862,13 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    push   {r0, r4-r11, lr}\n"
         "    sub    sp, #64\n"
         "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    r10, [r0, #8]\n"         /* order */
-        "    str    r10, [sp, #0]\n"
-        "    str    r1, [sp, #4]\n"          /* v */
+        "    ldr    r2, [r0, #8]\n"          /* order */
+        "    mov    r3, r1\n"                /* v */
         "    ldr    r6, [ip, #20]\n"         /* xsat */
-        "    str    r6, [sp, #8]\n"
-        "    ldr    lr, [ip, #16]\n"         /* slope */
-        "    str    lr, [sp, #12]\n"
-        "    ldrsh  lr, [ip, #12]\n"         /* rmax */
-        "    str    lr, [sp, #16]\n"
+        "    ldr    r7, [ip, #16]\n"         /* slope */
+        "    ldrsh  r8, [ip, #12]\n"         /* rmax */
+        "    stm    sp, {r2, r3, r6, r7, r8}\n" /* the frame's first five words in one */
+        "    mov    r10, r2\n"               /* order */
         "    ldr    r11, [ip, #24]\n"        /* c */
         "    ldr    r5, [r0, #4]\n"          /* psi */
         "    ldr    lr, [r0, #52]\n"         /* psum */
@@ -887,12 +876,11 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    ldrh   r2, [ip, #8]\n"          /* n_ops */
         "    add    lr, lr, r2, lsl #2\n"
         "    add    lr, lr, #4\n"
-        "    sub    lr, lr, r10\n"
-        "    str    lr, [sp, #36]\n"         /* psum + n_ops + 1 - order (bytes) */
+        "    sub    lr, lr, r10\n"           /* psum + n_ops + 1 - order (bytes) */
         "    add    r4, r0, #122\n"          /* col_start */
         "    ldrb   r3, [r0, #48]\n"         /* n_cols */
-        "    add    lr, r4, r3, lsl #1\n"
-        "    str    lr, [sp, #32]\n"
+        "    add    r9, r4, r3, lsl #1\n"
+        "    strd   r9, lr, [sp, #32]\n"
         /* the band's first column (first_col_above: the first whose n2
          * exceeds v_prev - xsat; every column without n2_banded), walked
          * from the last rising tick's */
@@ -944,16 +932,14 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         ".Ldr_col:\n"
         "    ldrh   r0, [r4], #2\n"          /* pos */
         "    ldrh   r1, [r4]\n"              /* end */
-        "    ldr    ip, [sp, #0]\n"
-        "    add    r0, ip, r0, lsl #2\n"
-        "    add    r1, ip, r1, lsl #2\n"
+        "    ldm    sp, {r2, r3, ip}\n"      /* order, v, xsat in one (round 16) */
+        "    add    r0, r2, r0, lsl #2\n"
+        "    add    r1, r2, r1, lsl #2\n"
         "    ldrsh  r2, [r0, #2]\n"          /* n2 */
         "    str    r2, [sp, #40]\n"
-        "    ldr    lr, [sp, #4]\n"
-        "    subs   r3, lr, r2\n"            /* x = v - n2 */
+        "    subs   r3, r3, r2\n"            /* x = v - n2 */
         "    ble    .Ldr_done\n"             /* n2 >= v from here on: r = 0 */
-        "    ldr    lr, [sp, #8]\n"
-        "    cmp    r3, lr\n"
+        "    cmp    r3, ip\n"
         "    bge    .Ldr_sat\n"
         "    ldr    lr, [sp, #12]\n"
         "    mul    r3, r3, lr\n"
@@ -1083,11 +1069,9 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    bhs    .Ldr_next\n"
         "    lsr    r2, r2, #2\n"
         "    ldr    ip, [sp, #40]\n"
-        "    str    lr, [r10, #0]\n"
-        "    str    r3, [r10, #4]\n"
-        "    strh   ip, [r10, #8]\n"
-        "    strh   r2, [r10, #10]\n"
-        "    add    r10, r10, #16\n"
+        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
+        "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
+        "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
         "    str    r10, [sp, #44]\n"
         ".Ldr_next:\n"
         "    ldr    ip, [sp, #32]\n"
@@ -1331,6 +1315,25 @@ void piezo_dcc_ops_update_c(struct piezo_dcc *dcc, int16_t v_q15)
     dcc_ops(dcc, v_q15);
 }
 
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* A tick with runs and a new input: the reversal's three stores (as
+ * dcc_ops), then the whole step in Thumb-2. */
+static inline __attribute__((always_inline)) void runs_step(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    const int8_t dir = v_q15 > dcc->v_prev_q15 ? 1 : -1;
+    if (dir != dcc->dir) { /* reversal, as dcc_ops */
+        dcc->xi_q15 = dcc->v_prev_q15;
+        dcc->dir = dir;
+        dcc->n_run = 0u;
+    }
+    if (dir > 0) {
+        dcc_rise_m4(dcc, v_q15);
+    } else {
+        dcc_fall_m4(dcc, v_q15);
+    }
+}
+#endif
+
 /* The operators' step (the law's own call inlines it: one call less). */
 static inline __attribute__((always_inline)) void ops_update(struct piezo_dcc *dcc, int16_t v_q15)
 {
@@ -1340,17 +1343,7 @@ static inline __attribute__((always_inline)) void ops_update(struct piezo_dcc *d
         return;
     }
     if (dcc->runs) {
-        const int8_t dir = v_q15 > dcc->v_prev_q15 ? 1 : -1;
-        if (dir != dcc->dir) { /* reversal, as dcc_ops */
-            dcc->xi_q15 = dcc->v_prev_q15;
-            dcc->dir = dir;
-            dcc->n_run = 0u;
-        }
-        if (dir > 0) {
-            dcc_rise_m4(dcc, v_q15);
-        } else {
-            dcc_fall_m4(dcc, v_q15);
-        }
+        runs_step(dcc, v_q15);
         return;
     }
 #endif
@@ -1362,11 +1355,41 @@ void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
     ops_update(dcc, v_q15);
 }
 
+/* The law's output from sum_j Psi_j c_j (Q39): the feedthrough, rounded and
+ * saturated; kept as the next tick's input. */
+static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *dcc, int64_t acc,
+                                                             int16_t yd_q15)
+{
+    acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
+    const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    dcc->u_last_q15 = u;
+    return u;
+}
+
 int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
 {
     const int16_t v = dcc->u_last_q15;
-    ops_update(dcc, v);
     /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+    if (dcc->runs) {
+        /* runs tested once for the step and the sum (round 16: gcc tested
+         * the byte again after the step's call) */
+        if (v != dcc->v_prev_q15) {
+            runs_step(dcc, v);
+        }
+        /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product */
+        int64_t acc = (int64_t)v * (int32_t)dcc->csum - dcc->kacc;
+        acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
+        /* |v C|, |kacc| = |sum psi_j c_j| and |yd g| are each below
+         * 2^15 2^31 (|psi_j|, |v|, |yd| <= 2^15; sum |c_j| and g below 2^31),
+         * so |acc| < 2^48 and acc rounded to q15 fits an int32: SSAT alone
+         * clamps it, as piezo_sat_q15 would (4 instructions fewer) */
+        const int16_t u = (int16_t)__builtin_arm_ssat((int32_t)piezo_rshift_rnd64(acc, 24u), 16u);
+        dcc->u_last_q15 = u;
+        return u;
+    }
+#endif
+    ops_update(dcc, v);
     int64_t acc;
     if (dcc->runs) {
         /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product */
@@ -1381,8 +1404,5 @@ int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
             acc += (int64_t)(v - psi[j]) * c[j];
         }
     }
-    acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
-    const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
-    dcc->u_last_q15 = u;
-    return u;
+    return dcc_out(dcc, acc, yd_q15);
 }

@@ -97,20 +97,29 @@ int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
 /* The same, inline: the inverse's sample (eupi_inv.c) runs it without a call
  * (issue 15, round 14: the call, its register saves and argument moves cost
  * about as much as the polynomial's own multiplies). */
-static inline int64_t piezo_eupi_poly_q39_inline(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
-                                                 int16_t u_q15)
+/* The polynomial's part above its constant, hu = rshift_rnd(h u, 15) in
+ * Q24 with h by Horner, so that P(u) = p0 2^15 + hu u (Q39); 0 for n_p == 0.
+ * |hu| <= sum |p_m| + n_p (each step rounds by 1/2 LSB at most, |u| <= 1). */
+static inline int32_t piezo_eupi_poly_hu_q24(const int32_t *p_q24, uint16_t n_p, int16_t u_q15)
 {
-    const int64_t c0 = (int64_t)p0_q24 * PIEZO_Q15_ONE; /* Q39; no << of a negative */
     if (n_p == 0u) {
-        return c0;
+        return 0;
     }
-    /* h = p_Np; h = h * u + p_m down to m = 2; P = p0 + (h * u) * u. */
+    /* h = p_Np; h = h * u + p_m down to m = 2; hu = h * u. */
     int32_t h = p_q24[n_p - 1u];
     for (size_t m = n_p - 1u; m > 0u; m--) {
         h = (int32_t)(piezo_mul_rshift_rnd(h, u_q15, 15u) + p_q24[m - 1u]);
     }
-    const int32_t hu = (int32_t)piezo_mul_rshift_rnd(h, u_q15, 15u);
-    return piezo_mlal(c0, hu, u_q15); /* (no 64 x 64 multiply: fixed_q.h) */
+    return (int32_t)piezo_mul_rshift_rnd(h, u_q15, 15u);
+}
+
+/* P(u) in Q39, inline: the same integers as piezo_eupi_poly_q39. */
+static inline int64_t piezo_eupi_poly_q39_inline(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
+                                                 int16_t u_q15)
+{
+    const int64_t c0 = (int64_t)p0_q24 * PIEZO_Q15_ONE; /* Q39; no << of a negative */
+    /* (no 64 x 64 multiply: fixed_q.h; hu = 0 for n_p == 0) */
+    return piezo_mlal(c0, piezo_eupi_poly_hu_q24(p_q24, n_p, u_q15), u_q15);
 }
 
 /* Checks of the G_UPI + P part common to the model and its inverse. */

@@ -61,9 +61,12 @@ int16_t piezo_eupi_inv_process(struct piezo_eupi_inv *c, int16_t yr_q15)
     acc += piezo_play_process_cpi(&c->cpi_inv, v);
     const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
     /* G2(k) = G_UPI[u] + P(u) - k_ex u, kept in Q39 for the next sample. */
+    /* P(u) - k_ex u = p0 2^15 + (hu - k_ex) u exactly: two SMLALs onto the
+     * bank's sum instead of forming p0 2^15 and k_ex u apart (round 16);
+     * |hu - k_ex| <= sum |p| + n_p + |k_ex| < 2^31 by the G2 bound of init. */
     int64_t g2 = piezo_play_process_upi(&c->upi, u);
-    g2 += piezo_eupi_poly_q39_inline(k->p_q24, k->n_p, k->p0_q24, u);
-    g2 -= piezo_mul32(k->kex_q24, u); /* (no 64 x 64 multiply: fixed_q.h) */
+    g2 = piezo_mlal(g2, k->p0_q24, (int32_t)PIEZO_Q15_ONE);
+    g2 = piezo_mlal(g2, piezo_eupi_poly_hu_q24(k->p_q24, k->n_p, u) - k->kex_q24, u);
     c->g2_q39 = g2;
     return u;
 }

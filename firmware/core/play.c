@@ -162,14 +162,17 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
 struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it updates it */
     uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
     int32_t *f;          /* 4: the column's outputs (column by column) */
-    intptr_t w_a;        /* 8: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
-    const int32_t *r;    /* 12: thresholds */
+    uint32_t f_step;     /* 8: n_r * 4, bytes of a column of outputs */
+    intptr_t w_a;        /* 12: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
     const int32_t *a;    /* 16: the column's slope */
     const int32_t *a_end;/* 20: one past the last slope */
-    uint32_t f_step;     /* 24: n_r * 4, bytes of a column of outputs */
-    uint32_t w_stride;   /* 28: n_a * 4, bytes between a column's weights */
+    const int32_t *r;    /* 24: thresholds */
+    uint32_t pad;        /* 28: p sits at 32 */
 };
-typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_stride) == 28u &&
+/* the first four words in one LDM per column, the set-up's seven in one STM
+ * (round 16: 15 -> 10 per column, 24 -> 20 to enter) */
+typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_a) == 12u &&
+                                                 offsetof(struct upi_fall_args, r) == 24u &&
                                                  sizeof(struct upi_fall_args) == 32u) ? 1 : -1];
 /* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
@@ -193,39 +196,32 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
-        "    ldr    r1, [r0, #0]\n"           /* coef */
-        "    ldr    r4, [r0, #4]\n"           /* f */
-        "    ldr    r5, [r0, #8]\n"           /* off */
+        "    ldr    ip, [r0, #0]\n"           /* coef */
+        "    ldr    r2, [r0, #4]\n"           /* f */
+        "    ldr    r1, [r0, #8]\n"           /* off */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
-        "    ldrh   r6, [r1, #12]\n"          /* n_r */
-        "    ldrh   r7, [r1, #14]\n"          /* n_a */
-        "    ldr    r10, [r1, #4]\n"          /* a */
-        "    ldr    r12, [r1, #8]\n"          /* w */
-        "    ldr    r11, [r1, #0]\n"          /* r */
-        "    sub    r5, r5, r4, lsl #1\n"
-        "    sub    r12, r12, r10\n"           /* w - a: a column's first weight is a_j's address + it */
-        "    add    r1, r10, r7, lsl #2\n"
-        "    lsl    r6, r6, #2\n"
-        "    lsl    r7, r7, #2\n"
-        "    strd   r5, r4, [sp, #0]\n"
-        "    strd   r12, r11, [sp, #8]\n"
-        "    strd   r10, r1, [sp, #16]\n"
-        "    strd   r6, r7, [sp, #24]\n"
-        "    mov    r5, r7\n"
-        "    cmp    r6, #0\n"
-        "    beq    7f\n"
-        "1:  ldr    r4, [sp, #8]\n"           /* column (r10 = &a_j: the set-up's or 6's): a_j, the split a u */
+        "    ldrh   r3, [ip, #12]\n"          /* n_r */
+        "    ldrh   r5, [ip, #14]\n"          /* n_a */
+        "    ldr    r10, [ip, #4]\n"          /* a */
+        "    ldr    r4, [ip, #8]\n"           /* w */
+        "    ldr    r12, [ip, #0]\n"          /* r */
+        "    sub    r1, r1, r2, lsl #1\n"
+        "    sub    r4, r4, r10\n"             /* w - a: a column's first weight is a_j's address + it */
+        "    lsl    r5, r5, #2\n"
+        "    add    r11, r10, r5\n"
+        "    lsls   r3, r3, #2\n"
+        "    stm    sp, {r1, r2, r3, r4, r10, r11, r12}\n"
+        "    beq    7f\n"                     /* n_r == 0 (the lsls) */
+        "1:  ldm    sp, {r1, r2, r3, r4}\n"   /* column (r10 = &a_j: the set-up's or 6's) */
+        "    add    r1, r1, r2, lsl #1\n"     /* its constants */
+        "    add    r3, r3, r2\n"             /* its outputs' end */
         "    add    r4, r4, r10\n"             /* wp = w + j */
-        "    ldr    r11, [r10], #4\n"
+        "    ldr    r11, [r10], #4\n"          /* a_j, the split a u */
         "    str    r10, [sp, #16]\n"
         "    smull  r6, r7, r11, lr\n"
         "    lsr    r10, r6, #24\n"
         "    orr    r7, r10, r7, lsl #8\n"
         "    lsl    r6, r6, #8\n"
-        "    ldrd   r1, r2, [sp, #0]\n"
-        "    add    r1, r1, r2, lsl #1\n"
-        "    ldr    r3, [sp, #24]\n"
-        "    add    r3, r2, r3\n"
         "    cmp    r11, #0x1000000\n"
         "    ble    2f\n"
         "    cmp    lr, #0\n"
@@ -260,7 +256,7 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
-        "5:  ldr    r0, [sp, #12]\n"           /* with the lower branch: its prefix, one per pass */
+        "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r10, r11, [r1], #8\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r7\n"            /* hi */
@@ -300,7 +296,10 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    pop    {r4-r11, pc}\n");
 }
 
-#else
+#endif
+
+/* The C falling step: what other targets run, and on the Cortex-M4 the
+ * reference of upi_fall_m4 (piezo_play_process_upi_c, test_play). */
 static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
                         int64_t acc)
 {
@@ -344,7 +343,6 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
     }
     return acc;
 }
-#endif
 
 /*
  * Rising, F = max(u - r_i, F) (the upper branch cannot bind while rising):
@@ -419,7 +417,8 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    pop    {r4-r11, pc}\n");
 }
 
-#else
+#endif
+/* The C rising step (the reference of rise_m4, as upi_fall above). */
 static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
                     int32_t u_q15, int64_t acc)
 {
@@ -438,7 +437,6 @@ static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, 
     }
     return acc;
 }
-#endif
 
 /* The classical run's stores: f[k] = u + r[k] falling (rsb == 0), u - r[k]
  * rising (rsb == 1). On Thumb-2 two per pass (ldrd/strd: three
@@ -582,8 +580,6 @@ static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *
         "    ldr    r7, [r3, #8]\n"           /* w */
         "    ldrh   lr, [r3, #12]\n"          /* n_r */
         "    ldrsb  r8, [r0, #29]\n"          /* run_dir */
-        "    movs   r9, #0\n"                 /* i = 0, run_w = 0 unless the run holds */
-        "    movs   r3, #0\n"
         "    subs   r2, r1, r2\n"             /* d = u - u_prev, never 0 here */
         "    ble    20f\n"
         /* rising: F = max(u - r, F) */
@@ -592,6 +588,8 @@ static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *
         "    movs   r8, #1\n"
         "    strb   r8, [r0, #29]\n"          /* run_dir = 1 */
         "    movs   r8, #0\n"
+        "    movs   r9, #0\n"                 /* a new run: i = 0, run_w = 0 (round 16: */
+        "    movs   r3, #0\n"                 /* here, not on every tick) */
         "    b      15f\n"
         "11: ldrh   r9, [r0, #30]\n"          /* i = run_n */
         "    ldrd   r3, r8, [r0, #32]\n"      /* run_w */
@@ -644,6 +642,8 @@ static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *
         "    mov    r8, #-1\n"
         "    strb   r8, [r0, #29]\n"          /* run_dir = -1 */
         "    movs   r8, #0\n"
+        "    movs   r9, #0\n"                 /* a new run: i = 0, run_w = 0 (round 16: */
+        "    movs   r3, #0\n"                 /* here, not on every tick) */
         "    b      25f\n"
         "21: ldrh   r9, [r0, #30]\n"
         "    ldrd   r3, r8, [r0, #32]\n"
@@ -772,6 +772,12 @@ __attribute__((naked)) int64_t piezo_play_process_upi(struct piezo_play *p, int3
 #else
 int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
 {
+    return piezo_play_process_upi_c(p, u_q15);
+}
+#endif
+
+int64_t piezo_play_process_upi_c(struct piezo_play *p, int32_t u_q15)
+{
     if (!p->primed) {
         return play_first(p, u_q15);
     }
@@ -796,7 +802,6 @@ int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15)
     p->acc_q39 = acc;
     return acc;
 }
-#endif
 
 int64_t piezo_play_process(struct piezo_play *p, int32_t u_q15)
 {

@@ -140,6 +140,10 @@ int64_t piezo_play_process_upi(struct piezo_play *p, int32_t u_q15);
  * the Thumb-2 step (test_play compares the two); elsewhere the same as
  * piezo_play_process_cpi. */
 int64_t piezo_play_process_cpi_c(struct piezo_play *p, int32_t u_q15);
+/* The unparallel bank with the C steps only: on the Cortex-M4 the reference
+ * of the Thumb-2 upi_fall_m4 and rise_m4 (test_play compares them); elsewhere
+ * the same as piezo_play_process_upi. */
+int64_t piezo_play_process_upi_c(struct piezo_play *p, int32_t u_q15);
 
 /* Output F_k of operator k = i * n_a + j (row-major, as the weights). */
 static inline int32_t piezo_play_output(const struct piezo_play *p, size_t k)

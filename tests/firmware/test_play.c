@@ -453,6 +453,65 @@ static void test_cpi_step_matches_c_step(void **state)
     }
 }
 
+/* The unparallel step as this target runs it (on the Cortex-M4 the Thumb-2
+ * upi_fall_m4 and rise_m4) against the C steps (piezo_play_process_upi_c)
+ * from the same state (round 16: the falling step's column state moved to
+ * LDM/STM): the run tests' walks (long runs, pauses, jumps, small
+ * reversals), columns of odd and even length (the falling loop's pairs),
+ * slopes at exactly 1, below and above (the lower branch's choice per
+ * column), weights at the int32 extremes half the time; the sum, acc,
+ * u_prev and every output compared after every sample. On sil and sanitize
+ * both entries are the C step. */
+static void test_upi_step_matches_c_step(void **state)
+{
+    (void)state;
+    static int32_t r[PIEZO_PLAY_MAX_OPS], a[PIEZO_PLAY_MAX_OPS], w[PIEZO_PLAY_MAX_OPS];
+    static int32_t f_c[PIEZO_PLAY_MAX_OPS];
+    static int64_t off_c[PIEZO_PLAY_MAX_OPS];
+    static const uint16_t shapes[][3] = {
+        /* n_r, n_a, input span (log2) */
+        {10, 3, 15}, {9, 3, 16}, {1, 1, 15}, {2, 4, 15}, {11, 2, 20}, {16, 8, 15}, {40, 3, 15},
+    };
+    lcg_state = 777u;
+    for (size_t s = 0; s < sizeof shapes / sizeof shapes[0]; s++) {
+        const uint16_t n_r = shapes[s][0], n_a = shapes[s][1];
+        const int32_t span = (int32_t)1 << shapes[s][2];
+        const size_t n_ops = PIEZO_PLAY_N_OPS(n_r, n_a);
+        random_bank(r, w, n_r, span);
+        for (size_t k = n_r; k < n_ops; k++) { /* the weights past the first column's */
+            const uint32_t pick = lcg() % 4u;
+            w[k] = pick == 0u ? INT32_MAX : pick == 1u ? INT32_MIN : (int32_t)(lcg() << 8 ^ lcg());
+        }
+        for (size_t j = 0; j < n_a; j++) {
+            const uint32_t pick = lcg() % 3u; /* a = 1 exactly, below, above */
+            a[j] = pick == 0u ? PIEZO_Q24_ONE
+                 : pick == 1u ? lcg_range(1, PIEZO_Q24_ONE - 1)
+                              : lcg_range(PIEZO_Q24_ONE + 1, 4 * PIEZO_Q24_ONE);
+        }
+        const struct piezo_play_coef c = {r, a, w, n_r, n_a};
+        struct piezo_play p, q;
+        assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, off_buf, PIEZO_PLAY_MAX_OPS),
+                         PIEZO_OK);
+        assert_int_equal(piezo_play_init(&q, &c, f_c, PIEZO_PLAY_MAX_OPS, off_c, PIEZO_PLAY_MAX_OPS),
+                         PIEZO_OK);
+        struct walk wk = {0, 1, 0, 1};
+        size_t falls = 0u;
+        for (size_t k = 0; k < 20000u; k++) {
+            const int32_t u = walk_next(&wk, span);
+            const size_t at = s * 100000u + k;
+            falls += u < p.u_prev_q15;
+            assert_golden_i32("upi step: sum", at, piezo_play_process_upi(&p, u), piezo_play_process_upi_c(&q, u));
+            assert_golden_i32("upi step: acc", at, p.acc_q39, q.acc_q39);
+            assert_golden_i32("upi step: u_prev", at, p.u_prev_q15, q.u_prev_q15);
+            for (size_t i = 0; i < n_ops; i++) {
+                assert_golden_i32("upi step: output", at * 1000u + i, f_buf[i], f_c[i]);
+            }
+        }
+        /* the walk fell often enough to test the falling step (2,785 to 6,724) */
+        assert_true(falls >= 2000u);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -466,6 +525,7 @@ int main(void)
         cmocka_unit_test(test_runs_equal_eager_formula),
         cmocka_unit_test(test_classical_runs_equal_scan),
         cmocka_unit_test(test_cpi_step_matches_c_step),
+        cmocka_unit_test(test_upi_step_matches_c_step),
     };
     return cmocka_run_group_tests_name("play", tests, NULL, NULL);
 }
