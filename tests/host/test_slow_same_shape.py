@@ -1,0 +1,94 @@
+"""Round 16: a drift told from a sensor offset by the level difference between reveal recordings that sweep
+between the same extremes (slow_signature.sweep_extremes, same_shape_pairs and their part in level_trend_test)."""
+
+import types
+
+import numpy as np
+import pytest
+
+from piezoctl.diagnose import slow_signature as ss
+
+DT = 1e-3
+
+
+def _triangle(dur_s, f_hz, lo=-0.9, hi=0.9):
+    """Triangle between lo and hi, starting in the middle going up (as the foreign bench draws its reveal)."""
+    t = np.arange(int(round(dur_s / DT))) * DT
+    ph = (f_hz * t + 0.25) % 1.0
+    return (lo + hi) / 2 + (hi - lo) / 2 * np.where(ph < 0.5, 4 * ph - 1, 3 - 4 * ph)
+
+
+def _walk(dur_s, rng, lo=-0.9, hi=0.9):
+    """A smoothed random walk inside [lo, hi]: its turning points lie between the extremes."""
+    n = int(round(dur_s / DT))
+    x = np.cumsum(rng.normal(size=n))
+    x = np.convolve(x, np.ones(200) / 200, mode="same")
+    return lo + (hi - lo) * (x - x.min()) / (x.max() - x.min())
+
+
+def _loop_misfit(u):
+    """The base's misfit on the major loop: a function of the drive and its direction only (rate independent)."""
+    d = np.sign(np.gradient(u))
+    return 0.05 * np.sin(3.0 * u) + 0.03 * d * (1 - u ** 2)
+
+
+def _ctx(drives, starts):
+    sigs = [types.SimpleNamespace(u=u, t=np.arange(u.size) * DT, t_session=t0, index=i)
+            for i, (u, t0) in enumerate(zip(drives, starts))]
+    return types.SimpleNamespace(signals=sigs, valid=[np.ones(u.size, bool) for u in drives], n_rec=len(drives),
+                                 offset_of=lambda i: 0, drift_t0=0.0)
+
+
+def _stack(ctx, level):
+    """Residual [um] of every recording: the loop's misfit (the walk: its own history's, 0.3 um off), the
+    ``level(session time)`` and noise; with the recording index and session time of each sample."""
+    rng = np.random.default_rng(5)
+    r, rec, tt = [], [], []
+    for i, s in enumerate(ctx.signals):
+        ts = s.t_session + s.t
+        own = _loop_misfit(s.u) if ss.sweep_extremes(s.u) else 0.3 + 0.1 * np.sin(ts)
+        r.append(own + level(ts) + 2e-3 * rng.normal(size=s.u.size))
+        rec.append(np.full(s.u.size, i))
+        tt.append(ts)
+    return np.concatenate(r), np.concatenate(rec), np.concatenate(tt)
+
+
+def test_a_triangle_sweeps_between_its_extremes_and_a_walk_does_not():
+    u = _triangle(10.0, 0.5)
+    lo, hi, first = ss.sweep_extremes(u)
+    assert lo == pytest.approx(-0.9, abs=1e-3) and hi == pytest.approx(0.9, abs=1e-3)
+    # started in the middle going up: the first turn (hi) after 0.5 s, the second (lo) 1 s later
+    assert first * DT == pytest.approx(1.5, abs=2 * DT)
+    assert ss.sweep_extremes(_walk(10.0, np.random.default_rng(1))) is None
+    two_sines = 0.5 * np.sin(2 * np.pi * 1.0 * np.arange(5000) * DT) + 0.3 * np.sin(2 * np.pi * 3.3 * np.arange(5000) * DT)
+    assert ss.sweep_extremes(two_sines) is None
+
+
+@pytest.mark.parametrize("kind", ["offset", "drift"])
+def test_same_sweep_recordings_differ_by_the_drift_between_them_and_not_by_an_offset(kind):
+    """Two triangles at different rates and session times, a walk between them: the pair's level difference is
+    the level's change on the clock; an offset cancels, and so does the loop's misfit."""
+    drives = [_triangle(20.0, 0.3), _walk(15.0, np.random.default_rng(2)), _triangle(7.0, 0.8)]
+    ctx = _ctx(drives, [30.0, 55.0, 75.0])
+    level = (lambda ts: 0.4 + 0 * ts) if kind == "offset" else (lambda ts: 0.4 + 0.3 * (1 - np.exp(-ts / 60.0)))
+    r, rec, tt = _stack(ctx, level)
+    pairs = ss.same_shape_pairs(ctx, r, rec, tt)
+    assert [p["recordings"] for p in pairs] == [[0, 2]]
+    p = pairs[0]
+    # the level's change between the two recordings' mean times of the samples used
+    t0 = 30.0 + np.mean(np.arange(ss.sweep_extremes(drives[0])[2], drives[0].size)) * DT
+    t2 = 75.0 + np.mean(np.arange(ss.sweep_extremes(drives[2])[2], drives[2].size)) * DT
+    want = float(level(np.array([t2]))[0] - level(np.array([t0]))[0])
+    assert p["dt_s"] == pytest.approx(t2 - t0, rel=0.02)
+    assert abs(p["level_difference_um"] - want) < 3 * p["se_um"] + 0.05 * abs(want), (p, want)
+    if kind == "offset":
+        assert abs(p["level_difference_um"]) < 3 * p["se_um"], p
+    else:
+        assert abs(p["level_difference_um"]) > 10 * p["se_um"], p
+
+
+def test_loops_between_other_extremes_are_not_compared():
+    drives = [_triangle(20.0, 0.3), _triangle(7.0, 0.8, lo=-0.5, hi=0.9)]
+    ctx = _ctx(drives, [30.0, 75.0])
+    r, rec, tt = _stack(ctx, lambda ts: 0 * ts)
+    assert ss.same_shape_pairs(ctx, r, rec, tt) == []
