@@ -92,3 +92,53 @@ def test_loops_between_other_extremes_are_not_compared():
     ctx = _ctx(drives, [30.0, 75.0])
     r, rec, tt = _stack(ctx, lambda ts: 0 * ts)
     assert ss.same_shape_pairs(ctx, r, rec, tt) == []
+
+
+def _pipeline_ctx(drives, starts):
+    """The signature tests' context (test_diagnose_slow's) with these reveal drives."""
+    from piezoctl.diagnose.select import Ctx, Signals, make_masks
+    from piezoctl.models.hysteresis import hysteresis_parts
+    from test_diagnose_slow import DT as DT2, _plane
+    hp = _plane()
+    base = {"hysteresis": hp, "dynamics": {"b": [1.0], "a": [1.0]}, "u_mid": 0.0, "u_half": 1.0, "terms": {}}
+    sigs = []
+    for i, (v, t0) in enumerate(zip(drives, starts)):
+        t = np.arange(v.size) * DT2
+        h, hyst = hysteresis_parts(hp, v)
+        sigs.append(Signals(name=f"rec{i}", t=t, u=v, y=h.copy(), u2=None, x2=None, temp=None, dt=DT2, v=v, h=h,
+                            hyst=hyst, yb=h.copy(), ydyn=h.copy(), index=i, t_session=t0))
+    valid, fold, block = make_masks(sigs, 0.5, 1.0)
+    ctx = Ctx(base=base, signals=sigs, valid=valid, fold=fold, block=block, names=[s.name for s in sigs],
+              n_rec=len(sigs), dt=DT2, duration=30.0, u2_ref=0.0, y_center=0.0, y_half=6.0, u_lo=-0.9, u_hi=0.9,
+              u_mid_all=0.0, u_half_all=0.9, max_step=1.8, peak_freqs=[], y_span=12.0, cal_u_lo=-1.0, cal_u_hi=1.0,
+              drift_t0=0.0, drift_span=100.0)
+    ctx.offset_group, ctx.offset_sessions = [0] * len(sigs), ["1"]
+    return ctx
+
+
+@pytest.mark.parametrize("same_shape", [False, True])
+def test_a_drift_flat_within_the_precise_recording_trends_only_by_the_same_shape_pair(monkeypatch, same_shape):
+    """s114-001-like: the long triangle sits on a flat stretch of a drift that rose 0.4 um before the second
+    triangle; the walk between them wanders too much to show it. Round 15's test (within the recordings) does not
+    trend; with the pair it does, at the step's slope."""
+    from test_diagnose_slow import DT as DT2, _run
+    from test_slow_signature_levels import _misfit
+    rng = np.random.default_rng(31)
+    tri = lambda dur, f: 0.9 * (2 * np.abs(2 * ((np.arange(int(dur / DT2)) * DT2 * f + 0.25) % 1) - 1) - 1)
+    walk = _walk(10.0 * DT2 / DT, rng)[::int(DT2 / DT)]
+    ctx = _pipeline_ctx([tri(12.0, 0.4), walk, tri(8.0, 0.9)], [30.0, 45.0, 58.0])
+    _misfit(ctx)
+    monkeypatch.setattr(ss, "SAME_SHAPE", same_shape)
+    # flat through the first triangle, rising 0.4 um between 42 and 58 s; the walk's level wanders 0.1 um
+    level = lambda ts: 0.2 + 0.4 * np.clip((ts - 42.0) / 16.0, 0.0, 1.0)
+    tests = _run(ctx, lambda s: level(s.t_session + s.t) + (0.1 * np.sin(2.1 * s.t) if s.index == 1 else 0.0), rng)
+    tr = tests["thermal_drift"].trend
+    if same_shape:
+        assert [p["recordings"] for p in tr["same_shape"]] == [[0, 2]]
+        pr = tr["same_shape"][0]
+        # the nuisance fitted with the levels (the drive's and output's gains) takes part of a step this size
+        assert 0.75 * 0.4 < pr["level_difference_um"] < 0.4 + 3 * pr["se_um"], pr
+        assert tr["trends"], tr
+    else:
+        assert "same_shape" in tr and tr["same_shape"] == []
+        assert not tr["trends"], tr
