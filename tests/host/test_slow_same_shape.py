@@ -72,7 +72,7 @@ def test_same_sweep_recordings_differ_by_the_drift_between_them_and_not_by_an_of
     ctx = _ctx(drives, [30.0, 55.0, 75.0])
     level = (lambda ts: 0.4 + 0 * ts) if kind == "offset" else (lambda ts: 0.4 + 0.3 * (1 - np.exp(-ts / 60.0)))
     r, rec, tt = _stack(ctx, level)
-    pairs = ss.same_shape_pairs(ctx, r, rec, tt)
+    pairs = ss.same_shape_pairs(ctx, [r], rec, tt)
     assert [p["recordings"] for p in pairs] == [[0, 2]]
     p = pairs[0]
     # the level's change between the two recordings' mean times of the samples used
@@ -91,7 +91,7 @@ def test_loops_between_other_extremes_are_not_compared():
     drives = [_triangle(20.0, 0.3), _triangle(7.0, 0.8, lo=-0.5, hi=0.9)]
     ctx = _ctx(drives, [30.0, 75.0])
     r, rec, tt = _stack(ctx, lambda ts: 0 * ts)
-    assert ss.same_shape_pairs(ctx, r, rec, tt) == []
+    assert ss.same_shape_pairs(ctx, [r], rec, tt) == []
 
 
 def _pipeline_ctx(drives, starts):
@@ -142,3 +142,18 @@ def test_a_drift_flat_within_the_precise_recording_trends_only_by_the_same_shape
     else:
         assert "same_shape" in tr and tr["same_shape"] == []
         assert not tr["trends"], tr
+
+
+def test_the_two_fold_models_disagreeing_on_the_difference_widen_its_error():
+    """s113-002-like (offset): read through one fold's model the second triangle sits 6 nm higher, through the
+    other's 1 nm; the pair's difference is their mean and its error covers their disagreement."""
+    drives = [_triangle(20.0, 0.3), _walk(15.0, np.random.default_rng(2)), _triangle(7.0, 0.8)]
+    ctx = _ctx(drives, [30.0, 55.0, 75.0])
+    r, rec, tt = _stack(ctx, lambda ts: 0.4 + 0 * ts)
+    one = ss.same_shape_pairs(ctx, [r], rec, tt)[0]
+    shifted = r + np.where(rec == 2, 0.005, 0.0)
+    two = ss.same_shape_pairs(ctx, [r, shifted], rec, tt)[0]
+    assert two["per_fold_um"][1] - two["per_fold_um"][0] == pytest.approx(0.005, abs=1e-9)
+    assert two["level_difference_um"] == pytest.approx(one["level_difference_um"] + 0.0025, abs=1e-9)
+    assert two["se_um"] >= 0.0025 > 3 * one["se_um"], (one, two)
+    assert abs(two["level_difference_um"]) < 3 * two["se_um"], two

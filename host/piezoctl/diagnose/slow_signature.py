@@ -547,22 +547,24 @@ def sweep_extremes(u, tol: float = SWEEP_TOL) -> tuple | None:
     return lo, hi, int(turns[1])
 
 
-def same_shape_pairs(ctx, r, rec, tt, tol: float = SWEEP_TOL) -> list:
+def same_shape_pairs(ctx, rs, rec, tt, tol: float = SWEEP_TOL) -> list:
     """The level difference between reveal recordings that sweep between the same extremes (round 16).
 
     On the major loop between the same extremes the base's misfit is the same function of the drive and its
     direction in both recordings (:func:`sweep_extremes`), so the difference of their residuals, bin by bin in
     drive and direction, is what changed between them on the session clock (a drift) plus noise; a sensor offset
-    is the same in both and cancels. The difference ``d`` is the mean over the bins both recordings fill, its
-    standard error the bins' scatter about it (``nb - 1`` degrees of freedom): a loop whose misfit is not the
-    same in both (rate dependence, dynamics) shows as that scatter.
+    is the same in both and cancels. Per fold model, the difference ``d_f`` is the mean over the bins both
+    recordings fill and ``se_f`` the bins' scatter about it; ``d`` is the mean of the two and its variance the
+    mean ``se_f^2`` plus ``((d_0 - d_1) / 2)^2``: the same difference read through the model fitted on either
+    fold differs by what the fit moves the level by (development offset s113-002: 1.3 and 6.4 nm under the two
+    fold models, each with a bin scatter of 1.2 to 1.7 nm), which is part of what the pair cannot resolve.
 
     Parameters
     ----------
     ctx : Ctx
         Recordings (``signals``, ``valid``) and their sensor-zero columns (``offset_of``).
-    r : ndarray
-        Residual beyond the nuisance [um], settled samples stacked.
+    rs : sequence of ndarray
+        Per fold model, the residual beyond the nuisance [um] of every settled sample, stacked.
     rec : ndarray
         Recording of each stacked sample.
     tt : ndarray
@@ -572,8 +574,8 @@ def same_shape_pairs(ctx, r, rec, tt, tol: float = SWEEP_TOL) -> list:
     -------
     list of dict
         Per pair ``(i, j)`` (``i`` recorded first) of one sensor-zero column other than the calibration's:
-        ``level_difference_um``, ``se_um``, ``dt_s`` (between the mean times of the samples used),
-        ``slope_um_per_s``, ``se_slope_um_per_s``, ``bins``.
+        ``level_difference_um``, ``se_um``, ``per_fold_um``, ``dt_s`` (between the mean times of the samples
+        used), ``slope_um_per_s``, ``se_slope_um_per_s``, ``bins``.
     """
     cols = [ctx.offset_of(i) for i in range(ctx.n_rec)]
     info = {}
@@ -597,31 +599,43 @@ def same_shape_pairs(ctx, r, rec, tt, tol: float = SWEEP_TOL) -> list:
             if cols[i] != cols[j] or abs(lo_i - lo_j) > tol * span or abs(hi_i - hi_j) > tol * span:
                 continue
             lo, hi = min(lo_i, lo_j), max(hi_i, hi_j)
-            means, times = [], []
+            bins, times = [], []
             for k in (i, j):
                 _, _, u, d, on = info[k]
-                mk = rec == k
-                rk, tk = r[mk], tt[mk]
                 use = on & (d != 0)
                 b = np.clip(((u - lo) / (hi - lo) * SWEEP_BINS).astype(int), 0, SWEEP_BINS - 1) + \
                     SWEEP_BINS * (d > 0)
-                b = np.where(use, b, -1)
-                n = np.bincount(b[use], minlength=2 * SWEEP_BINS)
-                sm = np.bincount(b[use], weights=rk[use], minlength=2 * SWEEP_BINS)
-                means.append(np.where(n >= SWEEP_MIN_SAMPLES, sm / np.maximum(n, 1), np.nan))
-                times.append(float(tk[use].mean()) if np.any(use) else np.nan)
-            diff = means[1] - means[0]
-            diff = diff[np.isfinite(diff)]
+                bins.append((b[use], use))
+                times.append(float(tt[rec == k][use].mean()) if np.any(use) else np.nan)
             dt_ = times[1] - times[0]
-            if diff.size < 3 or not np.isfinite(dt_) or dt_ == 0:
+            if not np.isfinite(dt_) or dt_ == 0:
                 continue
-            dd, se = float(diff.mean()), float(diff.std(ddof=1) / np.sqrt(diff.size))
+            ds, ses, nb = [], [], 0
+            for r in rs:
+                means = []
+                for k, (b, use) in zip((i, j), bins):
+                    rk = r[rec == k][use]
+                    n = np.bincount(b, minlength=2 * SWEEP_BINS)
+                    sm = np.bincount(b, weights=rk, minlength=2 * SWEEP_BINS)
+                    means.append(np.where(n >= SWEEP_MIN_SAMPLES, sm / np.maximum(n, 1), np.nan))
+                diff = means[1] - means[0]
+                diff = diff[np.isfinite(diff)]
+                if diff.size < 3:
+                    break
+                ds.append(float(diff.mean()))
+                ses.append(float(diff.std(ddof=1) / np.sqrt(diff.size)))
+                nb = diff.size
+            if len(ds) != len(rs):
+                continue
+            dd = float(np.mean(ds))
+            se = float(np.sqrt(np.mean(np.square(ses)) + (0.25 * (ds[0] - ds[-1]) ** 2 if len(ds) > 1 else 0.0)))
             if se <= 0:
                 continue
             first, second = (i, j) if dt_ > 0 else (j, i)
-            out.append({"recordings": [int(first), int(second)], "level_difference_um": dd * np.sign(dt_),
-                        "se_um": se, "dt_s": abs(dt_), "slope_um_per_s": dd / dt_, "se_slope_um_per_s": se / abs(dt_),
-                        "bins": int(diff.size)})
+            sgn = float(np.sign(dt_))
+            out.append({"recordings": [int(first), int(second)], "level_difference_um": dd * sgn, "se_um": se,
+                        "per_fold_um": [x * sgn for x in ds], "dt_s": abs(dt_), "slope_um_per_s": dd / dt_,
+                        "se_slope_um_per_s": se / abs(dt_), "bins": int(nb)})
     return out
 
 
@@ -676,14 +690,14 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
     R = (rec[:, None] == np.arange(ctx.n_rec)[None, :]).astype(float)
     tt = np.concatenate([_session_time(ctx, s)[v] for s, v in zip(ctx.signals, ctx.valid)])
     blocks, levels = [], []
-    r_all = np.zeros(fold_all.size)
+    r_all = []
     for f in (0, 1):
         X, lo, hi = _level_design(designs[f], R)
         m = fold_all == f
         th = lstsq_box(X[train_rows(m, rows)], es[f][train_rows(m, rows)], lo, hi)
         levels.append(th[-ctx.n_rec:])
         r = es[f] - X[:, :-ctx.n_rec] @ th[:-ctx.n_rec]   # what the level per recording and per block takes
-        r_all[m] = r[m]
+        r_all.append(r)
         for b in np.unique(block_all[m]):
             mb = m & (block_all == b)
             blocks.append((int(rec[mb][0]), float(tt[mb].mean()), float(r[mb].mean())))
