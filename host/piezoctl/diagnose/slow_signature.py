@@ -663,8 +663,8 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
 
     Round 16: except between recordings that sweep between the same extremes (:func:`same_shape_pairs`): on
     the same major loop the base's misfit is the same in both, so their level difference over the session time
-    between them is one more slope, pooled with the others by its own standard error (the bins' scatter; ``nb - 1``
-    degrees of freedom). Development s114-001 (drift, KP): the long triangle sits on a flat stretch of the drift
+    between them is one more slope, pooled with the others by its own standard error (the bins' scatter and the
+    two fold models' disagreement; ``nb - 1`` degrees of freedom). Development s114-001 (drift, KP): the long triangle sits on a flat stretch of the drift
     (+2.2 +- 0.9 nm/s) while the in-range triangle, a minute later, sits 0.38 um higher; a sensor offset is the
     same in both and cancels.
 
