@@ -57,8 +57,8 @@ def test_a_triangle_sweeps_between_its_extremes_and_a_walk_does_not():
     u = _triangle(10.0, 0.5)
     lo, hi, first = ss.sweep_extremes(u)
     assert lo == pytest.approx(-0.9, abs=1e-3) and hi == pytest.approx(0.9, abs=1e-3)
-    # started in the middle going up: the first turn (hi) after 0.5 s, the second (lo) 1 s later
-    assert first * DT == pytest.approx(1.5, abs=2 * DT)
+    # started in the middle going up: the first turn (at hi, where the major loop begins) after 0.5 s
+    assert first * DT == pytest.approx(0.5, abs=2 * DT)
     assert ss.sweep_extremes(_walk(10.0, np.random.default_rng(1))) is None
     two_sines = 0.5 * np.sin(2 * np.pi * 1.0 * np.arange(5000) * DT) + 0.3 * np.sin(2 * np.pi * 3.3 * np.arange(5000) * DT)
     assert ss.sweep_extremes(two_sines) is None
@@ -157,3 +157,19 @@ def test_the_two_fold_models_disagreeing_on_the_difference_widen_its_error():
     assert two["level_difference_um"] == pytest.approx(one["level_difference_um"] + 0.0025, abs=1e-9)
     assert two["se_um"] >= 0.0025 > 3 * one["se_um"], (one, two)
     assert abs(two["level_difference_um"]) < 3 * two["se_um"], two
+
+
+def test_a_branch_shift_odd_in_the_direction_cancels_and_one_branch_alone_is_not_compared():
+    """s115-017-like (offset): the faster triangle's branches lag, ascending low and descending high by 20 nm; the
+    mean of the two directions cancels it. A recording that covers one branch only is not paired."""
+    drives = [_triangle(20.0, 0.3), _walk(15.0, np.random.default_rng(2)), _triangle(7.0, 0.8)]
+    ctx = _ctx(drives, [30.0, 55.0, 75.0])
+    r, rec, tt = _stack(ctx, lambda ts: 0.4 + 0 * ts)
+    lag = np.zeros(rec.size)
+    lag[rec == 2] = -0.02 * np.sign(np.gradient(drives[2]))
+    p = ss.same_shape_pairs(ctx, [r + lag], rec, tt)[0]
+    assert abs(p["level_difference_um"]) < 3 * p["se_um"] and abs(p["level_difference_um"]) < 0.002, p
+    half = [_triangle(20.0, 0.3), _triangle(0.95, 0.8)]   # turns at hi, descends, turns at lo and stops: one branch
+    ctx = _ctx(half, [30.0, 75.0])
+    r, rec, tt = _stack(ctx, lambda ts: 0 * ts)
+    assert ss.same_shape_pairs(ctx, [r], rec, tt) == []

@@ -524,7 +524,7 @@ def sweep_extremes(u, tol: float = SWEEP_TOL) -> tuple | None:
     Returns
     -------
     tuple or None
-        ``(lo, hi, first)``: the extremes [V] and the first sample on the major loop (the second turning point);
+        ``(lo, hi, first)``: the extremes [V] and the first sample on the major loop (the first turning point);
         None when a turning point lies between the extremes or the drive turns fewer than twice.
     """
     u = np.asarray(u, float)
@@ -544,7 +544,9 @@ def sweep_extremes(u, tol: float = SWEEP_TOL) -> tuple | None:
     at_hi = np.abs(v - hi) <= tol * span
     if np.all(at_hi) or not np.any(at_hi):
         return None
-    return lo, hi, int(turns[1])
+    # turning at the range's extreme wipes out every turning point inside it: the branch from there on is the
+    # major loop's (the recordings stay inside the calibrated range, so no earlier extreme lies beyond it)
+    return lo, hi, int(turns[0])
 
 
 def same_shape_pairs(ctx, rs, rec, tt, tol: float = SWEEP_TOL) -> list:
@@ -553,8 +555,9 @@ def same_shape_pairs(ctx, rs, rec, tt, tol: float = SWEEP_TOL) -> list:
     On the major loop between the same extremes the base's misfit is the same function of the drive and its
     direction in both recordings (:func:`sweep_extremes`), so the difference of their residuals, bin by bin in
     drive and direction, is what changed between them on the session clock (a drift) plus noise; a sensor offset
-    is the same in both and cancels. Per fold model, the difference ``d_f`` is the mean over the bins both
-    recordings fill and ``se_f`` the bins' scatter about it; ``d`` is the mean of the two and its variance the
+    is the same in both and cancels. Per fold model, the difference ``d_f`` is the mean of the two directions'
+    means over the bins both recordings fill (a lag or a rate-dependent loop width, odd in the direction, cancels;
+    a pair without both directions is not used) and ``se_f`` from the bins' scatter; ``d`` is the mean of the two and its variance the
     mean ``se_f^2`` plus ``((d_0 - d_1) / 2)^2``: the same difference read through the model fitted on either
     fold differs by what the fit moves the level by (development offset s113-002: 1.3 and 6.4 nm under the two
     fold models, each with a bin scatter of 1.2 to 1.7 nm), which is part of what the pair cannot resolve.
@@ -618,13 +621,16 @@ def same_shape_pairs(ctx, rs, rec, tt, tol: float = SWEEP_TOL) -> list:
                     n = np.bincount(b, minlength=2 * SWEEP_BINS)
                     sm = np.bincount(b, weights=rk, minlength=2 * SWEEP_BINS)
                     means.append(np.where(n >= SWEEP_MIN_SAMPLES, sm / np.maximum(n, 1), np.nan))
-                diff = means[1] - means[0]
-                diff = diff[np.isfinite(diff)]
-                if diff.size < 3:
+                # per direction, then the mean of the two: a lag or a rate-dependent width moves the branches in
+                # opposite directions and cancels; a level moves both alike (development offset s115-017: its
+                # in-range triangle's ascending branch alone sat 21 nm off the other triangle's)
+                diff = (means[1] - means[0]).reshape(2, SWEEP_BINS)
+                per = [x[np.isfinite(x)] for x in diff]
+                if min(x.size for x in per) < 2:
                     break
-                ds.append(float(diff.mean()))
-                ses.append(float(diff.std(ddof=1) / np.sqrt(diff.size)))
-                nb = diff.size
+                ds.append(float(0.5 * (per[0].mean() + per[1].mean())))
+                ses.append(float(0.5 * np.sqrt(sum(x.var(ddof=1) / x.size for x in per))))
+                nb = sum(x.size for x in per) - 1
             if len(ds) != len(rs):
                 continue
             dd = float(np.mean(ds))
