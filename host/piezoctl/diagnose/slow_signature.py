@@ -500,6 +500,152 @@ def level_spread_test(designs, es, fold_all, rec, ctx, rows) -> dict | None:
             "f": float(F), "p": p, "varies": bool(p < ALPHA_SIGNATURE)}
 
 
+SWEEP_TOL = 0.01   # turning points within this fraction of the drive's span count as the same extreme
+SWEEP_BINS = 16    # drive bins per direction over the sweep's range (a loop's misfit is compared bin by bin)
+SWEEP_MIN_SAMPLES = 20   # samples a bin needs in each recording to count
+
+
+def sweep_extremes(u, tol: float = SWEEP_TOL) -> tuple | None:
+    """Whether a drive sweeps back and forth between two fixed turning points (a triangle or a sine between the
+    same extremes), and from which sample on its hysteresis state is the major loop between them.
+
+    Rate-independent hysteresis wipes out the history inside a sweep between extremes: once the drive has turned
+    at both, the output is a function of the drive and its direction alone (the major loop), whatever the rate
+    or the state before. Two recordings that sweep between the same extremes therefore share the base's misfit
+    point by point on that loop.
+
+    Parameters
+    ----------
+    u : ndarray
+        The drive of one recording [V].
+    tol : float
+        Turning points within ``tol`` x the drive's span of its minimum or maximum count as at that extreme.
+
+    Returns
+    -------
+    tuple or None
+        ``(lo, hi, first)``: the extremes [V] and the first sample on the major loop (the first turning point);
+        None when a turning point lies between the extremes or the drive turns fewer than twice.
+    """
+    u = np.asarray(u, float)
+    lo, hi = float(u.min()), float(u.max())
+    span = hi - lo
+    if span <= 0:
+        return None
+    du = np.diff(u)
+    nz = np.flatnonzero(du != 0)
+    sg_ = np.sign(du[nz])
+    turns = nz[1:][sg_[1:] != sg_[:-1]]     # the sample at which the direction reverses
+    if turns.size < 2:
+        return None
+    v = u[turns]
+    if not np.all((np.abs(v - lo) <= tol * span) | (np.abs(v - hi) <= tol * span)):
+        return None
+    at_hi = np.abs(v - hi) <= tol * span
+    if np.all(at_hi) or not np.any(at_hi):
+        return None
+    # turning at the range's extreme wipes out every turning point inside it: the branch from there on is the
+    # major loop's (the recordings stay inside the calibrated range, so no earlier extreme lies beyond it)
+    return lo, hi, int(turns[0])
+
+
+def same_shape_pairs(ctx, rs, rec, tt, tol: float = SWEEP_TOL) -> list:
+    """The level difference between reveal recordings that sweep between the same extremes (round 16).
+
+    On the major loop between the same extremes the base's misfit is the same function of the drive and its
+    direction in both recordings (:func:`sweep_extremes`), so the difference of their residuals, bin by bin in
+    drive and direction, is what changed between them on the session clock (a drift) plus noise; a sensor offset
+    is the same in both and cancels. Per fold model, the difference ``d_f`` is the mean of the two directions'
+    means over the bins both recordings fill (a lag or a rate-dependent loop width, odd in the direction, cancels;
+    a pair without both directions is not used) and ``se_f`` from the bins' scatter; ``d`` is the mean of the two and its variance the
+    mean ``se_f^2`` plus ``((d_0 - d_1) / 2)^2``: the same difference read through the model fitted on either
+    fold differs by what the fit moves the level by (development offset s113-002: 1.3 and 6.4 nm under the two
+    fold models, each with a bin scatter of 1.2 to 1.7 nm), which is part of what the pair cannot resolve.
+
+    Parameters
+    ----------
+    ctx : Ctx
+        Recordings (``signals``, ``valid``) and their sensor-zero columns (``offset_of``).
+    rs : sequence of ndarray
+        Per fold model, the residual beyond the nuisance [um] of every settled sample, stacked.
+    rec : ndarray
+        Recording of each stacked sample.
+    tt : ndarray
+        Session time of each stacked sample [s] (:func:`_session_time`).
+
+    Returns
+    -------
+    list of dict
+        Per pair ``(i, j)`` (``i`` recorded first) of one sensor-zero column other than the calibration's:
+        ``level_difference_um``, ``se_um``, ``per_fold_um``, ``dt_s`` (between the mean times of the samples
+        used), ``slope_um_per_s``, ``se_slope_um_per_s``, ``bins``.
+    """
+    cols = [ctx.offset_of(i) for i in range(ctx.n_rec)]
+    info = {}
+    for i, (s, v) in enumerate(zip(ctx.signals, ctx.valid)):
+        if cols[i] < 0:
+            continue
+        sw = sweep_extremes(s.u, tol)
+        if sw is None:
+            continue
+        u = np.asarray(s.u, float)
+        d = np.sign(np.gradient(u))
+        on = np.arange(u.size) >= sw[2]
+        info[i] = (sw[0], sw[1], u[v], d[v], on[v])
+    out = []
+    keys = sorted(info)
+    for a, i in enumerate(keys):
+        for j in keys[a + 1:]:
+            lo_i, hi_i = info[i][:2]
+            lo_j, hi_j = info[j][:2]
+            span = max(hi_i - lo_i, hi_j - lo_j)
+            if cols[i] != cols[j] or abs(lo_i - lo_j) > tol * span or abs(hi_i - hi_j) > tol * span:
+                continue
+            lo, hi = min(lo_i, lo_j), max(hi_i, hi_j)
+            bins, times = [], []
+            for k in (i, j):
+                _, _, u, d, on = info[k]
+                use = on & (d != 0)
+                b = np.clip(((u - lo) / (hi - lo) * SWEEP_BINS).astype(int), 0, SWEEP_BINS - 1) + \
+                    SWEEP_BINS * (d > 0)
+                bins.append((b[use], use))
+                times.append(float(tt[rec == k][use].mean()) if np.any(use) else np.nan)
+            dt_ = times[1] - times[0]
+            if not np.isfinite(dt_) or dt_ == 0:
+                continue
+            ds, ses, nb = [], [], 0
+            for r in rs:
+                means = []
+                for k, (b, use) in zip((i, j), bins):
+                    rk = r[rec == k][use]
+                    n = np.bincount(b, minlength=2 * SWEEP_BINS)
+                    sm = np.bincount(b, weights=rk, minlength=2 * SWEEP_BINS)
+                    means.append(np.where(n >= SWEEP_MIN_SAMPLES, sm / np.maximum(n, 1), np.nan))
+                # per direction, then the mean of the two: a lag or a rate-dependent width moves the branches in
+                # opposite directions and cancels; a level moves both alike (development offset s115-017: its
+                # in-range triangle's ascending branch alone sat 21 nm off the other triangle's)
+                diff = (means[1] - means[0]).reshape(2, SWEEP_BINS)
+                per = [x[np.isfinite(x)] for x in diff]
+                if min(x.size for x in per) < 2:
+                    break
+                ds.append(float(0.5 * (per[0].mean() + per[1].mean())))
+                ses.append(float(0.5 * np.sqrt(sum(x.var(ddof=1) / x.size for x in per))))
+                nb = sum(x.size for x in per) - 1
+            if len(ds) != len(rs):
+                continue
+            dd = float(np.mean(ds))
+            se = float(np.sqrt(np.mean(np.square(ses)) + (0.25 * (ds[0] - ds[-1]) ** 2 if len(ds) > 1 else 0.0)))
+            if se <= 0:
+                continue
+            first, second = (i, j) if dt_ > 0 else (j, i)
+            sgn = float(np.sign(dt_))
+            out.append({"recordings": [int(first), int(second)], "level_difference_um": dd * sgn, "se_um": se,
+                        "per_fold_um": [x * sgn for x in ds], "dt_s": abs(dt_), "slope_um_per_s": dd / dt_,
+                        "se_slope_um_per_s": se / abs(dt_), "bins": int(nb)})
+    return out
+
+
+SAME_SHAPE = True   # round 16: the levels of same-sweep recordings enter the trend (off: round 15's test)
 TREND_MIN_BLOCKS = 4   # blocks a recording needs for its slope to count: a line and its scatter take three
 
 def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict | None:
@@ -521,6 +667,13 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
     freedom; the level **trends** when the two-sided p is below ``ALPHA_SIGNATURE`` (a search over the slow
     signatures). The levels *between* the recordings are not used: they carry each history's misfit.
 
+    Round 16: except between recordings that sweep between the same extremes (:func:`same_shape_pairs`): on
+    the same major loop the base's misfit is the same in both, so their level difference over the session time
+    between them is one more slope, pooled with the others by its own standard error (the bins' scatter and the
+    two fold models' disagreement; ``nb - 1`` degrees of freedom). Development s114-001 (drift, KP): the long triangle sits on a flat stretch of the drift
+    (+2.2 +- 0.9 nm/s) while the in-range triangle, a minute later, sits 0.38 um higher; a sensor offset is the
+    same in both and cancels.
+
     The same scale bounds the drift an offset could be: when every recording carries the session clock
     (``ctx.drift_t0``), a drift that had reached a sensor-zero column's level ``c`` (the mean of its recordings'
     levels) at a steady rate since the calibration ended would have the slope ``c / t_c`` (``t_c``: the mean
@@ -533,7 +686,7 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
     -------
     dict or None
         ``slopes_um_per_s`` (per recording tested), ``slope_um_per_s``, ``se_um_per_s``, ``t``, ``dof``, ``p``,
-        ``trends``; ``levels_um``, ``needed_um_per_s`` and ``excludes_drift`` (None when the session clock is
+        ``trends``; ``same_shape`` (the pairs of :func:`same_shape_pairs` pooled); ``levels_um``, ``needed_um_per_s`` and ``excludes_drift`` (None when the session clock is
         unknown). None when no recording qualifies.
     """
     from scipy import stats as st
@@ -543,12 +696,14 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
     R = (rec[:, None] == np.arange(ctx.n_rec)[None, :]).astype(float)
     tt = np.concatenate([_session_time(ctx, s)[v] for s, v in zip(ctx.signals, ctx.valid)])
     blocks, levels = [], []
+    r_all = []
     for f in (0, 1):
         X, lo, hi = _level_design(designs[f], R)
         m = fold_all == f
         th = lstsq_box(X[train_rows(m, rows)], es[f][train_rows(m, rows)], lo, hi)
         levels.append(th[-ctx.n_rec:])
         r = es[f] - X[:, :-ctx.n_rec] @ th[:-ctx.n_rec]   # what the level per recording and per block takes
+        r_all.append(r)
         for b in np.unique(block_all[m]):
             mb = m & (block_all == b)
             blocks.append((int(rec[mb][0]), float(tt[mb].mean()), float(r[mb].mean())))
@@ -576,20 +731,28 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
         w_sum += w
         wb_sum += w * b
         dof += int(np.sum(m)) - 2
-    if not tested:
+    clock = ctx.drift_t0 is not None and all(s.t_session is not None for s in ctx.signals)
+    # round 16: recordings that sweep between the same extremes at different session times (same_shape_pairs)
+    pairs = same_shape_pairs(ctx, r_all, rec, tt) if clock and SAME_SHAPE else []
+    for pr in pairs:
+        w = 1.0 / pr["se_slope_um_per_s"] ** 2
+        w_sum += w
+        wb_sum += w * pr["slope_um_per_s"]
+        dof += pr["bins"] - 1
+    if not tested and not pairs:
         return None
     slope, se = wb_sum / w_sum, 1.0 / np.sqrt(w_sum)
     t = slope / se
     p = float(2 * st.t.sf(abs(t), dof))
     out = {"recordings": tested, "slopes_um_per_s": slopes, "slope_um_per_s": float(slope), "se_um_per_s": float(se),
            "t": float(t), "dof": dof, "p": p, "trends": bool(p < ALPHA_SIGNATURE),
-           "levels_um": None, "needed_um_per_s": None, "excludes_drift": None}
-    if ctx.drift_t0 is not None and all(s.t_session is not None for s in ctx.signals):
-        ks = sorted({cols[i] for i in tested})
+           "levels_um": None, "needed_um_per_s": None, "excludes_drift": None, "same_shape": pairs}
+    if clock:
+        ks = sorted({cols[i] for i in tested} | {cols[p["recordings"][0]] for p in pairs})
         q = float(st.t.isf(0.5 * sg.ALPHA / len(ks), dof))
         lv, need = [], []
         for k in ks:
-            rs = [i for i in tested if cols[i] == k]
+            rs = [i for i in sorted(set(tested) | {i for p in pairs for i in p["recordings"]}) if cols[i] == k]
             c = float(np.mean(L[rs]))
             tc = float(np.mean(B[np.isin(B[:, 0], rs), 1]))
             lv.append(c)
