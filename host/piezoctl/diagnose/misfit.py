@@ -28,7 +28,7 @@ from scipy import signal as sig
 
 from .significance import unique_labels
 
-__all__ = ["BANDS", "split_bands", "band_energy", "base_misfit", "credited_ratio"]
+__all__ = ["BANDS", "split_bands", "band_energy", "base_misfit", "credited_ratio", "ratios_above"]
 
 BANDS = ("level", "slow", "fast")
 
@@ -58,9 +58,19 @@ def band_energy(parts, rec, dt: float, f_slow_hz: float) -> np.ndarray:
     return e
 
 
-def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float) -> dict | None:
+def _above(r, dt: float, edge_hz: float) -> np.ndarray:
+    """``r`` high-passed at ``edge_hz`` (zero phase, fourth order Butterworth; :func:`ratios_above`'s filter)."""
+    r = np.asarray(r, float)
+    if r.size <= 64:
+        return np.zeros_like(r)
+    return sig.sosfiltfilt(sig.butter(4, edge_hz, "highpass", fs=1.0 / dt, output="sos"), r)
+
+
+def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float, edge_hz: float | None = None) -> dict | None:
     """The base's error on held-out calibration histories, pooled: per band its energy per sample
-    ``mse_um2`` (the fast band less the noise), the noise, and per history its RMS and its bands.
+    ``mse_um2`` (the fast band less the noise), the noise, and per history its RMS and its bands. With
+    ``edge_hz`` (round 16: the calibration's band) also ``above_um2``, the same excess above ``edge_hz``
+    (what :func:`ratios_above` subtracts).
 
     Parameters
     ----------
@@ -80,6 +90,8 @@ def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float) -> dict
     """
     tot, tot_in = np.zeros(3), np.zeros(3)
     n_tot, d2, n_d = 0, 0.0, 0
+    up = 0.0   # excess energy above edge_hz
+    edge_ok = edge_hz is not None and 0.0 < edge_hz < 0.45 / dt
     rows = []
     for h in holdout:
         r, m = np.asarray(h["resid"], float), np.asarray(h["scored"], bool)
@@ -94,6 +106,8 @@ def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float) -> dict
         n_d += dd.size
         tot += e
         tot_in += e_in
+        if edge_ok:
+            up += float(np.sum(_above(r, dt, edge_hz)[m] ** 2) - np.sum(_above(h["resid_in"], dt, edge_hz)[m] ** 2))
         n_tot += n
         rows.append({"recording": names[h["recording"]], "samples": [int(h["start"]), int(h["stop"])],
                      "scored_fraction": float(np.mean(m)), "rms_um": float(np.sqrt(np.mean(r[m] ** 2))),
@@ -110,7 +124,8 @@ def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float) -> dict
                        "the misfit is the energy per sample beyond the full fit's on the same samples"),
             "slow_hz": f_slow_hz, "rms_um": float(np.sqrt(tot.sum() / n_tot)),
             "rms_seen_um": float(np.sqrt(tot_in.sum() / n_tot)), "noise_rms_um": float(np.sqrt(noise2)),
-            "mse_um2": dict(zip(BANDS, map(float, excess))), "histories": rows}
+            "mse_um2": dict(zip(BANDS, map(float, excess))), "histories": rows,
+            **({"above_hz": float(edge_hz), "above_um2": max(up, 0.0) / n_tot} if edge_ok else {})}
 
 
 def credited_ratio(e_before, correction, rec, dt: float, misfit: dict | None) -> tuple:
@@ -133,3 +148,65 @@ def credited_ratio(e_before, correction, rec, dt: float, misfit: dict | None) ->
     credited = total - float(np.sum(np.clip(gain, 0.0, m)))
     ratio = float(np.sqrt(max(1.0 - credited / mse_b, 0.0)))
     return ratio, {b: {"improvement_um2": float(g), "misfit_um2": float(x)} for b, g, x in zip(BANDS, gain, m)}
+
+
+def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, misfit: dict | None) -> tuple:
+    """(fold ratios, credited ratio) of a candidate on the residual above ``edge_hz`` (round 16).
+
+    A term whose effect lies above the band the calibration identified the dynamics in (a mode offered above it)
+    explains nothing below it; there the residual is the base's hysteresis and its slow misfit, which no such term
+    can take and which says nothing about it. Its size is judged on the band where it acts: the held-out residual
+    without and with the term, high-passed (zero phase, fourth order Butterworth) at ``edge_hz`` per recording.
+    The credited ratio subtracts the base's misfit there from the improvement there, as :func:`credited_ratio`
+    does per band: ``misfit["above_um2"]`` (the same excess on held-out calibration histories, filtered the same
+    way) when it was measured at this edge, else the whole *fast* misfit (everything above ``1 / block_s``).
+
+    Parameters
+    ----------
+    e_before, correction : ndarray
+        The residual before the term (nested) and the term's held-out predicted correction [um], used samples.
+    fold : ndarray of int
+        Fold (0/1) of each sample; fold ratio f is scored on fold 1 - f, as in ``select._evaluate``.
+    rec : ndarray of int
+        Recording label of each sample (each recording's samples contiguous).
+    dt : float
+        Sample period [s].
+    edge_hz : float
+        The band edge [Hz].
+    misfit : dict or None
+        ``base_misfit``'s result.
+
+    Returns
+    -------
+    (list of float, float)
+        The two fold ratios and the credited ratio above ``edge_hz``; (None, None) when the edge is not below
+        the Nyquist frequency or no recording is long enough to filter.
+    """
+    e_before = np.asarray(e_before, float)
+    e_after = e_before - np.asarray(correction, float)
+    if not 0.0 < edge_hz < 0.45 / dt:
+        return None, None
+    sos = sig.butter(4, edge_hz, "highpass", fs=1.0 / dt, output="sos")
+    hb, ha = np.zeros_like(e_before), np.zeros_like(e_after)
+    done = np.zeros(e_before.size, bool)
+    for i in unique_labels(rec):
+        m = rec == i
+        if np.sum(m) > 64:
+            hb[m], ha[m], done[m] = sig.sosfiltfilt(sos, e_before[m]), sig.sosfiltfilt(sos, e_after[m]), True
+    if not np.any(done):
+        return None, None
+    frs = []
+    for f in (1, 0):
+        t = done & (fold == f)
+        eb = float(np.sum(hb[t] ** 2))
+        frs.append(float(np.sqrt(np.sum(ha[t] ** 2) / eb)) if eb > 0 else 1.0)
+    n = max(int(np.sum(done)), 1)
+    eb, ea = float(np.sum(hb[done] ** 2)) / n, float(np.sum(ha[done] ** 2)) / n
+    if eb <= 0:
+        return frs, 1.0
+    if misfit and misfit.get("above_hz") == edge_hz:
+        m_fast = float(misfit["above_um2"])
+    else:
+        m_fast = float(misfit["mse_um2"]["fast"]) if misfit else 0.0
+    credited = (eb - ea) - min(max(eb - ea, 0.0), m_fast)
+    return frs, float(np.sqrt(max(1.0 - credited / eb, 0.0)))

@@ -61,7 +61,9 @@ def fit_base_model(cal, calibration, settle_s, out, log, t_start, block_s=DEFAUL
     base = fit_base(cal, settle_s=settle_s, holdout=True)
     base_info = base.pop("base_info")
     held = history_holdout(base)
-    base_info["misfit"] = base_misfit(held, [os.path.basename(str(p)) for p in calibration], cal[0].dt, 1.0 / block_s)
+    k0 = [min(int(round(settle_s / r.dt)), len(r) // 2) for r in cal]   # as locate's cal_k0
+    base_info["misfit"] = base_misfit(held, [os.path.basename(str(p)) for p in calibration], cal[0].dt, 1.0 / block_s,
+                                      edge_hz=calibration_band_hz(cal, k0))
     prov = make_provenance(list(calibration), {"settle_s": settle_s}, rows=[len(r) for r in cal],
                            metrics={"dynamics_order": base_info["dynamics_order"], "plane": {
                                k: v for k, v in base_info["plane"].items() if k != "cv_table"}})
@@ -128,6 +130,7 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None, dynamics_band
               max_step=max(float(np.max(np.abs(np.diff(s.u)))) for s in sigs),
               peak_freqs=loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt), y_span=span,
               mode_freqs=_mode_freqs(base, sigs, valid, cal, cal_k0, dt, dynamics_band_hz),
+              cal_band_hz=calibration_band_hz(cal, cal_k0),
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
               cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
               cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
@@ -328,7 +331,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             "selection_round": a.selection_round, "ratio_max": a.ratio_max,
                             "worse_on": ({"recording": a.worsened[0], "factor": a.worsened[1]}
                                          if a.worsened else None),
-                            **({"slow_signature": a.slow_signature} if a.slow_signature else {})},
+                            **({"slow_signature": a.slow_signature} if a.slow_signature else {}),
+                            **({"whole_residual": a.whole} if a.whole else {})},
             "signature": a.term.signature, "signature_check": a.signature_check, **sep_fields})
     last = rounds[-1] if rounds else []
     named = {x["name"] for x in effects}
@@ -350,7 +354,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                         "credited_ratio": c.credited, "credited_bands": c.credited_bands,
                                         "selection_round": c.selection_round, "ratio_max": c.ratio_max,
                                         "fold_ratios": c.fold_ratios, "p_value": c.p, "delta_bic": c.dbic,
-                                        **({"slow_signature": c.slow_signature} if c.slow_signature else {})},
+                                        **({"slow_signature": c.slow_signature} if c.slow_signature else {}),
+                                        **({"whole_residual": c.whole} if c.whole else {})},
                         "signature": c.term.signature, "signature_check": c.signature_check})
     return {"format": "piezoctl-diagnosis", "version": 1,
             "named": [x["name"] for x in effects if x["significant"]] or ["none"],

@@ -22,7 +22,7 @@ from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg
-from .misfit import credited_ratio
+from .misfit import credited_ratio, ratios_above
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import SIGNATURES, attribute, creep_on_steps, signature_tests
 from .solve import lstsq_box as _lstsq_box, train_rows
@@ -110,6 +110,8 @@ class Ctx:
     #                                   offset of its own); None: one per recording (sessions unknown)
     offset_sessions: list | None = None  # the session label of each column, when sessions are known
     misfit: dict | None = None      # the base's error on held-out calibration histories (misfit.base_misfit)
+    cal_band_hz: float | None = None  # the calibration's band (discriminate.calibration_band_hz) [Hz]; a term that
+    #                                   acts above it is judged on the residual above it (round 16)
     mode_freqs: list | None = None  # where unmodeled_resonance is offered (round 12: the residual transfer's
     #                                 significant peak, signature.mode_frequencies); None: at peak_freqs
     accepted_flex: np.ndarray | None = None  # (n_settled, m): the accepted terms' own flexibility (their gains and
@@ -171,6 +173,8 @@ class Candidate:
     separation: list | None = None            # accepted: the pair tests against the round's others (discriminate.separate)
     slow_alternative: dict | None = None      # sensor_offset: a drift its levels cannot exclude (slow_signature.attribute)
     heldout: tuple | None = None              # (before, correction, fold, block, rec): signature.HELDOUT_CHECKED only
+    whole: dict | None = None                 # round 16, a term judged above the calibration's band: the edge [Hz]
+    #                                           and its fold and credited ratios on the whole residual
 
     @property
     def below_gates(self) -> bool:
@@ -541,8 +545,16 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     neff = sg.effective_n(rb_res)
     dbic = sg.bic_delta(float(np.sum(rb_res ** 2)), float(np.sum(ra_res ** 2)), neff, k)
     within = (lambda x: x <= ratio_max) if ratio_max < FURTHER_RATIO_MAX else (lambda x: x < ratio_max)
-    significant = bool(within(max(fold_ratios)) and p < p_max and dbic < 0)
     cr, bands = credited_ratio(rb_res, pred_after[used], rec, ctxs[0].dt, ctxs[0].misfit)
+    whole = None
+    edge = ctxs[0].cal_band_hz if term.acts_above_calibration else None
+    if edge:   # round 16: sized on the band where it acts (misfit.ratios_above), not beside the base's slow misfit
+        fr_above, cr_above = ratios_above(rb_res, pred_after[used], fold_all[used], rec, ctxs[0].dt, edge,
+                                          ctxs[0].misfit)
+        if fr_above is not None:
+            whole = {"above_hz": float(edge), "fold_ratios": list(fold_ratios), "credited_ratio": cr}
+            fold_ratios, cr = fr_above, cr_above
+    significant = bool(within(max(fold_ratios)) and p < p_max and dbic < 0)
     veto = None
     # round 13: data that cannot credit it; round 15: vetoed whether or not it passed, so that it is no pair's
     # alternative either (held-out s114-026: an in-range clip below the round's level, reported as the sensor
@@ -574,7 +586,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     return Candidate(term=term, ratio=na / nb if nb > 0 else 1.0, fold_ratios=fold_ratios, nrmse_before=nb,
                      nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
-                     veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held)
+                     veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held, whole=whole)
 
 
 def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):

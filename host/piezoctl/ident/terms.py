@@ -98,6 +98,8 @@ class Term:
     nested_dynamics = False  # also against low-order corrections of the dynamics (drive-side terms, a mode)
     supersedes = ()     # names of simpler terms this one contains (as its nuisance): when both pass, it goes first
     initial_state = False  # also against a bounded gain per recording on its unknown initial hysteresis state
+    acts_above_calibration = False  # its effect lies above the calibration's band: sized there (round 16,
+    #                                 diagnose.misfit.ratios_above; read through ``ctx.cal_band_hz``)
 
     def applicable(self, ctx) -> bool:
         return True
@@ -713,6 +715,7 @@ class UnmodeledResonance(Term):
     stage = "dynamics"
     nested_dynamics = True
     signature = "residual energy in a narrow band above the calibration band, ringing after corners"
+    acts_above_calibration = True   # offered only above the calibration's band, where its columns act
     DAMPINGS = (0.005, 0.01, 0.02, 0.05)
 
     @staticmethod
