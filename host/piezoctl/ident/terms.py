@@ -36,8 +36,8 @@ import dataclasses
 import numpy as np
 
 from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
-from ..models.hysteresis import (hysteresis_groups, hysteresis_output, hysteresis_output_of, plane_width_change,
-                                 play_states, scale_groups)
+from ..models.hysteresis import (bouc_wen_column, hysteresis_groups, hysteresis_output, hysteresis_output_of,
+                                 plane_width_change, play_states, scale_groups)
 
 __all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G"]
 
@@ -538,7 +538,8 @@ class RateDependentHysteresis(Term):
     keeps no memory of the rate they moved at. On the development rate misses s114-035 and s114-051 the true extra
     leaves 0.30/0.31 and 0.35/0.39 of the residual (oracle through the selection's test), the gain law
     0.72/0.67 and 0.72/0.75, this law 0.44/0.46 and 0.49/0.54 (docs/diagnose.md, "Round 15: rate dependence").
-    Plays of the base only: a Bouc-Wen column of the plane is not widened; a base without plays (the own-stage
+    Round 15 widened the plays of the base only; since round 16 a Bouc-Wen column of the plane is scaled by the same
+    width factor (``widened``). A base without plays (the own-stage
     cases': the reversible curve and a Bouc-Wen column) keeps the old law (``has_plays``). Model files with ``gain``
     and ``ref_fs_per_s`` but no ``width_k`` keep the old law.
 
@@ -576,9 +577,19 @@ class RateDependentHysteresis(Term):
         r = drive_rate(v, dt, cutoff)
         return r / (r + ref) * hyst
 
-    def widened(self, hp, v, dt, ref, k, cutoff=RATE_CUTOFF_HZ) -> np.ndarray:
-        """H with the widened plays minus H [um] (``plane_width_change``)."""
-        return plane_width_change(hp, v, self.width(v, dt, ref, k, cutoff))
+    def widened(self, hp, v, dt, ref, k, cutoff=RATE_CUTOFF_HZ, bw=True) -> np.ndarray:
+        """H with the widened plays minus H [um] (``plane_width_change``); with ``bw`` (round 16) plus the plane's
+        Bouc-Wen column scaled by the same width factor less one, ``(w - 1) c_h h(v)``.
+
+        The Bouc-Wen column has no thresholds: its loop's width is its size, so the width factor of the moment
+        scales it (the law up to round 14, for that column alone). Round 15's law widened the plays only and lost
+        s112-035 and s112-051 (generalized PI), whose bases carry most of the loop in the column (c_h -12 and
+        -29 um)."""
+        w = self.width(v, dt, ref, k, cutoff)
+        out = plane_width_change(hp, v, w)
+        if bw and hp.get("bw") and hp.get("type", "pi") == "plane":
+            out = out + (w - 1.0) * bouc_wen_column(hp, v)
+        return out
 
     def constant_widening(self, hp, v, ks=None) -> np.ndarray:
         """(T, len(ks)) [um]: H with every play's threshold x (1 + k) minus H, for each k (default ``WIDTH_K``):
@@ -663,14 +674,14 @@ class RateDependentHysteresis(Term):
         n = self.n_nuisance(ctx)
         return {"gain": float(coef[n]), "ref_fs_per_s": float(ref), "width_k": float(k),
                 "rate_cutoff_hz": RATE_CUTOFF_HZ, "constant_k": [float(x) for x in self.WIDTH_K[:n]],
-                "constant_gain": [float(c) for c in coef[:n]]}
+                "constant_gain": [float(c) for c in coef[:n]], "widen_bw": True}
 
     def apply(self, p, st):
         cutoff = float(p.get("rate_cutoff_hz", RATE_CUTOFF_HZ))
         if "width_k" in p:
             hp = st.params["hysteresis"]
             st.h = st.h + float(p["gain"]) * self.widened(hp, st.v, st.dt, float(p["ref_fs_per_s"]),
-                                                           float(p["width_k"]), cutoff)
+                                                           float(p["width_k"]), cutoff, bool(p.get("widen_bw")))
             ks = [float(x) for x in p.get("constant_k", [])]
             if ks:   # round 16: the base's own constant widening fitted with the term
                 st.h = st.h + self.constant_widening(hp, st.v, ks) @ np.asarray(p["constant_gain"], float)
