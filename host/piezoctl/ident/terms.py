@@ -547,7 +547,7 @@ class RateDependentHysteresis(Term):
     the plane with every threshold x (1 + k) minus the plane, for each k of ``WIDTH_K``: a base whose plays are a
     few per cent too narrow or too wide everywhere is the base's own error, and only what the rate adds beyond it
     is credited to the term (as creep is nested against a refit of the hysteresis). Round 15's width law took
-    null s112-018 (Maxwell slip) at 0.63/0.60 with a 3 % widening at ref 2 FS/s - c near 1 on most of the motion,
+    null s112-018 (generalized PI) at 0.63/0.60 with a 3 % widening at ref 2 FS/s - c near 1 on most of the motion,
     a nearly constant widening the hysteresis groups' gains do not hold - and held-out null s115-041 (Preisach)
     at 0.99."""
 
