@@ -57,6 +57,11 @@ Parameters (JSON, physical units where they have one)
       makes; r the magnitude of the normalized drive rate [FS/s] low-passed
       at ``rate_cutoff_hz``. Without ``width_k`` (files of rounds up to 14)
       the hysteretic part of H is scaled by ``1 + gain r / (r + ref)``.
+      Round 16: ``constant_k`` and ``constant_gain`` (lists): H also changes
+      by ``sum constant_gain_i`` times the change of every play's threshold
+      x (1 + constant_k_i) (the constant widening the term was nested
+      against, refitted with it); with ``widen_bw`` true a Bouc-Wen column of
+      the plane is scaled by the same width factor, ``(w - 1) c_h h(v)``.
     - ``creep``: ``tau_s`` (list), ``gain`` (list, [1]), ``static_gain`` [1]
       and ``h_ref_um``: ``w + sum g_i (lowpass_tau_i(w) - w) + g_s (w - h_ref)``
       (g_s: the static gain the calibration, faster than the slow terms, did

@@ -619,11 +619,19 @@ def hysteresis_groups(hp: dict, v) -> np.ndarray:
         else:
             hys += fj
     cols = [c for c in (rev, hys) if c is not None]
-    bw = hp.get("bw")
-    if bw:
-        cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
-                                                  float(bw.get("n", 1.0)), float(bw.get("h0", 0.0))))
+    if hp.get("bw"):
+        cols.append(bouc_wen_column(hp, v))
     return np.column_stack(cols)
+
+
+def bouc_wen_column(hp: dict, v) -> np.ndarray:
+    """A ``plane`` operator's Bouc-Wen column ``c_h h(v)`` [um] (zeros without one or for other types)."""
+    v = np.asarray(v, float)
+    bw = hp.get("bw") if hp.get("type", "pi") == "plane" else None
+    if not bw:
+        return np.zeros(v.size)
+    return float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
+                                         float(bw.get("n", 1.0)), float(bw.get("h0", 0.0)))
 
 
 def scale_groups(hp: dict, gains) -> dict:
