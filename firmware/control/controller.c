@@ -433,7 +433,7 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     if (c->xc_active >= 0) {
         const piezo_xcset_t *xs = &c->xset[c->xc_active];
         /* y or y2 from sig[] (stored at step 3): not kept in a register across the calls */
-        int16_t u_xc = piezo_xc_process(&c->xc[c->xc_active], c->u2_q15, c->sig[xs->x_source ? PIEZO_SIG_Y2 : PIEZO_SIG_Y]),
+        int16_t u_xc = piezo_xc_process(&c->xc[c->xc_active], c->sig[PIEZO_SIG_U2], c->sig[xs->x_source ? PIEZO_SIG_Y2 : PIEZO_SIG_Y]),
                 applied = 0;
         if (!g->xcouple_bypass && (mb & (MODE_BIT(PIEZO_MODE_FEEDFORWARD) | MODE_BIT(PIEZO_MODE_FF_FEEDBACK) |
                                          MODE_BIT(PIEZO_MODE_FEEDBACK))) != 0u) {
@@ -455,9 +455,9 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
         dac = code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code);
     }
 
-    /* 9. recorder and status (REF, Y, ERR, FF, FB, Y2 are in sig[] already) */
+    /* 9. recorder and status (REF, Y, ERR, FF, FB, Y2 are in sig[] already;
+     *    U2 is an input kept there by its writers, controller.h) */
     c->sig[PIEZO_SIG_U] = u;
-    c->sig[PIEZO_SIG_U2] = c->u2_q15;
     rec_was = c->rec.state;
     piezo_rec_process(&c->rec, c->sig);
     if (c->wave_on_trigger && rec_was == PIEZO_REC_ARMED && c->rec.state != PIEZO_REC_ARMED) {

@@ -34,7 +34,7 @@
  *   6. feedback (FF_FEEDBACK, FEEDBACK): e = r - y, u_fb = notch(PID(e))
  *   7. u = sat_q15(u_ff + u_fb); disarmed or IDLE: u = u_safe
  *      cross-coupling compensation (a cross_coupling table loaded): the
- *      xcouple kernel predicts, from the other axis' drive u2_q15 and a
+ *      xcouple kernel predicts, from the other axis' drive (sig[PIEZO_SIG_U2]) and a
  *      position (this axis' y or the other's y2, as the table says), the
  *      drive that the coupling from the other axis is worth on this axis;
  *      in FEEDFORWARD, FF_FEEDBACK and FEEDBACK (not DIRECT, OPEN_LOOP or
@@ -164,12 +164,6 @@ typedef struct {
      * then. Set after the request itself (both volatile: in that order), cleared
      * by the tick. */
     volatile uint8_t boundary_req;
-    /* The other axis' drive (q15), recorded as signal u2 and the input of the
-     * cross-coupling compensation. A multi-axis target sets it before each
-     * tick from the other axis' controller (sil_loop.c: that controller's
-     * drive of the previous tick, the same for both axes); elsewhere the host
-     * may write it (register u2_q15). */
-    int16_t u2_q15;
     /* &ff[active] and &set[active], NULL with no table: written with active
      * (set_active, controller.c: at init, at boot's load and by the tick's
      * swap), read by the tick's step 5 instead of indexing both arrays */
@@ -183,6 +177,14 @@ typedef struct {
     piezo_biquad_t notch;
     piezo_limit_t limit;
     piezo_rec_t rec;
+    /* The signals of the last tick (q15), the recorder's and the register
+     * map's copy. sig[PIEZO_SIG_U2], the other axis' drive, is an input as
+     * well and lives only here (no copy per tick, round 16): the input of the
+     * cross-coupling compensation, recorded as signal u2. A multi-axis target
+     * sets it before each tick from the other axis' controller (sil_loop.c:
+     * that controller's drive of the previous tick, the same for both axes);
+     * elsewhere the host may write it (register u2_q15); the tick never
+     * writes it. */
     int16_t sig[PIEZO_SIG_N];
     int16_t y_prev_q15;
     uint16_t bad_run;

@@ -203,7 +203,7 @@ static uint32_t holding_value(const piezo_regmap_t *m, const piezo_reg_desc_t *d
     case PIEZO_HREG_SETPOINT_Q15: return (uint16_t)c->setpoint_q15;
     case PIEZO_HREG_COMMAND: return 0u;
     case PIEZO_HREG_REF_SOURCE: return c->ref_source;
-    case PIEZO_HREG_U2_Q15: return (uint16_t)c->u2_q15;
+    case PIEZO_HREG_U2_Q15: return (uint16_t)c->sig[PIEZO_SIG_U2];
     case PIEZO_HREG_WAVE_KIND: return w->kind;
     case PIEZO_HREG_WAVE_OFFSET_Q15: return (uint16_t)w->offset_q15;
     case PIEZO_HREG_WAVE_AMPLITUDE_Q15: return (uint16_t)w->amplitude_q15;
@@ -436,7 +436,7 @@ static void apply(piezo_regmap_t *m, const pending_t *p, uint16_t *table_cmd, ui
         }
         break;
     case PIEZO_HREG_REF_SOURCE: c->ref_source = (uint8_t)v; break;
-    case PIEZO_HREG_U2_Q15: c->u2_q15 = s16(v); break;
+    case PIEZO_HREG_U2_Q15: c->sig[PIEZO_SIG_U2] = s16(v); break;
     case PIEZO_HREG_WAVE_KIND: w->kind = (uint8_t)v; break;
     case PIEZO_HREG_WAVE_OFFSET_Q15: w->offset_q15 = s16(v); break;
     case PIEZO_HREG_WAVE_AMPLITUDE_Q15: w->amplitude_q15 = s16(v); break;

@@ -251,6 +251,35 @@ static void test_wave_and_recorder_over_registers(void **state)
     assert_int_equal(write1(PIEZO_HOLDING_WAVE_KIND, 99), PIEZO_MB_EX_ILLEGAL_DATA_VALUE);
 }
 
+/* The other axis' drive over its register: the tick records the value written
+ * before it (signal u2), a later write the next tick, and the register reads
+ * it back. Round 16 keeps u2 only in sig[PIEZO_SIG_U2] (no copy per tick):
+ * this fails if the register's write path or the recording misses it. */
+static void test_u2_register_is_the_recorded_u2(void **state)
+{
+    static const int16_t u2[5] = {-12000, 0, 7, 32767, -32768};
+    (void)state;
+    setup();
+    uint16_t rec[2] = {1, PIEZO_SIG_U2};
+    assert_int_equal(write_regs(PIEZO_HOLDING_REC_N_CHANNELS, 2, rec), 0);
+    assert_int_equal(write1(PIEZO_HOLDING_REC_TRIGGER, PIEZO_REC_IMMEDIATE), 0);
+    assert_int_equal(write1(PIEZO_HOLDING_COMMAND, 4), 0); /* arm recorder: immediate */
+    for (int k = 0; k < 5; k++) {
+        int32_t in[2] = {0, 0}, dac;
+        uint16_t back;
+        assert_int_equal(write1(PIEZO_HOLDING_U2_Q15, (uint16_t)u2[k]), 0);
+        assert_int_equal(read_regs(PIEZO_MB_FC_READ_HOLDING, PIEZO_HOLDING_U2_Q15, 1, &back), 0);
+        assert_int_equal((int16_t)back, u2[k]);
+        piezo_ctl_tick(&ctl, in, &dac);
+    }
+    assert_int_equal(read_u32(PIEZO_MB_FC_READ_INPUT, PIEZO_INPUT_REC_FRAMES), 5);
+    for (uint16_t k = 0; k < 5; k++) {
+        uint16_t idx[2] = {0, k}, w;
+        assert_int_equal(read_write(PIEZO_HOLDING_REC_WINDOW, 1, PIEZO_HOLDING_REC_READ_INDEX, 2, idx, &w), 0);
+        assert_int_equal((int16_t)w, u2[k]);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -258,6 +287,7 @@ int main(void)
         cmocka_unit_test(test_table_upload_readback_commit),
         cmocka_unit_test(test_configuration_needs_key_and_disarm),
         cmocka_unit_test(test_wave_and_recorder_over_registers),
+        cmocka_unit_test(test_u2_register_is_the_recorded_u2),
     };
     return cmocka_run_group_tests_name("regmap", tests, NULL, NULL);
 }

@@ -156,12 +156,12 @@ static void test_wave_starts_in_step_with_the_other_axis(void **state)
     assert_int_equal(ctl.setpoint_q15, 3000);
     ctl.wave_cfg.kind = PIEZO_WAVE_TRIANGLE;
     assert_int_equal(piezo_ctl_start_wave_on_trigger(&ctl), PIEZO_OK);
-    ctl.u2_q15 = -500;
+    ctl.sig[PIEZO_SIG_U2] = -500;
     for (uint32_t k = 0; k < 7u; k++) {
         assert_int_equal(tick(0), 0); /* the wave's offset until the other axis' drive rises through 0 */
         assert_int_equal(ctl.ref_source, PIEZO_REF_SETPOINT);
     }
-    ctl.u2_q15 = 500;
+    ctl.sig[PIEZO_SIG_U2] = 500;
     assert_int_equal(tick(0), 0); /* the trigger tick: the wave starts after it */
     assert_int_equal(ctl.ref_source, PIEZO_REF_WAVE);
     assert_int_equal(tick(0), 0);    /* sample 0: the triangle starts at 0 rising */

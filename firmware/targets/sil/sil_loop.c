@@ -64,8 +64,8 @@ void piezo_sil_tick(piezo_sil_t *s)
         /* each controller sees the other's drive of the previous tick (before
          * either ticks: the same lag for both axes) */
         int16_t u0 = s->ctl[0].sig[PIEZO_SIG_U], u1 = s->ctl[1].sig[PIEZO_SIG_U];
-        s->ctl[0].u2_q15 = u1;
-        s->ctl[1].u2_q15 = u0;
+        s->ctl[0].sig[PIEZO_SIG_U2] = u1;
+        s->ctl[1].sig[PIEZO_SIG_U2] = u0;
     }
     for (int i = 0; i < s->n_axes; i++) {
         int32_t in[2] = {s->adc[i], s->n_axes > 1 ? s->adc[1 - i] : 0};

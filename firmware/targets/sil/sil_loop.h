@@ -6,7 +6,7 @@
  * codes the stage produced at the end of the previous tick (its own axis
  * first, the other axis' second), computes its DAC code, then the stage
  * advances one sample with those codes. On a two-axis stage each
- * controller's u2_q15 (the other axis' drive: signal u2 and the input of the
+ * controller's sig[PIEZO_SIG_U2] (the other axis' drive: signal u2 and the input of the
  * cross-coupling compensation) is set before the tick to the other
  * controller's drive of the previous tick (what that axis' DAC holds). The converters map the full q15 range
  * onto their codes (q15 = code - 2^(bits-1), scaled to the bit width), and the
