@@ -58,12 +58,20 @@ def band_energy(parts, rec, dt: float, f_slow_hz: float) -> np.ndarray:
     return e
 
 
-def _above(r, dt: float, edge_hz: float) -> np.ndarray:
-    """``r`` high-passed at ``edge_hz`` (zero phase, fourth order Butterworth; :func:`ratios_above`'s filter)."""
+ABOVE_MIN_SAMPLES = 64   # a stretch this short or shorter is not filtered above the edge (zero-phase padding)
+
+
+def _highpass_sos(dt: float, edge_hz: float) -> np.ndarray:
+    """The fourth order Butterworth high-pass at ``edge_hz`` [Hz] for sample period ``dt`` [s] (second-order sections)."""
+    return sig.butter(4, edge_hz, "highpass", fs=1.0 / dt, output="sos")
+
+
+def _above(r, sos) -> np.ndarray:
+    """``r`` high-passed by ``sos`` (zero phase; :func:`ratios_above`'s filter), zeros when too short to filter."""
     r = np.asarray(r, float)
-    if r.size <= 64:
+    if r.size <= ABOVE_MIN_SAMPLES:
         return np.zeros_like(r)
-    return sig.sosfiltfilt(sig.butter(4, edge_hz, "highpass", fs=1.0 / dt, output="sos"), r)
+    return sig.sosfiltfilt(sos, r)
 
 
 def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float, edge_hz: float | None = None) -> dict | None:
@@ -92,6 +100,7 @@ def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float, edge_hz
     n_tot, d2, n_d = 0, 0.0, 0
     up = 0.0   # excess energy above edge_hz
     edge_ok = edge_hz is not None and 0.0 < edge_hz < 0.45 / dt
+    sos = _highpass_sos(dt, edge_hz) if edge_ok else None
     rows = []
     for h in holdout:
         r, m = np.asarray(h["resid"], float), np.asarray(h["scored"], bool)
@@ -107,7 +116,7 @@ def base_misfit(holdout: list, names: list, dt: float, f_slow_hz: float, edge_hz
         tot += e
         tot_in += e_in
         if edge_ok:
-            up += float(np.sum(_above(r, dt, edge_hz)[m] ** 2) - np.sum(_above(h["resid_in"], dt, edge_hz)[m] ** 2))
+            up += float(np.sum(_above(r, sos)[m] ** 2) - np.sum(_above(h["resid_in"], sos)[m] ** 2))
         n_tot += n
         rows.append({"recording": names[h["recording"]], "samples": [int(h["start"]), int(h["stop"])],
                      "scored_fraction": float(np.mean(m)), "rms_um": float(np.sqrt(np.mean(r[m] ** 2))),
@@ -186,13 +195,13 @@ def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, mis
     e_after = e_before - np.asarray(correction, float)
     if not 0.0 < edge_hz < 0.45 / dt:
         return None, None
-    sos = sig.butter(4, edge_hz, "highpass", fs=1.0 / dt, output="sos")
+    sos = _highpass_sos(dt, edge_hz)
     hb, ha = np.zeros_like(e_before), np.zeros_like(e_after)
     done = np.zeros(e_before.size, bool)
     for i in unique_labels(rec):
         m = rec == i
-        if np.sum(m) > 64:
-            hb[m], ha[m], done[m] = sig.sosfiltfilt(sos, e_before[m]), sig.sosfiltfilt(sos, e_after[m]), True
+        if np.sum(m) > ABOVE_MIN_SAMPLES:
+            hb[m], ha[m], done[m] = _above(e_before[m], sos), _above(e_after[m], sos), True
     if not np.any(done):
         return None, None
     frs = []
