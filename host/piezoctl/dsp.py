@@ -16,7 +16,7 @@ import numpy as np
 from scipy import signal
 
 __all__ = ["filt", "lowpass", "lowpass_tau", "mode_filter", "slew_limit", "drive_rate", "RATE_CUTOFF_HZ",
-           "blas_threads"]
+           "turning_points", "blas_threads"]
 
 RATE_CUTOFF_HZ = 50.0
 _SLEW_SCALAR = 32   # slew_limit: ramp steps taken one by one before the rest is taken as an array
@@ -136,6 +136,28 @@ def drive_rate(v, dt: float, cutoff_hz: float = RATE_CUTOFF_HZ) -> np.ndarray:
     """Magnitude of the drive rate [FS/s], low-passed at ``cutoff_hz`` [Hz]."""
     r = np.abs(np.gradient(np.asarray(v, float), dt)) if len(v) > 1 else np.zeros(len(v))
     return lowpass(r, cutoff_hz, dt)
+
+
+def turning_points(v) -> np.ndarray:
+    """Where a signal reverses: the indices ``i`` of ``diff(v)`` whose step is the first in a new direction
+    (steps of zero are skipped), so ``v[i]`` is the extreme it turned at.
+
+    Parameters
+    ----------
+    v : array_like
+        The signal (any unit), e.g. the drive [V] or a play's output.
+
+    Returns
+    -------
+    ndarray of int
+        The indices, increasing; empty when the signal moves in one direction or not at all.
+    """
+    d = np.sign(np.diff(np.asarray(v, float)))
+    nz = np.flatnonzero(d)
+    if nz.size < 2:
+        return np.zeros(0, np.intp)
+    dn = d[nz]
+    return nz[np.flatnonzero(dn[1:] != dn[:-1]) + 1]
 
 
 # (set, get) entry points of the OpenBLAS builds numpy and scipy load (their wheels rename the symbols)

@@ -69,6 +69,7 @@ import dataclasses
 
 import numpy as np
 
+from ..dsp import turning_points
 from ..ident.terms import TERMS, G
 from . import significance as sg
 from .misfit import credited_ratio
@@ -532,10 +533,7 @@ def sweep_extremes(u, tol: float = SWEEP_TOL) -> tuple | None:
     span = hi - lo
     if span <= 0:
         return None
-    du = np.diff(u)
-    nz = np.flatnonzero(du != 0)
-    sg_ = np.sign(du[nz])
-    turns = nz[1:][sg_[1:] != sg_[:-1]]     # the sample at which the direction reverses
+    turns = turning_points(u)     # the sample at which the direction reverses
     if turns.size < 2:
         return None
     v = u[turns]

@@ -65,7 +65,7 @@ import numpy as np
 from scipy import optimize
 from scipy import signal as sig
 
-from ..dsp import blas_threads, filt
+from ..dsp import blas_threads, filt, turning_points
 from ..models.hysteresis import hat_basis, play_states
 from .common import IdentError
 
@@ -549,12 +549,7 @@ def reversal_levels(vs, k0s, deadband: float = 0.02, resolution: float = 1.0 / 3
     for v, k0 in zip(vs, k0s):
         p = play_states(np.asarray(v, float)[k0:], [deadband], float(v[k0]))[:, 0]
         d = np.sign(np.diff(p))
-        nz = np.flatnonzero(d)
-        if nz.size < 2:
-            continue
-        dn = d[nz]
-        turn = nz[np.flatnonzero(dn[1:] != dn[:-1]) + 1]          # first step in the new direction
-        for i in turn:
+        for i in turning_points(p):                                # first step in the new direction
             levels.add((int(d[i] > 0), int(np.round(p[i] / (2.0 * resolution)))))
     return len(levels)
 
@@ -571,10 +566,7 @@ def _path_points(v, rows) -> np.ndarray:
     """Indices that keep the drive's path: ``rows``, every turning point, the first and the last sample. Plays
     and the Bouc-Wen state are exact on this subsequence (rate independent, and exact for any step within a
     monotone run), so the size search runs on it instead of every sample."""
-    d = np.sign(np.diff(v))
-    nz = np.flatnonzero(d)
-    turn = nz[np.flatnonzero(d[nz][1:] != d[nz][:-1]) + 1] if nz.size > 1 else np.zeros(0, int)
-    return np.unique(np.concatenate([rows, turn, [0, v.size - 1]]).astype(np.intp))
+    return np.unique(np.concatenate([rows, turning_points(v), [0, v.size - 1]]).astype(np.intp))
 
 
 def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
