@@ -30,4 +30,13 @@
         }                                                                          \
     } while (0)
 
+/* The tests' random numbers: one step of the 32-bit linear congruential
+ * generator (Numerical Recipes' constants) on *x, returning the new state.
+ * Tests seed their own state, so every test's sequence is its own. */
+static inline uint32_t piezo_test_lcg(uint32_t *x)
+{
+    *x = *x * 1664525u + 1013904223u;
+    return *x;
+}
+
 #endif /* PIEZO_TEST_H */

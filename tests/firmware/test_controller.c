@@ -404,12 +404,6 @@ enum { FF_ZERO, FF_REF, FF_LINE, FF_TABLE };
  * gain, 16)) as the int64 formula, for random zeros, gains (both signs, up to
  * the int32 range) and codes, the saturation's edges included (s = 2^31 - 1,
  * 2^31, -2^31, -2^31 - 1 before the shift). */
-static uint32_t sensor_lcg(uint32_t *x)
-{
-    *x = *x * 1664525u + 1013904223u;
-    return *x;
-}
-
 static int16_t sensor_formula(int32_t d, int32_t gain)
 {
     int64_t v = ((int64_t)d * gain + 32768) >> 16;
@@ -427,9 +421,9 @@ static void test_sensor_scale_matches_int64_formula(void **state)
         piezo_ctl_cfg_t cfg = unit_cfg();
         int32_t in[2], dac = 0, d0, d1;
         uint32_t sh;
-        cfg.adc_zero = (int32_t)(sensor_lcg(&x) >> 8) - (1 << 23);
-        sh = sensor_lcg(&x) % 31u;
-        cfg.sensor_gain_q16 = (int32_t)sensor_lcg(&x) >> sh;
+        cfg.adc_zero = (int32_t)(piezo_test_lcg(&x) >> 8) - (1 << 23);
+        sh = piezo_test_lcg(&x) % 31u;
+        cfg.sensor_gain_q16 = (int32_t)piezo_test_lcg(&x) >> sh;
         cfg.adc_min_ok = INT32_MIN;
         cfg.adc_max_ok = INT32_MAX;
         if (i < 6) {
@@ -439,12 +433,12 @@ static void test_sensor_scale_matches_int64_formula(void **state)
         } else {
             /* a difference of two values in [0, 2^31): no int32 overflow; then
              * a random magnitude */
-            d0 = (int32_t)(sensor_lcg(&x) >> 1);
-            d0 -= (int32_t)(sensor_lcg(&x) >> 1);
-            d0 >>= sensor_lcg(&x) % 32u;
-            d1 = (int32_t)(sensor_lcg(&x) >> 1);
-            d1 -= (int32_t)(sensor_lcg(&x) >> 1);
-            d1 >>= sensor_lcg(&x) % 32u;
+            d0 = (int32_t)(piezo_test_lcg(&x) >> 1);
+            d0 -= (int32_t)(piezo_test_lcg(&x) >> 1);
+            d0 >>= piezo_test_lcg(&x) % 32u;
+            d1 = (int32_t)(piezo_test_lcg(&x) >> 1);
+            d1 -= (int32_t)(piezo_test_lcg(&x) >> 1);
+            d1 >>= piezo_test_lcg(&x) % 32u;
         }
         /* codes whose difference from the zero does not overflow int32 */
         if ((cfg.adc_zero > 0 && d0 > INT32_MAX - cfg.adc_zero) || (cfg.adc_zero < 0 && d0 < INT32_MIN - cfg.adc_zero) ||
@@ -483,11 +477,11 @@ static void test_sensor_plausibility_matches_the_rule(void **state)
             int32_t in[2] = {0, 0}, dac = 0, code;
             int bad;
             if (k % 50 == 49) { /* a configuration change between two ticks */
-                x = x * 1664525u + 1013904223u;
+                (void)piezo_test_lcg(&x);
                 ctl.cfg.max_jump_q15 = (int16_t)((int32_t)(x >> 22) - 256); /* -256 .. 767 */
                 piezo_ctl_config_changed(&ctl);
             }
-            x = x * 1664525u + 1013904223u;
+            (void)piezo_test_lcg(&x);
             code = (int32_t)(x >> 16) - 32768;
             if ((x & 3u) != 0u) {
                 code = y_prev + (int32_t)((x >> 8) & 1023u) - 512; /* mostly near the last good value */

@@ -288,8 +288,7 @@ static int32_t walk_psi[WALK_MAX_OPS]; /* the oracle's operators */
 static uint32_t walk_rng;
 static uint32_t walk_rand(uint32_t n)
 {
-    walk_rng = walk_rng * 1664525u + 1013904223u;
-    return (uint32_t)(((uint64_t)(walk_rng >> 8) * n) >> 24);
+    return (uint32_t)(((uint64_t)(piezo_test_lcg(&walk_rng) >> 8) * n) >> 24);
 }
 
 static struct piezo_dcc_coeffs walk_plane(uint16_t L)

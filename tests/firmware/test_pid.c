@@ -130,12 +130,6 @@ static int16_t ref_pid(ref_pid_t *p, const piezo_pid_coef_t *c, int16_t e)
     return p->out;
 }
 
-static uint32_t lcg32(uint32_t *s)
-{
-    *s = *s * 1664525u + 1013904223u;
-    return *s;
-}
-
 /* One step of the tests' input walk from the random word m: a jump anywhere
  * (1 in 16), an extreme (1 in 16), else a small step, so that runs of one
  * sign drive the state into saturation and out. */
@@ -172,10 +166,10 @@ static void test_pid_matches_int64_formula(void **state)
         /* gains over the whole q24 range (any sign, up to +-128), limits
          * anywhere (min <= max, sometimes equal, sometimes excluding 0) */
         piezo_pid_coef_t c;
-        int16_t a = (int16_t)(lcg32(&seed) >> 16), b = (int16_t)(lcg32(&seed) >> 16);
-        c.kp_q24 = (int32_t)lcg32(&seed) >> (lcg32(&seed) >> 27);
-        c.ki_q24 = (int32_t)lcg32(&seed) >> (lcg32(&seed) >> 27); /* down to +-1 LSB */
-        c.kd_q24 = (trial % 3 == 0) ? 0 : (int32_t)lcg32(&seed) >> (lcg32(&seed) >> 27);
+        int16_t a = (int16_t)(piezo_test_lcg(&seed) >> 16), b = (int16_t)(piezo_test_lcg(&seed) >> 16);
+        c.kp_q24 = (int32_t)piezo_test_lcg(&seed) >> (piezo_test_lcg(&seed) >> 27);
+        c.ki_q24 = (int32_t)piezo_test_lcg(&seed) >> (piezo_test_lcg(&seed) >> 27); /* down to +-1 LSB */
+        c.kd_q24 = (trial % 3 == 0) ? 0 : (int32_t)piezo_test_lcg(&seed) >> (piezo_test_lcg(&seed) >> 27);
         if (trial % 2 == 0) {
             a = (int16_t)(a >> 8); /* narrow limits: the clamps bind often */
             b = (int16_t)(b >> 8);
@@ -188,7 +182,7 @@ static void test_pid_matches_int64_formula(void **state)
         int16_t e = 0;
         for (int k = 0; k < 400; k++) {
             /* runs of one sign (into saturation and out), jumps, extremes */
-            e = walk_step(e, lcg32(&seed));
+            e = walk_step(e, piezo_test_lcg(&seed));
             const int16_t want = ref_pid(&r, &c, e);
             assert_int_equal(piezo_pid_process(&p, e), want);
             assert_true(p.integ_q39 == r.integ);
@@ -213,20 +207,20 @@ static void test_notch_matches_int64_formula(void **state)
         piezo_biquad_coef_t c;
         int32_t *k[5] = {&c.b0_q24, &c.b1_q24, &c.b2_q24, &c.a1_q24, &c.a2_q24};
         for (int i = 0; i < 5; i++) {
-            const uint32_t m = lcg32(&seed);
+            const uint32_t m = piezo_test_lcg(&seed);
             /* the edges now and then, else anywhere in (-lim, lim) at any scale */
-            *k[i] = (m & 7u) == 0u ? ((m & 8u) ? lim : -lim) : (int32_t)(lcg32(&seed) >> 5) - (1 << 26);
+            *k[i] = (m & 7u) == 0u ? ((m & 8u) ? lim : -lim) : (int32_t)(piezo_test_lcg(&seed) >> 5) - (1 << 26);
             *k[i] >>= (m >> 28) & 7u;
         }
         piezo_biquad_t f;
         assert_int_equal(piezo_biquad_init(&f, &c), PIEZO_OK);
-        f.x1_q15 = (int16_t)(lcg32(&seed) >> 16);
-        f.x2_q15 = (int16_t)(lcg32(&seed) >> 16);
-        f.y1_q31 = (int32_t)lcg32(&seed);
-        f.y2_q31 = (int32_t)lcg32(&seed);
+        f.x1_q15 = (int16_t)(piezo_test_lcg(&seed) >> 16);
+        f.x2_q15 = (int16_t)(piezo_test_lcg(&seed) >> 16);
+        f.y1_q31 = (int32_t)piezo_test_lcg(&seed);
+        f.y2_q31 = (int32_t)piezo_test_lcg(&seed);
         int16_t x = 0;
         for (int n = 0; n < 200; n++) {
-            x = walk_step(x, lcg32(&seed));
+            x = walk_step(x, piezo_test_lcg(&seed));
             const int64_t acc = ((int64_t)c.b0_q24 * x + (int64_t)c.b1_q24 * f.x1_q15 + (int64_t)c.b2_q24 * f.x2_q15) *
                                     PIEZO_Q16_ONE -
                                 (int64_t)c.a1_q24 * f.y1_q31 - (int64_t)c.a2_q24 * f.y2_q31;

@@ -201,8 +201,7 @@ static void test_branches_by_hand(void **state)
 static uint32_t lcg_state;
 static uint32_t lcg(void)
 {
-    lcg_state = lcg_state * 1664525u + 1013904223u;
-    return lcg_state >> 8; /* 24 bits */
+    return piezo_test_lcg(&lcg_state) >> 8; /* 24 bits */
 }
 
 static int32_t lcg_range(int32_t lo, int32_t hi) /* [lo, hi], hi - lo < 2^24 */

@@ -273,8 +273,7 @@ static void oracle_process(piezo_rec_t *r, const int16_t *s)
 
 static uint32_t lcg_next(uint32_t *x)
 {
-    *x = *x * 1664525u + 1013904223u;
-    return *x >> 8;
+    return piezo_test_lcg(x) >> 8;
 }
 
 /* The tick (decimation by a countdown, the state kept in a register) against

@@ -40,12 +40,9 @@ static void test_sine_is_the_table_rule_and_finishes_after_cycles(void **state)
         piezo_wave_cfg_t c = {.kind = PIEZO_WAVE_SINE, .cycles = (uint32_t)(t % 4)};
         piezo_wave_t w;
         uint32_t phase = 0u, wraps = 0u;
-        x = x * 1664525u + 1013904223u;
-        c.offset_q15 = (int16_t)(x >> 16);
-        x = x * 1664525u + 1013904223u;
-        c.amplitude_q15 = (int16_t)(x >> 16);
-        x = x * 1664525u + 1013904223u;
-        c.freq_word = (x >> (t % 8u)) | 1u;
+        c.offset_q15 = (int16_t)(piezo_test_lcg(&x) >> 16);
+        c.amplitude_q15 = (int16_t)(piezo_test_lcg(&x) >> 16);
+        c.freq_word = (piezo_test_lcg(&x) >> (t % 8u)) | 1u;
         assert_int_equal(piezo_wave_init(&w, &c), PIEZO_OK);
         for (int k = 0; k < 3000; k++) {
             int64_t v = (int64_t)c.offset_q15 +
