@@ -2,32 +2,38 @@
 #include "play.h"
 
 #include <stddef.h>
+#include <string.h>
 
 #include "fixed_q.h"
 
 /*
- * The upper branch (off + a u) >> 24 in three instructions: a value x is
- * split into its high part x >> 24 (int32) and its low 24 bits shifted to the
- * top of a word, stored as one int64 (high part in the upper word). Then
- * (x + y) >> 24 = xh + yh + carry of the 32-bit sum xl + yl.
+ * The upper branch hi_ij(u) = A_j(u) + c_ij with A_j(u) = rshift_rnd(a_j u, 24)
+ * (one rounding per slope and sample) and c_ij = rshift_rnd(a_j r_i, 24)
+ * (init). The constants are q15 integers, |c| < 2^27 (a < 2^31, r <= 2^20),
+ * stored as an int32 array in the caller's int64 work array (two per word,
+ * by memcpy; the Thumb-2 steps read them as int32), column by column:
+ * constant j * n_r + i.
  */
-static int64_t split24(int64_t x)
+static inline int32_t c_get(const int64_t *c2, size_t k)
 {
-    const uint32_t lo = ((uint32_t)x & 0xFFFFFFu) << 8;
-    const int32_t hi = (int32_t)(x >> 24);
-    return (int64_t)(((uint64_t)(uint32_t)hi << 32) | lo);
+    int32_t v; /* through memcpy: the words are int64 objects (one LDR on the M4) */
+    memcpy(&v, (const unsigned char *)c2 + k * sizeof v, sizeof v);
+    return v;
 }
 
-static inline int32_t upper(int64_t off_split, uint32_t au_lo, int32_t au_hi)
+static inline void c_set(int64_t *c2, size_t k, int32_t v)
 {
-    const uint32_t ol = (uint32_t)off_split;
-    const int32_t oh = (int32_t)(off_split >> 32);
-    const uint32_t sum = ol + au_lo;
-    return oh + au_hi + (int32_t)(sum < ol);
+    memcpy((unsigned char *)c2 + k * sizeof v, &v, sizeof v);
+}
+
+/* A_j(u) = rshift_rnd(a_j u, 24): |a u| < 2^31 * 2^20, so |A| < 2^27. */
+static inline int32_t upper_a(int32_t a_q24, int32_t u_q15)
+{
+    return (int32_t)piezo_rshift_rnd64((int64_t)a_q24 * u_q15, 24u);
 }
 
 int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
-                    int32_t *f_q15, size_t f_len, int64_t *off_q39, size_t off_len)
+                    int32_t *f_q15, size_t f_len, int64_t *work, size_t work_len)
 {
     if (p == NULL || coef == NULL || f_q15 == NULL) {
         return PIEZO_EINVAL;
@@ -40,10 +46,10 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
         return PIEZO_EINVAL;
     }
     if (coef->n_a > 0u) {
-        if (coef->a_q24 == NULL || off_q39 == NULL) {
+        if (coef->a_q24 == NULL || work == NULL) {
             return PIEZO_EINVAL;
         }
-        if (off_len < n_ops) {
+        if (work_len < n_ops) {
             return PIEZO_ERANGE;
         }
         for (size_t j = 0; j < coef->n_a; j++) {
@@ -63,15 +69,14 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
     }
     p->coef = coef;
     p->f_q15 = f_q15;
-    p->off_q39 = coef->n_a > 0u ? off_q39 : NULL;
+    p->c2_q15 = coef->n_a > 0u ? work : NULL;
     p->n_ops = n_ops;
-    /* Constants of the upper branch: off = a_j * r_i with the rounding half
-     * folded in, so that (off + a * u) >> 24 == piezo_rshift_rnd64(a * (u + r), 24),
-     * stored split (see upper()) and column by column: slot j * n_r + i. */
+    /* Constants of the upper branch, c_ij = rshift_rnd(a_j r_i, 24) (q15),
+     * column by column: constant j * n_r + i (c_get). */
     for (size_t i = 0; i < coef->n_r && coef->n_a > 0u; i++) {
         for (size_t j = 0; j < coef->n_a; j++) {
-            off_q39[j * coef->n_r + i] =
-                split24((int64_t)coef->a_q24[j] * coef->r_q15[i] + ((int64_t)1 << 23));
+            c_set(work, j * coef->n_r + i,
+                  (int32_t)piezo_rshift_rnd64((int64_t)coef->a_q24[j] * coef->r_q15[i], 24u));
         }
     }
     piezo_play_reset(p);
@@ -113,11 +118,10 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
         return acc;
     }
     for (size_t j = 0; j < n_a; j++) {
-        const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
-        const int64_t *off = p->off_q39 + j * n_r;
+        const int32_t au = upper_a(c->a_q24[j], u_q15);
         int32_t *fc = f + j * n_r; /* column j, outputs column by column */
         for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
-            const int32_t hi = upper(off[i], (uint32_t)au, (int32_t)(au >> 32));
+            const int32_t hi = au + c_get(p->c2_q15, j * n_r + i);
             const int32_t lo = u_q15 - r[i];
             int32_t y = fc[i];
             y = y < hi ? y : hi;
@@ -131,11 +135,11 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
 
 /*
  * The unparallel bank falling: for each slope (column) a_j, from the
- * column's first threshold, F moves iff F >= hi = rshift_rnd(a (u + r), 24)
- * (formed as (off + a u) >> 24 from the split constants), to max(u - r, hi),
- * or to hi where the lower branch cannot win (a <= 1 and u <= 0, or a >= 1
- * and u >= 0: u - r - hi <= u (1 - a) - r (1 + a) + 1/2, an integer below
- * 1); the scan stops at the first F < hi. Returns acc plus the sum of
+ * column's first threshold, F moves iff F >= hi = A_j(u) + c_ij (A_j once
+ * per column), to max(u - r, hi), or to hi where the lower branch cannot win
+ * (a <= 1 and u <= 0, or a >= 1 and u >= 0: each rounding is above its
+ * value less 1/2, so u - r - hi < u (1 - a) - r (1 + a) + 1, an integer
+ * below 1); the scan stops at the first F < hi. Returns acc plus the sum of
  * w (F_new - F_old). F == hi goes through the update too: F >= u - r while
  * falling, so then max(hi, u - r) == F and nothing changes.
  */
@@ -150,17 +154,19 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * per pass; the break tested on the sign of the step it stores) and 17
  * with the lower branch, but only over the column's lower-branch prefix:
  * g_i = (u - r_i) - hi_i is non-increasing in i (r_{i+1} - r_i = D >= 0
- * raises hi by floor(x + a D) - floor(x) >= floor(a D) >= 0, so g falls by
- * at least D), so once the upper branch wins (u - r < hi) it wins for the
- * rest of the column, which the upper-branch loop finishes at 11 (round 13),
- * 10.5 since round 14: a pass's two weights are read at wp and wp + stride
- * and wp steps once by two strides (an odd count enters at the pair's
- * second with wp one stride back; wp is reloaded per column).
+ * raises hi by c_{i+1} - c_i >= 0, so g falls by at least D), so once
+ * the upper branch wins (u - r < hi) it wins for the rest of the column,
+ * which the upper-branch loop finishes at 11 (round 13), 10.5 since round
+ * 14 (a pass's two weights are read at wp and wp + stride and wp steps
+ * once by two strides; an odd count enters at the pair's second with wp
+ * one stride back; wp is reloaded per column), 8.5 since round 17 (hi =
+ * A_j + c: one add instead of the carry add, the pair's two constants by
+ * one LDRD).
  * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
 struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it updates it */
-    uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
+    uintptr_t c_f;       /* 0: c - f (addresses): a column's constants start at c_f + fp */
     int32_t *f;          /* 4: the column's outputs (column by column) */
     uint32_t f_step;     /* 8: n_r * 4, bytes of a column of outputs */
     intptr_t w_a;        /* 12: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
@@ -177,7 +183,7 @@ typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, 
 /* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
                                         offsetof(struct piezo_play, f_q15) == 4u &&
-                                        offsetof(struct piezo_play, off_q39) == 8u &&
+                                        offsetof(struct piezo_play, c2_q15) == 8u &&
                                         offsetof(struct piezo_play, acc_q39) == 16u &&
                                         offsetof(struct piezo_play, u_prev_q15) == 24u &&
                                         offsetof(struct piezo_play_coef, r_q15) == 0u &&
@@ -189,23 +195,24 @@ typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u 
 static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_play *p)
 {
     (void)p;
-    /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
-     * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
-     * thresholds in the lower-branch loop; the column state at [sp] */
+    /* r1 cp (the constants c_ij, int32), r2 fp, r3 the column's end of fp,
+     * r4 wp, r5 weight stride, r6 A_j = rshift_rnd(a_j u, 24), r8:r9 acc,
+     * r7 r10-r12 scratch, lr u, r0 the thresholds in the lower-branch loop;
+     * the column state at [sp] */
     __asm__ volatile(
         "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    ip, [r0, #0]\n"           /* coef */
         "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    r1, [r0, #8]\n"           /* off */
+        "    ldr    r1, [r0, #8]\n"           /* c */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
         "    ldrh   r3, [ip, #12]\n"          /* n_r */
         "    ldrh   r5, [ip, #14]\n"          /* n_a */
         "    ldr    r10, [ip, #4]\n"          /* a */
         "    ldr    r4, [ip, #8]\n"           /* w */
         "    ldr    r12, [ip, #0]\n"          /* r */
-        "    sub    r1, r1, r2, lsl #1\n"
+        "    sub    r1, r1, r2\n"
         "    sub    r4, r4, r10\n"             /* w - a: a column's first weight is a_j's address + it */
         "    lsl    r5, r5, #2\n"
         "    add    r11, r10, r5\n"
@@ -213,15 +220,16 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    stm    sp, {r1, r2, r3, r4, r10, r11, r12}\n"
         "    beq    7f\n"                     /* n_r == 0 (the lsls) */
         "1:  ldm    sp, {r1, r2, r3, r4}\n"   /* column (r10 = &a_j: the set-up's or 6's) */
-        "    add    r1, r1, r2, lsl #1\n"     /* its constants */
+        "    add    r1, r1, r2\n"             /* its constants */
         "    add    r3, r3, r2\n"             /* its outputs' end */
         "    add    r4, r4, r10\n"             /* wp = w + j */
-        "    ldr    r11, [r10], #4\n"          /* a_j, the split a u */
+        "    ldr    r11, [r10], #4\n"          /* a_j; A_j = (a_j u + 2^23) >> 24 */
         "    str    r10, [sp, #16]\n"
         "    smull  r6, r7, r11, lr\n"
-        "    lsr    r10, r6, #24\n"
-        "    orr    r7, r10, r7, lsl #8\n"
-        "    lsl    r6, r6, #8\n"
+        "    adds   r6, r6, #0x800000\n"
+        "    adc    r7, r7, #0\n"
+        "    lsr    r6, r6, #24\n"
+        "    orr    r6, r6, r7, lsl #8\n"
         "    cmp    r11, #0x1000000\n"
         "    ble    2f\n"
         "    cmp    lr, #0\n"
@@ -233,20 +241,18 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    tst    r12, #4\n"
         "    beq    31f\n"
         "    sub    r4, r4, r5\n"             /* odd: enter at the pair's second, whose weight is [r4 + r5] */
+        "    ldr    r11, [r1], #4\n"
         "    b      4f\n"
-        "31: ldrd   r10, r11, [r1], #8\n"
+        "31: ldrd   r7, r11, [r1], #8\n"      /* the pair's two constants */
         "    ldr    r12, [r2]\n"
-        "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"
-        "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
+        "    add    r7, r7, r6\n"             /* hi = A_j + c */
+        "    subs   r10, r7, r12\n"           /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
-        "    str    r11, [r2], #4\n"
+        "    str    r7, [r2], #4\n"
         "    ldr    r12, [r4]\n"              /* the pair's weights at r4 and r4 + r5, */
         "    smlal  r8, r9, r12, r10\n"
-        "4:  ldrd   r10, r11, [r1], #8\n"
-        "    ldr    r12, [r2]\n"
-        "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"
+        "4:  ldr    r12, [r2]\n"
+        "    add    r11, r11, r6\n"
         "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
@@ -257,9 +263,8 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    bne    31b\n"
         "    b      6f\n"
         "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
-        "51: ldrd   r10, r11, [r1], #8\n"
-        "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"            /* hi */
+        "51: ldr    r11, [r1], #4\n"
+        "    add    r11, r11, r6\n"            /* hi = A_j + c */
         "    ldr    r10, [r0], #4\n"
         "    sub    r10, lr, r10\n"            /* lo = u - r */
         "    cmp    r10, r11\n"
@@ -300,24 +305,22 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
 
 /* The C falling step: what other targets run, and on the Cortex-M4 the
  * reference of upi_fall_m4 (piezo_play_process_upi_c, test_play). */
-static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
+static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *c2, int32_t *f, int32_t u_q15,
                         int64_t acc)
 {
     const int32_t *r = c->r_q15;
     const int32_t *w = c->w_q24;
     const size_t n_r = c->n_r, n_a = c->n_a;
     for (size_t j = 0; j < n_a; j++) {
-        const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
-        const uint32_t au_lo = (uint32_t)au;
-        const int32_t au_hi = (int32_t)(au >> 32);
-        const int64_t *op = off + j * n_r;
+        const int32_t au = upper_a(c->a_q24[j], u_q15);
+        size_t k = j * n_r; /* the column's first constant */
         int32_t *fp = f + j * n_r;
         const int32_t *rp = r;
         const int32_t *wp = w + j;
         const int32_t a_j = c->a_q24[j];
         if (a_j <= PIEZO_Q24_ONE ? u_q15 <= 0 : u_q15 >= 0) {
             for (size_t i = n_r; i != 0u; i--) {
-                const int32_t hi = upper(*op++, au_lo, au_hi);
+                const int32_t hi = au + c_get(c2, k++);
                 const int32_t y = *fp;
                 if (y < hi) {
                     break;
@@ -329,7 +332,7 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
             continue;
         }
         for (size_t i = n_r; i != 0u; i--) {
-            const int32_t hi = upper(*op++, au_lo, au_hi);
+            const int32_t hi = au + c_get(c2, k++);
             const int32_t y = *fp;
             if (y < hi) {
                 break;
@@ -797,7 +800,7 @@ int64_t piezo_play_process_upi_c(struct piezo_play *p, int32_t u_q15)
     if (u_q15 > u_prev) {
         acc = rise(p->f_q15, c->w_q24, c->r_q15, c->n_r, c->n_a, c->n_a, u_q15, acc);
     } else {
-        acc = upi_fall(c, p->off_q39, p->f_q15, u_q15, acc);
+        acc = upi_fall(c, p->c2_q15, p->f_q15, u_q15, acc);
     }
     p->acc_q39 = acc;
     return acc;
