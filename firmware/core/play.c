@@ -184,6 +184,7 @@ typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, 
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
                                         offsetof(struct piezo_play, f_q15) == 4u &&
                                         offsetof(struct piezo_play, c2_q15) == 8u &&
+                                        offsetof(struct piezo_play, n_ops) == 12u &&
                                         offsetof(struct piezo_play, acc_q39) == 16u &&
                                         offsetof(struct piezo_play, u_prev_q15) == 24u &&
                                         offsetof(struct piezo_play_coef, r_q15) == 0u &&
@@ -202,6 +203,8 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
     __asm__ volatile(
         "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
+        "    mov    r3, #-1\n"
+        "    strb   r3, [r0, #29]\n"          /* run_dir = -1: the rising runs end */
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    ip, [r0, #0]\n"           /* coef */
         "    ldr    r2, [r0, #4]\n"           /* f */
@@ -361,35 +364,84 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *c2, int3
  * gcc's 13; test_play and the EUPI golden vectors under QEMU. 9.5 since
  * round 14: a pass's two weights at wp and wp + stride, wp stepped once per
  * pass (with n_r odd every column enters at a pair's second, so the first
- * column's weight pointer starts one stride back). */
+ * column's weight pointer starts one stride back). Round 17: the rising
+ * runs (upi_rise below): each column's run stored two per pass (LDRD/STRD,
+ * 3 per operator), its part of the sum one UMLAL + MLA for the bank; the
+ * scan from the run's end at 11.5 per operator (run_w += w), each column's
+ * state (its rest count) read and written once. */
 
-static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play *p)
+static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play *p, int32_t u_q15, int32_t u_prev_q15)
 {
     (void)p;
-    /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
-     * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
-     * r11 thresholds, r12 n_r * 4, lr u */
+    (void)u_q15;
+    (void)u_prev_q15;
+    /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's rest
+     * count (n_r - m_j, uint16), r5 weight stride, r6 r7 r12 scratch, r8:r9
+     * acc, r10:r11 run_w, lr u; at [sp]: the thresholds, the column's
+     * weights' end (&w[n_r n_a + j]), the counts' end, n_r * 4; p at [sp, #16] */
     __asm__ volatile(
-        "    push   {r0, r4-r11, lr}\n"       /* p at [sp] */
+        "    push   {r0, r4-r11, lr}\n"
+        "    sub    sp, #16\n"
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
-        "    ldr    r1, [r0, #0]\n"           /* coef */
+        "    mov    lr, r1\n"                 /* u */
+        "    sub    r1, r1, r2\n"             /* d = u - u_prev > 0 (the entry's r2) */
+        "    ldrsb  r6, [r0, #29]\n"          /* run_dir */
+        "    movs   r7, #1\n"
+        "    strb   r7, [r0, #29]\n"          /* run_dir = 1 */
+        "    ldrd   r10, r11, [r0, #32]\n"    /* run_w */
         "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
-        "    ldr    r4, [r1, #8]\n"           /* w */
-        "    ldr    r11, [r1, #0]\n"          /* r */
-        "    ldrh   r12, [r1, #12]\n"         /* n_r */
-        "    ldrh   r10, [r1, #14]\n"         /* n_a: the columns and the weights' step */
-        "    lsl    r5, r10, #2\n"
-        "    lsls   r12, r12, #2\n"
-        "    beq    5f\n"
-        "    tst    r12, #4\n"                /* n_r odd: every column enters at a pair's second, */
-        "    it     ne\n"
-        "    subne  r4, r4, r5\n"              /* whose weight is [r0 + r5]: r4 one stride back */
-        "1:  add    r3, r2, r12\n"             /* column */
-        "    mov    r1, r11\n"
-        "    mov    r0, r4\n"
-        "    tst    r12, #4\n"
-        "    bne    3f\n"
+        "    ldr    r4, [r0, #8]\n"           /* the constants, */
+        "    ldr    r7, [r0, #12]\n"          /* n_ops of them: the rest counts follow */
+        "    ldr    r3, [r0, #0]\n"           /* coef */
+        "    add    r4, r4, r7, lsl #2\n"
+        "    ldrh   r12, [r3, #12]\n"         /* n_r */
+        "    cmp    r12, #0\n"
+        "    beq    7f\n"
+        "    ldrh   r7, [r3, #14]\n"          /* n_a */
+        "    ldr    r0, [r3, #0]\n"           /* r */
+        "    ldr    r3, [r3, #8]\n"           /* w */
+        "    lsl    r5, r7, #2\n"             /* the weights' stride */
+        "    mla    r3, r12, r5, r3\n"        /* &w[n_r n_a]: column 0's weights' end */
+        "    add    r7, r4, r7, lsl #1\n"     /* the counts' end */
+        "    cmp    r6, #1\n"
+        "    bne    8f\n"
+        "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */
+        "    mla    r9, r11, r1, r9\n"
+        "    b      9f\n"
+        "8:  movs   r10, #0\n"                /* new runs: run_w = 0, every rest n_r */
+        "    movs   r11, #0\n"
+        "    mov    r6, r4\n"
+        "81: strh   r12, [r6], #2\n"
+        "    cmp    r6, r7\n"
+        "    bne    81b\n"
+        "9:  lsl    r12, r12, #2\n"
+        "    stm    sp, {r0, r3, r7, r12}\n"
+        "1:  ldrh   r7, [r4]\n"               /* column: its rest */
+        "    ldrd   r1, r0, [sp]\n"           /* rp = r, the column's weights' end */
+        "    add    r3, r2, r12\n"            /* the column's end */
+        "    add    r6, r0, #4\n"
+        "    str    r6, [sp, #4]\n"           /* the next column's */
+        "    mls    r0, r7, r5, r0\n"         /* wp: the first weight after the run */
+        "    sub    r6, r3, r7, lsl #2\n"     /* the run's end */
+        "    sub    r6, r6, #4\n"             /* its stores two per pass while fp < r6 */
+        "    cmp    r2, r6\n"
+        "    bhs    22f\n"
+        "21: ldrd   r7, r12, [r1], #8\n"
+        "    sub    r7, lr, r7\n"
+        "    sub    r12, lr, r12\n"
+        "    strd   r7, r12, [r2], #8\n"
+        "    cmp    r2, r6\n"
+        "    blo    21b\n"
+        "22: bne    30f\n"                    /* fp == r6: one left */
+        "    ldr    r7, [r1], #4\n"
+        "    sub    r7, lr, r7\n"
+        "    str    r7, [r2], #4\n"
+        "30: subs   r6, r3, r2\n"             /* the scan from the run's end */
+        "    beq    4f\n"
+        "    tst    r6, #4\n"
+        "    beq    2f\n"
+        "    sub    r0, r0, r5\n"             /* odd: enter at the pair's second, whose weight is [r0 + r5] */
+        "    b      3f\n"
         "2:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
@@ -398,6 +450,8 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    str    r6, [r2], #4\n"
         "    ldr    r6, [r0]\n"               /* the pair's weights at r0 and r0 + r5, */
         "    smlal  r8, r9, r6, r7\n"
+        "    adds   r10, r10, r6\n"           /* run_w += w */
+        "    adc    r11, r11, r6, asr #31\n"
         "3:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
@@ -407,13 +461,21 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    ldr    r6, [r0, r5]\n"
         "    add    r0, r0, r5, lsl #1\n"     /* one step of two strides per pass */
         "    smlal  r8, r9, r6, r7\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r6, asr #31\n"
         "    cmp    r2, r3\n"
         "    bne    2b\n"
-        "4:  mov    r2, r3\n"                  /* the next column starts where this one ends */
-        "    add    r4, r4, #4\n"
-        "    subs   r10, r10, #1\n"
+        "4:  sub    r6, r3, r2\n"             /* the column's new rest */
+        "    lsr    r6, r6, #2\n"
+        "    strh   r6, [r4], #2\n"
+        "    mov    r2, r3\n"                  /* the next column starts where this one ends */
+        "    ldrd   r7, r12, [sp, #8]\n"      /* the counts' end, n_r * 4 */
+        "    cmp    r4, r7\n"
         "    bne    1b\n"
-        "5:  ldr    r2, [sp], #4\n"           /* p */
+        "    ldr    r0, [sp, #16]\n"          /* p */
+        "    strd   r10, r11, [r0, #32]\n"    /* run_w */
+        "7:  add    sp, #16\n"
+        "    ldr    r2, [sp], #4\n"           /* p */
         "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
         "    mov    r0, r8\n"
         "    mov    r1, r9\n"
@@ -421,26 +483,6 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
 }
 
 #endif
-/* The C rising step (the reference of rise_m4, as upi_fall above). */
-static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
-                    int32_t u_q15, int64_t acc)
-{
-    for (size_t j = 0; j < n_col; j++) {
-        int32_t *fc = f + j * n_r;
-        const int32_t *wk = w + j;
-        for (size_t i = 0; i < n_r; i++, wk += w_step) {
-            const int32_t lo = u_q15 - r[i];
-            const int32_t y = fc[i];
-            if (lo <= y) {
-                break;
-            }
-            fc[i] = lo;
-            acc += (int64_t)*wk * (lo - y);
-        }
-    }
-    return acc;
-}
-
 /* The classical run's stores: f[k] = u + r[k] falling (rsb == 0), u - r[k]
  * rising (rsb == 1). On Thumb-2 two per pass (ldrd/strd: three
  * instructions per operator; gcc's C pairs neither and spends five). */
@@ -482,6 +524,73 @@ static inline void store_run(int32_t *f, const int32_t *r, size_t n, int32_t u, 
     for (size_t k = 0; k < n; k++) {
         f[k] = rsb ? u - r[k] : u + r[k];
     }
+}
+
+/*
+ * The unparallel bank's rising runs (round 17): after a rising sample the
+ * operators 0..m_j-1 of column j (the ones that moved) hold u_prev - r_i;
+ * a sample that rises again moves each of them by exactly d = u - u_prev
+ * (F = max(u - r_i, F), u - r_i > u_prev - r_i), in every column: their part
+ * of the sum is d * run_w, run_w = the sum of their weights over the whole
+ * bank (p->run_w_q24, int64: |run_w| < 2^8 * 2^31, |d| <= 2^21, as the
+ * classical run), and they are only stored; each column's scan goes on from
+ * m_j. Each column keeps n_r - m_j (uint16, the operators after its run),
+ * after the constants in the work array (bytes 4 n_ops + 2 j: the constants
+ * take 4 n_ops of its 8 n_ops bytes).
+ * p->run_dir is +1 while they hold; a falling sample sets it to -1 and
+ * reset to 0: the next rise starts every column's run anew.
+ */
+static inline unsigned char *upi_runs(const struct piezo_play *p)
+{
+    return (unsigned char *)p->c2_q15 + p->n_ops * sizeof(int32_t);
+}
+
+static inline size_t m_get(const unsigned char *m, size_t j)
+{
+    uint16_t v;
+    memcpy(&v, m + j * sizeof v, sizeof v);
+    return v;
+}
+
+static inline void m_set(unsigned char *m, size_t j, size_t v)
+{
+    const uint16_t x = (uint16_t)v;
+    memcpy(m + j * sizeof x, &x, sizeof x);
+}
+
+/* The C rising step (the reference of rise_m4, as upi_fall above). */
+static int64_t upi_rise(struct piezo_play *p, int32_t u_q15, int32_t u_prev, int64_t acc)
+{
+    const struct piezo_play_coef *c = p->coef;
+    const int32_t *r = c->r_q15;
+    const size_t n_r = c->n_r, n_a = c->n_a;
+    unsigned char *m = upi_runs(p);
+    const int keep = p->run_dir > 0;
+    int64_t run_w = 0;
+    if (keep) {
+        run_w = p->run_w_q24;
+        acc += run_w * (u_q15 - u_prev);
+    }
+    for (size_t j = 0; j < n_a; j++) {
+        int32_t *fc = p->f_q15 + j * n_r;
+        size_t i = keep ? n_r - m_get(m, j) : 0u;
+        const int32_t *wk = c->w_q24 + j + i * n_a;
+        store_run(fc, r, i, u_q15, 1);
+        for (; i < n_r; i++, wk += n_a) {
+            const int32_t lo = u_q15 - r[i];
+            const int32_t y = fc[i];
+            if (lo <= y) {
+                break;
+            }
+            fc[i] = lo;
+            acc += (int64_t)*wk * (lo - y);
+            run_w += *wk;
+        }
+        m_set(m, j, n_r - i);
+    }
+    p->run_dir = 1;
+    p->run_w_q24 = run_w;
+    return acc;
 }
 
 /* The first sample after init or reset: every operator by the formula. */
@@ -798,8 +907,9 @@ int64_t piezo_play_process_upi_c(struct piezo_play *p, int32_t u_q15)
     const struct piezo_play_coef *c = p->coef;
     int64_t acc = p->acc_q39;
     if (u_q15 > u_prev) {
-        acc = rise(p->f_q15, c->w_q24, c->r_q15, c->n_r, c->n_a, c->n_a, u_q15, acc);
+        acc = upi_rise(p, u_q15, u_prev, acc);
     } else {
+        p->run_dir = -1; /* the rising runs end */
         acc = upi_fall(c, p->c2_q15, p->f_q15, u_q15, acc);
     }
     p->acc_q39 = acc;

@@ -65,6 +65,10 @@
  * in int64: |run_w| < 2^8 * 2^31 = 2^39 and |d| <= 2^21, so
  * |d * run_w| < 2^60; the new sum is the exact one, within the bound below) and they are only stored; the scan goes on
  * from operator run_n. A reversal starts the run anew from operator 0.
+ * Unparallel banks keep the rising runs the same way, one per column (the
+ * operators 0..m_j-1 that moved hold u_prev - r_i; m_j in the work array
+ * after the constants, run_w the sum over all columns); a falling sample
+ * ends them (run_dir = -1).
  *
  * Initial state: every operator output is 0 after init and reset (relaxed,
  * demagnetized actuator at u = 0).
@@ -116,9 +120,11 @@ struct piezo_play {
     int64_t acc_q39;       /* sum_k w_k F_k of the current outputs */
     int32_t u_prev_q15;    /* input of the last sample */
     uint8_t primed;        /* 0 after reset: the next sample updates every operator */
-    int8_t run_dir;        /* classical banks: +1 the last sample rose, -1 fell, 0 none */
+    int8_t run_dir;        /* +1 the last sample rose, -1 fell, 0 none (reset) */
     uint16_t run_n;        /* classical banks: operators 0..run_n-1 hold u_prev -+ r_i */
-    int64_t run_w_q24;     /* classical banks: sum of w_i over those run_n operators */
+    int64_t run_w_q24;     /* classical banks: sum of w_i over those run_n operators;
+                            * unparallel banks after a rise: sum of w_ij over every
+                            * column's rising run (play.c, upi_rise) */
 };
 
 /*
