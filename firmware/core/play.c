@@ -26,50 +26,6 @@ static inline void c_set(int64_t *c2, size_t k, int32_t v)
     memcpy((unsigned char *)c2 + k * sizeof v, &v, sizeof v);
 }
 
-/*
- * The columns' runs (round 17), 24 bytes per column after the constants
- * (from int64 word (n_ops + 1) / 2 of the work array; play.h,
- * PIEZO_PLAY_WORK_LEN): falling, the operators p..m-1 of column j that
- * moved on the upper branch hold g + c_ij (g = A_j of that sample), w_q24
- * their weights' sum (|w| < 2^8 * 2^31); p4 = 4 p (0xFFFF: no run), m4 = 4 m.
- * A rise leaves a falling run whole unless it moves one of its operators
- * (the rising movers are the prefix 0..m_j-1: m_j > p ends the run), so the
- * runs outlast the drive's small reversals; reset ends them all. Rising,
- * rest = n_r - m_j (upi_rise). The Thumb-2 steps read the same bytes: w at
- * 0, g at 8, p4 at 12, m4 at 14, rest at 16.
- */
-struct upi_col {
-    int64_t w_q24;
-    int32_t g_q15;
-    uint16_t p4;
-    uint16_t m4;
-    uint16_t rest;  /* rising: n_r - m_j (upi_rise) */
-    uint16_t pad;
-};
-typedef char piezo_upi_col_layout_check_t[(sizeof(struct upi_col) == 24u &&
-                                           offsetof(struct upi_col, g_q15) == 8u &&
-                                           offsetof(struct upi_col, p4) == 12u &&
-                                           offsetof(struct upi_col, m4) == 14u &&
-                                           offsetof(struct upi_col, rest) == 16u) ? 1 : -1];
-#define UPI_NO_RUN 0xFFFFu
-
-static inline unsigned char *upi_col_at(const struct piezo_play *p, size_t j)
-{
-    return (unsigned char *)(p->c2_q15 + (p->n_ops + 1u) / 2u) + j * sizeof(struct upi_col);
-}
-
-static inline struct upi_col col_get(const struct piezo_play *p, size_t j)
-{
-    struct upi_col x;
-    memcpy(&x, upi_col_at(p, j), sizeof x);
-    return x;
-}
-
-static inline void col_set(const struct piezo_play *p, size_t j, const struct upi_col *x)
-{
-    memcpy(upi_col_at(p, j), x, sizeof *x);
-}
-
 /* A_j(u) = rshift_rnd(a_j u, 24): |a u| < 2^31 * 2^20, so |A| < 2^27. */
 static inline int32_t upper_a(int32_t a_q24, int32_t u_q15)
 {
@@ -93,7 +49,7 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
         if (coef->a_q24 == NULL || work == NULL) {
             return PIEZO_EINVAL;
         }
-        if (work_len < PIEZO_PLAY_WORK_LEN(coef->n_r, coef->n_a)) {
+        if (work_len < n_ops) {
             return PIEZO_ERANGE;
         }
         for (size_t j = 0; j < coef->n_a; j++) {
@@ -138,12 +94,6 @@ void piezo_play_reset(struct piezo_play *p)
     p->run_dir = 0;
     p->run_n = 0u;
     p->run_w_q24 = 0;
-    for (size_t j = 0; p->c2_q15 != NULL && j < p->coef->n_a; j++) {
-        struct upi_col run;
-        memset(&run, 0, sizeof run);
-        run.p4 = UPI_NO_RUN;
-        col_set(p, j, &run);
-    }
 }
 
 /* The formula on every operator, the sum from scratch (first sample). */
@@ -220,19 +170,16 @@ struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it 
     int32_t *f;          /* 4: the column's outputs (column by column) */
     uint32_t f_step;     /* 8: n_r * 4, bytes of a column of outputs */
     intptr_t w_a;        /* 12: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
-    uintptr_t col_next;  /* 16: the column's run state (struct upi_col), then the next one's */
-    const int32_t *a;    /* 20: the column's slope */
-    const int32_t *a_end;/* 24: one past the last slope */
-    const int32_t *r;    /* 28: thresholds */
-    int32_t u;           /* 32: the input */
-    uintptr_t col;       /* 36: the column's run state (struct upi_col); p sits at 40 */
+    const int32_t *a;    /* 16: the column's slope */
+    const int32_t *a_end;/* 20: one past the last slope */
+    const int32_t *r;    /* 24: thresholds */
+    uint32_t pad;        /* 28: p sits at 32 */
 };
-/* the first five words in one LDM per column, the set-up's eight in one STM */
-typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, col_next) == 16u &&
-                                                 offsetof(struct upi_fall_args, a) == 20u &&
-                                                 offsetof(struct upi_fall_args, r) == 28u &&
-                                                 offsetof(struct upi_fall_args, col) == 36u &&
-                                                 sizeof(struct upi_fall_args) == 40u) ? 1 : -1];
+/* the first four words in one LDM per column, the set-up's seven in one STM
+ * (round 16: 15 -> 10 per column, 24 -> 20 to enter) */
+typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_a) == 12u &&
+                                                 offsetof(struct upi_fall_args, r) == 24u &&
+                                                 sizeof(struct upi_fall_args) == 32u) ? 1 : -1];
 /* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
                                         offsetof(struct piezo_play, f_q15) == 4u &&
@@ -251,101 +198,49 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
     (void)p;
     /* r1 cp (the constants c_ij, int32), r2 fp, r3 the column's end of fp,
      * r4 wp, r5 weight stride, r6 A_j = rshift_rnd(a_j u, 24), r8:r9 acc,
-     * r7 r10-r12 scratch, lr u (the upper branch: r0:lr the run's weights'
-     * sum), r0 the thresholds in the lower-branch loop; the column state
-     * at [sp] (upi_fall_args) */
+     * r7 r10-r12 scratch, lr u, r0 the thresholds in the lower-branch loop;
+     * the column state at [sp] */
     __asm__ volatile(
-        "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #40] once the state is below it */
-        "    sub    sp, #40\n"
-        "    mov    r6, #-1\n"
-        "    strb   r6, [r0, #29]\n"          /* run_dir = -1: the rising runs end */
+        "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
+        "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
+        "    mov    r3, #-1\n"
+        "    strb   r3, [r0, #29]\n"          /* run_dir = -1: the rising runs end */
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    ip, [r0, #0]\n"           /* coef */
         "    ldr    r2, [r0, #4]\n"           /* f */
         "    ldr    r1, [r0, #8]\n"           /* c */
-        "    ldr    r7, [r0, #12]\n"          /* n_ops */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
+        "    ldrh   r3, [ip, #12]\n"          /* n_r */
         "    ldrh   r5, [ip, #14]\n"          /* n_a */
         "    ldr    r10, [ip, #4]\n"          /* a */
         "    ldr    r4, [ip, #8]\n"           /* w */
-        "    ldrh   r0, [ip, #12]\n"          /* n_r */
-        "    ldr    ip, [ip, #0]\n"           /* r (ip is r12) */
-        "    adds   r7, r7, #1\n"
-        "    lsrs   r7, r7, #1\n"
-        "    add    r7, r1, r7, lsl #3\n"     /* S: the column states after the constants */
-        "    lsl    r5, r5, #2\n"
-        "    cmp    r0, #0\n"
-        "    beq    7f\n"                     /* n_r == 0 */
+        "    ldr    r12, [ip, #0]\n"          /* r */
         "    sub    r1, r1, r2\n"
         "    sub    r4, r4, r10\n"             /* w - a: a column's first weight is a_j's address + it */
+        "    lsl    r5, r5, #2\n"
         "    add    r11, r10, r5\n"
-        "    lsl    r3, r0, #2\n"
-        "    str    lr, [sp, #32]\n"
-        "    stm    sp, {r1, r2, r3, r4, r7, r10, r11, r12}\n"
-        "1:  ldm    sp, {r1, r2, r3, r4, r7}\n" /* column (r10 = &a_j: the set-up's or 61's) */
-        "    ldr    lr, [sp, #32]\n"          /* u */
+        "    lsls   r3, r3, #2\n"
+        "    stm    sp, {r1, r2, r3, r4, r10, r11, r12}\n"
+        "    beq    7f\n"                     /* n_r == 0 (the lsls) */
+        "1:  ldm    sp, {r1, r2, r3, r4}\n"   /* column (r10 = &a_j: the set-up's or 6's) */
         "    add    r1, r1, r2\n"             /* its constants */
         "    add    r3, r3, r2\n"             /* its outputs' end */
         "    add    r4, r4, r10\n"             /* wp = w + j */
-        "    add    r12, r7, #24\n"          /* its run state, the next one's */
-        "    str    r12, [sp, #16]\n"
-        "    str    r7, [sp, #36]\n"
         "    ldr    r11, [r10], #4\n"          /* a_j; A_j = (a_j u + 2^23) >> 24 */
-        "    str    r10, [sp, #20]\n"
-        "    smull  r6, r12, r11, lr\n"
+        "    str    r10, [sp, #16]\n"
+        "    smull  r6, r7, r11, lr\n"
         "    adds   r6, r6, #0x800000\n"
-        "    adc    r12, r12, #0\n"
+        "    adc    r7, r7, #0\n"
         "    lsr    r6, r6, #24\n"
-        "    orr    r6, r6, r12, lsl #8\n"
+        "    orr    r6, r6, r7, lsl #8\n"
         "    cmp    r11, #0x1000000\n"
         "    ble    2f\n"
         "    cmp    lr, #0\n"
-        "    bge    10f\n"
+        "    bge    3f\n"
         "    b      5f\n"
         "2:  cmp    lr, #0\n"
         "    bgt    5f\n"
-        /* the upper branch from fp (operator p' of the column) */
-        "10: ldr    r7, [sp, #36]\n"
-        "    ldr    r11, [sp, #4]\n"
-        "    sub    r11, r2, r11\n"           /* 4 p' */
-        "    ldrh   r10, [r7, #12]\n"         /* the last run: 4 p, */
-        "    ldrh   r12, [r7, #14]\n"         /* 4 m */
-        "    strh   r11, [r7, #12]\n"         /* this one starts at p' */
-        "    movs   r0, #0\n"
-        "    movs   lr, #0\n"                 /* its weights' sum */
-        "    cmp    r10, r11\n"
-        "    bne    3f\n"                     /* it does not go on unless p == p' */
-        "    subs   r12, r12, r11\n"          /* and m > p: its bytes */
-        "    bls    3f\n"
-        "    ldr    r10, [r7, #8]\n"          /* its g */
-        "    subs   r10, r6, r10\n"           /* the step A_j - g */
-        "    bgt    3f\n"                     /* > 0 (a rise in between): it does not move */
-        "    ldrd   r0, lr, [r7]\n"           /* it goes on: its weights' sum, */
-        "    lsr    r11, r12, #2\n"
-        "    mla    r4, r11, r5, r4\n"        /* wp past it */
-        "    bne    40f\n"
-        "    add    r1, r1, r12\n"            /* 0: it keeps its values */
-        "    add    r2, r2, r12\n"
-        "    b      3f\n"
-        "40: umlal  r8, r9, r0, r10\n"        /* acc += sum w * step (the step < 0 read as */
-        "    mla    r9, lr, r10, r9\n"        /* step + 2^32, so the sum's low word comes */
-        "    sub    r9, r9, r0\n"             /* off the high word once) */
-        "    add    r12, r2, r12\n"           /* its end; F = A_j + c two per pass */
-        "    sub    r12, r12, #4\n"
-        "    cmp    r2, r12\n"
-        "    bhs    42f\n"
-        "41: ldrd   r10, r11, [r1], #8\n"
-        "    add    r10, r10, r6\n"
-        "    add    r11, r11, r6\n"
-        "    strd   r10, r11, [r2], #8\n"
-        "    cmp    r2, r12\n"
-        "    blo    41b\n"
-        "42: bne    3f\n"                     /* fp == r12: one left */
-        "    ldr    r10, [r1], #4\n"
-        "    add    r10, r10, r6\n"
-        "    str    r10, [r2], #4\n"
-        "3:  subs   r12, r3, r2\n"            /* the scan, two per pass */
-        "    beq    60f\n"
+        "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
         "    tst    r12, #4\n"
         "    beq    31f\n"
         "    sub    r4, r4, r5\n"             /* odd: enter at the pair's second, whose weight is [r4 + r5] */
@@ -355,40 +250,22 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    ldr    r12, [r2]\n"
         "    add    r7, r7, r6\n"             /* hi = A_j + c */
         "    subs   r10, r7, r12\n"           /* d = hi - F: F < hi ends the scan */
-        "    bgt    60f\n"
+        "    bgt    6f\n"
         "    str    r7, [r2], #4\n"
         "    ldr    r12, [r4]\n"              /* the pair's weights at r4 and r4 + r5, */
         "    smlal  r8, r9, r12, r10\n"
-        "    adds   r0, r0, r12\n"            /* the run's weights' sum */
-        "    adc    lr, lr, r12, asr #31\n"
         "4:  ldr    r12, [r2]\n"
         "    add    r11, r11, r6\n"
         "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
-        "    bgt    60f\n"
+        "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
         "    ldr    r12, [r4, r5]\n"
-        "    add    r4, r4, r5, lsl #1\n"     /* one step of two strides per pass */
+        "    add    r4, r4, r5, lsl #1\n"     /* one step of two strides per pass (r4 is dead at 6) */
         "    smlal  r8, r9, r12, r10\n"
-        "    adds   r0, r0, r12\n"
-        "    adc    lr, lr, r12, asr #31\n"
         "    cmp    r2, r3\n"
         "    bne    31b\n"
-        "60: ldr    r7, [sp, #36]\n"          /* the column's run: its sum, g = A_j, 4 m */
-        "    strd   r0, lr, [r7]\n"
-        "    str    r6, [r7, #8]\n"
-        "    ldr    r11, [sp, #4]\n"
-        "    sub    r11, r2, r11\n"
-        "    strh   r11, [r7, #14]\n"
-        "    b      61f\n"
-        "6:  ldr    r7, [sp, #36]\n"          /* the scan ended in the lower branch: no run */
-        "    movw   r11, #0xFFFF\n"
-        "    strh   r11, [r7, #12]\n"
-        "61: str    r3, [sp, #4]\n"           /* next column: fp starts where this one ends */
-        "    ldrd   r10, r11, [sp, #20]\n"
-        "    cmp    r10, r11\n"
-        "    bne    1b\n"
-        "    b      7f\n"
-        "5:  ldr    r0, [sp, #28]\n"           /* with the lower branch: its prefix, one per pass */
+        "    b      6f\n"
+        "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldr    r11, [r1], #4\n"
         "    add    r11, r11, r6\n"            /* hi = A_j + c */
         "    ldr    r10, [r0], #4\n"
@@ -397,7 +274,7 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    blt    53f\n"                     /* lo < hi: from here on the upper branch wins */
         "    ldr    r12, [r2]\n"
         "    cmp    r12, r11\n"
-        "    blt    6b\n"                      /* F < hi ends the scan */
+        "    blt    6f\n"                      /* F < hi ends the scan */
         "    str    r10, [r2], #4\n"
         "    sub    r10, r10, r12\n"
         "    ldr    r12, [r4]\n"
@@ -405,10 +282,21 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
         "    bne    51b\n"
-        "    b      6b\n"
-        "53: sub    r1, r1, #4\n"              /* this operator's constant again, */
-        "    b      10b\n"                     /* in the upper branch */
-        "7:  add    sp, #40\n"
+        "    b      6f\n"
+        "53: ldr    r12, [r2]\n"               /* this operator on the upper branch, */
+        "    subs   r10, r11, r12\n"
+        "    bgt    6f\n"
+        "    str    r11, [r2], #4\n"
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r10\n"
+        "    cmp    r2, r3\n"
+        "    bne    3b\n"                      /* the rest by the upper-branch loop */
+        "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
+        "    ldrd   r10, r11, [sp, #16]\n"
+        "    cmp    r10, r11\n"
+        "    bne    1b\n"
+        "7:  add    sp, #32\n"
         "    ldr    r2, [sp], #4\n"           /* p */
         "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
         "    mov    r0, r8\n"
@@ -420,74 +308,44 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
 
 /* The C falling step: what other targets run, and on the Cortex-M4 the
  * reference of upi_fall_m4 (piezo_play_process_upi_c, test_play). */
-static int64_t upi_fall(struct piezo_play *p, int32_t u_q15, int64_t acc)
+static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *c2, int32_t *f, int32_t u_q15,
+                        int64_t acc)
 {
-    const struct piezo_play_coef *c = p->coef;
-    const int64_t *c2 = p->c2_q15;
     const int32_t *r = c->r_q15;
     const int32_t *w = c->w_q24;
     const size_t n_r = c->n_r, n_a = c->n_a;
     for (size_t j = 0; j < n_a; j++) {
         const int32_t au = upper_a(c->a_q24[j], u_q15);
-        const size_t k0 = j * n_r; /* the column's first constant */
-        int32_t *fc = p->f_q15 + k0;
+        size_t k = j * n_r; /* the column's first constant */
+        int32_t *fp = f + j * n_r;
+        const int32_t *rp = r;
         const int32_t *wp = w + j;
         const int32_t a_j = c->a_q24[j];
-        struct upi_col run = col_get(p, j);
-        size_t i = 0;
-        if (!(a_j <= PIEZO_Q24_ONE ? u_q15 <= 0 : u_q15 >= 0)) {
-            /* the lower branch's prefix */
-            for (; i < n_r; i++, wp += n_a) {
-                const int32_t hi = au + c_get(c2, k0 + i);
-                const int32_t lo = u_q15 - r[i];
-                if (lo < hi) {
-                    break; /* from here on the upper branch wins */
-                }
-                const int32_t y = fc[i];
+        if (a_j <= PIEZO_Q24_ONE ? u_q15 <= 0 : u_q15 >= 0) {
+            for (size_t i = n_r; i != 0u; i--) {
+                const int32_t hi = au + c_get(c2, k++);
+                const int32_t y = *fp;
                 if (y < hi) {
-                    i = n_r + 1u; /* the scan ends in the lower branch: no run */
                     break;
                 }
-                fc[i] = lo;
-                acc += (int64_t)*wp * (lo - y);
+                *fp++ = hi;
+                acc += (int64_t)*wp * (hi - y);
+                wp += n_a;
             }
-            if (i >= n_r) {
-                run.p4 = UPI_NO_RUN;
-                col_set(p, j, &run);
-                continue;
-            }
+            continue;
         }
-        /* the upper branch from operator i: the last sample's run goes on
-         * if it starts here, moved by one step for all (the rounding is the
-         * column's), then the scan from its end */
-        int64_t run_w = 0;
-        const size_t p4 = 4u * i;
-        if (run.p4 == p4 && run.m4 > p4 && au <= run.g_q15) {
-            /* (a rise in between may have left u above the run's input:
-             * then A_j > g, its first operator does not move, nor the rest) */
-            const size_t m = run.m4 / 4u;
-            run_w = run.w_q24;
-            acc += run_w * (au - run.g_q15);
-            for (; i < m; i++) {
-                fc[i] = au + c_get(c2, k0 + i);
-            }
-            wp += (m - p4 / 4u) * n_a;
-        }
-        for (; i < n_r; i++, wp += n_a) {
-            const int32_t hi = au + c_get(c2, k0 + i);
-            const int32_t y = fc[i];
+        for (size_t i = n_r; i != 0u; i--) {
+            const int32_t hi = au + c_get(c2, k++);
+            const int32_t y = *fp;
             if (y < hi) {
                 break;
             }
-            fc[i] = hi;
-            acc += (int64_t)*wp * (hi - y);
-            run_w += *wp;
+            const int32_t lo = u_q15 - *rp++;
+            const int32_t v = hi > lo ? hi : lo;
+            *fp++ = v;
+            acc += (int64_t)*wp * (v - y);
+            wp += n_a;
         }
-        run.w_q24 = run_w;
-        run.g_q15 = au;
-        run.p4 = (uint16_t)p4;
-        run.m4 = (uint16_t)(4u * i);
-        col_set(p, j, &run);
     }
     return acc;
 }
@@ -533,12 +391,9 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    ldrd   r10, r11, [r0, #32]\n"    /* run_w */
         "    ldr    r2, [r0, #4]\n"           /* f */
         "    ldr    r4, [r0, #8]\n"           /* the constants, */
-        "    ldr    r7, [r0, #12]\n"          /* n_ops of them: the column states follow */
+        "    ldr    r7, [r0, #12]\n"          /* n_ops of them: the rest counts follow */
         "    ldr    r3, [r0, #0]\n"           /* coef */
-        "    adds   r7, r7, #1\n"
-        "    lsrs   r7, r7, #1\n"
-        "    add    r4, r4, r7, lsl #3\n"
-        "    adds   r4, r4, #16\n"            /* column 0's rest (struct upi_col) */
+        "    add    r4, r4, r7, lsl #2\n"
         "    ldrh   r12, [r3, #12]\n"         /* n_r */
         "    cmp    r12, #0\n"
         "    beq    7f\n"
@@ -547,8 +402,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    ldr    r3, [r3, #8]\n"           /* w */
         "    lsl    r5, r7, #2\n"             /* the weights' stride */
         "    mla    r3, r12, r5, r3\n"        /* &w[n_r n_a]: column 0's weights' end */
-        "    add    r7, r7, r7, lsl #1\n"
-        "    add    r7, r4, r7, lsl #3\n"     /* the counts' end (24 bytes a column) */
+        "    add    r7, r4, r7, lsl #1\n"     /* the counts' end */
         "    cmp    r6, #1\n"
         "    bne    8f\n"
         "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */
@@ -557,7 +411,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "8:  movs   r10, #0\n"                /* new runs: run_w = 0, every rest n_r */
         "    movs   r11, #0\n"
         "    mov    r6, r4\n"
-        "81: strh   r12, [r6], #24\n"
+        "81: strh   r12, [r6], #2\n"
         "    cmp    r6, r7\n"
         "    bne    81b\n"
         "9:  lsl    r12, r12, #2\n"
@@ -611,18 +465,11 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    adc    r11, r11, r6, asr #31\n"
         "    cmp    r2, r3\n"
         "    bne    2b\n"
-        "4:  ldrd   r7, r12, [sp, #8]\n"      /* the counts' end, n_r * 4 */
-        "    sub    r6, r3, r2\n"             /* the column's new rest, */
-        "    sub    r0, r12, r6\n"            /* 4 m_j */
+        "4:  sub    r6, r3, r2\n"             /* the column's new rest */
         "    lsr    r6, r6, #2\n"
-        "    strh   r6, [r4]\n"
-        "    ldrh   r1, [r4, #-4]\n"          /* the falling run's 4 p (0xFFFF: none) */
-        "    cmp    r0, r1\n"
-        "    bls    41f\n"
-        "    movw   r1, #0xFFFF\n"            /* m_j > p: this rise moved its first operator */
-        "    strh   r1, [r4, #-4]\n"
-        "41: add    r4, r4, #24\n"
+        "    strh   r6, [r4], #2\n"
         "    mov    r2, r3\n"                  /* the next column starts where this one ends */
+        "    ldrd   r7, r12, [sp, #8]\n"      /* the counts' end, n_r * 4 */
         "    cmp    r4, r7\n"
         "    bne    1b\n"
         "    ldr    r0, [sp, #16]\n"          /* p */
@@ -687,17 +534,37 @@ static inline void store_run(int32_t *f, const int32_t *r, size_t n, int32_t u, 
  * of the sum is d * run_w, run_w = the sum of their weights over the whole
  * bank (p->run_w_q24, int64: |run_w| < 2^8 * 2^31, |d| <= 2^21, as the
  * classical run), and they are only stored; each column's scan goes on from
- * m_j. Each column keeps n_r - m_j (uint16, the operators after its run)
- * in its state's m4 (struct upi_col).
+ * m_j. Each column keeps n_r - m_j (uint16, the operators after its run),
+ * after the constants in the work array (bytes 4 n_ops + 2 j: the constants
+ * take 4 n_ops of its 8 n_ops bytes).
  * p->run_dir is +1 while they hold; a falling sample sets it to -1 and
  * reset to 0: the next rise starts every column's run anew.
  */
+static inline unsigned char *upi_runs(const struct piezo_play *p)
+{
+    return (unsigned char *)p->c2_q15 + p->n_ops * sizeof(int32_t);
+}
+
+static inline size_t m_get(const unsigned char *m, size_t j)
+{
+    uint16_t v;
+    memcpy(&v, m + j * sizeof v, sizeof v);
+    return v;
+}
+
+static inline void m_set(unsigned char *m, size_t j, size_t v)
+{
+    const uint16_t x = (uint16_t)v;
+    memcpy(m + j * sizeof x, &x, sizeof x);
+}
+
 /* The C rising step (the reference of rise_m4, as upi_fall above). */
 static int64_t upi_rise(struct piezo_play *p, int32_t u_q15, int32_t u_prev, int64_t acc)
 {
     const struct piezo_play_coef *c = p->coef;
     const int32_t *r = c->r_q15;
     const size_t n_r = c->n_r, n_a = c->n_a;
+    unsigned char *m = upi_runs(p);
     const int keep = p->run_dir > 0;
     int64_t run_w = 0;
     if (keep) {
@@ -706,8 +573,7 @@ static int64_t upi_rise(struct piezo_play *p, int32_t u_q15, int32_t u_prev, int
     }
     for (size_t j = 0; j < n_a; j++) {
         int32_t *fc = p->f_q15 + j * n_r;
-        struct upi_col run = col_get(p, j);
-        size_t i = keep ? n_r - run.rest : 0u;
+        size_t i = keep ? n_r - m_get(m, j) : 0u;
         const int32_t *wk = c->w_q24 + j + i * n_a;
         store_run(fc, r, i, u_q15, 1);
         for (; i < n_r; i++, wk += n_a) {
@@ -720,11 +586,7 @@ static int64_t upi_rise(struct piezo_play *p, int32_t u_q15, int32_t u_prev, int
             acc += (int64_t)*wk * (lo - y);
             run_w += *wk;
         }
-        run.rest = (uint16_t)(n_r - i);
-        if (run.p4 != UPI_NO_RUN && 4u * i > run.p4) {
-            run.p4 = UPI_NO_RUN; /* this rise moved the falling run's first operator */
-        }
-        col_set(p, j, &run);
+        m_set(m, j, n_r - i);
     }
     p->run_dir = 1;
     p->run_w_q24 = run_w;
@@ -1042,12 +904,13 @@ int64_t piezo_play_process_upi_c(struct piezo_play *p, int32_t u_q15)
      * column's outputs, thresholds and branch constants are walked in step;
      * only the weights (row-major, as given) are read with a stride. */
     /* rising, F = max(u - r_i, F): the upper branch cannot bind */
+    const struct piezo_play_coef *c = p->coef;
     int64_t acc = p->acc_q39;
     if (u_q15 > u_prev) {
         acc = upi_rise(p, u_q15, u_prev, acc);
     } else {
         p->run_dir = -1; /* the rising runs end */
-        acc = upi_fall(p, u_q15, acc);
+        acc = upi_fall(c, p->c2_q15, p->f_q15, u_q15, acc);
     }
     p->acc_q39 = acc;
     return acc;

@@ -95,11 +95,6 @@
 
 /* Operators in a bank of n_r thresholds and n_a slopes (n_a = 0: classical). */
 #define PIEZO_PLAY_N_OPS(n_r, n_a) ((size_t)(n_r) * ((n_a) ? (size_t)(n_a) : 1u))
-/* int64 entries of an unparallel bank's work array: its constants c_ij
- * (int32, two per entry) and 24 bytes per column for its runs (play.c);
- * at most the operator count from 6 thresholds per column up. */
-#define PIEZO_PLAY_WORK_LEN(n_r, n_a) \
-    ((n_a) ? (PIEZO_PLAY_N_OPS(n_r, n_a) + 1u) / 2u + 3u * (size_t)(n_a) : (size_t)0)
 
 /* Coefficients: constant, may be shared by several instances. */
 struct piezo_play_coef {
@@ -134,9 +129,8 @@ struct piezo_play {
 
 /*
  * Check the coefficients, bind the caller's arrays and reset.
- * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; work (int64) needs
- * PIEZO_PLAY_WORK_LEN(n_r, n_a) for an unparallel bank and may be NULL
- * (work_len 0) for a classical one.
+ * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; work (int64) needs as
+ * many for an unparallel bank and may be NULL (work_len 0) for a classical one.
  * Returns PIEZO_OK, PIEZO_EINVAL (NULL pointer, r < 0 or r > WIDE_MAX,
  * a <= 0), PIEZO_EORDER (thresholds decreasing) or PIEZO_ERANGE (more than
  * PIEZO_PLAY_MAX_OPS operators, or an array too short).
