@@ -226,13 +226,10 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    add    r1, r1, r2\n"             /* its constants */
         "    add    r3, r3, r2\n"             /* its outputs' end */
         "    add    r4, r4, r10\n"             /* wp = w + j */
-        "    ldr    r11, [r10], #4\n"          /* a_j; A_j = (a_j u + 2^23) >> 24 */
+        "    ldr    r11, [r10], #4\n"          /* a_j; A_j = rshift_rnd(a_j u, 24) */
         "    str    r10, [sp, #16]\n"
-        "    smull  r6, r7, r11, lr\n"
-        "    adds   r6, r6, #0x800000\n"
-        "    adc    r7, r7, #0\n"
-        "    lsr    r6, r6, #24\n"
-        "    orr    r6, r6, r7, lsl #8\n"
+        "    lsl    r6, lr, #8\n"             /* u 2^8 fits (|u| <= 2^20): the rounded high */
+        "    smmulr r6, r11, r6\n"            /* word (a_j u 2^8 + 2^31) >> 32 is A_j */
         "    cmp    r11, #0x1000000\n"
         "    ble    2f\n"
         "    cmp    lr, #0\n"
