@@ -158,10 +158,10 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * the upper branch wins (u - r < hi) it wins for the rest of the column,
  * which the upper-branch loop finishes at 11 (round 13), 10.5 since round
  * 14 (a pass's two weights are read at wp and wp + stride and wp steps
- * once by two strides; an odd count enters at the pair's second with wp
- * one stride back; wp is reloaded per column), 8.5 since round 17 (hi =
- * A_j + c: one add instead of the carry add, the pair's two constants by
- * one LDRD).
+ * once by two strides; wp is reloaded per column), 8 since round 17 (hi =
+ * A_j + c: one add instead of the carry add; the pair's two constants, its
+ * two outputs and, when both move, its two stores by one LDRD or STRD; an
+ * odd count takes one operator first).
  * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
@@ -240,27 +240,37 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
         "    tst    r12, #4\n"
         "    beq    31f\n"
-        "    sub    r4, r4, r5\n"             /* odd: enter at the pair's second, whose weight is [r4 + r5] */
-        "    ldr    r11, [r1], #4\n"
-        "    b      4f\n"
-        "31: ldrd   r7, r11, [r1], #8\n"      /* the pair's two constants */
+        "    ldr    r11, [r1], #4\n"          /* odd: one first */
         "    ldr    r12, [r2]\n"
-        "    add    r7, r7, r6\n"             /* hi = A_j + c */
-        "    subs   r10, r7, r12\n"           /* d = hi - F: F < hi ends the scan */
-        "    bgt    6f\n"
-        "    str    r7, [r2], #4\n"
-        "    ldr    r12, [r4]\n"              /* the pair's weights at r4 and r4 + r5, */
-        "    smlal  r8, r9, r12, r10\n"
-        "4:  ldr    r12, [r2]\n"
-        "    add    r11, r11, r6\n"
+        "    add    r11, r11, r6\n"           /* hi = A_j + c */
         "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4, r5]\n"
-        "    add    r4, r4, r5, lsl #1\n"     /* one step of two strides per pass (r4 is dead at 6) */
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
         "    smlal  r8, r9, r12, r10\n"
         "    cmp    r2, r3\n"
+        "    beq    6f\n"
+        "31: ldrd   r7, r11, [r1], #8\n"      /* the pair's constants, */
+        "    ldrd   r12, r0, [r2]\n"          /* its outputs */
+        "    add    r7, r7, r6\n"             /* hi = A_j + c */
+        "    subs   r12, r7, r12\n"           /* d = hi - F: F < hi ends the scan */
+        "    bgt    6f\n"
+        "    add    r11, r11, r6\n"
+        "    subs   r0, r11, r0\n"
+        "    bgt    32f\n"                    /* the second ends it: the first alone moves */
+        "    strd   r7, r11, [r2], #8\n"
+        "    ldr    r7, [r4]\n"               /* the pair's weights at r4 and r4 + r5, */
+        "    smlal  r8, r9, r7, r12\n"
+        "    ldr    r11, [r4, r5]\n"
+        "    add    r4, r4, r5, lsl #1\n"     /* one step of two strides per pass (r4 is dead at 6) */
+        "    smlal  r8, r9, r11, r0\n"
+        "    cmp    r2, r3\n"
         "    bne    31b\n"
+        "    b      6f\n"
+        "32: str    r7, [r2], #4\n"
+        "    ldr    r7, [r4]\n"
+        "    smlal  r8, r9, r7, r12\n"
         "    b      6f\n"
         "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldr    r11, [r1], #4\n"
