@@ -165,20 +165,22 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
-struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it updates it */
+struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack */
     uintptr_t c_f;       /* 0: c - f (addresses): a column's constants start at c_f + fp */
-    int32_t *f;          /* 4: the column's outputs (column by column) */
+    int32_t *f;          /* 4: the column's outputs (column by column); updated per column */
     uint32_t f_step;     /* 8: n_r * 4, bytes of a column of outputs */
     intptr_t w_a;        /* 12: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
-    const int32_t *a;    /* 16: the column's slope */
-    const int32_t *a_end;/* 20: one past the last slope */
-    const int32_t *r;    /* 24: thresholds */
-    uint32_t pad;        /* 28: p sits at 32 */
+    int32_t u_8;         /* 16: u 2^8, SMMULR's operand */
+    int32_t k;           /* 20: the lower branch's test constant K */
+    const int32_t *a_end;/* 24: one past the last slope */
+    const int32_t *r;    /* 28: thresholds; p sits at 32 */
 };
-/* the first four words in one LDM per column, the set-up's seven in one STM
- * (round 16: 15 -> 10 per column, 24 -> 20 to enter) */
+/* the first six words in one LDM per column, the set-up's eight in one STM
+ * (round 16: 15 -> 10 per column, 24 -> 20 to enter; round 17: the slope's
+ * pointer kept in r10, u 2^8 and K loaded with the rest) */
 typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_a) == 12u &&
-                                                 offsetof(struct upi_fall_args, r) == 24u &&
+                                                 offsetof(struct upi_fall_args, a_end) == 24u &&
+                                                 offsetof(struct upi_fall_args, r) == 28u &&
                                                  sizeof(struct upi_fall_args) == 32u) ? 1 : -1];
 /* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
@@ -198,8 +200,8 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
     (void)p;
     /* r1 cp (the constants c_ij, int32), r2 fp, r3 the column's end of fp,
      * r4 wp, r5 weight stride, r6 A_j = rshift_rnd(a_j u, 24), r8:r9 acc,
-     * r7 r10-r12 scratch, lr u, r0 the thresholds in the lower-branch loop;
-     * the column state at [sp] */
+     * r10 &a_j (then the next slope's), r7 r11 r12 scratch, lr u, r0 the
+     * thresholds in the lower-branch loop; the column state at [sp] */
     __asm__ volatile(
         "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
@@ -219,36 +221,37 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    sub    r4, r4, r10\n"             /* w - a: a column's first weight is a_j's address + it */
         "    lsl    r5, r5, #2\n"
         "    add    r11, r10, r5\n"
-        "    lsls   r3, r3, #2\n"
-        "    stm    sp, {r1, r2, r3, r4, r10, r11, r12}\n"
+        "    lsl    r6, lr, #8\n"             /* u 2^8 (fits: |u| <= 2^20) */
+        "    movs   r7, #0\n"                 /* K: the lower branch can win iff */
+        "    cmp    lr, #0\n"                 /* ((a_j - K) ^ (u >> 31)) < 0: u > 0 and */
+        "    beq    8f\n"                     /* a < 1 (K = 2^24), u < 0 and a > 1 */
+        "    mov    r7, #0x1000000\n"         /* (K = 2^24 + 1: ~(a - K) = 2^24 - a), */
+        "    it     lt\n"                     /* never at u = 0 (K = 0, a > 0) */
+        "    addlt  r7, r7, #1\n"
+        "8:  lsls   r3, r3, #2\n"
+        "    stm    sp, {r1, r2, r3, r4, r6, r7, r11, r12}\n"
         "    beq    7f\n"                     /* n_r == 0 (the lsls) */
-        "1:  ldm    sp, {r1, r2, r3, r4}\n"   /* column (r10 = &a_j: the set-up's or 6's) */
+        "1:  ldm    sp, {r1, r2, r3, r4, r6, r7}\n" /* column (r10 = &a_j) */
         "    add    r1, r1, r2\n"             /* its constants */
         "    add    r3, r3, r2\n"             /* its outputs' end */
         "    add    r4, r4, r10\n"             /* wp = w + j */
-        "    ldr    r11, [r10], #4\n"          /* a_j; A_j = rshift_rnd(a_j u, 24) */
-        "    str    r10, [sp, #16]\n"
-        "    lsl    r6, lr, #8\n"             /* u 2^8 fits (|u| <= 2^20): the rounded high */
-        "    smmulr r6, r11, r6\n"            /* word (a_j u 2^8 + 2^31) >> 32 is A_j */
-        "    cmp    r11, #0x1000000\n"
-        "    ble    2f\n"
-        "    cmp    lr, #0\n"
-        "    bge    3f\n"
-        "    b      5f\n"
-        "2:  cmp    lr, #0\n"
-        "    bgt    5f\n"
+        "    ldr    r11, [r10], #4\n"          /* a_j */
+        "    smmulr r6, r11, r6\n"            /* the rounded high word (a_j u 2^8 + 2^31) >> 32 */
+        "    subs   r7, r11, r7\n"            /* is A_j = rshift_rnd(a_j u, 24) */
+        "    eors   r7, r7, lr, asr #31\n"
+        "    bmi    5f\n"
         "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
         "    tst    r12, #4\n"
         "    beq    31f\n"
         "    ldr    r11, [r1], #4\n"          /* odd: one first */
         "    ldr    r12, [r2]\n"
         "    add    r11, r11, r6\n"           /* hi = A_j + c */
-        "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
+        "    subs   r7, r11, r12\n"           /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r10\n"
+        "    smlal  r8, r9, r12, r7\n"
         "    cmp    r2, r3\n"
         "    beq    6f\n"
         "31: ldrd   r7, r11, [r1], #8\n"      /* the pair's constants, */
@@ -272,35 +275,35 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    ldr    r7, [r4]\n"
         "    smlal  r8, r9, r7, r12\n"
         "    b      6f\n"
-        "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
+        "5:  ldr    r0, [sp, #28]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldr    r11, [r1], #4\n"
         "    add    r11, r11, r6\n"            /* hi = A_j + c */
-        "    ldr    r10, [r0], #4\n"
-        "    sub    r10, lr, r10\n"            /* lo = u - r */
-        "    cmp    r10, r11\n"
+        "    ldr    r7, [r0], #4\n"
+        "    sub    r7, lr, r7\n"              /* lo = u - r */
+        "    cmp    r7, r11\n"
         "    blt    53f\n"                     /* lo < hi: from here on the upper branch wins */
         "    ldr    r12, [r2]\n"
         "    cmp    r12, r11\n"
         "    blt    6f\n"                      /* F < hi ends the scan */
-        "    str    r10, [r2], #4\n"
-        "    sub    r10, r10, r12\n"
+        "    str    r7, [r2], #4\n"
+        "    sub    r7, r7, r12\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r10\n"
+        "    smlal  r8, r9, r12, r7\n"
         "    cmp    r2, r3\n"
         "    bne    51b\n"
         "    b      6f\n"
         "53: ldr    r12, [r2]\n"               /* this operator on the upper branch, */
-        "    subs   r10, r11, r12\n"
+        "    subs   r7, r11, r12\n"
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r10\n"
+        "    smlal  r8, r9, r12, r7\n"
         "    cmp    r2, r3\n"
         "    bne    3b\n"                      /* the rest by the upper-branch loop */
         "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
-        "    ldrd   r10, r11, [sp, #16]\n"
+        "    ldr    r11, [sp, #24]\n"
         "    cmp    r10, r11\n"
         "    bne    1b\n"
         "7:  add    sp, #32\n"
