@@ -574,6 +574,9 @@ static int64_t upi_rise(struct piezo_play *p, int32_t u_q15, int32_t u_prev, int
     const struct piezo_play_coef *c = p->coef;
     const int32_t *r = c->r_q15;
     const size_t n_r = c->n_r, n_a = c->n_a;
+    if (n_r == 0u) {
+        return acc; /* no operators, and the work array may be empty (rise_m4 too) */
+    }
     unsigned char *m = upi_runs(p);
     const int keep = p->run_dir > 0;
     int64_t run_w = 0;

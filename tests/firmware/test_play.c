@@ -523,6 +523,23 @@ static void test_upi_step_matches_c_step(void **state)
     }
 }
 
+/* An unparallel bank without thresholds: nothing to update, and its work
+ * array may be empty (here one past a real one, so that ASan sees a write). */
+static void test_empty_upi_bank(void **state)
+{
+    (void)state;
+    int32_t a[2] = {PIEZO_Q24_ONE / 2, 2 * PIEZO_Q24_ONE};
+    int32_t r[1] = {0}, w[1] = {0}, f[1] = {0};
+    int64_t wk[1] = {0};
+    const struct piezo_play_coef c = {r, a, w, 0, 2};
+    struct piezo_play p;
+    assert_int_equal(piezo_play_init(&p, &c, f, 0, wk + 1, 0), PIEZO_OK);
+    const int32_t u[6] = {0, 100, 200, -300, -400, 500};
+    for (size_t k = 0; k < 6; k++) {
+        assert_true(piezo_play_process(&p, u[k]) == 0);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -537,6 +554,7 @@ int main(void)
         cmocka_unit_test(test_classical_runs_equal_scan),
         cmocka_unit_test(test_cpi_step_matches_c_step),
         cmocka_unit_test(test_upi_step_matches_c_step),
+        cmocka_unit_test(test_empty_upi_bank),
     };
     return cmocka_run_group_tests_name("play", tests, NULL, NULL);
 }
