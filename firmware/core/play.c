@@ -2,32 +2,38 @@
 #include "play.h"
 
 #include <stddef.h>
+#include <string.h>
 
 #include "fixed_q.h"
 
 /*
- * The upper branch (off + a u) >> 24 in three instructions: a value x is
- * split into its high part x >> 24 (int32) and its low 24 bits shifted to the
- * top of a word, stored as one int64 (high part in the upper word). Then
- * (x + y) >> 24 = xh + yh + carry of the 32-bit sum xl + yl.
+ * The upper branch hi_ij(u) = A_j(u) + c_ij with A_j(u) = rshift_rnd(a_j u, 24)
+ * (one rounding per slope and sample) and c_ij = rshift_rnd(a_j r_i, 24)
+ * (init). The constants are q15 integers, |c| < 2^27 (a < 2^31, r <= 2^20),
+ * stored as an int32 array in the caller's int64 work array (two per word,
+ * by memcpy; the Thumb-2 steps read them as int32), column by column:
+ * constant j * n_r + i.
  */
-static int64_t split24(int64_t x)
+static inline int32_t c_get(const int64_t *c2, size_t k)
 {
-    const uint32_t lo = ((uint32_t)x & 0xFFFFFFu) << 8;
-    const int32_t hi = (int32_t)(x >> 24);
-    return (int64_t)(((uint64_t)(uint32_t)hi << 32) | lo);
+    int32_t v; /* through memcpy: the words are int64 objects (one LDR on the M4) */
+    memcpy(&v, (const unsigned char *)c2 + k * sizeof v, sizeof v);
+    return v;
 }
 
-static inline int32_t upper(int64_t off_split, uint32_t au_lo, int32_t au_hi)
+static inline void c_set(int64_t *c2, size_t k, int32_t v)
 {
-    const uint32_t ol = (uint32_t)off_split;
-    const int32_t oh = (int32_t)(off_split >> 32);
-    const uint32_t sum = ol + au_lo;
-    return oh + au_hi + (int32_t)(sum < ol);
+    memcpy((unsigned char *)c2 + k * sizeof v, &v, sizeof v);
+}
+
+/* A_j(u) = rshift_rnd(a_j u, 24): |a u| < 2^31 * 2^20, so |A| < 2^27. */
+static inline int32_t upper_a(int32_t a_q24, int32_t u_q15)
+{
+    return (int32_t)piezo_rshift_rnd64((int64_t)a_q24 * u_q15, 24u);
 }
 
 int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
-                    int32_t *f_q15, size_t f_len, int64_t *off_q39, size_t off_len)
+                    int32_t *f_q15, size_t f_len, int64_t *work, size_t work_len)
 {
     if (p == NULL || coef == NULL || f_q15 == NULL) {
         return PIEZO_EINVAL;
@@ -40,10 +46,10 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
         return PIEZO_EINVAL;
     }
     if (coef->n_a > 0u) {
-        if (coef->a_q24 == NULL || off_q39 == NULL) {
+        if (coef->a_q24 == NULL || work == NULL) {
             return PIEZO_EINVAL;
         }
-        if (off_len < n_ops) {
+        if (work_len < n_ops) {
             return PIEZO_ERANGE;
         }
         for (size_t j = 0; j < coef->n_a; j++) {
@@ -63,15 +69,14 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
     }
     p->coef = coef;
     p->f_q15 = f_q15;
-    p->off_q39 = coef->n_a > 0u ? off_q39 : NULL;
+    p->c2_q15 = coef->n_a > 0u ? work : NULL;
     p->n_ops = n_ops;
-    /* Constants of the upper branch: off = a_j * r_i with the rounding half
-     * folded in, so that (off + a * u) >> 24 == piezo_rshift_rnd64(a * (u + r), 24),
-     * stored split (see upper()) and column by column: slot j * n_r + i. */
+    /* Constants of the upper branch, c_ij = rshift_rnd(a_j r_i, 24) (q15),
+     * column by column: constant j * n_r + i (c_get). */
     for (size_t i = 0; i < coef->n_r && coef->n_a > 0u; i++) {
         for (size_t j = 0; j < coef->n_a; j++) {
-            off_q39[j * coef->n_r + i] =
-                split24((int64_t)coef->a_q24[j] * coef->r_q15[i] + ((int64_t)1 << 23));
+            c_set(work, j * coef->n_r + i,
+                  (int32_t)piezo_rshift_rnd64((int64_t)coef->a_q24[j] * coef->r_q15[i], 24u));
         }
     }
     piezo_play_reset(p);
@@ -113,11 +118,10 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
         return acc;
     }
     for (size_t j = 0; j < n_a; j++) {
-        const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
-        const int64_t *off = p->off_q39 + j * n_r;
+        const int32_t au = upper_a(c->a_q24[j], u_q15);
         int32_t *fc = f + j * n_r; /* column j, outputs column by column */
         for (size_t i = 0, k = j; i < n_r; i++, k += n_a) {
-            const int32_t hi = upper(off[i], (uint32_t)au, (int32_t)(au >> 32));
+            const int32_t hi = au + c_get(p->c2_q15, j * n_r + i);
             const int32_t lo = u_q15 - r[i];
             int32_t y = fc[i];
             y = y < hi ? y : hi;
@@ -131,11 +135,11 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
 
 /*
  * The unparallel bank falling: for each slope (column) a_j, from the
- * column's first threshold, F moves iff F >= hi = rshift_rnd(a (u + r), 24)
- * (formed as (off + a u) >> 24 from the split constants), to max(u - r, hi),
- * or to hi where the lower branch cannot win (a <= 1 and u <= 0, or a >= 1
- * and u >= 0: u - r - hi <= u (1 - a) - r (1 + a) + 1/2, an integer below
- * 1); the scan stops at the first F < hi. Returns acc plus the sum of
+ * column's first threshold, F moves iff F >= hi = A_j(u) + c_ij (A_j once
+ * per column), to max(u - r, hi), or to hi where the lower branch cannot win
+ * (a <= 1 and u <= 0, or a >= 1 and u >= 0: each rounding is above its
+ * value less 1/2, so u - r - hi < u (1 - a) - r (1 + a) + 1, an integer
+ * below 1); the scan stops at the first F < hi. Returns acc plus the sum of
  * w (F_new - F_old). F == hi goes through the update too: F >= u - r while
  * falling, so then max(hi, u - r) == F and nothing changes.
  */
@@ -150,34 +154,39 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * per pass; the break tested on the sign of the step it stores) and 17
  * with the lower branch, but only over the column's lower-branch prefix:
  * g_i = (u - r_i) - hi_i is non-increasing in i (r_{i+1} - r_i = D >= 0
- * raises hi by floor(x + a D) - floor(x) >= floor(a D) >= 0, so g falls by
- * at least D), so once the upper branch wins (u - r < hi) it wins for the
- * rest of the column, which the upper-branch loop finishes at 11 (round 13),
- * 10.5 since round 14: a pass's two weights are read at wp and wp + stride
- * and wp steps once by two strides (an odd count enters at the pair's
- * second with wp one stride back; wp is reloaded per column).
+ * raises hi by c_{i+1} - c_i >= 0, so g falls by at least D), so once
+ * the upper branch wins (u - r < hi) it wins for the rest of the column,
+ * which the upper-branch loop finishes at 11 (round 13), 10.5 since round
+ * 14 (a pass's two weights are read at wp and wp + stride and wp steps
+ * once by two strides; wp is reloaded per column), 8 since round 17 (hi =
+ * A_j + c: one add instead of the carry add; the pair's two constants, its
+ * two outputs and, when both move, its two stores by one LDRD or STRD; an
+ * odd count takes one operator first).
  * The column state lives in the caller's struct (the constants'
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
-struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack: it updates it */
-    uintptr_t off_2f;    /* 0: off - 2 f (addresses): a column's constants start at off_2f + 2 fp */
-    int32_t *f;          /* 4: the column's outputs (column by column) */
+struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack */
+    uintptr_t c_f;       /* 0: c - f (addresses): a column's constants start at c_f + fp */
+    int32_t *f;          /* 4: the column's outputs (column by column); updated per column */
     uint32_t f_step;     /* 8: n_r * 4, bytes of a column of outputs */
     intptr_t w_a;        /* 12: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
-    const int32_t *a;    /* 16: the column's slope */
-    const int32_t *a_end;/* 20: one past the last slope */
-    const int32_t *r;    /* 24: thresholds */
-    uint32_t pad;        /* 28: p sits at 32 */
+    int32_t u_8;         /* 16: u 2^8, SMMULR's operand */
+    int32_t k;           /* 20: the lower branch's test constant K */
+    const int32_t *a_end;/* 24: one past the last slope */
+    const int32_t *r;    /* 28: thresholds; p sits at 32 */
 };
-/* the first four words in one LDM per column, the set-up's seven in one STM
- * (round 16: 15 -> 10 per column, 24 -> 20 to enter) */
+/* the first six words in one LDM per column, the set-up's eight in one STM
+ * (round 16: 15 -> 10 per column, 24 -> 20 to enter; round 17: the slope's
+ * pointer kept in r10, u 2^8 and K loaded with the rest) */
 typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_a) == 12u &&
-                                                 offsetof(struct upi_fall_args, r) == 24u &&
+                                                 offsetof(struct upi_fall_args, a_end) == 24u &&
+                                                 offsetof(struct upi_fall_args, r) == 28u &&
                                                  sizeof(struct upi_fall_args) == 32u) ? 1 : -1];
 /* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
                                         offsetof(struct piezo_play, f_q15) == 4u &&
-                                        offsetof(struct piezo_play, off_q39) == 8u &&
+                                        offsetof(struct piezo_play, c2_q15) == 8u &&
+                                        offsetof(struct piezo_play, n_ops) == 12u &&
                                         offsetof(struct piezo_play, acc_q39) == 16u &&
                                         offsetof(struct piezo_play, u_prev_q15) == 24u &&
                                         offsetof(struct piezo_play_coef, r_q15) == 0u &&
@@ -189,103 +198,112 @@ typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u 
 static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_play *p)
 {
     (void)p;
-    /* r1 op, r2 fp, r3 the column's end of fp, r4 wp, r5 weight stride, r6:r7
-     * the split a u (low, high), r8:r9 acc, r10-r12 scratch, lr u, r0 the
+    /* r1 cp (the constants c_ij, int32), r2 fp, r3 the column's end of fp,
+     * r4 wp, r5 weight stride, r6 A_j = rshift_rnd(a_j u, 24), r8:r9 acc,
+     * r10 &a_j (then the next slope's), r7 r11 r12 scratch, lr u, r0 the
      * thresholds in the lower-branch loop; the column state at [sp] */
     __asm__ volatile(
         "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
+        "    mov    r3, #-1\n"
+        "    strb   r3, [r0, #29]\n"          /* run_dir = -1: the rising runs end */
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    ip, [r0, #0]\n"           /* coef */
         "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    r1, [r0, #8]\n"           /* off */
+        "    ldr    r1, [r0, #8]\n"           /* c */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
         "    ldrh   r3, [ip, #12]\n"          /* n_r */
         "    ldrh   r5, [ip, #14]\n"          /* n_a */
         "    ldr    r10, [ip, #4]\n"          /* a */
         "    ldr    r4, [ip, #8]\n"           /* w */
         "    ldr    r12, [ip, #0]\n"          /* r */
-        "    sub    r1, r1, r2, lsl #1\n"
+        "    sub    r1, r1, r2\n"
         "    sub    r4, r4, r10\n"             /* w - a: a column's first weight is a_j's address + it */
         "    lsl    r5, r5, #2\n"
         "    add    r11, r10, r5\n"
-        "    lsls   r3, r3, #2\n"
-        "    stm    sp, {r1, r2, r3, r4, r10, r11, r12}\n"
+        "    lsl    r6, lr, #8\n"             /* u 2^8 (fits: |u| <= 2^20) */
+        "    movs   r7, #0\n"                 /* K: the lower branch can win iff */
+        "    cmp    lr, #0\n"                 /* ((a_j - K) ^ (u >> 31)) < 0: u > 0 and */
+        "    beq    8f\n"                     /* a < 1 (K = 2^24), u < 0 and a > 1 */
+        "    mov    r7, #0x1000000\n"         /* (K = 2^24 + 1: ~(a - K) = 2^24 - a), */
+        "    it     lt\n"                     /* never at u = 0 (K = 0, a > 0) */
+        "    addlt  r7, r7, #1\n"
+        "8:  lsls   r3, r3, #2\n"
+        "    stm    sp, {r1, r2, r3, r4, r6, r7, r11, r12}\n"
         "    beq    7f\n"                     /* n_r == 0 (the lsls) */
-        "1:  ldm    sp, {r1, r2, r3, r4}\n"   /* column (r10 = &a_j: the set-up's or 6's) */
-        "    add    r1, r1, r2, lsl #1\n"     /* its constants */
+        "1:  ldm    sp, {r1, r2, r3, r4, r6, r7}\n" /* column (r10 = &a_j) */
+        "    add    r1, r1, r2\n"             /* its constants */
         "    add    r3, r3, r2\n"             /* its outputs' end */
         "    add    r4, r4, r10\n"             /* wp = w + j */
-        "    ldr    r11, [r10], #4\n"          /* a_j, the split a u */
-        "    str    r10, [sp, #16]\n"
-        "    smull  r6, r7, r11, lr\n"
-        "    lsr    r10, r6, #24\n"
-        "    orr    r7, r10, r7, lsl #8\n"
-        "    lsl    r6, r6, #8\n"
-        "    cmp    r11, #0x1000000\n"
-        "    ble    2f\n"
-        "    cmp    lr, #0\n"
-        "    bge    3f\n"
-        "    b      5f\n"
-        "2:  cmp    lr, #0\n"
-        "    bgt    5f\n"
+        "    ldr    r11, [r10], #4\n"          /* a_j */
+        "    smmulr r6, r11, r6\n"            /* the rounded high word (a_j u 2^8 + 2^31) >> 32 */
+        "    subs   r7, r11, r7\n"            /* is A_j = rshift_rnd(a_j u, 24) */
+        "    eors   r7, r7, lr, asr #31\n"
+        "    bmi    5f\n"
         "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
         "    tst    r12, #4\n"
         "    beq    31f\n"
-        "    sub    r4, r4, r5\n"             /* odd: enter at the pair's second, whose weight is [r4 + r5] */
-        "    b      4f\n"
-        "31: ldrd   r10, r11, [r1], #8\n"
+        "    ldr    r11, [r1], #4\n"          /* odd: one first */
         "    ldr    r12, [r2]\n"
-        "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"
-        "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
+        "    add    r11, r11, r6\n"           /* hi = A_j + c */
+        "    subs   r7, r11, r12\n"           /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4]\n"              /* the pair's weights at r4 and r4 + r5, */
-        "    smlal  r8, r9, r12, r10\n"
-        "4:  ldrd   r10, r11, [r1], #8\n"
-        "    ldr    r12, [r2]\n"
-        "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"
-        "    subs   r10, r11, r12\n"          /* d = hi - F: F < hi ends the scan */
+        "    ldr    r12, [r4]\n"
+        "    add    r4, r4, r5\n"
+        "    smlal  r8, r9, r12, r7\n"
+        "    cmp    r2, r3\n"
+        "    beq    6f\n"
+        "31: ldrd   r7, r11, [r1], #8\n"      /* the pair's constants, */
+        "    ldrd   r12, r0, [r2]\n"          /* its outputs */
+        "    add    r7, r7, r6\n"             /* hi = A_j + c */
+        "    subs   r12, r7, r12\n"           /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
-        "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4, r5]\n"
+        "    add    r11, r11, r6\n"
+        "    subs   r0, r11, r0\n"
+        "    bgt    32f\n"                    /* the second ends it: the first alone moves */
+        "    strd   r7, r11, [r2], #8\n"
+        "    ldr    r7, [r4]\n"               /* the pair's weights at r4 and r4 + r5, */
+        "    smlal  r8, r9, r7, r12\n"
+        "    ldr    r11, [r4, r5]\n"
         "    add    r4, r4, r5, lsl #1\n"     /* one step of two strides per pass (r4 is dead at 6) */
-        "    smlal  r8, r9, r12, r10\n"
+        "    smlal  r8, r9, r11, r0\n"
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
-        "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
-        "51: ldrd   r10, r11, [r1], #8\n"
-        "    adds   r10, r10, r6\n"
-        "    adc    r11, r11, r7\n"            /* hi */
-        "    ldr    r10, [r0], #4\n"
-        "    sub    r10, lr, r10\n"            /* lo = u - r */
-        "    cmp    r10, r11\n"
+        "32: str    r7, [r2], #4\n"
+        "    ldr    r7, [r4]\n"
+        "    smlal  r8, r9, r7, r12\n"
+        "    b      6f\n"
+        "5:  ldr    r0, [sp, #28]\n"           /* with the lower branch: its prefix, one per pass */
+        "51: ldr    r11, [r1], #4\n"
+        "    add    r11, r11, r6\n"            /* hi = A_j + c */
+        "    ldr    r7, [r0], #4\n"
+        "    sub    r7, lr, r7\n"              /* lo = u - r */
+        "    cmp    r7, r11\n"
         "    blt    53f\n"                     /* lo < hi: from here on the upper branch wins */
         "    ldr    r12, [r2]\n"
         "    cmp    r12, r11\n"
         "    blt    6f\n"                      /* F < hi ends the scan */
-        "    str    r10, [r2], #4\n"
-        "    sub    r10, r10, r12\n"
+        "    str    r7, [r2], #4\n"
+        "    sub    r7, r7, r12\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r10\n"
+        "    smlal  r8, r9, r12, r7\n"
         "    cmp    r2, r3\n"
         "    bne    51b\n"
         "    b      6f\n"
         "53: ldr    r12, [r2]\n"               /* this operator on the upper branch, */
-        "    subs   r10, r11, r12\n"
+        "    subs   r7, r11, r12\n"
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
         "    ldr    r12, [r4]\n"
         "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r10\n"
+        "    smlal  r8, r9, r12, r7\n"
         "    cmp    r2, r3\n"
         "    bne    3b\n"                      /* the rest by the upper-branch loop */
         "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
-        "    ldrd   r10, r11, [sp, #16]\n"
+        "    ldr    r11, [sp, #24]\n"
         "    cmp    r10, r11\n"
         "    bne    1b\n"
         "7:  add    sp, #32\n"
@@ -300,24 +318,22 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
 
 /* The C falling step: what other targets run, and on the Cortex-M4 the
  * reference of upi_fall_m4 (piezo_play_process_upi_c, test_play). */
-static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int32_t *f, int32_t u_q15,
+static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *c2, int32_t *f, int32_t u_q15,
                         int64_t acc)
 {
     const int32_t *r = c->r_q15;
     const int32_t *w = c->w_q24;
     const size_t n_r = c->n_r, n_a = c->n_a;
     for (size_t j = 0; j < n_a; j++) {
-        const int64_t au = split24((int64_t)c->a_q24[j] * u_q15);
-        const uint32_t au_lo = (uint32_t)au;
-        const int32_t au_hi = (int32_t)(au >> 32);
-        const int64_t *op = off + j * n_r;
+        const int32_t au = upper_a(c->a_q24[j], u_q15);
+        size_t k = j * n_r; /* the column's first constant */
         int32_t *fp = f + j * n_r;
         const int32_t *rp = r;
         const int32_t *wp = w + j;
         const int32_t a_j = c->a_q24[j];
         if (a_j <= PIEZO_Q24_ONE ? u_q15 <= 0 : u_q15 >= 0) {
             for (size_t i = n_r; i != 0u; i--) {
-                const int32_t hi = upper(*op++, au_lo, au_hi);
+                const int32_t hi = au + c_get(c2, k++);
                 const int32_t y = *fp;
                 if (y < hi) {
                     break;
@@ -329,7 +345,7 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
             continue;
         }
         for (size_t i = n_r; i != 0u; i--) {
-            const int32_t hi = upper(*op++, au_lo, au_hi);
+            const int32_t hi = au + c_get(c2, k++);
             const int32_t y = *fp;
             if (y < hi) {
                 break;
@@ -358,35 +374,84 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *off, int
  * gcc's 13; test_play and the EUPI golden vectors under QEMU. 9.5 since
  * round 14: a pass's two weights at wp and wp + stride, wp stepped once per
  * pass (with n_r odd every column enters at a pair's second, so the first
- * column's weight pointer starts one stride back). */
+ * column's weight pointer starts one stride back). Round 17: the rising
+ * runs (upi_rise below): each column's run stored two per pass (LDRD/STRD,
+ * 3 per operator), its part of the sum one UMLAL + MLA for the bank; the
+ * scan from the run's end at 11.5 per operator (run_w += w), each column's
+ * state (its rest count) read and written once. */
 
-static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play *p)
+static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play *p, int32_t u_q15, int32_t u_prev_q15)
 {
     (void)p;
-    /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's first
-     * weight, r5 weight stride, r6 r7 scratch, r8:r9 acc, r10 columns left,
-     * r11 thresholds, r12 n_r * 4, lr u */
+    (void)u_q15;
+    (void)u_prev_q15;
+    /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's rest
+     * count (n_r - m_j, uint16), r5 weight stride, r6 r7 r12 scratch, r8:r9
+     * acc, r10:r11 run_w, lr u; at [sp]: the thresholds, the column's
+     * weights' end (&w[n_r n_a + j]), the counts' end, n_r * 4; p at [sp, #16] */
     __asm__ volatile(
-        "    push   {r0, r4-r11, lr}\n"       /* p at [sp] */
+        "    push   {r0, r4-r11, lr}\n"
+        "    sub    sp, #16\n"
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
-        "    ldr    r1, [r0, #0]\n"           /* coef */
+        "    mov    lr, r1\n"                 /* u */
+        "    sub    r1, r1, r2\n"             /* d = u - u_prev > 0 (the entry's r2) */
+        "    ldrsb  r6, [r0, #29]\n"          /* run_dir */
+        "    movs   r7, #1\n"
+        "    strb   r7, [r0, #29]\n"          /* run_dir = 1 */
+        "    ldrd   r10, r11, [r0, #32]\n"    /* run_w */
         "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
-        "    ldr    r4, [r1, #8]\n"           /* w */
-        "    ldr    r11, [r1, #0]\n"          /* r */
-        "    ldrh   r12, [r1, #12]\n"         /* n_r */
-        "    ldrh   r10, [r1, #14]\n"         /* n_a: the columns and the weights' step */
-        "    lsl    r5, r10, #2\n"
-        "    lsls   r12, r12, #2\n"
-        "    beq    5f\n"
-        "    tst    r12, #4\n"                /* n_r odd: every column enters at a pair's second, */
-        "    it     ne\n"
-        "    subne  r4, r4, r5\n"              /* whose weight is [r0 + r5]: r4 one stride back */
-        "1:  add    r3, r2, r12\n"             /* column */
-        "    mov    r1, r11\n"
-        "    mov    r0, r4\n"
-        "    tst    r12, #4\n"
-        "    bne    3f\n"
+        "    ldr    r4, [r0, #8]\n"           /* the constants, */
+        "    ldr    r7, [r0, #12]\n"          /* n_ops of them: the rest counts follow */
+        "    ldr    r3, [r0, #0]\n"           /* coef */
+        "    add    r4, r4, r7, lsl #2\n"
+        "    ldrh   r12, [r3, #12]\n"         /* n_r */
+        "    cmp    r12, #0\n"
+        "    beq    7f\n"
+        "    ldrh   r7, [r3, #14]\n"          /* n_a */
+        "    ldr    r0, [r3, #0]\n"           /* r */
+        "    ldr    r3, [r3, #8]\n"           /* w */
+        "    lsl    r5, r7, #2\n"             /* the weights' stride */
+        "    mla    r3, r12, r5, r3\n"        /* &w[n_r n_a]: column 0's weights' end */
+        "    add    r7, r4, r7, lsl #1\n"     /* the counts' end */
+        "    cmp    r6, #1\n"
+        "    bne    8f\n"
+        "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */
+        "    mla    r9, r11, r1, r9\n"
+        "    b      9f\n"
+        "8:  movs   r10, #0\n"                /* new runs: run_w = 0, every rest n_r */
+        "    movs   r11, #0\n"
+        "    mov    r6, r4\n"
+        "81: strh   r12, [r6], #2\n"
+        "    cmp    r6, r7\n"
+        "    bne    81b\n"
+        "9:  lsl    r12, r12, #2\n"
+        "    stm    sp, {r0, r3, r7, r12}\n"
+        "1:  ldrh   r7, [r4]\n"               /* column: its rest */
+        "    ldrd   r1, r0, [sp]\n"           /* rp = r, the column's weights' end */
+        "    add    r3, r2, r12\n"            /* the column's end */
+        "    add    r6, r0, #4\n"
+        "    str    r6, [sp, #4]\n"           /* the next column's */
+        "    mls    r0, r7, r5, r0\n"         /* wp: the first weight after the run */
+        "    sub    r6, r3, r7, lsl #2\n"     /* the run's end */
+        "    sub    r6, r6, #4\n"             /* its stores two per pass while fp < r6 */
+        "    cmp    r2, r6\n"
+        "    bhs    22f\n"
+        "21: ldrd   r7, r12, [r1], #8\n"
+        "    sub    r7, lr, r7\n"
+        "    sub    r12, lr, r12\n"
+        "    strd   r7, r12, [r2], #8\n"
+        "    cmp    r2, r6\n"
+        "    blo    21b\n"
+        "22: bne    30f\n"                    /* fp == r6: one left */
+        "    ldr    r7, [r1], #4\n"
+        "    sub    r7, lr, r7\n"
+        "    str    r7, [r2], #4\n"
+        "30: subs   r6, r3, r2\n"             /* the scan from the run's end */
+        "    beq    4f\n"
+        "    tst    r6, #4\n"
+        "    beq    2f\n"
+        "    sub    r0, r0, r5\n"             /* odd: enter at the pair's second, whose weight is [r0 + r5] */
+        "    b      3f\n"
         "2:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
@@ -395,6 +460,8 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    str    r6, [r2], #4\n"
         "    ldr    r6, [r0]\n"               /* the pair's weights at r0 and r0 + r5, */
         "    smlal  r8, r9, r6, r7\n"
+        "    adds   r10, r10, r6\n"           /* run_w += w */
+        "    adc    r11, r11, r6, asr #31\n"
         "3:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
@@ -404,13 +471,21 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    ldr    r6, [r0, r5]\n"
         "    add    r0, r0, r5, lsl #1\n"     /* one step of two strides per pass */
         "    smlal  r8, r9, r6, r7\n"
+        "    adds   r10, r10, r6\n"
+        "    adc    r11, r11, r6, asr #31\n"
         "    cmp    r2, r3\n"
         "    bne    2b\n"
-        "4:  mov    r2, r3\n"                  /* the next column starts where this one ends */
-        "    add    r4, r4, #4\n"
-        "    subs   r10, r10, #1\n"
+        "4:  sub    r6, r3, r2\n"             /* the column's new rest */
+        "    lsr    r6, r6, #2\n"
+        "    strh   r6, [r4], #2\n"
+        "    mov    r2, r3\n"                  /* the next column starts where this one ends */
+        "    ldrd   r7, r12, [sp, #8]\n"      /* the counts' end, n_r * 4 */
+        "    cmp    r4, r7\n"
         "    bne    1b\n"
-        "5:  ldr    r2, [sp], #4\n"           /* p */
+        "    ldr    r0, [sp, #16]\n"          /* p */
+        "    strd   r10, r11, [r0, #32]\n"    /* run_w */
+        "7:  add    sp, #16\n"
+        "    ldr    r2, [sp], #4\n"           /* p */
         "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
         "    mov    r0, r8\n"
         "    mov    r1, r9\n"
@@ -418,26 +493,6 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
 }
 
 #endif
-/* The C rising step (the reference of rise_m4, as upi_fall above). */
-static int64_t rise(int32_t *f, const int32_t *w, const int32_t *r, size_t n_r, size_t n_col, size_t w_step,
-                    int32_t u_q15, int64_t acc)
-{
-    for (size_t j = 0; j < n_col; j++) {
-        int32_t *fc = f + j * n_r;
-        const int32_t *wk = w + j;
-        for (size_t i = 0; i < n_r; i++, wk += w_step) {
-            const int32_t lo = u_q15 - r[i];
-            const int32_t y = fc[i];
-            if (lo <= y) {
-                break;
-            }
-            fc[i] = lo;
-            acc += (int64_t)*wk * (lo - y);
-        }
-    }
-    return acc;
-}
-
 /* The classical run's stores: f[k] = u + r[k] falling (rsb == 0), u - r[k]
  * rising (rsb == 1). On Thumb-2 two per pass (ldrd/strd: three
  * instructions per operator; gcc's C pairs neither and spends five). */
@@ -479,6 +534,76 @@ static inline void store_run(int32_t *f, const int32_t *r, size_t n, int32_t u, 
     for (size_t k = 0; k < n; k++) {
         f[k] = rsb ? u - r[k] : u + r[k];
     }
+}
+
+/*
+ * The unparallel bank's rising runs (round 17): after a rising sample the
+ * operators 0..m_j-1 of column j (the ones that moved) hold u_prev - r_i;
+ * a sample that rises again moves each of them by exactly d = u - u_prev
+ * (F = max(u - r_i, F), u - r_i > u_prev - r_i), in every column: their part
+ * of the sum is d * run_w, run_w = the sum of their weights over the whole
+ * bank (p->run_w_q24, int64: |run_w| < 2^8 * 2^31, |d| <= 2^21, as the
+ * classical run), and they are only stored; each column's scan goes on from
+ * m_j. Each column keeps n_r - m_j (uint16, the operators after its run),
+ * after the constants in the work array (bytes 4 n_ops + 2 j: the constants
+ * take 4 n_ops of its 8 n_ops bytes).
+ * p->run_dir is +1 while they hold; a falling sample sets it to -1 and
+ * reset to 0: the next rise starts every column's run anew.
+ */
+static inline unsigned char *upi_runs(const struct piezo_play *p)
+{
+    return (unsigned char *)p->c2_q15 + p->n_ops * sizeof(int32_t);
+}
+
+static inline size_t m_get(const unsigned char *m, size_t j)
+{
+    uint16_t v;
+    memcpy(&v, m + j * sizeof v, sizeof v);
+    return v;
+}
+
+static inline void m_set(unsigned char *m, size_t j, size_t v)
+{
+    const uint16_t x = (uint16_t)v;
+    memcpy(m + j * sizeof x, &x, sizeof x);
+}
+
+/* The C rising step (the reference of rise_m4, as upi_fall above). */
+static int64_t upi_rise(struct piezo_play *p, int32_t u_q15, int32_t u_prev, int64_t acc)
+{
+    const struct piezo_play_coef *c = p->coef;
+    const int32_t *r = c->r_q15;
+    const size_t n_r = c->n_r, n_a = c->n_a;
+    if (n_r == 0u) {
+        return acc; /* no operators, and the work array may be empty (rise_m4 too) */
+    }
+    unsigned char *m = upi_runs(p);
+    const int keep = p->run_dir > 0;
+    int64_t run_w = 0;
+    if (keep) {
+        run_w = p->run_w_q24;
+        acc += run_w * (u_q15 - u_prev);
+    }
+    for (size_t j = 0; j < n_a; j++) {
+        int32_t *fc = p->f_q15 + j * n_r;
+        size_t i = keep ? n_r - m_get(m, j) : 0u;
+        const int32_t *wk = c->w_q24 + j + i * n_a;
+        store_run(fc, r, i, u_q15, 1);
+        for (; i < n_r; i++, wk += n_a) {
+            const int32_t lo = u_q15 - r[i];
+            const int32_t y = fc[i];
+            if (lo <= y) {
+                break;
+            }
+            fc[i] = lo;
+            acc += (int64_t)*wk * (lo - y);
+            run_w += *wk;
+        }
+        m_set(m, j, n_r - i);
+    }
+    p->run_dir = 1;
+    p->run_w_q24 = run_w;
+    return acc;
 }
 
 /* The first sample after init or reset: every operator by the formula. */
@@ -795,9 +920,10 @@ int64_t piezo_play_process_upi_c(struct piezo_play *p, int32_t u_q15)
     const struct piezo_play_coef *c = p->coef;
     int64_t acc = p->acc_q39;
     if (u_q15 > u_prev) {
-        acc = rise(p->f_q15, c->w_q24, c->r_q15, c->n_r, c->n_a, c->n_a, u_q15, acc);
+        acc = upi_rise(p, u_q15, u_prev, acc);
     } else {
-        acc = upi_fall(c, p->off_q39, p->f_q15, u_q15, acc);
+        p->run_dir = -1; /* the rising runs end */
+        acc = upi_fall(c, p->c2_q15, p->f_q15, u_q15, acc);
     }
     p->acc_q39 = acc;
     return acc;

@@ -7,7 +7,8 @@
  *
  *     F(k) = max(u(k) - r, min(a * (u(k) + r), F(k-1)))
  *
- * the minimum taken first, exactly as written. A bank is either
+ * the minimum taken first, exactly as written (the unparallel upper branch
+ * rounded as below). A bank is either
  *   - classical (n_a == 0): n_r operators F_{r_i,1}, no multiplication; or
  *   - unparallel (n_a >= 1): the n_r x n_a grid F_{r_i,a_j}, stored row-major
  *     (operator k = i * n_a + j).
@@ -24,12 +25,20 @@
  *   a_q24, w_q24         int32_t Q7.24; a > 0, w any sign.
  *   return value         int64_t Q39 (q15 * q24), not rounded.
  *
- * Rounding: the upper branch a * (u + r) is rounded to q15 with the one rule,
- * piezo_rshift_rnd64(a * (u + r), 24). init precomputes
- * off_q39 = a_q24 * r_q15 + 2^23 per operator, so that process() forms
- * (off_q39 + a_q24 * u_q15) >> 24, which is the same integer with one
- * product per slope and tick and an add per operator. The lower branch and the
- * classical upper branch u +- r are exact. The weighted sum is exact.
+ * Rounding (since round 17): the unparallel upper branch a * (u + r) is
+ *
+ *     hi_ij(u) = rshift_rnd(a_j * u, 24) + c_ij,  c_ij = rshift_rnd(a_j * r_i, 24)
+ *
+ * (rshift_rnd = piezo_rshift_rnd64, round half up): two roundings, one per
+ * slope and sample and one per operator at init, instead of
+ * rshift_rnd(a (u + r), 24) before round 17. The two differ by at most one
+ * LSB (the sum of two rounding errors in (-1/2, 1/2] less a third is an
+ * integer in (-3/2, 3/2); test_play checks it), hi stays non-decreasing in u
+ * and in r, and a column's upper branch moves by the one step
+ * rshift_rnd(a_j u, 24) - rshift_rnd(a_j u_prev, 24) for every operator.
+ * c_ij is q15-scaled in an int32 (|c| < 2^27 for a < 2^31, r <= 2^20),
+ * computed by init into the caller's work array (c2_q15). The lower branch
+ * and the classical upper branch u +- r are exact. The weighted sum is exact.
  *
  * Saturation: none; nothing can overflow within the documented ranges.
  *
@@ -39,9 +48,11 @@
  * by w_k * (F_new - F_old). With the thresholds non-decreasing, for each
  * slope (column) the operators that move form a prefix in threshold order:
  * rising input, F = max(u - r, F) moves iff u - r > F, and F + r is
- * non-decreasing in r; falling input, F moves iff F > hi = a (u + r) rounded
- * (then F = max(u - r, hi)), and F - hi is non-increasing in r up to one LSB
- * of the rounding, so the scan stops at the first F - hi <= -1. An unchanged
+ * non-decreasing in r; falling input, F moves iff F > hi (then
+ * F = max(u - r, hi)), and F - hi = (F - c) - rshift_rnd(a u, 24) is
+ * non-increasing in r along a column (F - c is a play operator's output
+ * with the lower threshold r + c, non-decreasing in r), so the scan stops
+ * at the first F < hi. An unchanged
  * input changes nothing (the update is idempotent). The first sample after
  * init or reset updates every operator. Worst case (every operator moves):
  * linear in the operator count.
@@ -54,6 +65,10 @@
  * in int64: |run_w| < 2^8 * 2^31 = 2^39 and |d| <= 2^21, so
  * |d * run_w| < 2^60; the new sum is the exact one, within the bound below) and they are only stored; the scan goes on
  * from operator run_n. A reversal starts the run anew from operator 0.
+ * Unparallel banks keep the rising runs the same way, one per column (the
+ * operators 0..m_j-1 that moved hold u_prev - r_i; n_r - m_j in the work array
+ * after the constants, run_w the sum over all columns); a falling sample
+ * ends them (run_dir = -1).
  *
  * Initial state: every operator output is 0 after init and reset (relaxed,
  * demagnetized actuator at u = 0).
@@ -96,27 +111,32 @@ struct piezo_play {
     int32_t *f_q15;        /* [n_ops] operator outputs (state); UPI banks store
                             * them column by column: read them with
                             * piezo_play_output() */
-    int64_t *off_q39;      /* [n_ops] a_j * r_i + 2^23 (UPI banks only), column by
-                            * column and split for a carry add (play.c) */
+    int64_t *c2_q15;       /* the caller's work array (UPI banks only): the
+                            * constants c_ij = rshift_rnd(a_j r_i, 24), q15
+                            * in int32, two per int64 word (an int32 array
+                            * laid in it), column by column: constant
+                            * j * n_r + i */
     size_t n_ops;
     int64_t acc_q39;       /* sum_k w_k F_k of the current outputs */
     int32_t u_prev_q15;    /* input of the last sample */
     uint8_t primed;        /* 0 after reset: the next sample updates every operator */
-    int8_t run_dir;        /* classical banks: +1 the last sample rose, -1 fell, 0 none */
+    int8_t run_dir;        /* +1 the last sample rose, -1 fell, 0 none (reset) */
     uint16_t run_n;        /* classical banks: operators 0..run_n-1 hold u_prev -+ r_i */
-    int64_t run_w_q24;     /* classical banks: sum of w_i over those run_n operators */
+    int64_t run_w_q24;     /* classical banks: sum of w_i over those run_n operators;
+                            * unparallel banks after a rise: sum of w_ij over every
+                            * column's rising run (play.c, upi_rise) */
 };
 
 /*
  * Check the coefficients, bind the caller's arrays and reset.
- * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; off_q39 needs as
- * many for an unparallel bank and may be NULL (off_len 0) for a classical one.
+ * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; work (int64) needs as
+ * many for an unparallel bank and may be NULL (work_len 0) for a classical one.
  * Returns PIEZO_OK, PIEZO_EINVAL (NULL pointer, r < 0 or r > WIDE_MAX,
  * a <= 0), PIEZO_EORDER (thresholds decreasing) or PIEZO_ERANGE (more than
  * PIEZO_PLAY_MAX_OPS operators, or an array too short).
  */
 int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
-                    int32_t *f_q15, size_t f_len, int64_t *off_q39, size_t off_len);
+                    int32_t *f_q15, size_t f_len, int64_t *work, size_t work_len);
 
 /* Every operator output back to 0. */
 void piezo_play_reset(struct piezo_play *p);

@@ -209,14 +209,19 @@ static int32_t lcg_range(int32_t lo, int32_t hi) /* [lo, hi], hi - lo < 2^24 */
     return lo + (int32_t)(lcg() % (uint32_t)(hi - lo + 1));
 }
 
-static void eager_step(const struct piezo_play_coef *c, int32_t *f, int32_t u)
+/* one_rounding: the unparallel upper branch as before round 17,
+ * rshift_rnd(a (u + r), 24); else (the bank's) rshift_rnd(a u, 24) +
+ * rshift_rnd(a r, 24). */
+static void eager_step(const struct piezo_play_coef *c, int32_t *f, int32_t u, int one_rounding)
 {
     const size_t n_a = c->n_a;
     for (size_t i = 0; i < c->n_r; i++) {
         for (size_t j = 0; j < (n_a ? n_a : 1u); j++) {
             const int32_t r = c->r_q15[i];
-            const int32_t hi = n_a ? (int32_t)piezo_rshift_rnd64((int64_t)c->a_q24[j] * (u + r), 24u)
-                                   : u + r;
+            const int64_t a = n_a ? c->a_q24[j] : 0;
+            const int32_t hi = !n_a ? u + r
+                             : one_rounding ? (int32_t)piezo_rshift_rnd64(a * (u + r), 24u)
+                                            : (int32_t)(piezo_rshift_rnd64(a * u, 24u) + piezo_rshift_rnd64(a * r, 24u));
             const int32_t lo = u - r;
             int32_t *y = &f[i * (n_a ? n_a : 1u) + j];
             *y = *y < hi ? *y : hi;
@@ -229,7 +234,8 @@ static void test_runs_equal_eager_formula(void **state)
 {
     (void)state;
     static int32_t r[PIEZO_PLAY_MAX_OPS], a[PIEZO_PLAY_MAX_OPS], w[PIEZO_PLAY_MAX_OPS];
-    static int32_t eager[PIEZO_PLAY_MAX_OPS];
+    static int32_t eager[PIEZO_PLAY_MAX_OPS], eager1[PIEZO_PLAY_MAX_OPS];
+    size_t n_apart = 0u;
     static const uint16_t shapes[][3] = {
         /* n_r, n_a, input span (log2 of the q15-scaled bound) */
         {10, 0, 15}, {1, 0, 20}, {40, 0, 20}, {10, 3, 15}, {16, 8, 15},
@@ -261,6 +267,7 @@ static void test_runs_equal_eager_formula(void **state)
         assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, off_buf,
                                          PIEZO_PLAY_MAX_OPS), PIEZO_OK);
         memset(eager, 0, sizeof eager);
+        memset(eager1, 0, sizeof eager1);
         int32_t u = 0;
         int32_t dir = 1, left = 0, step = 1;
         for (size_t k = 0; k < 2000u; k++) {
@@ -274,7 +281,8 @@ static void test_runs_equal_eager_formula(void **state)
             int64_t next = (int64_t)u + dir * step + jitter;
             next = next > span ? span : next < -span ? -span : next;
             u = (int32_t)next;
-            eager_step(&c, eager, u);
+            eager_step(&c, eager, u, 0);
+            eager_step(&c, eager1, u, 1);
             int64_t want = 0;
             for (size_t q = 0; q < n_ops; q++) {
                 want += (int64_t)w[q] * eager[q];
@@ -283,9 +291,13 @@ static void test_runs_equal_eager_formula(void **state)
             for (size_t q = 0; q < n_ops; q++) {
                 assert_golden_i32("runs: output", (s * 100000u + k) * 1000u + q,
                                   piezo_play_output(&p, q), eager[q]);
+                /* round 17's rounding within one LSB of the one-rounding form */
+                assert_true(eager[q] - eager1[q] <= 1 && eager1[q] - eager[q] <= 1);
+                n_apart += eager[q] != eager1[q];
             }
         }
     }
+    assert_true(n_apart > 0u); /* the two forms differ somewhere: the bound is tested */
 }
 
 /* The classical scan as it was before the runs (round 12: every sample scans
@@ -384,7 +396,7 @@ static void test_classical_runs_equal_scan(void **state)
                 scan_acc = 0;
                 primed = 0;
             }
-            eager_step(&c, eager, u);
+            eager_step(&c, eager, u, 0);
             if (!primed) { /* the first sample: the formula on every operator */
                 memcpy(scan, eager, n_r * sizeof scan[0]);
                 scan_acc = 0;
@@ -511,6 +523,23 @@ static void test_upi_step_matches_c_step(void **state)
     }
 }
 
+/* An unparallel bank without thresholds: nothing to update, and its work
+ * array may be empty (here one past a real one, so that ASan sees a write). */
+static void test_empty_upi_bank(void **state)
+{
+    (void)state;
+    int32_t a[2] = {PIEZO_Q24_ONE / 2, 2 * PIEZO_Q24_ONE};
+    int32_t r[1] = {0}, w[1] = {0}, f[1] = {0};
+    int64_t wk[1] = {0};
+    const struct piezo_play_coef c = {r, a, w, 0, 2};
+    struct piezo_play p;
+    assert_int_equal(piezo_play_init(&p, &c, f, 0, wk + 1, 0), PIEZO_OK);
+    const int32_t u[6] = {0, 100, 200, -300, -400, 500};
+    for (size_t k = 0; k < 6; k++) {
+        assert_true(piezo_play_process(&p, u[k]) == 0);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -525,6 +554,7 @@ int main(void)
         cmocka_unit_test(test_classical_runs_equal_scan),
         cmocka_unit_test(test_cpi_step_matches_c_step),
         cmocka_unit_test(test_upi_step_matches_c_step),
+        cmocka_unit_test(test_empty_upi_bank),
     };
     return cmocka_run_group_tests_name("play", tests, NULL, NULL);
 }

@@ -225,7 +225,8 @@ def test_quantizers_raise_on_overflow():
 def test_golden_play_bank_equals_float_on_exact_coefficients():
     # thresholds and input on the q15 grid, slopes powers of two: exact in
     # float, so the golden classical outputs equal play_outputs bit for bit
-    # and the UPI outputs differ only by the rounding of a (u + r)
+    # and the UPI outputs differ only by the rounding of a u (the thresholds
+    # are even: a r is exact)
     rng = np.random.default_rng(4)
     u_q = rng.integers(-32768, 32768, 3000)
     r = np.array([0, 1024, 5000, 20000]) / 32768
@@ -236,6 +237,46 @@ def test_golden_play_bank_equals_float_on_exact_coefficients():
     f, _ = gplay.play_bank_run(upi, u_q)
     ref = play_outputs(u_q / 32768, np.repeat(r, 3), np.tile([0.5, 1.0, 2.0], 4))
     assert np.max(np.abs(f - ref * 32768)) <= 0.5
+
+
+def _upi_one_rounding(bank, u_q):
+    """The UPI bank with the upper branch rounded once per operator,
+    rshift_rnd(a (u + r), 24) (the golden model before round 17), operator by operator."""
+    r, a = bank.per_op()
+    f = np.zeros(r.size, dtype=np.int64)
+    out = np.empty((len(u_q), r.size), dtype=np.int64)
+    for k, u in enumerate(u_q):
+        for i in range(r.size):
+            hi = (int(a[i]) * (int(u) + int(r[i])) + (1 << 23)) >> 24
+            f[i] = max(int(u) - int(r[i]), min(hi, int(f[i])))
+        out[k] = f
+    return out
+
+
+def test_golden_upi_upper_branch_rounded_per_column():
+    # round 17: hi = rshift_rnd(a u, 24) + rshift_rnd(a r, 24); every output
+    # within one LSB of the one-rounding form, and the formula on every operator
+    rng = np.random.default_rng(17)
+    n_diff = 0
+    for trial in range(6):
+        n_r, n_a = int(rng.integers(1, 9)), int(rng.integers(1, 4))
+        r = np.sort(rng.uniform(0.0, 0.95, n_r))
+        a = rng.uniform(0.2, 2.5, n_a) + rng.integers(0, 2 ** 20, n_a) / 2.0 ** 24
+        bank = gplay.quantize_bank(r, a, rng.uniform(-0.01, 0.01, n_r * n_a))
+        u_q = np.clip(np.cumsum(rng.integers(-900, 901, 600)), -32768, 32767)
+        f, acc = gplay.play_bank_run(bank, u_q)
+        old = _upi_one_rounding(bank, u_q)
+        assert np.max(np.abs(f - old)) <= 1
+        n_diff += int(np.count_nonzero(f != old))
+        rr, aa = bank.per_op()
+        c = (aa * rr + (1 << 23)) >> 24
+        fp = np.zeros(rr.size, dtype=np.int64)
+        for k, u in enumerate(u_q):
+            A = (aa * int(u) + (1 << 23)) >> 24
+            fp = np.maximum(int(u) - rr, np.minimum(A + c, fp))
+            np.testing.assert_array_equal(f[k], fp)
+            assert acc[k] == int(fp @ bank.w_q24)
+    assert n_diff > 0   # the two forms do differ somewhere: the test sees the change
 
 
 def test_golden_poly_matches_float():

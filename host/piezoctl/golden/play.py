@@ -28,7 +28,6 @@ __all__ = [
 Q15W = QFormat("q15 in int32", 32, 15)
 WIDE_MAX = 1 << 20          # PIEZO_PLAY_WIDE_MAX_Q15
 MAX_OPS = 256               # PIEZO_PLAY_MAX_OPS
-_HALF24 = 1 << 23
 
 
 @dataclass(frozen=True)
@@ -109,8 +108,9 @@ class PlayBankSim:
         self.bank = bank
         self.r, self.a = bank.per_op()
         n = self.r.size
-        # init: a_j r_i + 2^23, so that (off + a u) >> 24 == rshift_rnd(a (u + r), 24)
-        self.off = None if self.a is None else self.a * self.r + _HALF24
+        # init: c_ij = rshift_rnd(a_j r_i, 24) (q15, |c| < 2^27), so that the upper
+        # branch rshift_rnd(a_j u, 24) + c_ij has one rounding per slope and sample
+        self.c = None if self.a is None else fixed.rshift_rnd(self.a * self.r, 24)
         self.f = np.zeros(n, dtype=np.int64) if f0 is None else np.array(f0, dtype=np.int64).reshape(n)
 
     def step(self, u: int) -> int:
@@ -118,7 +118,7 @@ class PlayBankSim:
         u = int(u)
         if abs(u) > WIDE_MAX:
             raise ValueError("input beyond the bank's wide range")
-        hi = u + self.r if self.a is None else (self.off + self.a * u) >> 24
+        hi = u + self.r if self.a is None else fixed.rshift_rnd(self.a * u, 24) + self.c
         self.f = np.maximum(u - self.r, np.minimum(hi, self.f))
         return int(self.f @ self.bank.w_q24) if self.f.size else 0
 
