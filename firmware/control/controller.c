@@ -375,7 +375,6 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
      * writers are init, piezo_ctl_set_mode and servo_switch); IDLE's bit is in
      * no mask */
     mb = c->st.armed ? 1u << mode : 0u;
-    run = (mb & ~MODE_BIT(PIEZO_MODE_IDLE)) != 0u;
 
     /* 4. reference: r_ahead for the feedforward, r (preview_ticks later) for the rest */
     /* running as it was before this tick's step (the step may end the wave);
@@ -421,6 +420,12 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     /* 5. feedforward (of the shaped, inverted early reference) */
     {
         piezo_ff_state_t *const ff = c->ff_act; /* &ff[active]: no index arithmetic per tick */
+        /* mb opaque here and at step 6 (an empty asm, no instruction): gcc
+         * otherwise forms the masks of steps 5 and 6 when mb is made and
+         * keeps them on the stack across the calls (two stores and two
+         * loads, round 16's profile); now each is one TST/ANDS of mb, which
+         * lives in a register across the calls anyway (round 17) */
+        __asm__("" : "+r"(mb));
         if ((mb & (MODE_BIT(PIEZO_MODE_FEEDFORWARD) | MODE_BIT(PIEZO_MODE_FF_FEEDBACK))) != 0u && ff != NULL) {
             u_ff = piezo_ff_process(ff, c->set_act, r_ahead, c->limit.prev_q15);
         } else if ((mb & MODE_BIT(PIEZO_MODE_OPEN_LOOP)) != 0u && ff != NULL) {
@@ -433,6 +438,7 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     c->sig[PIEZO_SIG_FF] = u_ff;
 
     /* 6. feedback */
+    __asm__("" : "+r"(mb));
     if ((mb & (MODE_BIT(PIEZO_MODE_FF_FEEDBACK) | MODE_BIT(PIEZO_MODE_FEEDBACK))) != 0u) {
         int16_t e = piezo_sat_q15((int32_t)r_loop - y);
         u_fb = piezo_pid_process(&c->pid, e);
@@ -442,7 +448,9 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     }
     c->sig[PIEZO_SIG_FB] = u_fb;
 
-    /* 7-8. sum, clamp, slew limit (also while ramping down after a disarm), DAC */
+    /* 7-8. sum, clamp, slew limit (also while ramping down after a disarm), DAC;
+     * run from step 6's mb: gcc then knows it is set on the feedback's path */
+    run = (mb & ~MODE_BIT(PIEZO_MODE_IDLE)) != 0u;
     u = run ? piezo_sat_q15((int32_t)u_ff + u_fb) : g->u_safe_q15;
     /* the term applied, xc_q15, is written here only with a coupling slot:
      * without one it is 0 since the slot went (init, piezo_ctl_rollback) */
