@@ -313,6 +313,44 @@ void piezo_ctl_config_changed(piezo_ctl_t *c)
     c->boundary_req = 1u; /* the tick derives ref_stages and jump_span (only it writes them after init) */
 }
 
+/* The stages between the reference and the feedforward (step 4a-4c): r_ahead
+ * in; out r_ahead, r and r_loop packed in bits 0, 16 and 32 (r0:r1 on the
+ * Cortex-M4). Out of the tick's line (round 17): in line, gcc kept the three
+ * in three registers and copied the reference into each on the stage-free
+ * path (3 instructions a tick); out of line the stages pay a call and the
+ * packing instead (8 more a tick on reference_dyninv32). */
+static __attribute__((noinline)) uint64_t ref_stages_run(piezo_ctl_t *c, int16_t r_ahead, uint32_t wave_on)
+{
+    const piezo_ctl_cfg_t *g = &c->cfg;
+    int16_t r = r_ahead, r_loop;
+    if (g->preview_ticks != 0u) {
+        r = c->ref_fifo[c->fifo_pos];
+        c->ref_fifo[c->fifo_pos] = r_ahead;
+        if (++c->fifo_pos >= g->preview_ticks) {
+            c->fifo_pos = 0u;
+        }
+    }
+    /* 4b. the wave's learned feedforward, in sync with it (controller.h):
+     *     r_ahead + c(phase), and for the error r + c(phase - preview) */
+    r_loop = r;
+    c->wave_ff_q15 = 0;
+    if (wave_on != 0u && c->wave_ff_active >= 0) {
+        const piezo_ctl_wave_ff_t *t = &c->wave_ff[c->wave_ff_active];
+        c->wave_ff_q15 = wave_ff_at(t, c->wave_ff_phase);
+        r_ahead = piezo_sat_q15((int32_t)r_ahead + c->wave_ff_q15);
+        r_loop = piezo_sat_q15((int32_t)r +
+                               wave_ff_at(t, c->wave_ff_phase - (uint32_t)g->preview_ticks * t->freq_word));
+        c->wave_ff_phase += t->freq_word;
+    }
+
+    /* 4c. shaper, then the dynamics inverse (none with 0 taps: one compare) */
+    r_ahead = shape(c, r_ahead);
+    if (g->dyninv.n_taps != 0u) {
+        r_ahead = piezo_fir_q13_process(&c->dyninv, &g->dyninv, r_ahead);
+    }
+    return (uint16_t)r_ahead | (uint64_t)(uint16_t)r << 16 | (uint64_t)(uint16_t)r_loop << 32;
+}
+
 /* a mode's bit in the tick's mask of the running mode */
 #define MODE_BIT(m) (1u << (m))
 
@@ -384,33 +422,13 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     r = r_ahead;
     r_loop = r;
     /* 4a-4c. the stages between the reference and the feedforward, none in
-     * most configurations: one test of them all (ref_stages, step 1) */
+     * most configurations: one test of them all (ref_stages, step 1), the
+     * stages out of line (ref_stages_run) */
     if (c->ref_stages != 0u) {
-        if (g->preview_ticks != 0u) {
-            r = c->ref_fifo[c->fifo_pos];
-            c->ref_fifo[c->fifo_pos] = r_ahead;
-            if (++c->fifo_pos >= g->preview_ticks) {
-                c->fifo_pos = 0u;
-            }
-        }
-        /* 4b. the wave's learned feedforward, in sync with it (controller.h):
-         *     r_ahead + c(phase), and for the error r + c(phase - preview) */
-        r_loop = r;
-        c->wave_ff_q15 = 0;
-        if (wave_on != 0u && c->wave_ff_active >= 0) {
-            const piezo_ctl_wave_ff_t *t = &c->wave_ff[c->wave_ff_active];
-            c->wave_ff_q15 = wave_ff_at(t, c->wave_ff_phase);
-            r_ahead = piezo_sat_q15((int32_t)r_ahead + c->wave_ff_q15);
-            r_loop = piezo_sat_q15((int32_t)r +
-                                   wave_ff_at(t, c->wave_ff_phase - (uint32_t)g->preview_ticks * t->freq_word));
-            c->wave_ff_phase += t->freq_word;
-        }
-
-        /* 4c. shaper, then the dynamics inverse (none with 0 taps: one compare) */
-        r_ahead = shape(c, r_ahead);
-        if (g->dyninv.n_taps != 0u) {
-            r_ahead = piezo_fir_q13_process(&c->dyninv, &g->dyninv, r_ahead);
-        }
+        const uint64_t p = ref_stages_run(c, r_ahead, wave_on);
+        r_ahead = (int16_t)(uint16_t)p;
+        r = (int16_t)(uint16_t)(p >> 16);
+        r_loop = (int16_t)(uint16_t)(p >> 32);
     }
     /* (wave_ff_q15 is 0 without the stages: step 1 clears it whenever it
      * derives ref_stages, before this tick's stages could set it) */
