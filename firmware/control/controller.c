@@ -185,22 +185,6 @@ static inline int16_t sensor_q15(int32_t d, int32_t gain_q16)
     return hi < 0 ? PIEZO_Q15_MIN : PIEZO_Q15_MAX;
 }
 
-/* The drive's DAC offset rshift_rnd64(u gain, 16) for a q15 u and a q16
- * gain: u 2^16 fits int32, so (u 2^16) gain + 2^31 >> 32, the high word of
- * a rounded 32 x 32 product, is the same integer. On the Cortex-M4 one
- * SMMULR (round 17) where the 64-bit form sets up the rounding constant,
- * then an SMLAL and two instructions to shift the word pair (3 more). */
-static inline int32_t dac_offset(int16_t u, int32_t gain_q16)
-{
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    int32_t hi;
-    __asm__("smmulr %0, %1, %2" : "=r"(hi) : "r"((int32_t)((uint32_t)(int32_t)u << 16)), "r"(gain_q16));
-    return hi;
-#else
-    return (int32_t)piezo_rshift_rnd64((int64_t)u * gain_q16, 16u);
-#endif
-}
-
 /* The jump test's bound (jump_span): 2 max_jump when the test is on
  * (max_jump > 0) and a good sample has been seen, else none (UINT32_MAX:
  * every jump passes). */
@@ -492,7 +476,9 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
         /* |u * gain| <= 2^15 * 2^31, so the shifted product fits int32 (|.| <= 2^30);
          * the sum saturated to int32 and then clamped to [dac_min, dac_max] (int32)
          * is the clamp of the exact sum: the same code as in int64 */
-        int32_t code = piezo_add_sat_i32(g->dac_zero, dac_offset(u, g->dac_gain_q16));
+        /* rshift_rnd64(u gain, 16) as the rounded high word of (u 2^16) gain
+         * (one SMMULR on the Cortex-M4, round 17) */
+        int32_t code = piezo_add_sat_i32(g->dac_zero, piezo_mul_hi_rnd((int32_t)((uint32_t)(int32_t)u << 16), g->dac_gain_q16));
         dac = code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code);
     }
 
