@@ -85,10 +85,18 @@ int16_t piezo_biquad_process(piezo_biquad_t *f, int16_t x_q15)
      * (SMLAL) instead of a multiply and a 64-bit subtraction: the same
      * integer, since init (and the register map's check before any write)
      * holds |a1|, |a2| < 4 * 2^24, so their negatives fit int32 */
-    int64_t acc = ((int64_t)c->b0_q24 * x_q15 + (int64_t)c->b1_q24 * f->x1_q15 +
-                   (int64_t)c->b2_q24 * f->x2_q15) * PIEZO_Q16_ONE +
-                  (int64_t)(-c->a1_q24) * f->y1_q31 + (int64_t)(-c->a2_q24) * f->y2_q31;
-    int32_t y31 = piezo_sat_i32(piezo_rshift_rnd64(acc, 24u));
+    /* round 17: the output's rounding constant (2^23) starts the sum, and
+     * the b part's 2^16 goes on x (a q15 x times 2^16 fits int32), so every
+     * term is one SMLAL onto it (no shift of the b part's word pair, no
+     * 64-bit add of the constant at the end): |b x 2^16|, |a y| < 2^26 2^31
+     * each (init's bound), the sum exact in int64, the same integer */
+    int64_t acc = (int64_t)1 << 23;
+    acc += (int64_t)c->b0_q24 * ((int32_t)x_q15 * 65536);
+    acc += (int64_t)c->b1_q24 * ((int32_t)f->x1_q15 * 65536);
+    acc += (int64_t)c->b2_q24 * ((int32_t)f->x2_q15 * 65536);
+    acc += (int64_t)(-c->a1_q24) * f->y1_q31;
+    acc += (int64_t)(-c->a2_q24) * f->y2_q31;
+    int32_t y31 = piezo_sat_i32(acc >> 24);
     f->x2_q15 = f->x1_q15;
     f->x1_q15 = x_q15;
     f->y2_q31 = f->y1_q31;
