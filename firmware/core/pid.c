@@ -29,9 +29,15 @@ int16_t piezo_pid_process(piezo_pid_t *p, int16_t e_q15)
     const int32_t out_max = c->out_max_q15, out_min = c->out_min_q15;
     int64_t integ = p->integ_q39;
     int32_t v;
-    /* the proportional and derivative terms first: gcc then forms each
-     * product with one smull/smlal */
-    int64_t pd = (int64_t)c->kp_q24 * e_q15 + (int64_t)c->kd_q24 * ((int32_t)e_q15 - p->e_prev_q15);
+    /* the output's rounding constant (2^23) and the proportional and
+     * derivative terms first: gcc then forms each product with one SMLAL.
+     * The derivative only with kd != 0 (its product is 0 otherwise): round
+     * 17, 2 instructions fewer with kd = 0 (the reference's PI), 1 more
+     * with kd != 0; the same integers */
+    int64_t pd = ((int64_t)1 << 23) + (int64_t)c->kp_q24 * e_q15;
+    if (c->kd_q24 != 0) {
+        pd += (int64_t)c->kd_q24 * ((int32_t)e_q15 - p->e_prev_q15);
+    }
     /* anti-windup: hold the integrator while the last output sat at a limit
      * and the error would push it further out */
     if (!(p->saturated && ((p->out_q15 >= out_max && e_q15 > 0) ||
@@ -47,8 +53,9 @@ int16_t piezo_pid_process(piezo_pid_t *p, int16_t e_q15)
             integ = (int64_t)out_min * PIEZO_Q24_ONE;
         }
     }
-    /* |pd + integ| < 2^49: the rounded q15 value fits int32 */
-    v = (int32_t)piezo_rshift_rnd64(pd + integ, 24u);
+    /* |pd + integ| < 2^49: the rounded q15 value fits int32 (pd holds the
+     * rounding constant) */
+    v = (int32_t)((pd + integ) >> 24);
     p->saturated = (uint8_t)(v > out_max || v < out_min);
     p->out_q15 = (int16_t)(v > out_max ? out_max : (v < out_min ? out_min : v));
     p->integ_q39 = integ;
