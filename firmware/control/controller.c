@@ -193,6 +193,17 @@ static uint32_t jump_span_of(const piezo_ctl_t *c)
     return (c->cfg.max_jump_q15 > 0 && c->have_y) ? 2u * (uint32_t)c->cfg.max_jump_q15 : UINT32_MAX;
 }
 
+/* A bad sample: counted (the fault at bad_limit in a row), the last good
+ * value held. Out of line (round 17): the good path then keeps y alone. */
+static __attribute__((noinline)) int16_t bad_sample(piezo_ctl_t *c)
+{
+    if (++c->bad_run >= c->cfg.bad_limit) {
+        c->bad_run = c->cfg.bad_limit;
+        c->st.faults |= PIEZO_FAULT_SENSOR_IMPLAUSIBLE;
+    }
+    return c->y_prev_q15;
+}
+
 /* Sensor plausibility: a code outside the valid range, or a jump no stage can
  * make in one tick. Bad samples hold the last good value. */
 static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
@@ -207,12 +218,8 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
      * changes: init, the tick's step 1, the first good sample) */
     int bad = code < g->adc_min_ok || code > g->adc_max_ok ||
               (uint32_t)(jump + g->max_jump_q15) > c->jump_span;
-    if (bad) {
-        if (++c->bad_run >= g->bad_limit) {
-            c->bad_run = g->bad_limit;
-            c->st.faults |= PIEZO_FAULT_SENSOR_IMPLAUSIBLE;
-        }
-        return c->y_prev_q15;
+    if (__builtin_expect(bad, 0)) {
+        return bad_sample(c);
     }
     c->bad_run = 0u;
     c->y_prev_q15 = y;
