@@ -193,6 +193,17 @@ static uint32_t jump_span_of(const piezo_ctl_t *c)
     return (c->cfg.max_jump_q15 > 0 && c->have_y) ? 2u * (uint32_t)c->cfg.max_jump_q15 : UINT32_MAX;
 }
 
+/* A bad sample: counted (the fault at bad_limit in a row), the last good
+ * value held. Out of line (round 17): the good path then keeps y alone. */
+static __attribute__((noinline)) int16_t bad_sample(piezo_ctl_t *c)
+{
+    if (++c->bad_run >= c->cfg.bad_limit) {
+        c->bad_run = c->cfg.bad_limit;
+        c->st.faults |= PIEZO_FAULT_SENSOR_IMPLAUSIBLE;
+    }
+    return c->y_prev_q15;
+}
+
 /* Sensor plausibility: a code outside the valid range, or a jump no stage can
  * make in one tick. Bad samples hold the last good value. */
 static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
@@ -207,12 +218,8 @@ static int16_t read_sensor(piezo_ctl_t *c, int32_t code)
      * changes: init, the tick's step 1, the first good sample) */
     int bad = code < g->adc_min_ok || code > g->adc_max_ok ||
               (uint32_t)(jump + g->max_jump_q15) > c->jump_span;
-    if (bad) {
-        if (++c->bad_run >= g->bad_limit) {
-            c->bad_run = g->bad_limit;
-            c->st.faults |= PIEZO_FAULT_SENSOR_IMPLAUSIBLE;
-        }
-        return c->y_prev_q15;
+    if (__builtin_expect(bad, 0)) {
+        return bad_sample(c);
     }
     c->bad_run = 0u;
     c->y_prev_q15 = y;
@@ -297,6 +304,44 @@ void piezo_ctl_config_changed(piezo_ctl_t *c)
     c->boundary_req = 1u; /* the tick derives ref_stages and jump_span (only it writes them after init) */
 }
 
+/* The stages between the reference and the feedforward (step 4a-4c): r_ahead
+ * in; out r_ahead, r and r_loop packed in bits 0, 16 and 32 (r0:r1 on the
+ * Cortex-M4). Out of the tick's line (round 17): in line, gcc kept the three
+ * in three registers and copied the reference into each on the stage-free
+ * path (3 instructions a tick); out of line the stages pay a call and the
+ * packing instead (8 more a tick on reference_dyninv32). */
+static __attribute__((noinline)) uint64_t ref_stages_run(piezo_ctl_t *c, int16_t r_ahead, uint32_t wave_on)
+{
+    const piezo_ctl_cfg_t *g = &c->cfg;
+    int16_t r = r_ahead, r_loop;
+    if (g->preview_ticks != 0u) {
+        r = c->ref_fifo[c->fifo_pos];
+        c->ref_fifo[c->fifo_pos] = r_ahead;
+        if (++c->fifo_pos >= g->preview_ticks) {
+            c->fifo_pos = 0u;
+        }
+    }
+    /* 4b. the wave's learned feedforward, in sync with it (controller.h):
+     *     r_ahead + c(phase), and for the error r + c(phase - preview) */
+    r_loop = r;
+    c->wave_ff_q15 = 0;
+    if (wave_on != 0u && c->wave_ff_active >= 0) {
+        const piezo_ctl_wave_ff_t *t = &c->wave_ff[c->wave_ff_active];
+        c->wave_ff_q15 = wave_ff_at(t, c->wave_ff_phase);
+        r_ahead = piezo_sat_q15((int32_t)r_ahead + c->wave_ff_q15);
+        r_loop = piezo_sat_q15((int32_t)r +
+                               wave_ff_at(t, c->wave_ff_phase - (uint32_t)g->preview_ticks * t->freq_word));
+        c->wave_ff_phase += t->freq_word;
+    }
+
+    /* 4c. shaper, then the dynamics inverse (none with 0 taps: one compare) */
+    r_ahead = shape(c, r_ahead);
+    if (g->dyninv.n_taps != 0u) {
+        r_ahead = piezo_fir_q13_process(&c->dyninv, &g->dyninv, r_ahead);
+    }
+    return (uint16_t)r_ahead | (uint64_t)(uint16_t)r << 16 | (uint64_t)(uint16_t)r_loop << 32;
+}
+
 /* a mode's bit in the tick's mask of the running mode */
 #define MODE_BIT(m) (1u << (m))
 
@@ -359,7 +404,6 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
      * writers are init, piezo_ctl_set_mode and servo_switch); IDLE's bit is in
      * no mask */
     mb = c->st.armed ? 1u << mode : 0u;
-    run = (mb & ~MODE_BIT(PIEZO_MODE_IDLE)) != 0u;
 
     /* 4. reference: r_ahead for the feedforward, r (preview_ticks later) for the rest */
     /* running as it was before this tick's step (the step may end the wave);
@@ -369,33 +413,13 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     r = r_ahead;
     r_loop = r;
     /* 4a-4c. the stages between the reference and the feedforward, none in
-     * most configurations: one test of them all (ref_stages, step 1) */
+     * most configurations: one test of them all (ref_stages, step 1), the
+     * stages out of line (ref_stages_run) */
     if (c->ref_stages != 0u) {
-        if (g->preview_ticks != 0u) {
-            r = c->ref_fifo[c->fifo_pos];
-            c->ref_fifo[c->fifo_pos] = r_ahead;
-            if (++c->fifo_pos >= g->preview_ticks) {
-                c->fifo_pos = 0u;
-            }
-        }
-        /* 4b. the wave's learned feedforward, in sync with it (controller.h):
-         *     r_ahead + c(phase), and for the error r + c(phase - preview) */
-        r_loop = r;
-        c->wave_ff_q15 = 0;
-        if (wave_on != 0u && c->wave_ff_active >= 0) {
-            const piezo_ctl_wave_ff_t *t = &c->wave_ff[c->wave_ff_active];
-            c->wave_ff_q15 = wave_ff_at(t, c->wave_ff_phase);
-            r_ahead = piezo_sat_q15((int32_t)r_ahead + c->wave_ff_q15);
-            r_loop = piezo_sat_q15((int32_t)r +
-                                   wave_ff_at(t, c->wave_ff_phase - (uint32_t)g->preview_ticks * t->freq_word));
-            c->wave_ff_phase += t->freq_word;
-        }
-
-        /* 4c. shaper, then the dynamics inverse (none with 0 taps: one compare) */
-        r_ahead = shape(c, r_ahead);
-        if (g->dyninv.n_taps != 0u) {
-            r_ahead = piezo_fir_q13_process(&c->dyninv, &g->dyninv, r_ahead);
-        }
+        const uint64_t p = ref_stages_run(c, r_ahead, wave_on);
+        r_ahead = (int16_t)(uint16_t)p;
+        r = (int16_t)(uint16_t)(p >> 16);
+        r_loop = (int16_t)(uint16_t)(p >> 32);
     }
     /* (wave_ff_q15 is 0 without the stages: step 1 clears it whenever it
      * derives ref_stages, before this tick's stages could set it) */
@@ -405,6 +429,12 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     /* 5. feedforward (of the shaped, inverted early reference) */
     {
         piezo_ff_state_t *const ff = c->ff_act; /* &ff[active]: no index arithmetic per tick */
+        /* mb opaque here and at step 6 (an empty asm, no instruction): gcc
+         * otherwise forms the masks of steps 5 and 6 when mb is made and
+         * keeps them on the stack across the calls (two stores and two
+         * loads, round 16's profile); now each is one TST/ANDS of mb, which
+         * lives in a register across the calls anyway (round 17) */
+        __asm__("" : "+r"(mb));
         if ((mb & (MODE_BIT(PIEZO_MODE_FEEDFORWARD) | MODE_BIT(PIEZO_MODE_FF_FEEDBACK))) != 0u && ff != NULL) {
             u_ff = piezo_ff_process(ff, c->set_act, r_ahead, c->limit.prev_q15);
         } else if ((mb & MODE_BIT(PIEZO_MODE_OPEN_LOOP)) != 0u && ff != NULL) {
@@ -417,6 +447,7 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     c->sig[PIEZO_SIG_FF] = u_ff;
 
     /* 6. feedback */
+    __asm__("" : "+r"(mb));
     if ((mb & (MODE_BIT(PIEZO_MODE_FF_FEEDBACK) | MODE_BIT(PIEZO_MODE_FEEDBACK))) != 0u) {
         int16_t e = piezo_sat_q15((int32_t)r_loop - y);
         u_fb = piezo_pid_process(&c->pid, e);
@@ -426,7 +457,9 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
     }
     c->sig[PIEZO_SIG_FB] = u_fb;
 
-    /* 7-8. sum, clamp, slew limit (also while ramping down after a disarm), DAC */
+    /* 7-8. sum, clamp, slew limit (also while ramping down after a disarm), DAC;
+     * run from step 6's mb: gcc then knows it is set on the feedback's path */
+    run = (mb & ~MODE_BIT(PIEZO_MODE_IDLE)) != 0u;
     u = run ? piezo_sat_q15((int32_t)u_ff + u_fb) : g->u_safe_q15;
     /* the term applied, xc_q15, is written here only with a coupling slot:
      * without one it is 0 since the slot went (init, piezo_ctl_rollback) */
@@ -450,8 +483,9 @@ int32_t piezo_ctl_step(piezo_ctl_t *c, const int32_t adc[2])
         /* |u * gain| <= 2^15 * 2^31, so the shifted product fits int32 (|.| <= 2^30);
          * the sum saturated to int32 and then clamped to [dac_min, dac_max] (int32)
          * is the clamp of the exact sum: the same code as in int64 */
-        int32_t code = piezo_add_sat_i32(g->dac_zero,
-                                         (int32_t)piezo_rshift_rnd64((int64_t)u * g->dac_gain_q16, 16u));
+        /* rshift_rnd64(u gain, 16) as the rounded high word of (u 2^16) gain
+         * (one SMMULR on the Cortex-M4, round 17) */
+        int32_t code = piezo_add_sat_i32(g->dac_zero, piezo_mul_hi_rnd((int32_t)((uint32_t)(int32_t)u << 16), g->dac_gain_q16));
         dac = code < g->dac_min ? g->dac_min : (code > g->dac_max ? g->dac_max : code);
     }
 

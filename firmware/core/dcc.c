@@ -514,9 +514,11 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * in registers and the per-tick constants in a frame of their own, one
  * load each where a row uses them. It does the whole falling step of
  * dcc_ops with runs after the reversal's bookkeeping (ops_update, below):
- * the band's first row (first_row_above's answer, walked from
- * the hint one row at a time: at most n_rows <= 32 steps, one or none on a
- * smooth drive), the rows, the runs out, kacc and v_prev.
+ * the band's first row (first_row_above's answer: the hint's row or up to
+ * two rows below or above it, two to four compares, else a bisection over
+ * the rows left, at most 5 halvings for n_rows <= 32, where round 16 walked
+ * a row at a time, 8 instructions a row, after a user's step), the rows,
+ * the runs out, kacc and v_prev.
  *
  * r4 &row_start[k + 1] once a row is read, r5 psi, r7:r8 dk, r9 the old
  * run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
@@ -616,26 +618,69 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    add    r10, r4, r3, lsl #1\n"
         "    strd   r9, r10, [sp, #32]\n"
         /* the band's first row (first_row_above: the first whose n1 exceeds
-         * v - xsat), walked from the last falling tick's */
+         * v - xsat), from the last falling tick's: up to two rows either
+         * way one by one, beyond them a bisection (round 17) */
         "    sub    r6, r1, r6\n"            /* t = v - xsat */
         "    mov    lr, r2\n"                /* n1 */
         "    ldrb   r2, [r0, #47]\n"         /* k = row_cur */
-        "10: cbz    r2, 11f\n"
+        "    cbz    r2, 11f\n"
         "    add    r9, r4, r2, lsl #1\n"
         "    ldrh   r9, [r9, #-2]\n"
         "    ldrsh  r9, [lr, r9, lsl #1]\n"
         "    cmp    r9, r6\n"
         "    ble    11f\n"
-        "    subs   r2, r2, #1\n"           /* row k - 1 exceeds t */
-        "    b      10b\n"
+        "    subs   r2, r2, #1\n"             /* row k - 1 exceeds t: the answer is at most k - 1 */
+        "    beq    12f\n"
+        "    add    r9, r4, r2, lsl #1\n"
+        "    ldrh   r9, [r9, #-2]\n"
+        "    ldrsh  r9, [lr, r9, lsl #1]\n"
+        "    cmp    r9, r6\n"
+        "    ble    12f\n"                    /* row k - 2 does not: one row down */
+        "    subs   r2, r2, #1\n"
+        "    beq    12f\n"
+        "    add    r9, r4, r2, lsl #1\n"
+        "    ldrh   r9, [r9, #-2]\n"
+        "    ldrsh  r9, [lr, r9, lsl #1]\n"
+        "    cmp    r9, r6\n"
+        "    ble    12f\n"                    /* two rows down */
+        "    subs   r3, r2, #1\n"             /* row k - 3 exceeds t: bisect over [0, k - 3] */
+        "    movs   r2, #0\n"
+        "    b      14f\n"
         "11: cmp    r2, r3\n"
         "    bge    12f\n"
         "    ldrh   r9, [r4, r2, lsl #1]\n"
         "    ldrsh  r9, [lr, r9, lsl #1]\n"
         "    cmp    r9, r6\n"
-        "    bgt    12f\n"
-        "    adds   r2, r2, #1\n"           /* row k does not */
-        "    b      11b\n"
+        "    bgt    12f\n"                    /* the hint's row */
+        "    adds   r2, r2, #1\n"             /* row k does not exceed t */
+        "    cmp    r2, r3\n"
+        "    bge    12f\n"
+        "    ldrh   r9, [r4, r2, lsl #1]\n"
+        "    ldrsh  r9, [lr, r9, lsl #1]\n"
+        "    cmp    r9, r6\n"
+        "    bgt    12f\n"                    /* one row up */
+        "    adds   r2, r2, #1\n"             /* nor k + 1 */
+        "    cmp    r2, r3\n"
+        "    bge    12f\n"
+        "    ldrh   r9, [r4, r2, lsl #1]\n"
+        "    ldrsh  r9, [lr, r9, lsl #1]\n"
+        "    cmp    r9, r6\n"
+        "    bgt    12f\n"                    /* two rows up */
+        "    adds   r2, r2, #1\n"             /* nor k + 2: bisect over [k + 3, n_rows] */
+        "    b      14f\n"
+        /* the first row in [r2, r3] exceeding t (row r3 does, or r3 =
+         * n_rows): at most 5 halvings for 32 rows, where round 16 walked one
+         * row at a time (8 instructions a row) */
+        "13: add    r9, r2, r3\n"
+        "    lsrs   r9, r9, #1\n"
+        "    ldrh   r10, [r4, r9, lsl #1]\n"
+        "    ldrsh  r10, [lr, r10, lsl #1]\n"
+        "    cmp    r10, r6\n"
+        "    ite    gt\n"
+        "    movgt  r3, r9\n"
+        "    addle  r2, r9, #1\n"
+        "14: cmp    r2, r3\n"
+        "    blt    13b\n"
         "12: strb   r2, [r0, #47]\n"
         "    add    r4, r4, r2, lsl #1\n"    /* &row_start[k] */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
@@ -820,7 +865,9 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
  * reached through the order array, so the column's bounds, its run's start
  * and the scans are pointers into it (an entry's low halfword the index, the
  * high one n2); the prefix sums of the n2 order are read at the same offset
- * from an order pointer (psum + n_ops + 1 - order, in bytes).
+ * from an order pointer (psum + n_ops + 1 - order, in bytes). The band's
+ * first column is found as the falling step's first row (the hint, up to
+ * two columns either way, else a bisection; round 17).
  *
  * r4 &col_start[k + 1] once a column is read, r5 psi, r7:r8 dk, r9 the old
  * run, r11 c; in a column r0 the position (pointer), r1 the column's end, r2
@@ -882,8 +929,9 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    add    r9, r4, r3, lsl #1\n"
         "    strd   r9, lr, [sp, #32]\n"
         /* the band's first column (first_col_above: the first whose n2
-         * exceeds v_prev - xsat; every column without n2_banded), walked
-         * from the last rising tick's */
+         * exceeds v_prev - xsat; every column without n2_banded), from the
+         * last rising tick's: up to two columns either way one by one,
+         * beyond them a bisection (round 17) */
         "    movs   r2, #0\n"
         "    ldrb   lr, [r0, #41]\n"         /* n2_banded */
         "    cmp    lr, #0\n"
@@ -891,24 +939,71 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    ldrsh  lr, [r0, #34]\n"         /* v_prev */
         "    sub    r6, lr, r6\n"            /* t = v_prev - xsat */
         "    ldrb   r2, [r0, #49]\n"         /* k = col_cur */
-        "10: cbz    r2, 11f\n"
+        "    cbz    r2, 11f\n"
         "    add    r9, r4, r2, lsl #1\n"
         "    ldrh   r9, [r9, #-2]\n"
         "    add    r9, r10, r9, lsl #2\n"
         "    ldrsh  r9, [r9, #2]\n"
         "    cmp    r9, r6\n"
         "    ble    11f\n"
-        "    subs   r2, r2, #1\n"           /* column k - 1 exceeds t */
-        "    b      10b\n"
+        "    subs   r2, r2, #1\n"             /* column k - 1 exceeds t: the answer is at most k - 1 */
+        "    beq    12f\n"
+        "    add    r9, r4, r2, lsl #1\n"
+        "    ldrh   r9, [r9, #-2]\n"
+        "    add    r9, r10, r9, lsl #2\n"
+        "    ldrsh  r9, [r9, #2]\n"
+        "    cmp    r9, r6\n"
+        "    ble    12f\n"                    /* column k - 2 does not: one column down */
+        "    subs   r2, r2, #1\n"
+        "    beq    12f\n"
+        "    add    r9, r4, r2, lsl #1\n"
+        "    ldrh   r9, [r9, #-2]\n"
+        "    add    r9, r10, r9, lsl #2\n"
+        "    ldrsh  r9, [r9, #2]\n"
+        "    cmp    r9, r6\n"
+        "    ble    12f\n"                    /* two columns down */
+        "    subs   r3, r2, #1\n"             /* column k - 3 exceeds t: bisect over [0, k - 3] */
+        "    movs   r2, #0\n"
+        "    b      15f\n"
         "11: cmp    r2, r3\n"
         "    bge    12f\n"
         "    ldrh   r9, [r4, r2, lsl #1]\n"
         "    add    r9, r10, r9, lsl #2\n"
         "    ldrsh  r9, [r9, #2]\n"
         "    cmp    r9, r6\n"
-        "    bgt    12f\n"
-        "    adds   r2, r2, #1\n"           /* column k does not */
-        "    b      11b\n"
+        "    bgt    12f\n"                    /* the hint's column */
+        "    adds   r2, r2, #1\n"             /* column k does not exceed t */
+        "    cmp    r2, r3\n"
+        "    bge    12f\n"
+        "    ldrh   r9, [r4, r2, lsl #1]\n"
+        "    add    r9, r10, r9, lsl #2\n"
+        "    ldrsh  r9, [r9, #2]\n"
+        "    cmp    r9, r6\n"
+        "    bgt    12f\n"                    /* one column up */
+        "    adds   r2, r2, #1\n"             /* nor k + 1 */
+        "    cmp    r2, r3\n"
+        "    bge    12f\n"
+        "    ldrh   r9, [r4, r2, lsl #1]\n"
+        "    add    r9, r10, r9, lsl #2\n"
+        "    ldrsh  r9, [r9, #2]\n"
+        "    cmp    r9, r6\n"
+        "    bgt    12f\n"                    /* two columns up */
+        "    adds   r2, r2, #1\n"             /* nor k + 2: bisect over [k + 3, n_cols] */
+        "    b      15f\n"
+        /* the first column in [r2, r3] exceeding t (column r3 does, or r3 =
+         * n_cols): at most 5 halvings for 32 columns, where round 16 walked one
+         * column at a time (8 instructions a column) */
+        "14: add    r9, r2, r3\n"
+        "    lsrs   r9, r9, #1\n"
+        "    ldrh   lr, [r4, r9, lsl #1]\n"
+        "    add    lr, r10, lr, lsl #2\n"
+        "    ldrsh  lr, [lr, #2]\n"
+        "    cmp    lr, r6\n"
+        "    ite    gt\n"
+        "    movgt  r3, r9\n"
+        "    addle  r2, r9, #1\n"
+        "15: cmp    r2, r3\n"
+        "    blt    14b\n"
         "12: strb   r2, [r0, #49]\n"
         "13: add    r4, r4, r2, lsl #1\n"    /* &col_start[k] */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
@@ -1377,14 +1472,19 @@ int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
         if (v != dcc->v_prev_q15) {
             runs_step(dcc, v);
         }
-        /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product */
-        int64_t acc = (int64_t)v * (int32_t)dcc->csum - dcc->kacc;
-        acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
+        /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product. The
+         * rounding constant starts the sum (2^23 - kacc, then the two
+         * products by SMLAL: round 17, 2 instructions fewer than adding it
+         * to the sum at the end); the same integers, every step exact in
+         * int64 */
+        int64_t acc = ((int64_t)1 << 23) - dcc->kacc;
+        acc = piezo_mlal(acc, v, (int32_t)dcc->csum);
+        acc = piezo_mlal(acc, yd_q15, dcc->coeffs->g_q24);
         /* |v C|, |kacc| = |sum psi_j c_j| and |yd g| are each below
          * 2^15 2^31 (|psi_j|, |v|, |yd| <= 2^15; sum |c_j| and g below 2^31),
          * so |acc| < 2^48 and acc rounded to q15 fits an int32: SSAT alone
          * clamps it, as piezo_sat_q15 would (4 instructions fewer) */
-        const int16_t u = (int16_t)__builtin_arm_ssat((int32_t)piezo_rshift_rnd64(acc, 24u), 16u);
+        const int16_t u = (int16_t)__builtin_arm_ssat((int32_t)(acc >> 24), 16u);
         dcc->u_last_q15 = u;
         return u;
     }

@@ -110,6 +110,23 @@ static inline int64_t piezo_mul_rshift_rnd(int32_t a, int32_t b, unsigned s)
     return piezo_rshift_rnd64(piezo_mul32(a, b), s);
 }
 
+/** piezo_rshift_rnd64((int64_t)a * b, 32): the rounded high word of a 32 x
+ * 32 product, one SMMULR on the Cortex-M4 (round 17). With a = x 2^(32 - s)
+ * for an x that fits so shifted (a q15 x and s >= 16, or s = 24 and
+ * |x| <= 2^23) it is piezo_rshift_rnd64(x b, s) exactly, in 2 instructions
+ * where the 64-bit form sets up the rounding constant, an SMLAL and a
+ * shift of the word pair (5). */
+static inline int32_t piezo_mul_hi_rnd(int32_t a, int32_t b)
+{
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__) && defined(__GNUC__)
+    int32_t hi;
+    __asm__("smmulr %0, %1, %2" : "=r"(hi) : "r"(a), "r"(b));
+    return hi;
+#else
+    return (int32_t)piezo_rshift_rnd64((int64_t)a * b, 32u);
+#endif
+}
+
 /** Clamp a wide value to the int32 range (q24, q16 intermediates). */
 static inline int32_t piezo_sat_i32(int64_t x)
 {

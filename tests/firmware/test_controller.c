@@ -454,6 +454,53 @@ static void test_sensor_scale_matches_int64_formula(void **state)
     }
 }
 
+/* The DAC code against the int64 rule, clamp(sat_i32(dac_zero +
+ * rshift_rnd64(u gain, 16)), dac_min, dac_max): random drives (DIRECT, the
+ * setpoint is u), gains, zeros and limits, and the edges (u and the gain at
+ * their extremes, the rounding's ties of both signs). */
+static void test_dac_code_matches_int64_formula(void **state)
+{
+    (void)state;
+    uint32_t x = 4242u;
+    const int32_t edge_u[] = {-32768, 32767, 1, -1, 0, -32768, 32767, 3, -3};
+    const int32_t edge_g[] = {INT32_MIN, INT32_MIN, INT32_MAX, INT32_MAX, INT32_MAX, INT32_MAX, INT32_MIN, 1 << 15,
+                              1 << 15}; /* (+-3) 2^15: ties at +-1.5 */
+    for (int i = 0; i < 3000; i++) {
+        piezo_ctl_cfg_t cfg = unit_cfg();
+        int32_t u;
+        if (i < (int)(sizeof edge_u / sizeof edge_u[0])) {
+            u = edge_u[i];
+            cfg.dac_gain_q16 = edge_g[i];
+            cfg.dac_zero = 0;
+            cfg.dac_min = INT32_MIN;
+            cfg.dac_max = INT32_MAX;
+        } else {
+            u = (int32_t)(piezo_test_lcg(&x) >> 16) - 32768;
+            cfg.dac_gain_q16 = (int32_t)piezo_test_lcg(&x) >> (piezo_test_lcg(&x) % 32u);
+            cfg.dac_zero = (int32_t)piezo_test_lcg(&x) >> (piezo_test_lcg(&x) % 32u);
+            int32_t a = (int32_t)piezo_test_lcg(&x), b = (int32_t)piezo_test_lcg(&x);
+            cfg.dac_min = a < b ? a : b;
+            cfg.dac_max = a < b ? b : a;
+            if (i % 4 == 0) {
+                cfg.dac_min = INT32_MIN; /* the int32 saturation itself */
+                cfg.dac_max = INT32_MAX;
+            }
+        }
+        assert_int_equal(piezo_ctl_init(&ctl, &cfg), PIEZO_OK);
+        assert_int_equal(piezo_ctl_set_mode(&ctl, PIEZO_MODE_DIRECT), PIEZO_OK);
+        assert_int_equal(piezo_ctl_arm(&ctl, 1), PIEZO_OK);
+        const int32_t dac = tick((int16_t)u, 0);
+        assert_int_equal(ctl.sig[PIEZO_SIG_U], u);
+        int64_t want = cfg.dac_zero + (((int64_t)u * cfg.dac_gain_q16 + 32768) >> 16);
+        want = want > INT32_MAX ? INT32_MAX : (want < INT32_MIN ? INT32_MIN : want);
+        want = want < cfg.dac_min ? cfg.dac_min : (want > cfg.dac_max ? cfg.dac_max : want);
+        if (dac != (int32_t)want) {
+            fail_msg("u %ld gain %ld zero %ld [%ld, %ld]: code %ld, rule %lld", (long)u, (long)cfg.dac_gain_q16,
+                     (long)cfg.dac_zero, (long)cfg.dac_min, (long)cfg.dac_max, (long)dac, (long long)want);
+        }
+    }
+}
+
 /* The sensor's plausibility against the rule written as plain tests: a code
  * outside [adc_min_ok, adc_max_ok], or, with max_jump > 0 and a good sample
  * seen, |y - y_prev| > max_jump, holds the last good value; random codes,
@@ -565,6 +612,7 @@ int main(void)
         cmocka_unit_test(test_dcc_table_drives_bit_exact),
         cmocka_unit_test(test_mode_dispatch_matches_the_rule),
         cmocka_unit_test(test_sensor_scale_matches_int64_formula),
+        cmocka_unit_test(test_dac_code_matches_int64_formula),
         cmocka_unit_test(test_sensor_plausibility_matches_the_rule),
         cmocka_unit_test(test_eupi_inverse_table_drives_bit_exact),
         cmocka_unit_test(test_refused_images_leave_the_active_table_running),

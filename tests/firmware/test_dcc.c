@@ -505,6 +505,102 @@ static void test_step_matches_c_step(void **state)
     }
 }
 
+/* The band's first line walked from the last hint one line at a time, as
+ * round 16's Thumb-2 steps found it: the first of the n ascending keys that
+ * exceeds t. */
+static uint8_t walk_line(const int16_t *key, uint16_t n, uint8_t k, int32_t t, unsigned *steps)
+{
+    const uint8_t k0 = k;
+    while (k > 0u && key[k - 1u] > t) {
+        k--;
+    }
+    while (k < n && key[k] <= t) {
+        k++;
+    }
+    *steps = k > k0 ? (unsigned)(k - k0) : (unsigned)(k0 - k);
+    return k;
+}
+
+/* Large jumps (round 17): an input anywhere in the range every tick, now
+ * and then a small move. The step's hints (row_cur falling, col_cur rising)
+ * against the walk's line, every operator against the oracle and the kept
+ * sum, and the step against the C step (which bisects). Returns the ticks
+ * on which the walk took three lines or more (the steps' bisection). */
+static unsigned jump_check(uint16_t L, uint32_t seed, size_t n, int sums)
+{
+    walk_rng = seed;
+    struct piezo_dcc_coeffs dc = walk_plane(L);
+    struct piezo_dcc d, e;
+    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    if (sums) {
+        assert_int_equal(with_sums(&d, &dc), 1);
+    }
+    assert_int_equal(piezo_dcc_init(&e, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    piezo_dcc_const_weights(&d);
+    piezo_dcc_const_weights(&e);
+    assert_true(d.runs && d.n2_banded && d.n_rows == L && d.n_cols == L);
+    /* the rows' keys (n1) and the columns' (n2), ascending: the plane's L levels */
+    int16_t rows[WALK_MAX_L], cols[WALK_MAX_L];
+    for (uint16_t i = 0; i < L; i++) {
+        rows[i] = walk_n1[i == 0u ? 0u : (uint16_t)(i * L - i * (i - 1u) / 2u)]; /* row i's first operator */
+        cols[i] = walk_n2[i];                                                   /* row 0 holds every column */
+    }
+    for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+        walk_psi[j] = 0;
+    }
+    const int32_t xsat = dc.grid.xsat_q15;
+    int32_t v_prev = dc.grid.nmin_q15;
+    uint8_t row = 0u, col = 0u;
+    unsigned far = 0u, steps = 0u;
+    for (size_t k = 0; k < n; k++) {
+        const int32_t v = walk_rand(8u) == 0u ? v_prev + (int32_t)walk_rand(2001u) - 1000
+                                              : (int32_t)walk_rand(65536u) - 32768;
+        const int16_t vq = (int16_t)(v > 32767 ? 32767 : (v < -32768 ? -32768 : v));
+        if (vq < v_prev) {
+            row = walk_line(rows, L, row, vq - xsat, &steps);
+            far += steps >= 3u;
+        } else if (vq > v_prev) {
+            col = walk_line(cols, L, col, v_prev - xsat, &steps);
+            far += steps >= 3u;
+        }
+        walk_oracle(&dc.grid, v_prev, vq);
+        piezo_dcc_ops_update(&d, vq);
+        piezo_dcc_ops_update_c(&e, vq);
+        if (d.row_cur != row || d.col_cur != col || e.row_cur != row || e.col_cur != col) {
+            fail_msg("L %u seed %lu tick %lu v %d (from %ld): rows %u (C %u), columns %u (C %u), the walk's %u, %u",
+                     (unsigned)L, (unsigned long)seed, (unsigned long)k, vq, (long)v_prev, d.row_cur, e.row_cur,
+                     d.col_cur, e.col_cur, row, col);
+        }
+        int64_t kacc = 0;
+        for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+            if (d.psi_q15[j] != walk_psi[j] || e.psi_q15[j] != walk_psi[j]) {
+                fail_msg("L %u seed %lu tick %lu v %d operator %u: psi %ld (C %ld), oracle %ld", (unsigned)L,
+                         (unsigned long)seed, (unsigned long)k, vq, (unsigned)j, (long)d.psi_q15[j],
+                         (long)e.psi_q15[j], (long)walk_psi[j]);
+            }
+            kacc += (int64_t)walk_psi[j] * walk_c[j];
+        }
+        if (d.kacc != kacc || e.kacc != kacc) {
+            fail_msg("L %u seed %lu tick %lu: kept sum %lld (C %lld), oracle %lld", (unsigned)L,
+                     (unsigned long)seed, (unsigned long)k, (long long)d.kacc, (long long)e.kacc, (long long)kacc);
+        }
+        v_prev = vq;
+    }
+    return far;
+}
+
+static void test_search_after_large_jumps(void **state)
+{
+    (void)state;
+    static const uint16_t planes[] = {10u, 20u, 30u};
+    for (size_t i = 0; i < N_OF(planes); i++) {
+        for (int sums = 0; sums <= 1; sums++) {
+            const unsigned far = jump_check(planes[i], 104729u + planes[i], 3000u, sums);
+            assert_true(far >= 1000u); /* most jumps cross three lines or more */
+        }
+    }
+}
+
 static enum piezo_err init_with(const struct piezo_dcc_coeffs *c, size_t n_state)
 {
     struct piezo_dcc d;
@@ -550,6 +646,7 @@ int main(void)
         cmocka_unit_test(test_row_and_column_table_limits),
         cmocka_unit_test(test_runs_on_random_walks),
         cmocka_unit_test(test_step_matches_c_step),
+        cmocka_unit_test(test_search_after_large_jumps),
         cmocka_unit_test(test_prefix_sums_checked),
     };
     return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);

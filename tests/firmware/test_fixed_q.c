@@ -81,6 +81,18 @@ static void test_saturation_forms_match_int64(void **state)
         assert_true(piezo_mlal(x >> 2, a, b) == (x >> 2) + (int64_t)a * b);
         assert_true(piezo_mul_rshift_rnd(a, b, 15u) == piezo_rshift_rnd64((int64_t)a * b, 15u));
         assert_true(piezo_mul_rshift_rnd(a, b, 24u) == piezo_rshift_rnd64((int64_t)a * b, 24u));
+        assert_true(piezo_mul_hi_rnd(a, b) == (int32_t)(((int64_t)a * b + ((int64_t)1 << 31)) >> 32));
+        /* the two uses (round 17): a q15 u times a q16 gain, shift 16; a q15
+         * r times a q24 gain, shift 24 */
+        const int32_t q = (int16_t)(lcg_next(&seed) >> 48);
+        assert_true(piezo_mul_hi_rnd(q * 65536, b) == (int32_t)piezo_rshift_rnd64((int64_t)q * b, 16u));
+        assert_true(piezo_mul_hi_rnd(q * 256, b) == (int32_t)piezo_rshift_rnd64((int64_t)q * b, 24u));
+    }
+    /* the edges: the extremes, and ties of both signs */
+    static const int32_t ea[] = {INT32_MIN, INT32_MIN, INT32_MAX, -32768 * 65536, 3 * 65536, -3 * 65536, 1, -1};
+    static const int32_t eb[] = {INT32_MIN, INT32_MAX, INT32_MAX, INT32_MIN, 1 << 15, 1 << 15, INT32_MIN, INT32_MIN};
+    for (size_t k = 0; k < sizeof ea / sizeof ea[0]; k++) {
+        assert_true(piezo_mul_hi_rnd(ea[k], eb[k]) == (int32_t)(((int64_t)ea[k] * eb[k] + ((int64_t)1 << 31)) >> 32));
     }
     assert_true(piezo_add_sat_i32(INT32_MAX, 1) == INT32_MAX);
     assert_true(piezo_add_sat_i32(INT32_MIN, -1) == INT32_MIN);

@@ -24,6 +24,12 @@
  *      table through piezo_coefset_load, run by piezo_ff_process) on the
  *      reference scaled to 2/3 (0.6 FS, inside the model's range).
  *
+ * "reference_steps": the reference with a user's steps as its drive instead
+ * of the sine (the wave's STEPS kind, the same 0.9 FS amplitude, levels
+ * held 50 ticks): each step moves the DCC's input across many of the KP
+ * plane's lines in one tick (up to 1.8 FS, about 18 of the 20 lines), the
+ * case the sine never reaches (at most 942 LSB a tick, a line is 3,277).
+ *
  * "reference_dyninv32" and "ref_control_dyninv32": the same with the
  * dynamics-inverse FIR on (32 taps, spacing 1: its most taps; the cost does
  * not depend on the spacing), against "reference" and "ref_control" with it
@@ -123,6 +129,18 @@ static void reference_part_tick(void)
 
 /* 1: setup() configures the dynamics-inverse FIR with all its taps */
 static unsigned with_dyninv;
+/* 1: setup() drives the reference by steps_shape (each level held 50 ticks) */
+static unsigned with_steps;
+
+/* The steps' shape (q15, times the 0.9 FS amplitude): jumps of every size
+ * from a line to the whole plane, up and down, between the rails and in
+ * the middle; 20 levels of 50 ticks cover the 1000 counted ticks. */
+#define BENCH_STEPS_N 20u
+#define BENCH_STEPS_HOLD 50u
+static const int16_t steps_shape[BENCH_STEPS_N] = {
+    32767, -32767, 32767, 0, -32767, 16384, -16384, 24576, -32767, 8192,
+    -8192, 32767, -24576, 4096, 32767, 12288, -32767, -4096, 28672, -32767,
+};
 
 static int setup(void)
 {
@@ -152,6 +170,14 @@ static int setup(void)
     }
     c->wave_cfg = (piezo_wave_cfg_t){.kind = PIEZO_WAVE_SINE, .amplitude_q15 = 29491, /* 0.9 FS */
                                      .freq_word = 21474836u /* 50 Hz */};
+    if (with_steps) {
+        c->wave_cfg.kind = PIEZO_WAVE_STEPS;
+        c->wave_cfg.n_levels = BENCH_STEPS_N;
+        for (uint32_t i = 0; i < BENCH_STEPS_N; i++) {
+            c->levels_q15[i] = steps_shape[i];
+            c->durations[i] = BENCH_STEPS_HOLD;
+        }
+    }
     const piezo_rec_cfg_t rc = {.n_channels = 4,
                                 .signal = {PIEZO_SIG_REF, PIEZO_SIG_Y, PIEZO_SIG_U, PIEZO_SIG_FF},
                                 .decimation = 1, .pretrigger = 0, .trigger = PIEZO_REC_IMMEDIATE};
@@ -269,6 +295,10 @@ void piezo_bench_reference(void)
     for (ref_part = 0u; ref_part < 3u; ref_part++) {
         bench_part(part_name[ref_part]);
     }
+    /* the same driven by steps */
+    with_steps = 1u;
+    (void)bench_full("reference_steps");
+    with_steps = 0u;
     /* the same with the dynamics-inverse FIR on, all its taps */
     with_dyninv = 1u;
     (void)bench_full("reference_dyninv32");
