@@ -62,3 +62,17 @@ def test_the_simulation_is_the_regressor_and_old_models_stay_in_series():
     term.apply(old, st)
     assert np.allclose(st.y - y_base, term.basis(y_base, *HIDDEN, DT) @ coef, atol=1e-12)
     assert not np.allclose(st.y - y_base, term.columns(None, s, HIDDEN) @ coef, atol=1e-3)
+
+
+def test_the_mode_is_sized_above_its_own_band_or_the_calibrations():
+    """Round 17: below f / sqrt(2) the branch moves less than its static share; the edge is the higher of that and
+    the calibration's band, from the lower of the folds' frequencies."""
+    term = TERMS["unmodeled_resonance"]
+    ctx = SimpleNamespace(cal_band_hz=350.0)
+    assert abs(term.acts_above_hz(ctx, [(1030.0, 0.05), (1000.0, 0.02)]) - 1000.0 / np.sqrt(2.0)) < 1e-9
+    assert term.acts_above_hz(ctx, [(400.0, 0.05), (410.0, 0.05)]) == 350.0
+    x = np.array([0.5, 0.7, 0.72, 0.9])   # |M(f') - 1| against 1 around f / sqrt(2), the vocabulary's dampings
+    for z in term.DAMPINGS:
+        m1 = np.abs((x ** 2 - 2j * z * x) / (1 - x ** 2 + 2j * z * x))
+        assert np.all((m1 < 1) == (x < 1 / np.sqrt(2)))
+    assert all(TERMS[n].acts_above_hz(ctx, [None]) is None for n in TERMS if n != "unmodeled_resonance")

@@ -104,6 +104,11 @@ class Term:
     def applicable(self, ctx) -> bool:
         return True
 
+    def acts_above_hz(self, ctx, settings) -> float | None:
+        """[Hz] the edge above which the term is sized (``diagnose.misfit.ratios_above``) at its fitted
+        ``settings`` (one per fold): the calibration's band when it acts above it, else None (the whole residual)."""
+        return getattr(ctx, "cal_band_hz", None) if self.acts_above_calibration else None
+
     def refuses(self, ctx) -> str | None:
         """Why these data cannot credit the term at all (the candidate is still evaluated and counted among the
         round's tests, then vetoed with this reason); None: they can."""
@@ -804,6 +809,16 @@ class UnmodeledResonance(Term):
         # around each offered frequency (a damped ring's peak is not exactly its mode frequency)
         return [(f * q, z) for f in self.frequencies(ctx) for q in (0.97, 0.98, 0.99, 1.0, 1.01, 1.02, 1.03)
                 for z in self.DAMPINGS]
+
+    def acts_above_hz(self, ctx, settings):
+        """Round 17: the calibration's band or the mode's own, ``f / sqrt(2)``, whichever is higher [Hz]. Below
+        ``f / sqrt(2)`` the branch ``M(w) - w`` moves less than its static share: ``|M - 1| = |x^2 - 2 j z x| /
+        |1 - x^2 + 2 j z x|`` (``x = f' / f``) is below 1 exactly for ``x < 1 / sqrt(2)``, at every damping. What
+        lies there, between the calibration's band and the mode, is the base's misfit of its own modes, which no
+        concealed mode takes. The lower of the folds' frequencies is used."""
+        edge = getattr(ctx, "cal_band_hz", None)
+        f = min(float(st[0]) for st in settings) / np.sqrt(2.0) if settings else 0.0
+        return max(edge or 0.0, f) or None
 
     def columns(self, ctx, s, setting):
         # G's input (the H output, um): the mode is a branch beside G, not a filter on its output
