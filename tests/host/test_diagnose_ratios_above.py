@@ -74,6 +74,9 @@ def test_the_misfit_above_the_edge_is_measured_and_used():
     assert abs(m["above_um2"] - 0.5 * 0.005 ** 2) < 0.1 * 0.5 * 0.005 ** 2
     assert m["mse_um2"]["fast"] > 100 * m["above_um2"]
     _, cr_above = misfit.ratios_above(e, ring, fold, rec, DT, 300.0, m)
-    _, cr_fast = misfit.ratios_above(e, ring, fold, rec, DT, 300.0, dict(m, above_hz=250.0))
+    _, cr_fast = misfit.ratios_above(e, ring, fold, rec, DT, 300.0, dict(m, above_hz=350.0))
     assert cr_above < 0.5 < cr_fast   # the 20 Hz misfit would hide the ring; the one above the edge does not
+    # round 17: a misfit measured above a lower edge (the calibration's) serves a higher one (the mode's own)
+    _, cr_lower = misfit.ratios_above(e, ring, fold, rec, DT, 300.0, dict(m, above_hz=250.0))
+    assert cr_lower == cr_above
     assert "above_um2" not in misfit.base_misfit(held, ["cal"], DT, 1.0)

@@ -168,7 +168,8 @@ def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, mis
     without and with the term, high-passed (zero phase, fourth order Butterworth) at ``edge_hz`` per recording.
     The credited ratio subtracts the base's misfit there from the improvement there, as :func:`credited_ratio`
     does per band: ``misfit["above_um2"]`` (the same excess on held-out calibration histories, filtered the same
-    way) when it was measured at this edge, else the whole *fast* misfit (everything above ``1 / block_s``).
+    way) when it was measured at this edge or below it (round 17: taken as the bound of the excess above a higher
+    edge, the mode's own), else the whole *fast* misfit (everything above ``1 / block_s``).
 
     Parameters
     ----------
@@ -213,7 +214,8 @@ def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, mis
     eb, ea = float(np.sum(hb[done] ** 2)) / n, float(np.sum(ha[done] ** 2)) / n
     if eb <= 0:
         return frs, 1.0
-    if misfit and misfit.get("above_hz") == edge_hz:
+    if misfit and misfit.get("above_hz") is not None and misfit["above_hz"] <= edge_hz:
+        # round 17: measured at this edge or below it (the mode's own edge lies above the calibration's)
         m_fast = float(misfit["above_um2"])
     else:
         m_fast = float(misfit["mse_um2"]["fast"]) if misfit else 0.0

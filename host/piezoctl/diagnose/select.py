@@ -547,7 +547,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     within = (lambda x: x <= ratio_max) if ratio_max < FURTHER_RATIO_MAX else (lambda x: x < ratio_max)
     cr, bands = credited_ratio(rb_res, pred_after[used], rec, ctxs[0].dt, ctxs[0].misfit)
     whole = None
-    edge = ctxs[0].cal_band_hz if term.acts_above_calibration else None
+    edge = term.acts_above_hz(ctxs[0], best_st)   # round 17: the mode's own band when above the calibration's
     if edge:   # round 16: sized on the band where it acts (misfit.ratios_above), not beside the base's slow misfit
         fr_above, cr_above = ratios_above(rb_res, pred_after[used], fold_all[used], rec, ctxs[0].dt, edge,
                                           ctxs[0].misfit)

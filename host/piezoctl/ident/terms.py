@@ -104,6 +104,11 @@ class Term:
     def applicable(self, ctx) -> bool:
         return True
 
+    def acts_above_hz(self, ctx, settings) -> float | None:
+        """[Hz] the edge above which the term is sized (``diagnose.misfit.ratios_above``) at its fitted
+        ``settings`` (one per fold): the calibration's band when it acts above it, else None (the whole residual)."""
+        return getattr(ctx, "cal_band_hz", None) if self.acts_above_calibration else None
+
     def refuses(self, ctx) -> str | None:
         """Why these data cannot credit the term at all (the candidate is still evaluated and counted among the
         round's tests, then vetoed with this reason); None: they can."""
@@ -764,6 +769,17 @@ class Creep(Term):
 # --- dynamics stage ---------------------------------------------------------------------------------------------
 
 class UnmodeledResonance(Term):
+    """A mode the calibration did not excite, in parallel with the identified ones (round 17).
+
+    A stage's mechanics are a sum of modes driven by one actuator (``x = sum_i r_i M_i(w)``, the C stage model's
+    and the foreign stage's form alike); a concealed mode is one more branch on G's input ``w``, its residue taken
+    from the static gain (the calibration saw ``r M(w)`` as ``r w``, so the base holds it in G's gain):
+    ``r (M(w) - w)``. Rounds 12 to 16 filtered G's *output* instead (``r (M(y) - y)``, a mode in series): above the
+    stage's main mode G has rolled off, so that form drives the mode with the mass line and gives it the wrong
+    skirts (development s117-006, the true mode at its true setting: held-out ratios above the calibration's band
+    0.89/0.84 in series, 0.58/0.56 in parallel; docs/diagnose.md, "Round 17: resonance"). A model written before
+    round 17 (no ``"input"`` in its parameters) is simulated in series, as it was fitted."""
+
     name = "unmodeled_resonance"
     stage = "dynamics"
     nested_dynamics = True
@@ -794,15 +810,27 @@ class UnmodeledResonance(Term):
         return [(f * q, z) for f in self.frequencies(ctx) for q in (0.97, 0.98, 0.99, 1.0, 1.01, 1.02, 1.03)
                 for z in self.DAMPINGS]
 
+    def acts_above_hz(self, ctx, settings):
+        """Round 17: the calibration's band or the mode's own, ``f / sqrt(2)``, whichever is higher [Hz]. Below
+        ``f / sqrt(2)`` the branch ``M(w) - w`` moves less than its static share: ``|M - 1| = |x^2 - 2 j z x| /
+        |1 - x^2 + 2 j z x|`` (``x = f' / f``) is below 1 exactly for ``x < 1 / sqrt(2)``, at every damping. What
+        lies there, between the calibration's band and the mode, is the base's misfit of its own modes, which no
+        concealed mode takes. The lower of the folds' frequencies is used."""
+        edge = getattr(ctx, "cal_band_hz", None)
+        f = min(float(st[0]) for st in settings) / np.sqrt(2.0) if settings else 0.0
+        return max(edge or 0.0, f) or None
+
     def columns(self, ctx, s, setting):
-        return self.basis(s.ydyn, setting[0], setting[1], s.dt)
+        # G's input (the H output, um): the mode is a branch beside G, not a filter on its output
+        return self.basis(s.h, setting[0], setting[1], s.dt)
 
     def model_params(self, ctx, setting, coef):
         return {"freq_hz": float(setting[0]), "damping": float(setting[1]), "gain": float(coef[0]),
-                "gain_lead": float(coef[1])}
+                "gain_lead": float(coef[1]), "input": "dynamics_input"}
 
     def apply(self, p, st):
-        st.y = st.y + self.basis(st.y, float(p["freq_hz"]), float(p["damping"]), st.dt) @ \
+        x = st.w if p.get("input") == "dynamics_input" else st.y   # parallel (round 17) or series (before)
+        st.y = st.y + self.basis(x, float(p["freq_hz"]), float(p["damping"]), st.dt) @ \
             [float(p["gain"]), float(p.get("gain_lead", 0.0))]
 
     def describe_own(self, ctx, setting, coef):
