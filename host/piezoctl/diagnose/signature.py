@@ -346,6 +346,13 @@ def within_band(tr: Transfer, f_top: float) -> Transfer:
     return dataclasses.replace(tr, f=tr.f[keep], T=tr.T[keep], g2=tr.g2[keep], var=tr.var[keep])
 
 
+# Round 17: the fewest bins on which the shape test can decide. Its alternative (gain, latency, mode: 2 K - 4
+# degrees of freedom left on K complex bins, _shape_test) needs at least one left; on 2 bins it fits them as well as
+# the shape and F, computed on a degree of freedom clipped to 1, cannot pass (held-out s117-022: a true 0.4 ms delay,
+# fold ratios 0.54/0.54, p 1.5e-5, refused on 2 bins up to the drive's 203 Hz at F 5.8, p 0.14).
+SHAPE_MIN_BINS = 3
+
+
 def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: float | None = None) -> dict:
     """A delay's shape: ``T = a exp(-j 2 pi f d)``, ``d`` from 0 to 64 samples (quarter-sample steps).
 
@@ -354,7 +361,7 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
     it the transfer's informative bins are the stage's own modes rung by the drive's harmonics, which neither a
     delay nor the alternative fits, and their misfit decided F (development case s112-053, a true 0.8 ms delay on
     a base whose dynamics are static: F = 0.58 on 166 bins to 3.7 kHz, F = 27.9, p = 6e-5 on the 5 bins to the
-    drive's 167 Hz, delay 0.85 ms with the loop's sample). With fewer than 2 bins there (after
+    drive's 167 Hz, delay 0.85 ms with the loop's sample). With fewer than ``SHAPE_MIN_BINS`` bins there (after
     :func:`below_unity`) every bin is used, as before."""
     grid = np.arange(0.0, 64.25, 0.25) * dt
     shape = lambda d, f: np.exp(-2j * np.pi * f * d)   # noqa: E731
@@ -362,7 +369,7 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
     r = None
     if f_drive is not None and f_drive > f_band:
         part = within_band(tr, f_drive)
-        if below_unity(part).k >= 2:
+        if below_unity(part).k >= SHAPE_MIN_BINS:
             r = _shape_test(part, s2, f_band, dt, "delay", grid, shape, label + f" up to the drive's {f_drive:.0f} Hz")
     if r is None:
         r = _shape_test(tr, s2, f_band, dt, "delay", grid, shape, label)
