@@ -346,10 +346,10 @@ def within_band(tr: Transfer, f_top: float) -> Transfer:
     return dataclasses.replace(tr, f=tr.f[keep], T=tr.T[keep], g2=tr.g2[keep], var=tr.var[keep])
 
 
-# Round 17: the fewest bins on which the shape test can decide. Its alternative (gain, latency, mode: 2 K - 4
-# degrees of freedom left on K complex bins, _shape_test) needs at least one left; on 2 bins it fits them as well as
-# the shape and F, computed on a degree of freedom clipped to 1, cannot pass (held-out s117-022: a true 0.4 ms delay,
-# fold ratios 0.54/0.54, p 1.5e-5, refused on 2 bins up to the drive's 203 Hz at F 5.8, p 0.14).
+# Round 17: the fewest bins on which the shape test is an F test. Its alternative (gain, latency, mode: 2 K - 4
+# degrees of freedom left on K complex bins, _shape_test) needs at least one left; on 2 bins it has none (the F's
+# degree of freedom is clipped to 1) and its p says nothing (development s117-022: a true 0.4 ms delay, fold ratios
+# 0.54/0.54, p 1.5e-5, refused on 2 bins up to the drive's 203 Hz at F 5.8, p 0.14; named on every bin).
 SHAPE_MIN_BINS = 3
 
 
