@@ -223,3 +223,16 @@ def test_delay_check_uses_every_bin_when_the_drive_band_holds_too_few():
     assert not np.any((tr.f > 10.0) & (tr.f <= 10.5))
     r = sig.check_delay(tr, s2, 5.0, DT, 10.5)   # one bin (10 Hz) up to this drive band: too few
     assert r["figures"]["bins_informative"] == tr.k and r["passed"]
+
+
+def test_delay_check_needs_a_degree_of_freedom_left_to_the_alternative():
+    """Round 17 (development s117-022, s116-038): on 2 bins up to the drive band the alternative (gain, latency,
+    mode) has no degree of freedom left, so the shape is not testable there; from ``SHAPE_MIN_BINS`` = 3 bins on
+    the drive band is tested."""
+    xs, ys, tr, s2 = _case(lambda x: _delay(x, 8))
+    lo = tr.f[tr.f > 5.0]
+    two, three = 0.5 * (lo[1] + lo[2]), 0.5 * (lo[2] + lo[3])   # drive bands holding 2 and 3 bins above 5 Hz
+    r2 = sig.check_delay(tr, s2, 5.0, DT, two)
+    assert not r2["testable"] and r2["passed"] and r2["figures"]["bins"] == 2
+    r3 = sig.check_delay(tr, s2, 5.0, DT, three)
+    assert r3["testable"] and r3["figures"]["bins_informative"] == 3 and r3["figures"]["f_max_hz"] <= three

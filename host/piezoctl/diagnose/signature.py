@@ -346,6 +346,14 @@ def within_band(tr: Transfer, f_top: float) -> Transfer:
     return dataclasses.replace(tr, f=tr.f[keep], T=tr.T[keep], g2=tr.g2[keep], var=tr.var[keep])
 
 
+# Round 17: the fewest bins on which the shape test is an F test. Its alternative (gain, latency, mode: 2 K - 4
+# degrees of freedom left on K complex bins, _shape_test) needs at least one left; on 2 bins it has none (the F's
+# degree of freedom is clipped to 1) and its p says nothing either way (development s117-022, a true 0.4 ms delay
+# refused on 2 bins up to the drive's 203 Hz at F 5.8, p 0.14; s116-038, a true 1.9 ms delay passed on 2 bins at
+# F 1850, p 5e-4, and refused on every bin to 5 kHz, F 0.61, where the stage's modes decide, round 14).
+SHAPE_MIN_BINS = 3
+
+
 def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: float | None = None) -> dict:
     """A delay's shape: ``T = a exp(-j 2 pi f d)``, ``d`` from 0 to 64 samples (quarter-sample steps).
 
@@ -354,16 +362,23 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
     it the transfer's informative bins are the stage's own modes rung by the drive's harmonics, which neither a
     delay nor the alternative fits, and their misfit decided F (development case s112-053, a true 0.8 ms delay on
     a base whose dynamics are static: F = 0.58 on 166 bins to 3.7 kHz, F = 27.9, p = 6e-5 on the 5 bins to the
-    drive's 167 Hz, delay 0.85 ms with the loop's sample). With fewer than 2 bins there (after
-    :func:`below_unity`) every bin is used, as before."""
+    drive's 167 Hz, delay 0.85 ms with the loop's sample). With fewer than 2 bins there (after :func:`below_unity`)
+    every bin is used, as before; with 2 (round 17: fewer than ``SHAPE_MIN_BINS``) the shape is not testable where
+    the delay acts, and every bin is where it is not: not testable, as a shape test on too few bins is."""
     grid = np.arange(0.0, 64.25, 0.25) * dt
     shape = lambda d, f: np.exp(-2j * np.pi * f * d)   # noqa: E731
     label = "phase linear in frequency through zero with a flat magnitude of a delay"
     r = None
     if f_drive is not None and f_drive > f_band:
         part = within_band(tr, f_drive)
-        if below_unity(part).k >= 2:
+        k = below_unity(part).k
+        if k >= SHAPE_MIN_BINS:
             r = _shape_test(part, s2, f_band, dt, "delay", grid, shape, label + f" up to the drive's {f_drive:.0f} Hz")
+        elif k >= 2:
+            r = {"term": "delay", "testable": False, "passed": True,
+                 "figures": {"bins": k, "bins_informative": part.k, "identified_band_hz": float(f_band)},
+                 "reason": f"{k} informative bins where |T| is not above 1 up to the drive's {f_drive:.0f} Hz: too "
+                           f"few for the shape test (at least {SHAPE_MIN_BINS})"}
     if r is None:
         r = _shape_test(tr, s2, f_band, dt, "delay", grid, shape, label)
     r["figures"]["delay_s"] = r["figures"].pop("setting", None)
