@@ -22,7 +22,7 @@ from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg
-from .misfit import credited_ratio, ratios_above
+from .misfit import credited_ratio, ratios_above, ratios_where
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import SIGNATURES, attribute, creep_on_steps, signature_tests
 from .solve import lstsq_box as _lstsq_box, train_rows
@@ -492,6 +492,27 @@ def _nuis(ctx, term, train, test, rows, dynamics: bool = True, initial: bool = T
     return (N[train_rows(train, rows)], N[test], nuisance_bounds(ctx, term, N, initial))
 
 
+BEYOND_GUARD_S = 0.1   # [s] after the drive comes back into the calibrated range (run.OUT_GUARD_S)
+
+
+def beyond_calibrated_mask(ctx) -> np.ndarray:
+    """Settled samples (concatenated) where the drive is beyond the calibrated drive range
+    ``[ctx.cal_u_lo, ctx.cal_u_hi]`` or left it less than ``BEYOND_GUARD_S`` before: where a term of the drive
+    beyond the calibrated edge (``Term.acts_beyond_calibration``) can act, a backlash holding it while the drive
+    turns back. All False when no calibrated range is known."""
+    out = []
+    for s, v in zip(ctx.signals, ctx.valid):
+        b = np.zeros(s.u.size, bool)
+        if ctx.cal_u_hi > ctx.cal_u_lo:
+            b = (s.u > ctx.cal_u_hi) | (s.u < ctx.cal_u_lo)
+            g = max(1, int(round(BEYOND_GUARD_S / s.dt)))
+            c = np.cumsum(b.astype(int))
+            prev = np.concatenate([np.zeros(g, int), c[:-g]]) if c.size > g else np.zeros(c.size, int)
+            b = (c - prev) > 0
+        out.append(b[v])
+    return np.concatenate(out)
+
+
 def residual(ctx):
     return np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
 
@@ -554,6 +575,14 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         if fr_above is not None:
             whole = {"above_hz": float(edge), "fold_ratios": list(fold_ratios), "credited_ratio": cr}
             fold_ratios, cr = fr_above, cr_above
+    if term.acts_beyond_calibration and whole is None and all(st is not None for st in best_st):
+        # round 17: a knee setting in both folds acts only beyond the edge: sized on the samples where it can act
+        w = beyond_calibrated_mask(ctxs[0])[used]
+        fr_w, cr_w = ratios_where(rb_res, pred_after[used], fold_all[used], w, ctxs[0].misfit) if np.any(w) else (
+            None, None)
+        if fr_w is not None:
+            whole = {"beyond_calibrated_range": True, "fold_ratios": list(fold_ratios), "credited_ratio": cr}
+            fold_ratios, cr = fr_w, cr_w
     significant = bool(within(max(fold_ratios)) and p < p_max and dbic < 0)
     veto = None
     # round 13: data that cannot credit it; round 15: vetoed whether or not it passed, so that it is no pair's
