@@ -70,3 +70,40 @@ def test_the_mask_holds_the_guard_after_the_drive_returns():
 def test_only_the_asymmetric_term_is_sized_beyond_the_edge():
     assert TERMS["asymmetric_hysteresis"].acts_beyond_calibration
     assert not any(t.acts_beyond_calibration for n, t in TERMS.items() if n != "asymmetric_hysteresis")
+
+
+def _ctx_two_recordings(dt=1e-3):
+    """Two recordings: the first leaves the calibrated range 0..120 V, the second stays inside it."""
+    u0 = np.concatenate([np.full(200, 60.0), np.full(100, 140.0), np.full(200, 60.0)])
+    u1 = np.full(500, 60.0)
+    sig = [types.SimpleNamespace(u=u, dt=dt) for u in (u0, u1)]
+    return types.SimpleNamespace(signals=sig, valid=[np.ones(500, bool)] * 2, cal_u_lo=0.0, cal_u_hi=120.0,
+                                 names=["beyond.csv", "inside.csv"])
+
+
+def _cand(name, worse_inside):
+    """A candidate of ``name`` whose exact folds lower the first recording's error and scale the second's SSE."""
+    from piezoctl.diagnose.select import _worsened
+    ex = [{"per_recording": [(4.0, 1.0), (1.0, worse_inside)]} for _ in (0, 1)]
+    c = types.SimpleNamespace(term=TERMS[name], worsened=_worsened(ex, ["beyond.csv", "inside.csv"]))
+    return c, ex
+
+
+def test_a_sensor_curve_that_worsens_the_in_range_recording_is_contradicted():
+    from piezoctl.diagnose.select import _static_map_contradicted
+    ctx = _ctx_two_recordings()
+    c, ex = _cand("sensor_nonlinearity", 9.0)   # inside.csv 3x worse
+    why = _static_map_contradicted(c, ex, ctx)
+    assert why is not None and "inside.csv" in why and "3.00x" in why
+    c, ex = _cand("sensor_nonlinearity", 1.5)   # 1.22x: within WORSEN_MAX
+    assert _static_map_contradicted(c, ex, ctx) is None
+
+
+def test_only_a_static_map_and_only_when_a_recording_leaves_the_range():
+    from piezoctl.diagnose.select import _static_map_contradicted
+    ctx = _ctx_two_recordings()
+    c, ex = _cand("saturation", 9.0)            # not a map of the output: the caution only
+    assert c.worsened is not None and _static_map_contradicted(c, ex, ctx) is None
+    ctx.signals[0].u = np.full(500, 60.0)       # every recording in range: the in-range sensor curve as before
+    c, ex = _cand("sensor_nonlinearity", 9.0)
+    assert _static_map_contradicted(c, ex, ctx) is None

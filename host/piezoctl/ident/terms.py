@@ -102,6 +102,7 @@ class Term:
     #                                 diagnose.misfit.ratios_above; read through ``ctx.cal_band_hz``)
     acts_beyond_calibration = False  # it acts only where the drive left the calibrated range: sized on those
     #                                  samples (round 17, diagnose.misfit.ratios_where)
+    static_output_map = False   # a static map of the measured output (round 17, select._static_map_contradicted)
 
     def applicable(self, ctx) -> bool:
         return True
@@ -1013,6 +1014,7 @@ class SensorOffset(Term):
 class SensorNonlinearity(Term):
     name = "sensor_nonlinearity"
     intercept = True
+    static_output_map = True   # round 17: contradicted by an in-range recording it makes worse (select)
     signature = "static function of the measured displacement"
 
     @staticmethod
