@@ -81,29 +81,45 @@ def _ctx_two_recordings(dt=1e-3):
                                  names=["beyond.csv", "inside.csv"])
 
 
-def _cand(name, worse_inside):
-    """A candidate of ``name`` whose exact folds lower the first recording's error and scale the second's SSE."""
-    from piezoctl.diagnose.select import _worsened
+def _cand(name, worse_inside, worse_without=None, monkeypatch=None):
+    """A candidate of ``name`` whose exact folds lower the first recording's error and scale the second's SSE by
+    ``worse_inside``; refitted without its intercept (select._exact_fold, patched) by ``worse_without``."""
+    from piezoctl.diagnose import select as S
     ex = [{"per_recording": [(4.0, 1.0), (1.0, worse_inside)]} for _ in (0, 1)]
-    c = types.SimpleNamespace(term=TERMS[name], worsened=_worsened(ex, ["beyond.csv", "inside.csv"]))
-    return c, ex
+    c = S.Candidate(term=TERMS[name], ratio=0.5, fold_ratios=[0.5, 0.5], nrmse_before=1.0, nrmse_after=0.5, t=5.0,
+                    p=1e-6, n_active=10, p_max=1e-3, dbic=-10.0, n_eff=100.0, significant=True,
+                    setting=[None, None], coef=[np.array([1.0, 2.0, 0.3])] * 2)
+    c.worsened = S._worsened(ex, ["beyond.csv", "inside.csv"])
+    seen = []
+
+    def fake_exact(ctx, cand, f, fold_all, recs):
+        seen.append([float(x[-1]) for x in cand.coef])
+        w = worse_inside if worse_without is None else worse_without
+        return {"per_recording": [(4.0, 1.0), (1.0, w)]}
+
+    if monkeypatch is not None:
+        monkeypatch.setattr(S, "_exact_fold", fake_exact)
+    return c, ex, seen
 
 
-def test_a_sensor_curve_that_worsens_the_in_range_recording_is_contradicted():
+def test_a_sensor_curve_that_worsens_the_in_range_recording_is_contradicted(monkeypatch):
     from piezoctl.diagnose.select import _static_map_contradicted
     ctx = _ctx_two_recordings()
-    c, ex = _cand("sensor_nonlinearity", 9.0)   # inside.csv 3x worse
-    why = _static_map_contradicted(c, ex, ctx)
+    c, ex, seen = _cand("sensor_nonlinearity", 9.0, 9.0, monkeypatch)   # inside.csv 3x worse, also without
+    why = _static_map_contradicted(c, ex, [ctx, ctx], None, None)
     assert why is not None and "inside.csv" in why and "3.00x" in why
-    c, ex = _cand("sensor_nonlinearity", 1.5)   # 1.22x: within WORSEN_MAX
-    assert _static_map_contradicted(c, ex, ctx) is None
+    assert seen and all(x == [0.0, 0.0] for x in seen)   # refitted with the intercept zeroed
+    c, ex, _ = _cand("sensor_nonlinearity", 9.0, 1.0, monkeypatch)   # the worsening was its intercept's level
+    assert _static_map_contradicted(c, ex, [ctx, ctx], None, None) is None
+    c, ex, seen = _cand("sensor_nonlinearity", 1.5, None, monkeypatch)   # 1.22x: within WORSEN_MAX, no refit
+    assert _static_map_contradicted(c, ex, [ctx, ctx], None, None) is None and not seen
 
 
-def test_only_a_static_map_and_only_when_a_recording_leaves_the_range():
+def test_only_a_static_map_and_only_when_a_recording_leaves_the_range(monkeypatch):
     from piezoctl.diagnose.select import _static_map_contradicted
     ctx = _ctx_two_recordings()
-    c, ex = _cand("saturation", 9.0)            # not a map of the output: the caution only
-    assert c.worsened is not None and _static_map_contradicted(c, ex, ctx) is None
-    ctx.signals[0].u = np.full(500, 60.0)       # every recording in range: the in-range sensor curve as before
-    c, ex = _cand("sensor_nonlinearity", 9.0)
-    assert _static_map_contradicted(c, ex, ctx) is None
+    c, ex, _ = _cand("saturation", 9.0, 9.0, monkeypatch)   # not a map of the output: the caution only
+    assert c.worsened is not None and _static_map_contradicted(c, ex, [ctx, ctx], None, None) is None
+    ctx.signals[0].u = np.full(500, 60.0)                   # every recording in range: the sensor curve as before
+    c, ex, _ = _cand("sensor_nonlinearity", 9.0, 9.0, monkeypatch)
+    assert _static_map_contradicted(c, ex, [ctx, ctx], None, None) is None
