@@ -100,7 +100,11 @@ def test_what_the_first_terms_refit_absorbs_is_not_credited_to_a_second():
     assert flex.shape[1] == 3   # its gain and the change to each of its two neighbours
     ctx.accepted_flex = flex
     nested = _evaluate(ctx, ASYM, np.random.default_rng(6), lambda s: left[s.index], accepted=["saturation"])
-    assert not nested.significant and min(nested.fold_ratios) > 0.9, (nested.fold_ratios, nested.p)
+    # round 17: a knee setting is sized on the samples beyond the calibrated range; the whole residual's fold
+    # ratios are kept beside them (``whole``) and are the ones this test always read
+    whole = nested.whole["fold_ratios"] if nested.whole else nested.fold_ratios
+    assert not nested.significant and min(whole) > 0.9, (whole, nested.p)
+    assert min(nested.fold_ratios) > 0.8, nested.fold_ratios   # beyond the edge too it fails the size gate
     other = _evaluate(ctx, ASYM, np.random.default_rng(7), lambda s: left[s.index] + _soften(s),
                       accepted=["saturation"])
     assert other.significant and max(other.fold_ratios) < 0.5, (other.fold_ratios, other.p)

@@ -28,7 +28,7 @@ from scipy import signal as sig
 
 from .significance import unique_labels
 
-__all__ = ["BANDS", "split_bands", "band_energy", "base_misfit", "credited_ratio", "ratios_above"]
+__all__ = ["BANDS", "split_bands", "band_energy", "base_misfit", "credited_ratio", "ratios_above", "ratios_where"]
 
 BANDS = ("level", "slow", "fast")
 
@@ -220,4 +220,46 @@ def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, mis
     else:
         m_fast = float(misfit["mse_um2"]["fast"]) if misfit else 0.0
     credited = (eb - ea) - min(max(eb - ea, 0.0), m_fast)
+    return frs, float(np.sqrt(max(1.0 - credited / eb, 0.0)))
+
+
+def ratios_where(e_before, correction, fold, where, misfit: dict | None) -> tuple:
+    """(fold ratios, credited ratio) of a candidate on the samples ``where`` alone (round 17).
+
+    A term that acts only where the drive left the calibrated range (the asymmetric term: an extra beyond a knee
+    at or beyond the calibrated edge) explains nothing elsewhere; there the residual is the base's misfit on the
+    in-range histories, which no such term can take and which says nothing about it. Its size is judged on the
+    samples where it can act, as :func:`ratios_above` judges a mode on the band where it acts. The credited ratio
+    subtracts the base's whole misfit energy per sample (every band of ``misfit["mse_um2"]``) from the
+    improvement there.
+
+    Parameters
+    ----------
+    e_before, correction : ndarray
+        The residual before the term (nested) and the term's held-out predicted correction [um], used samples.
+    fold : ndarray of int
+        Fold (0/1) of each sample; fold ratio f is scored on fold 1 - f, as in ``select._evaluate``.
+    where : ndarray of bool
+        The samples to judge on.
+    misfit : dict or None
+        ``base_misfit``'s result.
+
+    Returns
+    -------
+    (list of float, float)
+        The two fold ratios and the credited ratio on ``where``; (None, None) when a fold has no such sample.
+    """
+    e_before = np.asarray(e_before, float)
+    e_after = e_before - np.asarray(correction, float)
+    frs = []
+    for f in (1, 0):
+        t = where & (fold == f)
+        eb = float(np.sum(e_before[t] ** 2))
+        if eb <= 0:
+            return None, None
+        frs.append(float(np.sqrt(np.sum(e_after[t] ** 2) / eb)))
+    n = int(np.sum(where))
+    eb, ea = float(np.sum(e_before[where] ** 2)) / n, float(np.sum(e_after[where] ** 2)) / n
+    m = float(sum(misfit["mse_um2"].values())) if misfit else 0.0
+    credited = (eb - ea) - min(max(eb - ea, 0.0), m)
     return frs, float(np.sqrt(max(1.0 - credited / eb, 0.0)))

@@ -100,6 +100,9 @@ class Term:
     initial_state = False  # also against a bounded gain per recording on its unknown initial hysteresis state
     acts_above_calibration = False  # its effect lies above the calibration's band: sized there (round 16,
     #                                 diagnose.misfit.ratios_above; read through ``ctx.cal_band_hz``)
+    acts_beyond_calibration = False  # it acts only where the drive left the calibrated range: sized on those
+    #                                  samples (round 17, diagnose.misfit.ratios_where)
+    static_output_map = False   # a static map of the measured output (round 17, select._static_map_contradicted)
 
     def applicable(self, ctx) -> bool:
         return True
@@ -449,6 +452,8 @@ class AsymmetricHysteresis(Term):
     name = "asymmetric_hysteresis"
     stage = "hysteresis"
     intercept = True
+    acts_beyond_calibration = True   # knees at or beyond the calibrated edge (the whole-stroke setting is refused
+    #                                  in range, and beside a knee its bend inside the range is the base's)
     signature = "even function of the drive (loop not point-symmetric), or an extra beyond a knee on one side"
     KNEES = (0.0, 0.025, 0.05, 0.075, 0.1)   # knee beyond the calibrated edge, fraction of the drive span
     STEP = 0.025
@@ -1037,6 +1042,7 @@ class SensorOffset(Term):
 class SensorNonlinearity(Term):
     name = "sensor_nonlinearity"
     intercept = True
+    static_output_map = True   # round 17: contradicted by an in-range recording it makes worse (select)
     signature = "static function of the measured displacement"
 
     @staticmethod
