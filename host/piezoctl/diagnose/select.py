@@ -529,7 +529,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         best = best_setting(ctx, term, e, train, test, rows, N)
         best_st.append(best[0])
         pred_after[test] = best[3] - (e[test] - e_before[test])
-        if term.fit_model_alone:   # round 17: the model's coefficients fitted with the term's own columns alone
+        if term.fit_model_alone(ctx):   # round 17: the model's coefficients fitted with its own columns alone
             chosen.append(best_setting(ctx, term, e, train, test, rows))
         elif term.nested_dynamics or term.initial_state or ctx.accepted_flex is not None:   # the model's setting and
             Nm = _nuis(ctx, term, train, test, rows, dynamics=False, initial=False,    # coefficients: without the

@@ -100,11 +100,14 @@ class Term:
     initial_state = False  # also against a bounded gain per recording on its unknown initial hysteresis state
     acts_above_calibration = False  # its effect lies above the calibration's band: sized there (round 16,
     #                                 diagnose.misfit.ratios_above; read through ``ctx.cal_band_hz``)
-    fit_model_alone = False  # round 17: the model's setting and coefficients are fitted without the nested test's
-    #                          nuisance (the model will not have it), so the exact check simulates what was fitted
 
     def applicable(self, ctx) -> bool:
         return True
+
+    def fit_model_alone(self, ctx) -> bool:
+        """Round 17: the model's setting and coefficients are fitted with the term's own columns alone, without the
+        nested test's nuisance (the model will not have it), so that the exact check simulates what was fitted."""
+        return False
 
     def refuses(self, ctx) -> str | None:
         """Why these data cannot credit the term at all (the candidate is still evaluated and counted among the
@@ -561,8 +564,8 @@ class RateDependentHysteresis(Term):
     # round 17: the hysteresis groups' gains of the nested test were fitted with the term and left out of the model,
     # so the constant widening's nearly opposite pair (fitted beside them) was simulated without them: s117-035
     # (Maxwell slip, linearized 0.27/0.26) failed the exact check at 0.67/1.11, its slow triangles' squared error
-    # 19 -> 859 um^2; fitted alone the model is the one the exact check simulates (0.38/0.38)
-    fit_model_alone = True
+    # 19 -> 859 um^2; fitted alone the model is the one the exact check simulates (0.38/0.38). The gain law of a
+    # base without plays (the own-stage cases') keeps round 16's fit
     signature = ("residual of a loop whose width grows with |du/dt| (the plays' thresholds widen with the rate they "
                  "move at)")
     # at high rates a loop that widens and dynamics the calibration did not identify (a phase lag growing with
@@ -659,6 +662,9 @@ class RateDependentHysteresis(Term):
         x.setflags(write=False)
         ctx.refit_cache[key] = (ctx.base, ctx.signals, x)
         return x
+
+    def fit_model_alone(self, ctx) -> bool:
+        return self.has_plays(ctx)
 
     @staticmethod
     def has_plays(ctx) -> bool:
