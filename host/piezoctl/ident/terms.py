@@ -609,7 +609,7 @@ class RateDependentHysteresis(Term):
         return out
 
     def constant_widening(self, hp, v, ks=None) -> np.ndarray:
-        """(T, len(ks)) [um]: H with every play's threshold x (1 + k) minus H, for each k (default ``WIDTH_K``):
+        """(T, len(ks)) [um]: H with every play's threshold x (1 + k) minus H, for each k (default ``CONSTANT_K``):
         the rate-independent part of the width law, the nuisance the term is nested against."""
         ks = self.CONSTANT_K if ks is None else ks
         v = np.asarray(v, float)
