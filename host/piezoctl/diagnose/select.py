@@ -431,6 +431,11 @@ def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True, accept
         parts.append(dynamics_nuisance(ctx))
     if accepted and ctx.accepted_flex is not None:
         parts.append(ctx.accepted_flex)
+    own_test = getattr(term, "test_nuisance", None)   # a term's own test-only nuisance (round 17: the rate term's)
+    if own_test is not None:
+        x = own_test(ctx)
+        if x is not None and x.shape[1]:
+            parts.append(x)
     if term.initial_state and initial:
         parts.append(initial_state_nuisance(ctx))
     return np.hstack(parts) if parts else None
@@ -545,7 +550,9 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         best = best_setting(ctx, term, e, train, test, rows, N)
         best_st.append(best[0])
         pred_after[test] = best[3] - (e[test] - e_before[test])
-        if term.nested_dynamics or term.initial_state or ctx.accepted_flex is not None:   # the model's setting and
+        if term.fit_model_alone(ctx):   # round 17: the model's coefficients fitted with its own columns alone
+            chosen.append(best_setting(ctx, term, e, train, test, rows))
+        elif term.nested_dynamics or term.initial_state or ctx.accepted_flex is not None:   # the model's setting and
             Nm = _nuis(ctx, term, train, test, rows, dynamics=False, initial=False,    # coefficients: without the
                        accepted=False)                                                # columns it will not have
             chosen.append(best_setting(ctx, term, e, train, test, rows, Nm))
