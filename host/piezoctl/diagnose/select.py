@@ -779,7 +779,8 @@ def _worsened(ex, names):
     """(recording, factor) of the recording whose held-out RMS error (both folds) the term raises most, when
     beyond ``WORSEN_MAX``; else None. Reported with the effect, not a veto: as a veto (round 7) it also refused
     a true rate dependence and a true creep on held-out cases, whose refined models made a slow in-range
-    triangle 2.7 to 3.1x worse at the noise floor."""
+    triangle 2.7 to 3.1x worse at the noise floor (their effect depends on each recording's history). A veto only
+    for a term that is the same map on every recording (``Term.same_on_every_recording``: the sensor's curve)."""
     worst = None
     for i, n in enumerate(names):
         b = sum(x["per_recording"][i][0] for x in ex)
@@ -833,9 +834,17 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
         c.exact_before = float(np.sqrt(sum(x["sse_before"] for x in ex) / max(n_ex, 1)) / span)
         c.exact_after = float(np.sqrt(sum(x["sse_after"] for x in ex) / max(n_ex, 1)) / span)
         log(f"    exact {c.name}: {c.exact_fold_ratios} {c.exact_before:.4f} -> {c.exact_after:.4f}")
+        worse = _worsened(ex, fctx[0].names)
+        if max(c.exact_fold_ratios) < 1.0 and worse and c.term.same_on_every_recording:
+            # round 17: a static map of the reading is the sensor's, the same on every recording it reads; a fit
+            # that makes one of them worse is another recording's misfit (null s117-018: x4.64 on the triangle)
+            c.veto = (f"it is a property of the sensor, the same on every recording, but its exact refined model "
+                      f"makes {worse[0]} worse (held-out error x{worse[1]:.2f} > {sg.WORSEN_MAX:g})")
+            log(f"    {c.name}: {c.veto}")
+            continue
         if max(c.exact_fold_ratios) < 1.0:
             c.exact = ex
-            c.worsened = _worsened(ex, fctx[0].names)
+            c.worsened = worse
             return c
         c.veto = ("the exact simulation of the refined model with this term does not lower the held-out "
                   f"error in each fold (ratios {c.exact_fold_ratios[0]:.2f}, {c.exact_fold_ratios[1]:.2f})")

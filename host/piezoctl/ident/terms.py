@@ -100,6 +100,8 @@ class Term:
     initial_state = False  # also against a bounded gain per recording on its unknown initial hysteresis state
     acts_above_calibration = False  # its effect lies above the calibration's band: sized there (round 16,
     #                                 diagnose.misfit.ratios_above; read through ``ctx.cal_band_hz``)
+    same_on_every_recording = False  # a property of the sensor, one map of the reading wherever it reads: the
+    #                                  refined model may not make any recording worse (round 17; diagnose.select)
 
     def applicable(self, ctx) -> bool:
         return True
@@ -1009,6 +1011,7 @@ class SensorOffset(Term):
 class SensorNonlinearity(Term):
     name = "sensor_nonlinearity"
     intercept = True
+    same_on_every_recording = True
     signature = "static function of the measured displacement"
 
     @staticmethod
