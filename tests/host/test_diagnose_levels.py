@@ -68,3 +68,31 @@ def test_a_term_that_breaks_one_recording_is_flagged():
     broken = [{"per_recording": [(4.0, 0.5), (1.0, 4.0)]}, {"per_recording": [(4.0, 0.5), (1.0, 4.0)]}]
     name, k = _worsened(broken, ["walk", "triangle"])
     assert name == "triangle" and k == pytest.approx(2.0) and k > sg.WORSEN_MAX
+
+
+def test_a_sensor_curve_that_breaks_one_recording_is_vetoed_a_history_dependent_term_is_not():
+    # round 17 (null s117-018): the sensor's curve is one map of the reading on every recording; a history-dependent
+    # term (creep, rate) may leave one recording worse and is named with the caution only
+    import types
+    from piezoctl.diagnose import select as S
+    from piezoctl.ident.terms import TERMS
+    fctx = [types.SimpleNamespace(names=["walk", "triangle"])] * 2
+
+    def cand(name, per):
+        c = S.Candidate(term=TERMS[name], ratio=0.6, fold_ratios=[0.6, 0.6], nrmse_before=0.02, nrmse_after=0.012,
+                        t=5.0, p=1e-9, n_active=40, p_max=1e-3, dbic=-50.0, n_eff=500.0, significant=True,
+                        setting=[None, None], coef=[None, None], credited=0.6)
+        c.exact = [{"sse_before": sum(b for b, _ in per), "sse_after": sum(a for _, a in per), "n": 100,
+                    "per_recording": per, "params": {}} for _ in (0, 1)]
+        return c
+
+    broken = [(4.0, 1.0), (0.1, 0.5)]      # the walk 2x better, the triangle x2.24 worse; in all 0.73
+    fine = [(4.0, 1.0), (0.1, 0.11)]
+    c = cand("sensor_nonlinearity", broken)
+    assert S._first_exact([c], fctx, None, None, 1.0, lambda *a: None) is None
+    assert "the same on every recording" in c.veto and "triangle" in c.veto
+    c = cand("sensor_nonlinearity", fine)
+    assert S._first_exact([c], fctx, None, None, 1.0, lambda *a: None) is c and c.worsened is None
+    c = cand("creep", broken)
+    assert S._first_exact([c], fctx, None, None, 1.0, lambda *a: None) is c
+    assert c.veto is None and c.worsened[0] == "triangle"

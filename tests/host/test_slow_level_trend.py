@@ -4,7 +4,7 @@ each recording shows itself (slow_signature.level_trend_test and the attribution
 import numpy as np
 
 from piezoctl.diagnose.discriminate import separation_doc
-from piezoctl.diagnose.slow_signature import attribute, level_trend_test
+from piezoctl.diagnose.slow_signature import attribute, level_trend_test, trend_phrase
 from test_diagnose_slow import _cand, _ctx, _run, _test
 from test_slow_signature_levels import _misfit
 
@@ -95,3 +95,23 @@ def test_no_trend_test_on_the_calibrations_session_alone():
     ctx.offset_group, ctx.offset_sessions = [-1, -1, -1], []
     rec = np.zeros(10, int)
     assert level_trend_test([None, None], [None, None], np.zeros(10, int), np.zeros(10, int), rec, ctx, 100) is None
+
+
+def test_a_trend_back_towards_the_calibrations_zero_does_not_take_the_offsets_level():
+    # round 17, development s118-002 (offset -0.78 um, KP): the level trends +0.5 nm/s, back towards the
+    # calibration's zero; a warm-up since the calibration moves on in the direction of the level it reached
+    rng = np.random.default_rng(25)
+    ctx = _ctx(rng)
+    _misfit(ctx)
+    tr = _run(ctx, lambda s: -0.8 + _warmup(s) + _wander(s), rng)["sensor_offset"].trend
+    assert tr["trends"] and tr["levels_um"][0] < 0 < tr["slope_um_per_s"] and tr["against_level"], tr
+    assert "back towards the calibration's zero" in trend_phrase(tr)
+    same = _run(ctx, lambda s: 0.8 + _warmup(s) + _wander(s), rng)["sensor_offset"].trend
+    assert same["trends"] and not same["against_level"], same       # away from zero: a warm-up may have left it
+    for against, named in ((True, "sensor_offset"), (False, "thermal_drift")):
+        evals = [_cand("sensor_offset", True, 0.67), _cand("thermal_drift", False, 0.9, p=2.9e-4),
+                 _cand("creep", False, 1.0)]
+        drift, off = _test("thermal_drift", False, 1.0), _test("sensor_offset", True, 0.85)
+        drift.trend = off.trend = dict(_trend(True), slope_um_per_s=-1e-3 if against else 1e-3, against_level=against)
+        text = attribute(evals, [_test("creep", False, 1.0), drift, off])
+        assert evals[0].name == named and evals[0].significant, text

@@ -102,7 +102,8 @@ class Term:
     #                                 diagnose.misfit.ratios_above; read through ``ctx.cal_band_hz``)
     acts_beyond_calibration = False  # it acts only where the drive left the calibrated range: sized on those
     #                                  samples (round 17, diagnose.misfit.ratios_where)
-    static_output_map = False   # a static map of the measured output (round 17, select._static_map_contradicted)
+    same_on_every_recording = False  # a property of the sensor, one map of the reading wherever it reads: the
+    #                                  refined model may not make any recording worse (round 17; diagnose.select)
 
     def applicable(self, ctx) -> bool:
         return True
@@ -1091,7 +1092,7 @@ class SensorOffset(Term):
 class SensorNonlinearity(Term):
     name = "sensor_nonlinearity"
     intercept = True
-    static_output_map = True   # round 17: contradicted by an in-range recording it makes worse (select)
+    same_on_every_recording = True
     signature = "static function of the measured displacement"
 
     @staticmethod
