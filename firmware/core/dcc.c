@@ -1456,7 +1456,7 @@ static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *d
                                                              int16_t yd_q15)
 {
     acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
-    const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    const int16_t u = piezo_sat_q15_rnd24(acc);
     dcc->u_last_q15 = u;
     return u;
 }
