@@ -875,7 +875,7 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
  * run's weight sum; r10, ip scratch. Frame: [sp] order, #4 v, #8 xsat, #12
  * slope, #16 rmax, #20 old_end, #24 out_end, #28 psum, #32
  * &col_start[n_cols], #36 the sums' offset, #40 n2, #44 the next run out,
- * #48 r4 and #52 r9 while a zero block is stored, #56 out, #64 dcc.
+ * #56 out, #64 dcc (#48, #52 unused since round 17).
  */
 typedef char piezo_dcc_rise_m4_layout_check_t[
     (offsetof(struct piezo_dcc, order) == 8u && offsetof(struct piezo_dcc, n2_banded) == 41u &&
@@ -1136,12 +1136,22 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    ldr    ip, [r2, ip]\n"
         "    sub    lr, lr, ip\n"            /* csum = their weights' sum */
         "    smlal  r7, r8, r3, lr\n"        /* r csum */
-        "    str    r4, [sp, #48]\n"
-        "    str    r9, [sp, #52]\n"
-        "    mov    r9, r2\n"
-        "    dcc_scatter r9, r4, ip, r10\n"
-        "    ldr    r4, [sp, #48]\n"
-        "    ldr    r9, [sp, #52]\n"
+        /* [e, z) one by one first, then the block [z, end) is stored with
+         * z and e as the scatter's pointer and bound (both dead after it):
+         * no spill of r4 and r9 around it (round 17, 4 per such column) */
+        "26: cmp    r0, r2\n"
+        "    bhs    27f\n"
+        "    ldrh   ip, [r0], #4\n"
+        "    ldr    r10, [r5, ip, lsl #2]\n"
+        "    sub    r10, r3, r10\n"
+        "    str    r3, [r5, ip, lsl #2]\n"
+        "    ldr    ip, [r11, ip, lsl #2]\n"
+        "    smlal  r7, r8, r10, ip\n"
+        "    add    lr, lr, ip\n"
+        "    b      26b\n"
+        "27:\n"
+        "    dcc_scatter r2, r0, ip, r10\n"
+        "    b      .Ldr_rec\n"
         ".Ldr_each:\n"                        /* [e, z) move one by one */
         "    cmp    r0, r2\n"
         "    bhs    .Ldr_rec\n"
