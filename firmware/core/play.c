@@ -374,7 +374,10 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *c2, int3
  * runs (upi_rise below): each column's run stored two per pass (LDRD/STRD,
  * 3 per operator), its part of the sum one UMLAL + MLA for the bank; the
  * scan from the run's end at 11.5 per operator (run_w += w), each column's
- * state (its rest count) read and written once. */
+ * state (its rest count) read and written once. Round 17, second part: the
+ * scan reads the weights' copy beside the constants (8 bytes apart, one
+ * post-indexed load each; the pointer set once when a column's scan starts,
+ * none per column otherwise): 11 per operator. */
 
 static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play *p, int32_t u_q15, int32_t u_prev_q15)
 {
@@ -382,9 +385,11 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
     (void)u_q15;
     (void)u_prev_q15;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's rest
-     * count (n_r - m_j, uint16), r5 weight stride, r6 r7 r12 scratch, r8:r9
-     * acc, r10:r11 run_w, lr u; at [sp]: the thresholds, the column's
-     * weights' end (&w[n_r n_a + j]), the counts' end, n_r * 4; p at [sp, #16] */
+     * count (n_r - m_j, uint16), r6 r7 r12 scratch, r8:r9 acc, r10:r11
+     * run_w, lr u; at [sp]: the thresholds, W = c2 + 4 - 2 f (the weights'
+     * copy beside the constants: the weight of the output at fp is at
+     * W + 2 fp; round 17, second part), the counts' end, n_r * 4; p at
+     * [sp, #16] */
     __asm__ volatile(
         "    push   {r0, r4-r11, lr}\n"
         "    sub    sp, #16\n"
@@ -399,15 +404,14 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    ldr    r4, [r0, #8]\n"           /* the constants, */
         "    ldr    r7, [r0, #12]\n"          /* n_ops pairs of them: the rest counts follow */
         "    ldr    r3, [r0, #0]\n"           /* coef */
+        "    sub    r5, r4, r2, lsl #1\n"     /* c2 - 2 f */
         "    add    r4, r4, r7, lsl #3\n"
         "    ldrh   r12, [r3, #12]\n"         /* n_r */
         "    cmp    r12, #0\n"
         "    beq    7f\n"
         "    ldrh   r7, [r3, #14]\n"          /* n_a */
         "    ldr    r0, [r3, #0]\n"           /* r */
-        "    ldr    r3, [r3, #8]\n"           /* w */
-        "    lsl    r5, r7, #2\n"             /* the weights' stride */
-        "    mla    r3, r12, r5, r3\n"        /* &w[n_r n_a]: column 0's weights' end */
+        "    add    r3, r5, #4\n"             /* W */
         "    add    r7, r4, r7, lsl #1\n"     /* the counts' end */
         "    cmp    r6, #1\n"
         "    bne    8f\n"
@@ -423,11 +427,8 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "9:  lsl    r12, r12, #2\n"
         "    stm    sp, {r0, r3, r7, r12}\n"
         "1:  ldrh   r7, [r4]\n"               /* column: its rest */
-        "    ldrd   r1, r0, [sp]\n"           /* rp = r, the column's weights' end */
+        "    ldrd   r1, r0, [sp]\n"           /* rp = r, W */
         "    add    r3, r2, r12\n"            /* the column's end */
-        "    add    r6, r0, #4\n"
-        "    str    r6, [sp, #4]\n"           /* the next column's */
-        "    mls    r0, r7, r5, r0\n"         /* wp: the first weight after the run */
         "    sub    r6, r3, r7, lsl #2\n"     /* the run's end */
         "    sub    r6, r6, #4\n"             /* its stores two per pass while fp < r6 */
         "    cmp    r2, r6\n"
@@ -444,17 +445,17 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    str    r7, [r2], #4\n"
         "30: subs   r6, r3, r2\n"             /* the scan from the run's end */
         "    beq    4f\n"
+        "    add    r0, r0, r2, lsl #1\n"     /* wp = W + 2 fp: its weight */
         "    tst    r6, #4\n"
         "    beq    2f\n"
-        "    sub    r0, r0, r5\n"             /* odd: enter at the pair's second, whose weight is [r0 + r5] */
-        "    b      3f\n"
+        "    b      3f\n"                    /* odd: enter at the pair's second */
         "2:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
         "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    ldr    r6, [r0]\n"               /* the pair's weights at r0 and r0 + r5, */
+        "    ldr    r6, [r0], #8\n"           /* the pair's weights, 8 bytes apart */
         "    smlal  r8, r9, r6, r7\n"
         "    adds   r10, r10, r6\n"           /* run_w += w */
         "    adc    r11, r11, r6, asr #31\n"
@@ -464,8 +465,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    ldr    r6, [r0, r5]\n"
-        "    add    r0, r0, r5, lsl #1\n"     /* one step of two strides per pass */
+        "    ldr    r6, [r0], #8\n"
         "    smlal  r8, r9, r6, r7\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r6, asr #31\n"
