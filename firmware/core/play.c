@@ -386,10 +386,10 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
     (void)u_prev_q15;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's rest
      * count (n_r - m_j, uint16), r6 r7 r12 scratch, r8:r9 acc, r10:r11
-     * run_w, lr u; at [sp]: the thresholds, W = c2 + 4 - 2 f (the weights'
-     * copy beside the constants: the weight of the output at fp is at
-     * W + 2 fp; round 17, second part), the counts' end, n_r * 4; p at
-     * [sp, #16] */
+     * run_w, lr u, r5 the counts' end; at [sp]: W = c2 + 4 - 2 f (the
+     * weights' copy beside the constants: the weight of the output at fp is
+     * at W + 2 fp; round 17, second part), the thresholds, n_r * 4 (one LDM
+     * per column); p at [sp, #16] */
     __asm__ volatile(
         "    push   {r0, r4-r11, lr}\n"
         "    sub    sp, #16\n"
@@ -404,15 +404,15 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    ldr    r4, [r0, #8]\n"           /* the constants, */
         "    ldr    r7, [r0, #12]\n"          /* n_ops pairs of them: the rest counts follow */
         "    ldr    r3, [r0, #0]\n"           /* coef */
-        "    sub    r5, r4, r2, lsl #1\n"     /* c2 - 2 f */
+        "    add    r0, r4, #4\n"
+        "    sub    r0, r0, r2, lsl #1\n"     /* W */
         "    add    r4, r4, r7, lsl #3\n"
         "    ldrh   r12, [r3, #12]\n"         /* n_r */
         "    cmp    r12, #0\n"
         "    beq    7f\n"
         "    ldrh   r7, [r3, #14]\n"          /* n_a */
-        "    ldr    r0, [r3, #0]\n"           /* r */
-        "    add    r3, r5, #4\n"             /* W */
-        "    add    r7, r4, r7, lsl #1\n"     /* the counts' end */
+        "    ldr    r3, [r3, #0]\n"           /* r */
+        "    add    r5, r4, r7, lsl #1\n"     /* the counts' end */
         "    cmp    r6, #1\n"
         "    bne    8f\n"
         "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */
@@ -422,12 +422,12 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    movs   r11, #0\n"
         "    mov    r6, r4\n"
         "81: strh   r12, [r6], #2\n"
-        "    cmp    r6, r7\n"
+        "    cmp    r6, r5\n"
         "    bne    81b\n"
         "9:  lsl    r12, r12, #2\n"
-        "    stm    sp, {r0, r3, r7, r12}\n"
+        "    stm    sp, {r0, r3, r12}\n"
         "1:  ldrh   r7, [r4]\n"               /* column: its rest */
-        "    ldrd   r1, r0, [sp]\n"           /* rp = r, W */
+        "    ldm    sp, {r0, r1, r12}\n"      /* W, rp = r, n_r * 4 */
         "    add    r3, r2, r12\n"            /* the column's end */
         "    sub    r6, r3, r7, lsl #2\n"     /* the run's end */
         "    sub    r6, r6, #4\n"             /* its stores two per pass while fp < r6 */
@@ -475,8 +475,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    lsr    r6, r6, #2\n"
         "    strh   r6, [r4], #2\n"
         "    mov    r2, r3\n"                  /* the next column starts where this one ends */
-        "    ldrd   r7, r12, [sp, #8]\n"      /* the counts' end, n_r * 4 */
-        "    cmp    r4, r7\n"
+        "    cmp    r4, r5\n"
         "    bne    1b\n"
         "    ldr    r0, [sp, #16]\n"          /* p */
         "    strd   r10, r11, [r0, #32]\n"    /* run_w */
