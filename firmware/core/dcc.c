@@ -1092,7 +1092,7 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    mov    lr, #0\n"
         /* operators that do not move, then (a suffix) all that do */
         "22: cmp    r0, r1\n"
-        "    bhs    23f\n"
+        "    bhs    .Ldr_next\n"            /* none moves: no run out (round 17) */
         "    ldrh   ip, [r0]\n"
         "    ldr    ip, [r5, ip, lsl #2]\n"
         "    cmp    ip, r3\n"
@@ -1103,9 +1103,7 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    mov    r2, r1\n"                /* z: from z on at 0 */
         "    ldr    ip, [sp, #28]\n"
         "    cmp    ip, #0\n"
-        "    beq    .Ldr_each\n"
-        "    cmp    r0, r1\n"
-        "    bhs    .Ldr_each\n"
+        "    beq    .Ldr_each\n"            /* (r0 < r1 here) */
         "    ldrh   ip, [r1, #-4]\n"
         "    ldr    ip, [r5, ip, lsl #2]\n"
         "    cmp    ip, #0\n"
@@ -1165,8 +1163,7 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    b      .Ldr_each\n"
 
         ".Ldr_rec:\n"                         /* the run out: [q, end) */
-        "    sub    r2, r1, r6\n"
-        "    cmp    r2, #0\n"
+        "    subs   r2, r1, r6\n"            /* (two positions in one array: no overflow) */
         "    ble    .Ldr_next\n"
         "    ldr    r10, [sp, #44]\n"
         "    ldr    ip, [sp, #24]\n"
