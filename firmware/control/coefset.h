@@ -111,7 +111,7 @@ typedef struct {
     int16_t psi_q15[PIEZO_CS_MAX_RKP_OPS];
     int32_t w_q24[PIEZO_CS_MAX_RKP_OPS];
     int32_t inv_state_q15[PIEZO_CS_MAX_CPI + PIEZO_CS_MAX_UPI_R * PIEZO_CS_MAX_UPI_A];
-    int64_t inv_work_q39[PIEZO_CS_MAX_UPI_R * PIEZO_CS_MAX_UPI_A];
+    int64_t inv_work_q39[PIEZO_EUPI_INV_WORK_LEN(PIEZO_CS_MAX_UPI_R, PIEZO_CS_MAX_UPI_A)];
 } piezo_ff_state_t;
 
 /* The commit sweep (see above). */

@@ -875,7 +875,7 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
  * run's weight sum; r10, ip scratch. Frame: [sp] order, #4 v, #8 xsat, #12
  * slope, #16 rmax, #20 old_end, #24 out_end, #28 psum, #32
  * &col_start[n_cols], #36 the sums' offset, #40 n2, #44 the next run out,
- * #48 r4 and #52 r9 while a zero block is stored, #56 out, #64 dcc.
+ * #56 out, #64 dcc (#48, #52 unused since round 17).
  */
 typedef char piezo_dcc_rise_m4_layout_check_t[
     (offsetof(struct piezo_dcc, order) == 8u && offsetof(struct piezo_dcc, n2_banded) == 41u &&
@@ -1092,7 +1092,7 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    mov    lr, #0\n"
         /* operators that do not move, then (a suffix) all that do */
         "22: cmp    r0, r1\n"
-        "    bhs    23f\n"
+        "    bhs    .Ldr_next\n"            /* none moves: no run out (round 17) */
         "    ldrh   ip, [r0]\n"
         "    ldr    ip, [r5, ip, lsl #2]\n"
         "    cmp    ip, r3\n"
@@ -1103,9 +1103,7 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    mov    r2, r1\n"                /* z: from z on at 0 */
         "    ldr    ip, [sp, #28]\n"
         "    cmp    ip, #0\n"
-        "    beq    .Ldr_each\n"
-        "    cmp    r0, r1\n"
-        "    bhs    .Ldr_each\n"
+        "    beq    .Ldr_each\n"            /* (r0 < r1 here) */
         "    ldrh   ip, [r1, #-4]\n"
         "    ldr    ip, [r5, ip, lsl #2]\n"
         "    cmp    ip, #0\n"
@@ -1136,12 +1134,22 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    ldr    ip, [r2, ip]\n"
         "    sub    lr, lr, ip\n"            /* csum = their weights' sum */
         "    smlal  r7, r8, r3, lr\n"        /* r csum */
-        "    str    r4, [sp, #48]\n"
-        "    str    r9, [sp, #52]\n"
-        "    mov    r9, r2\n"
-        "    dcc_scatter r9, r4, ip, r10\n"
-        "    ldr    r4, [sp, #48]\n"
-        "    ldr    r9, [sp, #52]\n"
+        /* [e, z) one by one first, then the block [z, end) is stored with
+         * z and e as the scatter's pointer and bound (both dead after it):
+         * no spill of r4 and r9 around it (round 17, 4 per such column) */
+        "26: cmp    r0, r2\n"
+        "    bhs    27f\n"
+        "    ldrh   ip, [r0], #4\n"
+        "    ldr    r10, [r5, ip, lsl #2]\n"
+        "    sub    r10, r3, r10\n"
+        "    str    r3, [r5, ip, lsl #2]\n"
+        "    ldr    ip, [r11, ip, lsl #2]\n"
+        "    smlal  r7, r8, r10, ip\n"
+        "    add    lr, lr, ip\n"
+        "    b      26b\n"
+        "27:\n"
+        "    dcc_scatter r2, r0, ip, r10\n"
+        "    b      .Ldr_rec\n"
         ".Ldr_each:\n"                        /* [e, z) move one by one */
         "    cmp    r0, r2\n"
         "    bhs    .Ldr_rec\n"
@@ -1155,8 +1163,7 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    b      .Ldr_each\n"
 
         ".Ldr_rec:\n"                         /* the run out: [q, end) */
-        "    sub    r2, r1, r6\n"
-        "    cmp    r2, #0\n"
+        "    subs   r2, r1, r6\n"            /* (two positions in one array: no overflow) */
         "    ble    .Ldr_next\n"
         "    ldr    r10, [sp, #44]\n"
         "    ldr    ip, [sp, #24]\n"
@@ -1456,7 +1463,7 @@ static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *d
                                                              int16_t yd_q15)
 {
     acc += (int64_t)yd_q15 * dcc->coeffs->g_q24;
-    const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    const int16_t u = piezo_sat_q15_rnd24(acc);
     dcc->u_last_q15 = u;
     return u;
 }

@@ -116,5 +116,5 @@ int16_t piezo_eupi_process(struct piezo_eupi *m, int16_t u_q15)
     acc += piezo_play_process_cpi(&m->cpi, u_q15);
     acc += piezo_play_process_upi(&m->upi, u_q15);
     acc += piezo_eupi_poly_q39(c->p_q24, c->n_p, c->p0_q24, u_q15);
-    return piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    return piezo_sat_q15_rnd24(acc);
 }

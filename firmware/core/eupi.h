@@ -54,7 +54,7 @@
 /* Entries of the caller's state (int32) and work (int64) arrays. */
 #define PIEZO_EUPI_STATE_LEN(n_cpi, n_upi_r, n_upi_a) \
     ((size_t)(n_cpi) + (size_t)(n_upi_r) * (size_t)(n_upi_a))
-#define PIEZO_EUPI_WORK_LEN(n_upi_r, n_upi_a) ((size_t)(n_upi_r) * (size_t)(n_upi_a))
+#define PIEZO_EUPI_WORK_LEN(n_upi_r, n_upi_a) PIEZO_PLAY_WORK_LEN(n_upi_r, n_upi_a)
 
 /* Coefficients: constant, may be shared. */
 struct piezo_eupi_coef {

@@ -59,7 +59,7 @@ int16_t piezo_eupi_inv_process(struct piezo_eupi_inv *c, int16_t yr_q15)
     /* u = G1^{-1}[v], clamped to the drive range. */
     int64_t acc = (int64_t)k->a0_inv_q24 * v;
     acc += piezo_play_process_cpi(&c->cpi_inv, v);
-    const int16_t u = piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    const int16_t u = piezo_sat_q15_rnd24(acc);
     /* G2(k) = G_UPI[u] + P(u) - k_ex u, kept in Q39 for the next sample. */
     /* P(u) - k_ex u = p0 2^15 + (hu - k_ex) u exactly: two SMLALs onto the
      * bank's sum instead of forming p0 2^15 and k_ex u apart (round 16);

@@ -72,6 +72,28 @@ static inline int16_t piezo_sat_q15(int64_t x)
 #endif
 }
 
+/** piezo_sat_q15(piezo_rshift_rnd64(x, 24)): a Q39 (or q24 x q15) sum
+ * rounded to q15 and clamped, for every int64 x.
+ *
+ * With SSAT (round 17, 2 instructions fewer than the general form's range
+ * test and branch): y = x + 2^23 = H 2^32 + L, and y >> 24 = H 2^8 + (L >> 24)
+ * with L >> 24 in [0, 255]. H clamped to [-256, 255] (SSAT #9) leaves the
+ * value exact when H is in that range (|y >> 24| < 2^16 then, no int32
+ * overflow), and otherwise leaves it beyond the q15 range on the same side
+ * (>= 255 2^8 > 32767, or <= -2^16 + 255 < -32768), so SSAT #16 of it gives
+ * the same limit as the clamp of the true value. */
+static inline int16_t piezo_sat_q15_rnd24(int64_t x)
+{
+#if defined(__ARM_FEATURE_SAT)
+    const int64_t y = x + ((int64_t)1 << 23);
+    const int32_t hs = (int32_t)__builtin_arm_ssat((int32_t)(y >> 32), 9u);
+    const uint32_t v = ((uint32_t)hs << 8) | ((uint32_t)y >> 24);
+    return (int16_t)(int32_t)__builtin_arm_ssat((int32_t)v, 16u);
+#else
+    return piezo_sat_q15(piezo_rshift_rnd64(x, 24u));
+#endif
+}
+
 /** acc + a * b in int64 (|a * b| <= 2^62; the caller keeps the sum in
  * range, as for the C expression), one SMLAL on Thumb-2.
  *

@@ -146,5 +146,5 @@ int16_t piezo_kp_process(struct piezo_kp *kp, int16_t u_q15)
     }
     kp->acc = acc;
     kp->u_prev_q15 = u_q15;
-    return piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    return piezo_sat_q15_rnd24(acc);
 }

@@ -10,20 +10,28 @@
  * The upper branch hi_ij(u) = A_j(u) + c_ij with A_j(u) = rshift_rnd(a_j u, 24)
  * (one rounding per slope and sample) and c_ij = rshift_rnd(a_j r_i, 24)
  * (init). The constants are q15 integers, |c| < 2^27 (a < 2^31, r <= 2^20),
- * stored as an int32 array in the caller's int64 work array (two per word,
- * by memcpy; the Thumb-2 steps read them as int32), column by column:
- * constant j * n_r + i.
+ * stored in the caller's int64 work array (by memcpy; the Thumb-2 steps
+ * read them as int32), column by column, each beside its operator's weight
+ * (round 17, second part): word k = j * n_r + i holds c_ij in its first four
+ * bytes and a copy of w_ij (coef->w_q24[i n_a + j]) in its last four, so
+ * that the falling step reads a pair of operators' constants and weights
+ * by one LDM (no strided weight pointer).
  */
 static inline int32_t c_get(const int64_t *c2, size_t k)
 {
     int32_t v; /* through memcpy: the words are int64 objects (one LDR on the M4) */
-    memcpy(&v, (const unsigned char *)c2 + k * sizeof v, sizeof v);
+    memcpy(&v, (const unsigned char *)c2 + k * 2u * sizeof v, sizeof v);
     return v;
 }
 
 static inline void c_set(int64_t *c2, size_t k, int32_t v)
 {
-    memcpy((unsigned char *)c2 + k * sizeof v, &v, sizeof v);
+    memcpy((unsigned char *)c2 + k * 2u * sizeof v, &v, sizeof v);
+}
+
+static inline void cw_set(int64_t *c2, size_t k, int32_t w)
+{
+    memcpy((unsigned char *)c2 + (k * 2u + 1u) * sizeof w, &w, sizeof w);
 }
 
 /* A_j(u) = rshift_rnd(a_j u, 24): |a u| < 2^31 * 2^20, so |A| < 2^27. */
@@ -49,7 +57,7 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
         if (coef->a_q24 == NULL || work == NULL) {
             return PIEZO_EINVAL;
         }
-        if (work_len < n_ops) {
+        if (work_len < PIEZO_PLAY_WORK_LEN(coef->n_r, coef->n_a)) {
             return PIEZO_ERANGE;
         }
         for (size_t j = 0; j < coef->n_a; j++) {
@@ -72,11 +80,12 @@ int piezo_play_init(struct piezo_play *p, const struct piezo_play_coef *coef,
     p->c2_q15 = coef->n_a > 0u ? work : NULL;
     p->n_ops = n_ops;
     /* Constants of the upper branch, c_ij = rshift_rnd(a_j r_i, 24) (q15),
-     * column by column: constant j * n_r + i (c_get). */
+     * column by column: constant j * n_r + i (c_get), each with its weight */
     for (size_t i = 0; i < coef->n_r && coef->n_a > 0u; i++) {
         for (size_t j = 0; j < coef->n_a; j++) {
             c_set(work, j * coef->n_r + i,
                   (int32_t)piezo_rshift_rnd64((int64_t)coef->a_q24[j] * coef->r_q15[i], 24u));
+            cw_set(work, j * coef->n_r + i, coef->w_q24[i * coef->n_a + j]);
         }
     }
     piezo_play_reset(p);
@@ -166,21 +175,22 @@ static int64_t play_full(struct piezo_play *p, int32_t u_q15)
  * column found from the outputs' by one add). A loop alone
  * in assembly inside the C function costs more in spills than it saves. */
 struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack */
-    uintptr_t c_f;       /* 0: c - f (addresses): a column's constants start at c_f + fp */
+    uintptr_t c_f;       /* 0: c - 2 f (addresses): a column's pairs start at c_f + 2 fp */
     int32_t *f;          /* 4: the column's outputs (column by column); updated per column */
     uint32_t f_step;     /* 8: n_r * 4, bytes of a column of outputs */
-    intptr_t w_a;        /* 12: w - a (addresses): column j's first weight (row-major) is &a[j] + w_a */
-    int32_t u_8;         /* 16: u 2^8, SMMULR's operand */
-    int32_t k;           /* 20: the lower branch's test constant K */
-    const int32_t *a_end;/* 24: one past the last slope */
-    const int32_t *r;    /* 28: thresholds; p sits at 32 */
+    int32_t u_8;         /* 12: u 2^8, SMMULR's operand */
+    int32_t k;           /* 16: the lower branch's test constant K */
+    const int32_t *a_end;/* 20: one past the last slope */
+    const int32_t *r;    /* 24: thresholds */
+    uint32_t pad;        /* 28: p sits at 32 */
 };
-/* the first six words in one LDM per column, the set-up's eight in one STM
+/* the first five words in one LDM per column, the set-up's seven in one STM
  * (round 16: 15 -> 10 per column, 24 -> 20 to enter; round 17: the slope's
- * pointer kept in r10, u 2^8 and K loaded with the rest) */
-typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, w_a) == 12u &&
-                                                 offsetof(struct upi_fall_args, a_end) == 24u &&
-                                                 offsetof(struct upi_fall_args, r) == 28u &&
+ * pointer kept in r10, u 2^8 and K loaded with the rest; the weights with
+ * the constants, no weight pointer per column) */
+typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, u_8) == 12u &&
+                                                 offsetof(struct upi_fall_args, a_end) == 20u &&
+                                                 offsetof(struct upi_fall_args, r) == 24u &&
                                                  sizeof(struct upi_fall_args) == 32u) ? 1 : -1];
 /* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
@@ -198,10 +208,10 @@ typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u 
 static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_play *p)
 {
     (void)p;
-    /* r1 cp (the constants c_ij, int32), r2 fp, r3 the column's end of fp,
-     * r4 wp, r5 weight stride, r6 A_j = rshift_rnd(a_j u, 24), r8:r9 acc,
-     * r10 &a_j (then the next slope's), r7 r11 r12 scratch, lr u, r0 the
-     * thresholds in the lower-branch loop; the column state at [sp] */
+    /* r1 cp (the pairs (c_ij, w_ij), int32 each), r2 fp, r3 the column's
+     * end of fp, r6 A_j = rshift_rnd(a_j u, 24), r8:r9 acc, r10 &a_j (then
+     * the next slope's), r4 r5 r7 r11 r12 scratch, lr u, r0 the thresholds
+     * in the lower-branch loop; the column state at [sp] */
     __asm__ volatile(
         "    push   {r0, r4-r11, lr}\n"       /* p at [sp, #32] once the state is below it */
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
@@ -210,17 +220,14 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldr    ip, [r0, #0]\n"           /* coef */
         "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    r1, [r0, #8]\n"           /* c */
+        "    ldr    r1, [r0, #8]\n"           /* the pairs */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
         "    ldrh   r3, [ip, #12]\n"          /* n_r */
         "    ldrh   r5, [ip, #14]\n"          /* n_a */
         "    ldr    r10, [ip, #4]\n"          /* a */
-        "    ldr    r4, [ip, #8]\n"           /* w */
         "    ldr    r12, [ip, #0]\n"          /* r */
-        "    sub    r1, r1, r2\n"
-        "    sub    r4, r4, r10\n"             /* w - a: a column's first weight is a_j's address + it */
-        "    lsl    r5, r5, #2\n"
-        "    add    r11, r10, r5\n"
+        "    sub    r1, r1, r2, lsl #1\n"     /* c - 2 f: a column's pairs are at it + 2 fp */
+        "    add    r11, r10, r5, lsl #2\n"   /* a_end */
         "    lsl    r6, lr, #8\n"             /* u 2^8 (fits: |u| <= 2^20) */
         "    movs   r7, #0\n"                 /* K: the lower branch can win iff */
         "    cmp    lr, #0\n"                 /* ((a_j - K) ^ (u >> 31)) < 0: u > 0 and */
@@ -229,12 +236,11 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    it     lt\n"                     /* never at u = 0 (K = 0, a > 0) */
         "    addlt  r7, r7, #1\n"
         "8:  lsls   r3, r3, #2\n"
-        "    stm    sp, {r1, r2, r3, r4, r6, r7, r11, r12}\n"
+        "    stm    sp, {r1, r2, r3, r6, r7, r11, r12}\n"
         "    beq    7f\n"                     /* n_r == 0 (the lsls) */
-        "1:  ldm    sp, {r1, r2, r3, r4, r6, r7}\n" /* column (r10 = &a_j) */
-        "    add    r1, r1, r2\n"             /* its constants */
+        "1:  ldm    sp, {r1, r2, r3, r6, r7}\n" /* column (r10 = &a_j) */
+        "    add    r1, r1, r2, lsl #1\n"     /* its pairs */
         "    add    r3, r3, r2\n"             /* its outputs' end */
-        "    add    r4, r4, r10\n"             /* wp = w + j */
         "    ldr    r11, [r10], #4\n"          /* a_j */
         "    smmulr r6, r11, r6\n"            /* the rounded high word (a_j u 2^8 + 2^31) >> 32 */
         "    subs   r7, r11, r7\n"            /* is A_j = rshift_rnd(a_j u, 24) */
@@ -243,40 +249,34 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
         "    tst    r12, #4\n"
         "    beq    31f\n"
-        "    ldr    r11, [r1], #4\n"          /* odd: one first */
+        "    ldrd   r11, r4, [r1], #8\n"      /* odd: one first (its c and w) */
         "    ldr    r12, [r2]\n"
         "    add    r11, r11, r6\n"           /* hi = A_j + c */
         "    subs   r7, r11, r12\n"           /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r7\n"
+        "    smlal  r8, r9, r4, r7\n"
         "    cmp    r2, r3\n"
         "    beq    6f\n"
-        "31: ldrd   r7, r11, [r1], #8\n"      /* the pair's constants, */
+        "31: ldm    r1!, {r4, r5, r7, r11}\n" /* the pair's c, w, c, w */
         "    ldrd   r12, r0, [r2]\n"          /* its outputs */
-        "    add    r7, r7, r6\n"             /* hi = A_j + c */
-        "    subs   r12, r7, r12\n"           /* d = hi - F: F < hi ends the scan */
+        "    add    r4, r4, r6\n"             /* hi = A_j + c */
+        "    subs   r12, r4, r12\n"           /* d = hi - F: F < hi ends the scan */
         "    bgt    6f\n"
-        "    add    r11, r11, r6\n"
-        "    subs   r0, r11, r0\n"
+        "    add    r7, r7, r6\n"
+        "    subs   r0, r7, r0\n"
         "    bgt    32f\n"                    /* the second ends it: the first alone moves */
-        "    strd   r7, r11, [r2], #8\n"
-        "    ldr    r7, [r4]\n"               /* the pair's weights at r4 and r4 + r5, */
-        "    smlal  r8, r9, r7, r12\n"
-        "    ldr    r11, [r4, r5]\n"
-        "    add    r4, r4, r5, lsl #1\n"     /* one step of two strides per pass (r4 is dead at 6) */
+        "    strd   r4, r7, [r2], #8\n"
+        "    smlal  r8, r9, r5, r12\n"
         "    smlal  r8, r9, r11, r0\n"
         "    cmp    r2, r3\n"
         "    bne    31b\n"
         "    b      6f\n"
-        "32: str    r7, [r2], #4\n"
-        "    ldr    r7, [r4]\n"
-        "    smlal  r8, r9, r7, r12\n"
+        "32: str    r4, [r2], #4\n"
+        "    smlal  r8, r9, r5, r12\n"
         "    b      6f\n"
-        "5:  ldr    r0, [sp, #28]\n"           /* with the lower branch: its prefix, one per pass */
-        "51: ldr    r11, [r1], #4\n"
+        "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
+        "51: ldrd   r11, r4, [r1], #8\n"       /* c, w */
         "    add    r11, r11, r6\n"            /* hi = A_j + c */
         "    ldr    r7, [r0], #4\n"
         "    sub    r7, lr, r7\n"              /* lo = u - r */
@@ -287,9 +287,7 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    blt    6f\n"                      /* F < hi ends the scan */
         "    str    r7, [r2], #4\n"
         "    sub    r7, r7, r12\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r7\n"
+        "    smlal  r8, r9, r4, r7\n"
         "    cmp    r2, r3\n"
         "    bne    51b\n"
         "    b      6f\n"
@@ -297,13 +295,11 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    subs   r7, r11, r12\n"
         "    bgt    6f\n"
         "    str    r11, [r2], #4\n"
-        "    ldr    r12, [r4]\n"
-        "    add    r4, r4, r5\n"
-        "    smlal  r8, r9, r12, r7\n"
+        "    smlal  r8, r9, r4, r7\n"
         "    cmp    r2, r3\n"
         "    bne    3b\n"                      /* the rest by the upper-branch loop */
         "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
-        "    ldr    r11, [sp, #24]\n"
+        "    ldr    r11, [sp, #20]\n"
         "    cmp    r10, r11\n"
         "    bne    1b\n"
         "7:  add    sp, #32\n"
@@ -378,7 +374,10 @@ static int64_t upi_fall(const struct piezo_play_coef *c, const int64_t *c2, int3
  * runs (upi_rise below): each column's run stored two per pass (LDRD/STRD,
  * 3 per operator), its part of the sum one UMLAL + MLA for the bank; the
  * scan from the run's end at 11.5 per operator (run_w += w), each column's
- * state (its rest count) read and written once. */
+ * state (its rest count) read and written once. Round 17, second part: the
+ * scan reads the weights' copy beside the constants (8 bytes apart, one
+ * post-indexed load each; the pointer set once when a column's scan starts,
+ * none per column otherwise): 11 per operator. */
 
 static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play *p, int32_t u_q15, int32_t u_prev_q15)
 {
@@ -386,9 +385,11 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
     (void)u_q15;
     (void)u_prev_q15;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's rest
-     * count (n_r - m_j, uint16), r5 weight stride, r6 r7 r12 scratch, r8:r9
-     * acc, r10:r11 run_w, lr u; at [sp]: the thresholds, the column's
-     * weights' end (&w[n_r n_a + j]), the counts' end, n_r * 4; p at [sp, #16] */
+     * count (n_r - m_j, uint16), r6 r7 r12 scratch, r8:r9 acc, r10:r11
+     * run_w, lr u, r5 the counts' end; at [sp]: W = c2 + 4 - 2 f (the
+     * weights' copy beside the constants: the weight of the output at fp is
+     * at W + 2 fp; round 17, second part), the thresholds, n_r * 4 (one LDM
+     * per column); p at [sp, #16] */
     __asm__ volatile(
         "    push   {r0, r4-r11, lr}\n"
         "    sub    sp, #16\n"
@@ -401,18 +402,17 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    ldrd   r10, r11, [r0, #32]\n"    /* run_w */
         "    ldr    r2, [r0, #4]\n"           /* f */
         "    ldr    r4, [r0, #8]\n"           /* the constants, */
-        "    ldr    r7, [r0, #12]\n"          /* n_ops of them: the rest counts follow */
+        "    ldr    r7, [r0, #12]\n"          /* n_ops pairs of them: the rest counts follow */
         "    ldr    r3, [r0, #0]\n"           /* coef */
-        "    add    r4, r4, r7, lsl #2\n"
+        "    add    r0, r4, #4\n"
+        "    sub    r0, r0, r2, lsl #1\n"     /* W */
+        "    add    r4, r4, r7, lsl #3\n"
         "    ldrh   r12, [r3, #12]\n"         /* n_r */
         "    cmp    r12, #0\n"
         "    beq    7f\n"
         "    ldrh   r7, [r3, #14]\n"          /* n_a */
-        "    ldr    r0, [r3, #0]\n"           /* r */
-        "    ldr    r3, [r3, #8]\n"           /* w */
-        "    lsl    r5, r7, #2\n"             /* the weights' stride */
-        "    mla    r3, r12, r5, r3\n"        /* &w[n_r n_a]: column 0's weights' end */
-        "    add    r7, r4, r7, lsl #1\n"     /* the counts' end */
+        "    ldr    r3, [r3, #0]\n"           /* r */
+        "    add    r5, r4, r7, lsl #1\n"     /* the counts' end */
         "    cmp    r6, #1\n"
         "    bne    8f\n"
         "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */
@@ -422,16 +422,13 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    movs   r11, #0\n"
         "    mov    r6, r4\n"
         "81: strh   r12, [r6], #2\n"
-        "    cmp    r6, r7\n"
+        "    cmp    r6, r5\n"
         "    bne    81b\n"
         "9:  lsl    r12, r12, #2\n"
-        "    stm    sp, {r0, r3, r7, r12}\n"
+        "    stm    sp, {r0, r3, r12}\n"
         "1:  ldrh   r7, [r4]\n"               /* column: its rest */
-        "    ldrd   r1, r0, [sp]\n"           /* rp = r, the column's weights' end */
+        "    ldm    sp, {r0, r1, r12}\n"      /* W, rp = r, n_r * 4 */
         "    add    r3, r2, r12\n"            /* the column's end */
-        "    add    r6, r0, #4\n"
-        "    str    r6, [sp, #4]\n"           /* the next column's */
-        "    mls    r0, r7, r5, r0\n"         /* wp: the first weight after the run */
         "    sub    r6, r3, r7, lsl #2\n"     /* the run's end */
         "    sub    r6, r6, #4\n"             /* its stores two per pass while fp < r6 */
         "    cmp    r2, r6\n"
@@ -448,17 +445,17 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    str    r7, [r2], #4\n"
         "30: subs   r6, r3, r2\n"             /* the scan from the run's end */
         "    beq    4f\n"
+        "    add    r0, r0, r2, lsl #1\n"     /* wp = W + 2 fp: its weight */
         "    tst    r6, #4\n"
         "    beq    2f\n"
-        "    sub    r0, r0, r5\n"             /* odd: enter at the pair's second, whose weight is [r0 + r5] */
-        "    b      3f\n"
+        "    b      3f\n"                    /* odd: enter at the pair's second */
         "2:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
         "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    ldr    r6, [r0]\n"               /* the pair's weights at r0 and r0 + r5, */
+        "    ldr    r6, [r0], #8\n"           /* the pair's weights, 8 bytes apart */
         "    smlal  r8, r9, r6, r7\n"
         "    adds   r10, r10, r6\n"           /* run_w += w */
         "    adc    r11, r11, r6, asr #31\n"
@@ -468,8 +465,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    subs   r7, r6, r7\n"            /* d = (u - r) - F: <= 0 ends the scan */
         "    ble    4f\n"
         "    str    r6, [r2], #4\n"
-        "    ldr    r6, [r0, r5]\n"
-        "    add    r0, r0, r5, lsl #1\n"     /* one step of two strides per pass */
+        "    ldr    r6, [r0], #8\n"
         "    smlal  r8, r9, r6, r7\n"
         "    adds   r10, r10, r6\n"
         "    adc    r11, r11, r6, asr #31\n"
@@ -479,8 +475,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    lsr    r6, r6, #2\n"
         "    strh   r6, [r4], #2\n"
         "    mov    r2, r3\n"                  /* the next column starts where this one ends */
-        "    ldrd   r7, r12, [sp, #8]\n"      /* the counts' end, n_r * 4 */
-        "    cmp    r4, r7\n"
+        "    cmp    r4, r5\n"
         "    bne    1b\n"
         "    ldr    r0, [sp, #16]\n"          /* p */
         "    strd   r10, r11, [r0, #32]\n"    /* run_w */
@@ -545,14 +540,14 @@ static inline void store_run(int32_t *f, const int32_t *r, size_t n, int32_t u, 
  * bank (p->run_w_q24, int64: |run_w| < 2^8 * 2^31, |d| <= 2^21, as the
  * classical run), and they are only stored; each column's scan goes on from
  * m_j. Each column keeps n_r - m_j (uint16, the operators after its run),
- * after the constants in the work array (bytes 4 n_ops + 2 j: the constants
- * take 4 n_ops of its 8 n_ops bytes).
+ * after the constants and weights in the work array (bytes 8 n_ops + 2 j:
+ * PIEZO_PLAY_WORK_LEN).
  * p->run_dir is +1 while they hold; a falling sample sets it to -1 and
  * reset to 0: the next rise starts every column's run anew.
  */
 static inline unsigned char *upi_runs(const struct piezo_play *p)
 {
-    return (unsigned char *)p->c2_q15 + p->n_ops * sizeof(int32_t);
+    return (unsigned char *)p->c2_q15 + p->n_ops * sizeof(int64_t);
 }
 
 static inline size_t m_get(const unsigned char *m, size_t j)

@@ -106,6 +106,14 @@ struct piezo_play_coef {
 };
 
 /* Instance: caller-owned; the arrays are the caller's too. */
+/* int64 entries of an unparallel bank's work array (piezo_play_init): one
+ * per operator (its constant c_ij and a copy of its weight), then the
+ * columns' rest counts (uint16 each) of the rising runs; 0 for a bank
+ * without operators or slopes. */
+#define PIEZO_PLAY_WORK_LEN(n_r, n_a)                                                              \
+    ((size_t)(n_r) * (size_t)(n_a) == 0u ? (size_t)0                                               \
+                                         : (size_t)(n_r) * (size_t)(n_a) + ((size_t)(n_a) + 3u) / 4u)
+
 struct piezo_play {
     const struct piezo_play_coef *coef;
     int32_t *f_q15;        /* [n_ops] operator outputs (state); UPI banks store
@@ -129,8 +137,10 @@ struct piezo_play {
 
 /*
  * Check the coefficients, bind the caller's arrays and reset.
- * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; work (int64) needs as
- * many for an unparallel bank and may be NULL (work_len 0) for a classical one.
+ * f_q15 needs f_len >= PIEZO_PLAY_N_OPS(n_r, n_a) entries; work (int64) needs
+ * PIEZO_PLAY_WORK_LEN(n_r, n_a) for an unparallel bank and may be NULL (work_len
+ * 0) for a classical one. The weights are copied into work: init again after
+ * changing coef's.
  * Returns PIEZO_OK, PIEZO_EINVAL (NULL pointer, r < 0 or r > WIDE_MAX,
  * a <= 0), PIEZO_EORDER (thresholds decreasing) or PIEZO_ERANGE (more than
  * PIEZO_PLAY_MAX_OPS operators, or an array too short).

@@ -119,5 +119,5 @@ int16_t piezo_rkp_process(struct piezo_rkp *rkp, int16_t u_q15)
     /* 4. operators and output */
     const int64_t acc = piezo_kp_step(&c->grid, rkp->psi_q15, u_q15, rkp->u_prev_q15, w);
     rkp->u_prev_q15 = u_q15;
-    return piezo_sat_q15(piezo_rshift_rnd64(acc, 24u));
+    return piezo_sat_q15_rnd24(acc);
 }

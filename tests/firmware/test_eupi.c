@@ -22,13 +22,14 @@ static const struct piezo_eupi_coef hot_coef = {
 };
 
 static int32_t state_buf[NCPI + NUPI];
-static int64_t work_buf[NUPI];
+#define NWORK PIEZO_EUPI_WORK_LEN(GOLDEN_EUPI_NUR, GOLDEN_EUPI_NUA)
+static int64_t work_buf[NWORK];
 
 static void run_case(const char *name, const struct piezo_eupi_coef *coef,
                      const int16_t *u, const int16_t *y, size_t n)
 {
     struct piezo_eupi m;
-    assert_int_equal(piezo_eupi_init(&m, coef, state_buf, NCPI + NUPI, work_buf, NUPI),
+    assert_int_equal(piezo_eupi_init(&m, coef, state_buf, NCPI + NUPI, work_buf, NWORK),
                      PIEZO_OK);
     for (size_t k = 0; k < n; k++) {
         assert_golden_i32(name, k, piezo_eupi_process(&m, u[k]), y[k]);
@@ -59,12 +60,12 @@ static void test_split_run_carries_state(void **state)
 {
     (void)state;
     static int32_t st2[NCPI + NUPI];
-    static int64_t wk2[NUPI];
+    static int64_t wk2[NWORK];
     struct piezo_eupi a;
     struct piezo_eupi b;
-    assert_int_equal(piezo_eupi_init(&a, &ref_coef, state_buf, NCPI + NUPI, work_buf, NUPI),
+    assert_int_equal(piezo_eupi_init(&a, &ref_coef, state_buf, NCPI + NUPI, work_buf, NWORK),
                      PIEZO_OK);
-    assert_int_equal(piezo_eupi_init(&b, &ref_coef, st2, NCPI + NUPI, wk2, NUPI), PIEZO_OK);
+    assert_int_equal(piezo_eupi_init(&b, &ref_coef, st2, NCPI + NUPI, wk2, NWORK), PIEZO_OK);
     for (size_t k = 0; k < GOLDEN_EUPI_SPLIT_HALF; k++) {
         assert_golden_i32("split block 1", k,
                           piezo_eupi_process(&a, golden_eupi_realistic_u[k]),
@@ -112,52 +113,52 @@ static void test_init_refuses_bad_coefficients(void **state)
     };
     struct piezo_eupi m;
     int32_t st[6];
-    int64_t wk[4];
+    int64_t wk[5]; /* 2 x 2 operators and the columns' rest counts */
 
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_OK);
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 5, wk, 4), PIEZO_ERANGE);
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 3), PIEZO_ERANGE);
-    assert_int_equal(piezo_eupi_init(&m, &c, NULL, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_OK);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 5, wk, 5), PIEZO_ERANGE);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_ERANGE);
+    assert_int_equal(piezo_eupi_init(&m, &c, NULL, 6, wk, 5), PIEZO_EINVAL);
     assert_int_equal(piezo_eupi_init(&m, &c, st, 6, NULL, 0), PIEZO_EINVAL);
     c.a0_q24 = 0;
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     c.a0_q24 = -5;
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     c.a0_q24 = PIEZO_Q24_ONE / 2;
     b[1] = -1; /* CPI weight < 0 */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     b[1] = 7;
     d[3] = -1; /* UPI weight < 0 */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     d[3] = 4000;
     r[1] = 32768; /* threshold not below 1 */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     r[1] = -2; /* negative threshold */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     r[1] = 16384;
     ru[0] = 9000; /* UPI thresholds descending */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EORDER);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EORDER);
     ru[0] = 0;
     r[0] = 20000; /* CPI thresholds descending */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EORDER);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EORDER);
     r[0] = 0;
     au[1] = 0; /* a_j must be > 0 */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     au[1] = 2 * PIEZO_Q24_ONE;
     c.upi.n_a = 0; /* a UPI grid without slopes */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     c.upi.n_a = 2;
     c.cpi.n_a = 1; /* the CPI bank is classical */
     c.cpi.a_q24 = au;
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     c.cpi.n_a = 0;
     c.n_p = PIEZO_EUPI_MAX_POLY + 1u;
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_ERANGE);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_ERANGE);
     c.n_p = 2;
     p[0] = INT32_MAX; /* 128 */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
     p[0] = (int32_t)(PIEZO_EUPI_POLY_SUM_MAX_Q24 - PIEZO_Q24_ONE / 50); /* sum = 64 */
-    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 4), PIEZO_OK);
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_OK);
 }
 
 int main(void)

@@ -16,13 +16,14 @@ static const struct piezo_eupi_inv_coef ref_coef = {
 };
 
 static int32_t state_buf[NCPI + NUPI];
-static int64_t work_buf[NUPI];
+#define NWORK PIEZO_EUPI_INV_WORK_LEN(GOLDEN_EUPI_INV_NUR, GOLDEN_EUPI_INV_NUA)
+static int64_t work_buf[NWORK];
 
 static void run_case(const char *name, const int16_t *yr, const int16_t *u, size_t n)
 {
     struct piezo_eupi_inv c;
     assert_int_equal(piezo_eupi_inv_init(&c, &ref_coef, state_buf, NCPI + NUPI,
-                                         work_buf, NUPI), PIEZO_OK);
+                                         work_buf, NWORK), PIEZO_OK);
     for (size_t k = 0; k < n; k++) {
         assert_golden_i32(name, k, piezo_eupi_inv_process(&c, yr[k]), u[k]);
     }
@@ -57,12 +58,12 @@ static void test_split_run_carries_state(void **state)
 {
     (void)state;
     static int32_t st2[NCPI + NUPI];
-    static int64_t wk2[NUPI];
+    static int64_t wk2[NWORK];
     struct piezo_eupi_inv a;
     struct piezo_eupi_inv b;
-    assert_int_equal(piezo_eupi_inv_init(&a, &ref_coef, state_buf, NCPI + NUPI, work_buf, NUPI),
+    assert_int_equal(piezo_eupi_inv_init(&a, &ref_coef, state_buf, NCPI + NUPI, work_buf, NWORK),
                      PIEZO_OK);
-    assert_int_equal(piezo_eupi_inv_init(&b, &ref_coef, st2, NCPI + NUPI, wk2, NUPI), PIEZO_OK);
+    assert_int_equal(piezo_eupi_inv_init(&b, &ref_coef, st2, NCPI + NUPI, wk2, NWORK), PIEZO_OK);
     for (size_t k = 0; k < GOLDEN_EUPI_INV_SPLIT_HALF; k++) {
         assert_golden_i32("split block 1", k,
                           piezo_eupi_inv_process(&a, golden_eupi_inv_realistic_yr[k]),
@@ -116,34 +117,34 @@ static void test_init_refuses_bad_coefficients(void **state)
     };
     struct piezo_eupi_inv inv;
     int32_t st[4];
-    int64_t wk[2];
+    int64_t wk[3]; /* 2 operators and the columns' rest counts */
 
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_OK);
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 3, wk, 2), PIEZO_ERANGE);
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 1), PIEZO_ERANGE);
-    assert_int_equal(piezo_eupi_inv_init(&inv, NULL, st, 4, wk, 2), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_OK);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 3, wk, 3), PIEZO_ERANGE);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_ERANGE);
+    assert_int_equal(piezo_eupi_inv_init(&inv, NULL, st, 4, wk, 3), PIEZO_EINVAL);
     c.a0_inv_q24 = 0;
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_EINVAL);
     c.a0_inv_q24 = 2 * PIEZO_Q24_ONE;
     ri[1] = PIEZO_PLAY_WIDE_MAX_Q15 + 1; /* beyond the wide range */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_EINVAL);
     ri[1] = 0;
     ri[0] = 5; /* descending */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EORDER);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_EORDER);
     ri[0] = 0;
     d[0] = -1; /* UPI weights stay >= 0 */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_EINVAL);
     d[0] = PIEZO_Q24_ONE / 100;
     au[0] = -1;
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_EINVAL);
     au[0] = PIEZO_Q24_ONE / 2;
     ru[0] = 32768; /* UPI threshold not below 1 */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_EINVAL);
     ru[0] = 1000;
     c.kex_q24 = 16 * PIEZO_Q24_ONE; /* |G2| bound above 16 FS */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_EINVAL);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_EINVAL);
     c.kex_q24 = -PIEZO_Q24_ONE; /* k_ex of either sign is fine */
-    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 2), PIEZO_OK);
+    assert_int_equal(piezo_eupi_inv_init(&inv, &c, st, 4, wk, 3), PIEZO_OK);
 }
 
 int main(void)

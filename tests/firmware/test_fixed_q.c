@@ -98,6 +98,40 @@ static void test_saturation_forms_match_int64(void **state)
     assert_true(piezo_add_sat_i32(INT32_MIN, -1) == INT32_MIN);
 }
 
+/* piezo_sat_q15_rnd24 (SSAT of the high word, then of the shifted word)
+ * against the clamp of the rounded int64 shift: every magnitude, the q15
+ * limits and the high word's clamp edges (H = 255, 256, -256, -257), ties of
+ * both signs. |x| < 2^62: the callers' sums, and x + 2^23 cannot overflow. */
+static int16_t ref_sat_q15_rnd24(int64_t x)
+{
+    return ref_sat_q15((x + ((int64_t)1 << 23)) >> 24);
+}
+
+static void test_sat_q15_rnd24_matches_int64(void **state)
+{
+    uint64_t seed = 777u;
+    (void)state;
+    static const int64_t q[] = {0, 1, -1, 32767, 32768, -32768, -32769, 65279, 65280, 65535, 65536,
+                                -65280, -65281, -65536, -65537, 1 << 20, -(1 << 20),
+                                (int64_t)1 << 37, -((int64_t)1 << 37)};
+    for (size_t k = 0; k < sizeof q / sizeof q[0]; k++) {
+        for (int64_t d = -((int64_t)1 << 23) - 1; d <= ((int64_t)1 << 23) + 1; d += ((int64_t)1 << 23) / 2) {
+            const int64_t x = q[k] * ((int64_t)1 << 24) + d;
+            assert_true(piezo_sat_q15_rnd24(x) == ref_sat_q15_rnd24(x));
+        }
+    }
+    for (int64_t hword = -300; hword <= 300; hword++) {
+        for (uint32_t lo = 0u; lo < 16u; lo++) {
+            const int64_t x = (int64_t)((uint64_t)hword << 32) + (int64_t)(lo * 0x11111111u);
+            assert_true(piezo_sat_q15_rnd24(x) == ref_sat_q15_rnd24(x));
+        }
+    }
+    for (int k = 0; k < 20000; k++) {
+        const int64_t x = (int64_t)lcg_next(&seed) >> (2u + (lcg_next(&seed) >> 58) % 62u);
+        assert_true(piezo_sat_q15_rnd24(x) == ref_sat_q15_rnd24(x));
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -105,6 +139,7 @@ int main(void)
         cmocka_unit_test(test_rshift_rnd_matches_golden),
         cmocka_unit_test(test_rounding_ties_go_up),
         cmocka_unit_test(test_saturation_forms_match_int64),
+        cmocka_unit_test(test_sat_q15_rnd24_matches_int64),
     };
     return cmocka_run_group_tests_name("fixed_q", tests, NULL, NULL);
 }

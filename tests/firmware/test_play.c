@@ -7,7 +7,8 @@
 #include "play_vectors.h"
 
 static int32_t f_buf[PIEZO_PLAY_MAX_OPS];
-static int64_t off_buf[PIEZO_PLAY_MAX_OPS];
+#define OFF_LEN (PIEZO_PLAY_MAX_OPS + 64)
+static int64_t off_buf[OFF_LEN];
 
 static const struct piezo_play_coef cpi_coef = {
     golden_play_cpi_r_q15, golden_play_cpi_a_q24, golden_play_cpi_w_q24,
@@ -30,7 +31,7 @@ static void run_case(const char *name, const struct piezo_play_coef *coef,
 {
     struct piezo_play p;
     assert_int_equal(piezo_play_init(&p, coef, f_buf, PIEZO_PLAY_MAX_OPS,
-                                     off_buf, PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+                                     off_buf, OFF_LEN), PIEZO_OK);
     const size_t n_ops = PIEZO_PLAY_N_OPS(coef->n_r, coef->n_a);
     for (size_t k = 0; k < n; k++) {
         /* assert_golden_i32 compares as long long: exact for int64 too */
@@ -82,13 +83,13 @@ static void test_split_run_carries_state(void **state)
 {
     (void)state;
     static int32_t f2[PIEZO_PLAY_MAX_OPS];
-    static int64_t off2[PIEZO_PLAY_MAX_OPS];
+    static int64_t off2[OFF_LEN];
     struct piezo_play a;
     struct piezo_play b;
     assert_int_equal(piezo_play_init(&a, &upi_coef, f_buf, PIEZO_PLAY_MAX_OPS,
-                                     off_buf, PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+                                     off_buf, OFF_LEN), PIEZO_OK);
     assert_int_equal(piezo_play_init(&b, &upi_coef, f2, PIEZO_PLAY_MAX_OPS,
-                                     off2, PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+                                     off2, OFF_LEN), PIEZO_OK);
     for (size_t k = 0; k < GOLDEN_PLAY_SPLIT_HALF; k++) {
         assert_golden_i32("split block 1", k, piezo_play_process(&a, golden_play_split_u[k]),
                           golden_play_split_acc[k]);
@@ -107,7 +108,7 @@ static void test_reset_zeroes_state(void **state)
     (void)state;
     struct piezo_play p;
     assert_int_equal(piezo_play_init(&p, &upi_coef, f_buf, PIEZO_PLAY_MAX_OPS,
-                                     off_buf, PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+                                     off_buf, OFF_LEN), PIEZO_OK);
     (void)piezo_play_process(&p, 30000);
     (void)piezo_play_process(&p, -30000);
     piezo_play_reset(&p);
@@ -128,33 +129,33 @@ static void test_init_refuses_bad_coefficients(void **state)
     int32_t w[6] = {1, 2, 3, 4, 5, 6};
     struct piezo_play_coef c = {r, a, w, 3, 2};
     int32_t f[6];
-    int64_t off[6];
+    int64_t off[7]; /* 6 operators, then the 2 columns' rest counts (one word) */
 
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_OK);
-    assert_int_equal(piezo_play_init(NULL, &c, f, 6, off, 6), PIEZO_EINVAL);
-    assert_int_equal(piezo_play_init(&p, NULL, f, 6, off, 6), PIEZO_EINVAL);
-    assert_int_equal(piezo_play_init(&p, &c, NULL, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_OK);
+    assert_int_equal(piezo_play_init(NULL, &c, f, 6, off, 7), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, NULL, f, 6, off, 7), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, NULL, 6, off, 7), PIEZO_EINVAL);
     assert_int_equal(piezo_play_init(&p, &c, f, 6, NULL, 0), PIEZO_EINVAL);
-    assert_int_equal(piezo_play_init(&p, &c, f, 5, off, 6), PIEZO_ERANGE);
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 5), PIEZO_ERANGE);
+    assert_int_equal(piezo_play_init(&p, &c, f, 5, off, 7), PIEZO_ERANGE);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_ERANGE);
     r[1] = 300; /* not ascending */
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EORDER);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_EORDER);
     r[1] = 200; /* equal thresholds are allowed */
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_OK);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_OK);
     r[0] = -1;
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_EINVAL);
     r[0] = 0;
     r[2] = PIEZO_PLAY_WIDE_MAX_Q15 + 1;
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_EINVAL);
     r[2] = PIEZO_PLAY_WIDE_MAX_Q15;
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_OK);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_OK);
     a[1] = 0;
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_EINVAL);
     a[1] = -5;
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_EINVAL);
     a[1] = 5;
     c.w_q24 = NULL;
-    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 6), PIEZO_EINVAL);
+    assert_int_equal(piezo_play_init(&p, &c, f, 6, off, 7), PIEZO_EINVAL);
     c.w_q24 = w;
     c.n_r = 129; /* 129 x 2 > PIEZO_PLAY_MAX_OPS */
     assert_int_equal(piezo_play_init(&p, &c, f, 1000, off, 1000), PIEZO_ERANGE);
@@ -175,7 +176,7 @@ static void test_branches_by_hand(void **state)
     int32_t a[1] = {PIEZO_Q24_ONE / 2};  /* 0.5 */
     struct piezo_play_coef c = {r, a, w, 1, 0};
     int32_t f[1];
-    int64_t off[1];
+    int64_t off[2]; /* 1 operator, then its column's rest count */
     const int32_t u[5] = {0, 16384, 32767, 16384, 0};
     const int32_t want[5] = {0, 8192, 24575, 24575, 8192};
     assert_int_equal(piezo_play_init(&p, &c, f, 1, NULL, 0), PIEZO_OK);
@@ -184,7 +185,7 @@ static void test_branches_by_hand(void **state)
         assert_golden_i32("cpi by hand", k, piezo_play_output(&p, 0), want[k]);
     }
     c.n_a = 1; /* F = max(u - 0.25, min(0.5 (u + 0.25), F)) */
-    assert_int_equal(piezo_play_init(&p, &c, f, 1, off, 1), PIEZO_OK);
+    assert_int_equal(piezo_play_init(&p, &c, f, 1, off, 2), PIEZO_OK);
     assert_true(piezo_play_process(&p, -16384) == (int64_t)-4096 * PIEZO_Q24_ONE);
     assert_int_equal(piezo_play_output(&p, 0), -4096);                    /* 0.5 (-0.5 + 0.25) */
     (void)piezo_play_process(&p, 32767);
@@ -265,7 +266,7 @@ static void test_runs_equal_eager_formula(void **state)
         const struct piezo_play_coef c = {r, a, w, n_r, n_a};
         struct piezo_play p;
         assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, off_buf,
-                                         PIEZO_PLAY_MAX_OPS), PIEZO_OK);
+                                         OFF_LEN), PIEZO_OK);
         memset(eager, 0, sizeof eager);
         memset(eager1, 0, sizeof eager1);
         int32_t u = 0;
@@ -478,7 +479,7 @@ static void test_upi_step_matches_c_step(void **state)
     (void)state;
     static int32_t r[PIEZO_PLAY_MAX_OPS], a[PIEZO_PLAY_MAX_OPS], w[PIEZO_PLAY_MAX_OPS];
     static int32_t f_c[PIEZO_PLAY_MAX_OPS];
-    static int64_t off_c[PIEZO_PLAY_MAX_OPS];
+    static int64_t off_c[OFF_LEN];
     static const uint16_t shapes[][3] = {
         /* n_r, n_a, input span (log2) */
         {10, 3, 15}, {9, 3, 16}, {1, 1, 15}, {2, 4, 15}, {11, 2, 20}, {16, 8, 15}, {40, 3, 15},
@@ -501,9 +502,9 @@ static void test_upi_step_matches_c_step(void **state)
         }
         const struct piezo_play_coef c = {r, a, w, n_r, n_a};
         struct piezo_play p, q;
-        assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, off_buf, PIEZO_PLAY_MAX_OPS),
+        assert_int_equal(piezo_play_init(&p, &c, f_buf, PIEZO_PLAY_MAX_OPS, off_buf, OFF_LEN),
                          PIEZO_OK);
-        assert_int_equal(piezo_play_init(&q, &c, f_c, PIEZO_PLAY_MAX_OPS, off_c, PIEZO_PLAY_MAX_OPS),
+        assert_int_equal(piezo_play_init(&q, &c, f_c, PIEZO_PLAY_MAX_OPS, off_c, OFF_LEN),
                          PIEZO_OK);
         struct walk wk = {0, 1, 0, 1};
         size_t falls = 0u;

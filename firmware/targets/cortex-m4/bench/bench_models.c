@@ -75,7 +75,7 @@ static const struct piezo_play_coef upi_coef = {bench_eupi_r_upi_q15, bench_eupi
                                                 BENCH_EUPI_NUR, BENCH_EUPI_NUA};
 static struct piezo_play play;
 static int32_t play_f[BENCH_EUPI_NUR * BENCH_EUPI_NUA];
-static int64_t play_off[BENCH_EUPI_NUR * BENCH_EUPI_NUA];
+static int64_t play_off[PIEZO_PLAY_WORK_LEN(BENCH_EUPI_NUR, BENCH_EUPI_NUA)];
 static void play_tick(uint32_t k)
 {
     piezo_bench_sink = (int32_t)(piezo_play_process(&play, piezo_bench_u[k]) >> 24);
@@ -89,7 +89,7 @@ static int32_t long_r[LONG_NR], long_a[LONG_NA], long_w[LONG_NR * LONG_NA];
 static const struct piezo_play_coef long_cpi_coef = {long_r, NULL, long_w, LONG_NR, 0};
 static const struct piezo_play_coef long_upi_coef = {long_r, long_a, long_w, LONG_NR, LONG_NA};
 #define LONG_F_LEN (LONG_NR * LONG_NA)
-#define LONG_OFF_LEN (LONG_NR * LONG_NA)
+#define LONG_OFF_LEN PIEZO_PLAY_WORK_LEN(LONG_NR, LONG_NA)
 static int32_t long_f[LONG_F_LEN];
 static int64_t long_off[LONG_OFF_LEN];
 
@@ -158,7 +158,7 @@ void piezo_bench_models(void)
                 play_tick);
     run_or_fail("play_upi10x3",
                 piezo_play_init(&play, &upi_coef, play_f, BENCH_EUPI_NUR * BENCH_EUPI_NUA, play_off,
-                                BENCH_EUPI_NUR * BENCH_EUPI_NUA) == PIEZO_OK,
+                                sizeof play_off / sizeof play_off[0]) == PIEZO_OK,
                 play_tick);
     long_banks_fill();
     run_or_fail("play_cpi40",
