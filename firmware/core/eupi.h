@@ -105,10 +105,13 @@ static inline int32_t piezo_eupi_poly_hu_q24(const int32_t *p_q24, uint16_t n_p,
     if (n_p == 0u) {
         return 0;
     }
-    /* h = p_Np; h = h * u + p_m down to m = 2; hu = h * u. */
-    int32_t h = p_q24[n_p - 1u];
-    for (size_t m = n_p - 1u; m > 0u; m--) {
-        h = (int32_t)(piezo_mul_rshift_rnd(h, u_q15, 15u) + p_q24[m - 1u]);
+    /* h = p_Np; h = h * u + p_m down to m = 2; hu = h * u. By a pointer
+     * that walks down to p_q24 (round 17: no index and its scaled address
+     * before the loop, 1 instruction per sample on Thumb-2). */
+    const int32_t *q = p_q24 + n_p;
+    int32_t h = *--q;
+    while (q != p_q24) {
+        h = (int32_t)(piezo_mul_rshift_rnd(h, u_q15, 15u) + *--q);
     }
     return (int32_t)piezo_mul_rshift_rnd(h, u_q15, 15u);
 }

@@ -100,10 +100,51 @@ static void test_rkp_kind_matches_kernels(void **state)
     assert_true(moved_w > ticks);       /* the density is not zero */
 }
 
+/* The DCC kind through piezo_ff_process (Thumb-2 on the Cortex-M4 since
+ * round 17): the output and the operators equal the DCC kernel called
+ * directly with the same line and the same applied drive, every tick. The
+ * applied drive is not the law's last output (a golden input sequence), so
+ * a lost u_last store shows: the law's own store makes them equal otherwise. */
+static void test_dcc_kind_matches_kernel(void **state)
+{
+    (void)state;
+    size_t ticks = 0, applied_differs = 0;
+    setup_rkp_set(); /* the grid, the line */
+    cs.kind = PIEZO_TABLE_KIND_KP_DCC;
+    for (uint16_t j = 0; j < rkp_std_NOPS; j++) {
+        cs.c_q24[j] = (int32_t)((j * 7919u) % 40000u) + 2000; /* positive, distinct */
+    }
+    cs.dcc.c_q24 = cs.c_q24;
+    assert_int_equal(piezo_ff_bind(&ff, &cs), PIEZO_OK);
+    ref_dcc_c = cs.dcc;
+    assert_int_equal(piezo_dcc_init(&ref_dcc, &ref_dcc_c, ref_cpsi, ref_zo, PIEZO_CS_MAX_RKP_OPS), PIEZO_OK);
+    piezo_dcc_const_weights(&ref_dcc);
+    int16_t last = 0;
+    for (size_t k = 0; k < sizeof rkp_case_random_u / sizeof rkp_case_random_u[0]; k++) {
+        const size_t n = sizeof rkp_case_random_u / sizeof rkp_case_random_u[0];
+        const int16_t u = rkp_case_random_u[k];
+        const int16_t r = rkp_case_random_u[(k + 7u) % n];
+        const int16_t got = piezo_ff_process(&ff, &cs, r, u);
+        ref_dcc.u_last_q15 = u;
+        const int16_t want = piezo_dcc_process(&ref_dcc, piezo_line_q15(r, Y_GAIN_Q24, Y_OFFSET_Q15));
+        assert_golden_i32("piezo_ff_process dcc", k, got, want);
+        for (uint16_t j = 0; j < rkp_std_NOPS; j++) {
+            assert_golden_i32("dcc psi", j, ff.dcc.psi_q15[j], ref_dcc.psi_q15[j]);
+        }
+        applied_differs += u != last;
+        last = got;
+        ticks++;
+    }
+    printf("dcc kind: %zu ticks, applied drive not the last output on %zu\n", ticks, applied_differs);
+    assert_true(ticks >= 100u);
+    assert_true(applied_differs > ticks / 2u);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_rkp_kind_matches_kernels),
+        cmocka_unit_test(test_dcc_kind_matches_kernel),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
