@@ -439,6 +439,23 @@ static void test_runs_on_random_walks(void **state)
     }
 }
 
+/* Two instances on one walk plane of L levels (seeded), d with the prefix
+ * sums when sums is set, both with constant weights: the Thumb-2 step's and
+ * the C step's twins of step_check and jump_check. */
+static void twin_init(uint16_t L, uint32_t seed, int sums, struct piezo_dcc_coeffs *dc, struct piezo_dcc *d,
+                      struct piezo_dcc *e)
+{
+    walk_rng = seed;
+    *dc = walk_plane(L);
+    assert_int_equal(piezo_dcc_init(d, dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    if (sums) {
+        assert_int_equal(with_sums(d, dc), 1);
+    }
+    assert_int_equal(piezo_dcc_init(e, dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
+    piezo_dcc_const_weights(d);
+    piezo_dcc_const_weights(e);
+}
+
 /* The step piezo_dcc_ops_update takes (on the Cortex-M4 the falling rows
  * in Thumb-2, round 15) against the C step (piezo_dcc_ops_update_c), two
  * instances on one plane and walk: every operator, the kept sum, the runs
@@ -447,16 +464,9 @@ static void test_runs_on_random_walks(void **state)
  * that took the runs. */
 static unsigned step_check(uint16_t L, uint32_t seed, size_t n, int sums)
 {
-    walk_rng = seed;
-    struct piezo_dcc_coeffs dc = walk_plane(L);
+    struct piezo_dcc_coeffs dc;
     struct piezo_dcc d, e;
-    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
-    if (sums) {
-        assert_int_equal(with_sums(&d, &dc), 1);
-    }
-    assert_int_equal(piezo_dcc_init(&e, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
-    piezo_dcc_const_weights(&d);
-    piezo_dcc_const_weights(&e);
+    twin_init(L, seed, sums, &dc, &d, &e);
     assert_true(d.runs && e.runs && (sums ? d.psum == sums_a : d.psum == NULL));
     struct walk w = {.v = dc.grid.nmin_q15, .dir = 1, .left = 0, .step = 0};
     unsigned falls = 0;
@@ -528,16 +538,9 @@ static uint8_t walk_line(const int16_t *key, uint16_t n, uint8_t k, int32_t t, u
  * on which the walk took three lines or more (the steps' bisection). */
 static unsigned jump_check(uint16_t L, uint32_t seed, size_t n, int sums)
 {
-    walk_rng = seed;
-    struct piezo_dcc_coeffs dc = walk_plane(L);
+    struct piezo_dcc_coeffs dc;
     struct piezo_dcc d, e;
-    assert_int_equal(piezo_dcc_init(&d, &dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
-    if (sums) {
-        assert_int_equal(with_sums(&d, &dc), 1);
-    }
-    assert_int_equal(piezo_dcc_init(&e, &dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
-    piezo_dcc_const_weights(&d);
-    piezo_dcc_const_weights(&e);
+    twin_init(L, seed, sums, &dc, &d, &e);
     assert_true(d.runs && d.n2_banded && d.n_rows == L && d.n_cols == L);
     /* the rows' keys (n1) and the columns' (n2), ascending: the plane's L levels */
     int16_t rows[WALK_MAX_L], cols[WALK_MAX_L];
