@@ -159,6 +159,13 @@ def credited_ratio(e_before, correction, rec, dt: float, misfit: dict | None) ->
     return ratio, {b: {"improvement_um2": float(g), "misfit_um2": float(x)} for b, g, x in zip(BANDS, gain, m)}
 
 
+def _one_band_credited(eb, ea, m) -> float:
+    """The credited ratio of one band (the module's rule with a single band): mean energies per sample before and
+    after the term ``eb`` > 0, ``ea``, and the base's misfit energy ``m`` there [um^2]."""
+    credited = (eb - ea) - min(max(eb - ea, 0.0), m)
+    return float(np.sqrt(max(1.0 - credited / eb, 0.0)))
+
+
 def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, misfit: dict | None) -> tuple:
     """(fold ratios, credited ratio) of a candidate on the residual above ``edge_hz`` (round 16).
 
@@ -219,8 +226,7 @@ def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, mis
         m_fast = float(misfit["above_um2"])
     else:
         m_fast = float(misfit["mse_um2"]["fast"]) if misfit else 0.0
-    credited = (eb - ea) - min(max(eb - ea, 0.0), m_fast)
-    return frs, float(np.sqrt(max(1.0 - credited / eb, 0.0)))
+    return frs, _one_band_credited(eb, ea, m_fast)
 
 
 def ratios_where(e_before, correction, fold, where, misfit: dict | None) -> tuple:
@@ -261,5 +267,4 @@ def ratios_where(e_before, correction, fold, where, misfit: dict | None) -> tupl
     n = int(np.sum(where))
     eb, ea = float(np.sum(e_before[where] ** 2)) / n, float(np.sum(e_after[where] ** 2)) / n
     m = float(sum(misfit["mse_um2"].values())) if misfit else 0.0
-    credited = (eb - ea) - min(max(eb - ea, 0.0), m)
-    return frs, float(np.sqrt(max(1.0 - credited / eb, 0.0)))
+    return frs, _one_band_credited(eb, ea, m)
