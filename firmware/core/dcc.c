@@ -411,6 +411,30 @@ static inline int32_t row_block_end(const int32_t *psi, int32_t p, int32_t end, 
     return lo;
 }
 
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* The law's output u = sat_q15(rshift_rnd(v C - kacc + yd g, 24)) from the
+ * new kacc in r2:r3, v in r4, yd in r1, the instance in ip (round 18: the
+ * steps end with it, so the law's tick reads kacc once and needs no frame
+ * of its own); u in r0 and u_last_q15. The rounding constant starts the sum
+ * (2^23 - kacc, both products by SMLAL); |v C|, |kacc| and |yd g| are each
+ * below 2^46 (|C| <= sum |c_j| < 2^31, c_abs_31), so the rounded value fits
+ * an int32 and SSAT alone clamps it. Clobbers r2, r3, r5, r6. */
+#define DCC_LAW_OUT_MACRO                                                                          \
+    "    .macro dcc_law_out\n"                                                                     \
+    "    ldr    r5, [ip, #16]\n"         /* C (its low word) */                                    \
+    "    ldr    r6, [ip, #0]\n"                                                                    \
+    "    rsbs   r2, r2, #0x800000\n"                                                              \
+    "    sbc    r3, r3, r3, lsl #1\n"    /* 2^23 - kacc */                                         \
+    "    ldr    r6, [r6, #28]\n"         /* g */                                                   \
+    "    smlal  r2, r3, r4, r5\n"                                                                  \
+    "    smlal  r2, r3, r1, r6\n"                                                                  \
+    "    lsrs   r2, r2, #24\n"                                                                    \
+    "    orr    r2, r2, r3, lsl #8\n"    /* acc >> 24 */                                           \
+    "    ssat   r0, #16, r2\n"                                                                    \
+    "    strh   r0, [ip, #36]\n"         /* u_last */                                              \
+    "    .endm\n"
+#endif
+
 /*
  * Falling to v with runs (const_w, n_rows, c_abs_31; docs/kernels-kp.md, "DCC:
  * runs"). In a row (one n1, index order = n2 order) psi is non-increasing
@@ -542,11 +566,10 @@ typedef char piezo_dcc_fall_m4_layout_check_t[
      offsetof(struct piezo_kp_grid, slope_q16) == 16u && offsetof(struct piezo_kp_grid, xsat_q15) == 20u &&
      offsetof(struct piezo_dcc_coeffs, c_q24) == 24u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, int32_t v)
+static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
 {
-    (void)dcc;
-    (void)v;
     __asm__ volatile(
+        DCC_LAW_OUT_MACRO
         /* psi[r0 .. r2) = r3 (index bounds; four per pass, as fill_i32);
          * clobbers r0, r6, ip */
         "    .macro dcc_fill\n"
@@ -600,16 +623,16 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "9:\n"
         "    .endm\n"
 
-        "    push   {r0, r4-r11, lr}\n"
+        "    push   {r0, r1, r4-r11, lr}\n"  /* dcc, yd kept for the output */
         "    sub    sp, #48\n"
         "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    r2, [ip, #0]\n"          /* n1 */
-        "    ldrsh  r3, [r0, #34]\n"         /* v_prev */
-        "    mov    r4, r1\n"                /* v */
+        "    ldr    r1, [ip, #0]\n"          /* n1 */
+        "    ldrsh  r2, [r0, #34]\n"         /* v_prev */
         "    ldr    r6, [ip, #20]\n"         /* xsat */
         "    ldr    r7, [ip, #16]\n"         /* slope */
         "    ldrsh  r8, [ip, #12]\n"         /* rmax */
-        "    stm    sp, {r2, r3, r4, r6, r7, r8}\n" /* the frame's first six words in one */
+        "    stm    sp, {r1, r2, r3, r6, r7, r8}\n" /* the frame's first six words in one (v in r3) */
+        "    sub    r6, r3, r6\n"            /* t = v - xsat */
         "    ldr    r11, [ip, #24]\n"        /* c */
         "    ldr    r5, [r0, #4]\n"          /* psi */
         "    ldr    r9, [r0, #52]\n"         /* psum */
@@ -620,8 +643,7 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         /* the band's first row (first_row_above: the first whose n1 exceeds
          * v - xsat), from the last falling tick's: up to two rows either
          * way one by one, beyond them a bisection (round 17) */
-        "    sub    r6, r1, r6\n"            /* t = v - xsat */
-        "    mov    lr, r2\n"                /* n1 */
+        "    mov    lr, r1\n"                /* n1 */
         "    ldrb   r2, [r0, #47]\n"         /* k = row_cur */
         "    cbz    r2, 11f\n"
         "    add    r9, r4, r2, lsl #1\n"
@@ -839,24 +861,26 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    blo    .Ldf_row\n"
 
         ".Ldf_done:\n"
-        "    ldr    r0, [sp, #48]\n"
-        "    ldrb   r1, [r0, #44]\n"
-        "    eor    r1, r1, #1\n"
-        "    strb   r1, [r0, #44]\n"         /* cur ^= 1 */
-        "    ldr    r1, [sp, #44]\n"
-        "    sub    r1, r10, r1\n"
-        "    lsr    r1, r1, #4\n"
-        "    strb   r1, [r0, #43]\n"         /* n_run */
-        "    ldrd   r2, r3, [r0, #24]\n"
+        "    ldrd   ip, r1, [sp, #48]\n"     /* dcc, yd */
+        "    ldrb   r0, [ip, #44]\n"
+        "    eor    r0, r0, #1\n"
+        "    strb   r0, [ip, #44]\n"         /* cur ^= 1 */
+        "    ldr    r0, [sp, #44]\n"
+        "    sub    r0, r10, r0\n"
+        "    lsr    r0, r0, #4\n"
+        "    strb   r0, [ip, #43]\n"         /* n_run */
+        "    ldrd   r2, r3, [ip, #24]\n"
         "    adds   r2, r2, r7\n"
         "    adc    r3, r3, r8\n"
-        "    strd   r2, r3, [r0, #24]\n"     /* kacc += dk (runs: const_w) */
-        "    ldr    r1, [sp, #8]\n"
-        "    strh   r1, [r0, #34]\n"         /* v_prev = v */
+        "    strd   r2, r3, [ip, #24]\n"     /* kacc += dk (runs: const_w) */
+        "    ldr    r4, [sp, #8]\n"
+        "    strh   r4, [ip, #34]\n"         /* v_prev = v */
+        "    dcc_law_out\n"
         "    add    sp, #48\n"
-        "    pop    {r2, r4-r11, pc}\n"
+        "    pop    {r1, r2, r4-r11, pc}\n"
         "    .purgem dcc_fill\n"
-        "    .purgem dcc_block_end\n");
+        "    .purgem dcc_block_end\n"
+        "    .purgem dcc_law_out\n");
 }
 
 /*
@@ -882,11 +906,10 @@ typedef char piezo_dcc_rise_m4_layout_check_t[
      offsetof(struct piezo_dcc, n_cols) == 48u && offsetof(struct piezo_dcc, col_cur) == 49u &&
      offsetof(struct piezo_dcc, col_start) == 122u && offsetof(struct piezo_kp_grid, n_ops) == 8u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, int32_t v)
+static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
 {
-    (void)dcc;
-    (void)v;
     __asm__ volatile(
+        DCC_LAW_OUT_MACRO
         /* psi[ord entries [p, r1)] = r3, two per pass (as scatter_i32);
          * clobbers p, b (the last pair's bound), t0, t1 */
         "    .macro dcc_scatter p, b, t0, t1\n"
@@ -906,11 +929,10 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "3:\n"
         "    .endm\n"
 
-        "    push   {r0, r4-r11, lr}\n"
+        "    push   {r0, r1, r4-r11, lr}\n"  /* dcc, yd kept for the output */
         "    sub    sp, #64\n"
         "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    r2, [r0, #8]\n"          /* order */
-        "    mov    r3, r1\n"                /* v */
+        "    ldr    r2, [r0, #8]\n"          /* order (v in r3) */
         "    ldr    r6, [ip, #20]\n"         /* xsat */
         "    ldr    r7, [ip, #16]\n"         /* slope */
         "    ldrsh  r8, [ip, #12]\n"         /* rmax */
@@ -1181,24 +1203,26 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    blo    .Ldr_col\n"
 
         ".Ldr_done:\n"
-        "    ldr    r0, [sp, #64]\n"
-        "    ldrb   r1, [r0, #44]\n"
-        "    eor    r1, r1, #1\n"
-        "    strb   r1, [r0, #44]\n"         /* cur ^= 1 */
-        "    ldr    r1, [sp, #44]\n"
+        "    ldrd   ip, r1, [sp, #64]\n"     /* dcc, yd */
+        "    ldrb   r0, [ip, #44]\n"
+        "    eor    r0, r0, #1\n"
+        "    strb   r0, [ip, #44]\n"         /* cur ^= 1 */
+        "    ldr    r0, [sp, #44]\n"
         "    ldr    r2, [sp, #56]\n"
-        "    sub    r1, r1, r2\n"
-        "    lsr    r1, r1, #4\n"
-        "    strb   r1, [r0, #43]\n"         /* n_run */
-        "    ldrd   r2, r3, [r0, #24]\n"
+        "    sub    r0, r0, r2\n"
+        "    lsr    r0, r0, #4\n"
+        "    strb   r0, [ip, #43]\n"         /* n_run */
+        "    ldrd   r2, r3, [ip, #24]\n"
         "    adds   r2, r2, r7\n"
         "    adc    r3, r3, r8\n"
-        "    strd   r2, r3, [r0, #24]\n"     /* kacc += dk */
-        "    ldr    r1, [sp, #4]\n"
-        "    strh   r1, [r0, #34]\n"         /* v_prev = v */
+        "    strd   r2, r3, [ip, #24]\n"     /* kacc += dk */
+        "    ldr    r4, [sp, #4]\n"
+        "    strh   r4, [ip, #34]\n"         /* v_prev = v */
+        "    dcc_law_out\n"
         "    add    sp, #64\n"
-        "    pop    {r2, r4-r11, pc}\n"
-        "    .purgem dcc_scatter\n");
+        "    pop    {r1, r2, r4-r11, pc}\n"
+        "    .purgem dcc_scatter\n"
+        "    .purgem dcc_law_out\n");
 }
 #endif
 
@@ -1417,46 +1441,6 @@ void piezo_dcc_ops_update_c(struct piezo_dcc *dcc, int16_t v_q15)
     dcc_ops(dcc, v_q15);
 }
 
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-/* A tick with runs and a new input: the reversal's three stores (as
- * dcc_ops), then the whole step in Thumb-2. */
-static inline __attribute__((always_inline)) void runs_step(struct piezo_dcc *dcc, int16_t v_q15)
-{
-    const int8_t dir = v_q15 > dcc->v_prev_q15 ? 1 : -1;
-    if (dir != dcc->dir) { /* reversal, as dcc_ops */
-        dcc->xi_q15 = dcc->v_prev_q15;
-        dcc->dir = dir;
-        dcc->n_run = 0u;
-    }
-    if (dir > 0) {
-        dcc_rise_m4(dcc, v_q15);
-    } else {
-        dcc_fall_m4(dcc, v_q15);
-    }
-}
-#endif
-
-/* The operators' step (the law's own call inlines it: one call less). */
-static inline __attribute__((always_inline)) void ops_update(struct piezo_dcc *dcc, int16_t v_q15)
-{
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    /* with runs: the whole step in Thumb-2 */
-    if (v_q15 == dcc->v_prev_q15) {
-        return;
-    }
-    if (dcc->runs) {
-        runs_step(dcc, v_q15);
-        return;
-    }
-#endif
-    dcc_ops(dcc, v_q15);
-}
-
-void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
-{
-    ops_update(dcc, v_q15);
-}
-
 /* The law's output from sum_j Psi_j c_j (Q39): the feedthrough, rounded and
  * saturated; kept as the next tick's input. */
 static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *dcc, int64_t acc,
@@ -1468,35 +1452,13 @@ static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *d
     return u;
 }
 
-int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
+/* The law's tick with the C kernels: the operators (dcc_ops, which also
+ * takes the runs), then the sum. */
+static inline __attribute__((always_inline)) int16_t process_c(struct piezo_dcc *dcc, int16_t yd_q15)
 {
     const int16_t v = dcc->u_last_q15;
+    dcc_ops(dcc, v);
     /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    if (dcc->runs) {
-        /* runs tested once for the step and the sum (round 16: gcc tested
-         * the byte again after the step's call) */
-        if (v != dcc->v_prev_q15) {
-            runs_step(dcc, v);
-        }
-        /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product. The
-         * rounding constant starts the sum (2^23 - kacc, then the two
-         * products by SMLAL: round 17, 2 instructions fewer than adding it
-         * to the sum at the end); the same integers, every step exact in
-         * int64 */
-        int64_t acc = ((int64_t)1 << 23) - dcc->kacc;
-        acc = piezo_mlal(acc, v, (int32_t)dcc->csum);
-        acc = piezo_mlal(acc, yd_q15, dcc->coeffs->g_q24);
-        /* |v C|, |kacc| = |sum psi_j c_j| and |yd g| are each below
-         * 2^15 2^31 (|psi_j|, |v|, |yd| <= 2^15; sum |c_j| and g below 2^31),
-         * so |acc| < 2^48 and acc rounded to q15 fits an int32: SSAT alone
-         * clamps it, as piezo_sat_q15 would (4 instructions fewer) */
-        const int16_t u = (int16_t)__builtin_arm_ssat((int32_t)(acc >> 24), 16u);
-        dcc->u_last_q15 = u;
-        return u;
-    }
-#endif
-    ops_update(dcc, v);
     int64_t acc;
     if (dcc->runs) {
         /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product */
@@ -1513,3 +1475,94 @@ int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
     }
     return dcc_out(dcc, acc, yd_q15);
 }
+
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Without the runs (the RKP kind's changing weights, a plane the runs do not
+ * handle): the C tick, out of the Thumb-2 entry's way. */
+static __attribute__((noinline, used)) int16_t dcc_process_scan(struct piezo_dcc *dcc, int16_t yd_q15)
+{
+    return process_c(dcc, yd_q15);
+}
+
+/*
+ * Cortex-M4: the law's tick with runs in Thumb-2 (round 18). gcc's C tick
+ * (round 17's) pushed six registers, moved the arguments to saved ones,
+ * called the step and read kacc back after it (32 instructions besides the
+ * step at tick 203). Here the tick tests runs, compares v = u_last with
+ * v_prev, makes the reversal's three stores (as dcc_ops) and jumps into the
+ * rising or falling step with v in r3 and yd in r1; the step ends with the
+ * output (dcc_law_out, kacc still in registers) and returns it. A tick
+ * without a move takes the output alone. test_dcc's walks compare it with
+ * the band scan's C law and, through piezo_dcc_ops_update (below), every
+ * operator and the step's state with the C step.
+ */
+typedef char piezo_dcc_process_m4_layout_check_t[
+    (offsetof(struct piezo_dcc, runs) == 50u && offsetof(struct piezo_dcc, u_last_q15) == 36u &&
+     offsetof(struct piezo_dcc, v_prev_q15) == 34u && offsetof(struct piezo_dcc, xi_q15) == 32u &&
+     offsetof(struct piezo_dcc, dir) == 38u && offsetof(struct piezo_dcc, n_run) == 43u &&
+     offsetof(struct piezo_dcc, csum) == 16u && offsetof(struct piezo_dcc, kacc) == 24u &&
+     offsetof(struct piezo_dcc_coeffs, g_q24) == 28u) ? 1 : -1];
+
+__attribute__((naked, noinline)) int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
+{
+    (void)dcc;
+    (void)yd_q15;
+    __asm__ volatile(
+        DCC_LAW_OUT_MACRO
+        "    ldrb   r2, [r0, #50]\n"         /* runs */
+        "    cbz    r2, 3f\n"
+        "    ldrsh  r3, [r0, #36]\n"         /* v = u_last: the operators' input */
+        "    ldrsh  r2, [r0, #34]\n"         /* v_prev */
+        "    cmp    r3, r2\n"
+        "    beq    4f\n"
+        "    ldrsb  ip, [r0, #38]\n"         /* dir */
+        "    blt    1f\n"
+        "    cmp    ip, #1\n"
+        "    beq.w  dcc_rise_m4\n"
+        "    movs   ip, #1\n"                /* a reversal to rising */
+        "    b      2f\n"
+        "1:  cmn    ip, #1\n"
+        "    beq.w  dcc_fall_m4\n"
+        "    mov    ip, #-1\n"               /* a reversal to falling */
+        "2:  strh   r2, [r0, #32]\n"         /* xi = v_prev */
+        "    strb   ip, [r0, #38]\n"         /* dir */
+        "    movs   r2, #0\n"
+        "    strb   r2, [r0, #43]\n"         /* n_run = 0: the runs are the other direction's */
+        "    cmp    ip, #0\n"
+        "    bgt.w  dcc_rise_m4\n"
+        "    b.w    dcc_fall_m4\n"
+        "3:  b.w    dcc_process_scan\n"
+        "4:  push   {r4, r5, r6, lr}\n"      /* no move: the output alone */
+        "    mov    r4, r3\n"
+        "    mov    ip, r0\n"
+        "    ldrd   r2, r3, [r0, #24]\n"     /* kacc */
+        "    dcc_law_out\n"
+        "    pop    {r4, r5, r6, pc}\n"
+        "    .purgem dcc_law_out\n");
+}
+
+/* The operators alone: on the Cortex-M4 with runs, the law's Thumb-2 tick on
+ * input v (u_last set to v and put back; the output is dropped), so that
+ * test_dcc's twin tests compare that path with the C step. */
+void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    if (dcc->runs) {
+        const int16_t u = dcc->u_last_q15;
+        dcc->u_last_q15 = v_q15;
+        (void)piezo_dcc_process(dcc, 0);
+        dcc->u_last_q15 = u;
+        return;
+    }
+    dcc_ops(dcc, v_q15);
+}
+#else
+void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    dcc_ops(dcc, v_q15);
+}
+
+int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
+{
+    return process_c(dcc, yd_q15);
+}
+#endif
