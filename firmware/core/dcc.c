@@ -549,8 +549,9 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * r3 r, lr the run's weight sum; r6, ip scratch.
  * Frame: [sp] th (n1), #4 v_prev, #8 v, #12 xsat, #16 slope, #20 rmax
  * (a row's first four words in one LDM, round 16),
- * #24 old_end, #28 out_end, #32 psum, #36 &row_start[n_rows], #40 r10
- * while a block's end is searched, #44 out, #48 dcc (pushed r0).
+ * #24 old_end, #28 out_end (one STRD, round 18), #32 psum, #36
+ * &row_start[n_rows], #40 r10 while a block's end is searched, #44 out,
+ * #48 dcc, #52 yd (pushed r0, r1: the step ends with the law's output).
  */
 typedef char piezo_dcc_fall_m4_layout_check_t[
     (offsetof(struct piezo_dcc, coeffs) == 0u && offsetof(struct piezo_dcc, psi_q15) == 4u &&
@@ -570,25 +571,25 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
 {
     __asm__ volatile(
         DCC_LAW_OUT_MACRO
-        /* psi[r0 .. r2) = r3 (index bounds; four per pass, as fill_i32);
-         * clobbers r0, r6, ip */
+        /* psi[r0 .. r2) = r3 (index bounds, r0 <= r2; four per pass, as
+         * fill_i32): the count in r6 (round 18: counted down, the last
+         * one to three by the count's two low bits in the flags, 9
+         * instructions besides the passes where the end pointer's
+         * compares took 11 or 12); clobbers r0, r6 */
         "    .macro dcc_fill\n"
+        "    sub    r6, r2, r0\n"
         "    add    r0, r5, r0, lsl #2\n"
-        "    add    ip, r5, r2, lsl #2\n"
-        "    sub    r6, ip, #12\n"
-        "    cmp    r0, r6\n"
-        "    bhs    2f\n"
+        "    subs   r6, r6, #4\n"
+        "    blo    2f\n"
         "1:  strd   r3, r3, [r0], #8\n"
         "    strd   r3, r3, [r0], #8\n"
-        "    cmp    r0, r6\n"
-        "    blo    1b\n"
-        "2:  sub    r6, ip, r0\n"
-        "    cmp    r6, #8\n"
-        "    blt    3f\n"
-        "    strd   r3, r3, [r0], #8\n"
-        "3:  cmp    r0, ip\n"
-        "    it     lo\n"
-        "    strlo  r3, [r0]\n"
+        "    subs   r6, r6, #4\n"
+        "    bhs    1b\n"
+        "2:  lsls   r6, r6, #31\n"         /* bit 1 of the count to C, bit 0 to N */
+        "    it     cs\n"
+        "    strdcs r3, r3, [r0], #8\n"
+        "    it     mi\n"
+        "    strmi  r3, [r0]\n"
         "    .endm\n"
         /* r2 = row_block_end(psi, r0, r1, r6): gallop from the row's end,
          * then bisect; clobbers ip (hi), lr (step, mid), r10 */
@@ -711,11 +712,10 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    add    r10, r9, r2, lsl #6\n"   /* out = run[cur ^ 1] */
         "    add    r9, r9, r3, lsl #6\n"    /* old = run[cur] */
         "    str    r10, [sp, #44]\n"
-        "    add    lr, r10, #64\n"
-        "    str    lr, [sp, #28]\n"         /* out_end */
-        "    ldrb   lr, [r0, #43]\n"         /* n_run */
-        "    add    lr, r9, lr, lsl #4\n"
-        "    str    lr, [sp, #24]\n"         /* old_end */
+        "    add    r2, r10, #64\n"          /* out_end */
+        "    ldrb   r3, [r0, #43]\n"         /* n_run */
+        "    add    r3, r9, r3, lsl #4\n"    /* old_end */
+        "    strd   r3, r2, [sp, #24]\n"     /* both in one (round 18) */
         "    movs   r7, #0\n"
         "    movs   r8, #0\n"
         "    ldr    ip, [sp, #36]\n"
@@ -757,10 +757,8 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         ".Ldf_old_ge:\n"
         "    bne    .Ldf_norun\n"
         /* the row's run moves as one */
-        "    ldr    lr, [r9, #0]\n"          /* csum */
-        "    ldr    ip, [r9, #4]\n"          /* lvl */
-        "    ldrh   r2, [r9, #10]\n"         /* k */
-        "    add    r9, r9, #16\n"
+        "    ldrd   lr, ip, [r9], #16\n"     /* csum, lvl (round 18: one LDRD) */
+        "    ldrh   r2, [r9, #-6]\n"         /* k */
         "    add    r2, r0, r2\n"            /* p = j + k */
         "    cmp    r3, ip\n"
         "    beq    .Ldf_run_same\n"
@@ -772,10 +770,10 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    b      .Ldf_scan\n"
 
         ".Ldf_norun:\n"
-        "    ldr    ip, [sp, #32]\n"         /* psum */
-        "    cmp    ip, #0\n"
-        "    beq    .Ldf_plain\n"
-        "    ldr    r6, [r5, r0, lsl #2]\n"  /* psi[j] */
+        "    ldr    r6, [sp, #32]\n"         /* psum */
+        "    cbnz   r6, 29f\n"               /* (one instruction less than CMP, BEQ) */
+        "    b      .Ldf_plain\n"
+        "29: ldr    r6, [r5, r0, lsl #2]\n"  /* psi[j] */
         "    ldr    lr, [sp, #20]\n"
         "    cmp    r6, lr\n"
         "    bne    .Ldf_diag\n"
@@ -897,9 +895,11 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
  * run, r11 c; in a column r0 the position (pointer), r1 the column's end, r2
  * n2 then scratch, r3 r, r6 q (where the moving suffix starts), lr the
  * run's weight sum; r10, ip scratch. Frame: [sp] order, #4 v, #8 xsat, #12
- * slope, #16 rmax, #20 old_end, #24 out_end, #28 psum, #32
- * &col_start[n_cols], #36 the sums' offset, #40 n2, #44 the next run out,
- * #56 out, #64 dcc (#48, #52 unused since round 17).
+ * slope, #16 rmax, #24 psum, #32 &col_start[n_cols], #36 the sums' offset,
+ * #40 out, #44 the next run out, #48 out_end, #52 old_end (in pairs: one
+ * LDRD per run out and at the end, one STRD each at the start, round 18),
+ * #64 dcc, #68 yd (#20, #28, #56, #60 unused). A run's n2 is read back from the column's last
+ * order entry (its high half) when the run is recorded, not kept per column.
  */
 typedef char piezo_dcc_rise_m4_layout_check_t[
     (offsetof(struct piezo_dcc, order) == 8u && offsetof(struct piezo_dcc, n2_banded) == 41u &&
@@ -941,7 +941,7 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    ldr    r11, [ip, #24]\n"        /* c */
         "    ldr    r5, [r0, #4]\n"          /* psi */
         "    ldr    lr, [r0, #52]\n"         /* psum */
-        "    str    lr, [sp, #28]\n"
+        "    str    lr, [sp, #24]\n"
         "    ldrh   r2, [ip, #8]\n"          /* n_ops */
         "    add    lr, lr, r2, lsl #2\n"
         "    add    lr, lr, #4\n"
@@ -1028,32 +1028,30 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    blt    14b\n"
         "12: strb   r2, [r0, #49]\n"
         "13: add    r4, r4, r2, lsl #1\n"    /* &col_start[k] */
+        "    ldrh   r1, [r4]\n"
+        "    add    r1, r10, r1, lsl #2\n"   /* its first position (round 18: then each column's from the last one's end) */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
         "    add    r9, r0, #188\n"
         "    eor    r2, r3, #1\n"
         "    add    r10, r9, r2, lsl #6\n"   /* out = run[cur ^ 1] */
         "    add    r9, r9, r3, lsl #6\n"    /* old = run[cur] */
-        "    str    r10, [sp, #56]\n"
-        "    str    r10, [sp, #44]\n"
-        "    add    lr, r10, #64\n"
-        "    str    lr, [sp, #24]\n"         /* out_end */
-        "    ldrb   lr, [r0, #43]\n"         /* n_run */
-        "    add    lr, r9, lr, lsl #4\n"
-        "    str    lr, [sp, #20]\n"         /* old_end */
+        "    add    r2, r10, #64\n"          /* out_end */
+        "    ldrb   r3, [r0, #43]\n"         /* n_run */
+        "    add    r3, r9, r3, lsl #4\n"    /* old_end */
+        "    strd   r10, r10, [sp, #40]\n"   /* out, the next run out */
+        "    strd   r2, r3, [sp, #48]\n"     /* out_end, old_end (round 18) */
         "    movs   r7, #0\n"
         "    movs   r8, #0\n"
         "    ldr    ip, [sp, #32]\n"
         "    cmp    r4, ip\n"
         "    bhs    .Ldr_done\n"
 
-        ".Ldr_col:\n"
-        "    ldrh   r0, [r4], #2\n"          /* pos */
-        "    ldrh   r1, [r4]\n"              /* end */
+        ".Ldr_col:\n"                         /* r1: the column's first position (the last one's end) */
+        "    mov    r0, r1\n"
+        "    ldrh   r1, [r4, #2]!\n"         /* end */
         "    ldm    sp, {r2, r3, ip}\n"      /* order, v, xsat in one (round 16) */
-        "    add    r0, r2, r0, lsl #2\n"
         "    add    r1, r2, r1, lsl #2\n"
         "    ldrsh  r2, [r0, #2]\n"          /* n2 */
-        "    str    r2, [sp, #40]\n"
         "    subs   r3, r3, r2\n"            /* x = v - n2 */
         "    ble    .Ldr_done\n"             /* n2 >= v from here on: r = 0 */
         "    cmp    r3, ip\n"
@@ -1066,7 +1064,7 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         ".Ldr_sat:\n"
         "    ldr    r3, [sp, #16]\n"
         ".Ldr_ridge:\n"
-        "    ldr    lr, [sp, #20]\n"         /* old_end */
+        "    ldr    lr, [sp, #52]\n"         /* old_end */
         ".Ldr_old:\n"
         "    cmp    r9, lr\n"
         "    bhs    .Ldr_norun\n"
@@ -1078,10 +1076,8 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         ".Ldr_old_ge:\n"
         "    bne    .Ldr_norun\n"
         /* the column's run moves as one */
-        "    ldr    lr, [r9, #0]\n"          /* csum */
-        "    ldr    ip, [r9, #4]\n"          /* lvl */
-        "    ldrh   r2, [r9, #10]\n"         /* k */
-        "    add    r9, r9, #16\n"
+        "    ldrd   lr, ip, [r9], #16\n"     /* csum, lvl (round 18: one LDRD) */
+        "    ldrh   r2, [r9, #-6]\n"         /* k */
         "    sub    r2, r1, r2, lsl #2\n"    /* q: the run's first position */
         "    cmp    r3, ip\n"
         "    beq    .Ldr_join\n"
@@ -1111,31 +1107,29 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    b      .Ldr_rec\n"
 
         ".Ldr_norun:\n"
-        "    mov    lr, #0\n"
         /* operators that do not move, then (a suffix) all that do */
         "22: cmp    r0, r1\n"
         "    bhs    .Ldr_next\n"            /* none moves: no run out (round 17) */
         "    ldrh   ip, [r0]\n"
-        "    ldr    ip, [r5, ip, lsl #2]\n"
-        "    cmp    ip, r3\n"
+        "    ldr    r10, [r5, ip, lsl #2]\n" /* kept: the first mover's psi (round 18) */
+        "    cmp    r10, r3\n"
         "    blt    23f\n"
         "    add    r0, r0, #4\n"
         "    b      22b\n"
         "23: mov    r6, r0\n"                /* q */
-        "    mov    r2, r1\n"                /* z: from z on at 0 */
-        "    ldr    ip, [sp, #28]\n"
-        "    cmp    ip, #0\n"
-        "    beq    .Ldr_each\n"            /* (r0 < r1 here) */
+        "    ldr    r2, [sp, #24]\n"         /* psum */
+        "    cbnz   r2, 29f\n"               /* (one instruction less than CMP, BEQ) */
+        "    mov    r2, r1\n"                /* no prefix sums: z = end */
+        "    b      .Ldr_each0\n"           /* (r0 < r1 here) */
+        "29: mov    r2, r1\n"                /* z: from z on at 0 */
         "    ldrh   ip, [r1, #-4]\n"
         "    ldr    ip, [r5, ip, lsl #2]\n"
         "    cmp    ip, #0\n"
-        "    bne    .Ldr_each\n"
-        /* its last operators at 0: their first by bisection */
+        "    bne    .Ldr_each0\n"
+        /* its last operators at 0: their first by bisection (none when
+         * the first mover, its psi still in r10, is at 0) */
         "    mov    r2, r0\n"
-        "    mov    r10, r0\n"
-        "    ldrh   ip, [r0]\n"
-        "    ldr    ip, [r5, ip, lsl #2]\n"
-        "    cmp    ip, #0\n"
+        "    cmp    r10, #0\n"
         "    beq    25f\n"
         "    add    r2, r0, #4\n"
         "    sub    r10, r1, #4\n"
@@ -1172,6 +1166,8 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "27:\n"
         "    dcc_scatter r2, r0, ip, r10\n"
         "    b      .Ldr_rec\n"
+        ".Ldr_each0:\n"
+        "    mov    lr, #0\n"                /* the run's weight sum (the zero block sets its own) */
         ".Ldr_each:\n"                        /* [e, z) move one by one */
         "    cmp    r0, r2\n"
         "    bhs    .Ldr_rec\n"
@@ -1187,13 +1183,11 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         ".Ldr_rec:\n"                         /* the run out: [q, end) */
         "    subs   r2, r1, r6\n"            /* (two positions in one array: no overflow) */
         "    ble    .Ldr_next\n"
-        "    ldr    r10, [sp, #44]\n"
-        "    ldr    ip, [sp, #24]\n"
+        "    ldrd   r10, ip, [sp, #44]\n"    /* the next run out, out_end */
         "    cmp    r10, ip\n"
         "    bhs    .Ldr_next\n"
-        "    lsr    r2, r2, #2\n"
-        "    ldr    ip, [sp, #40]\n"
-        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
+        "    ldrsh  ip, [r1, #-2]\n"         /* n2: the column's last entry's high half (round 18) */
+        "    pkhbt  ip, ip, r2, lsl #14\n"   /* thr and k (r2 = 4 k) as one word (round 16) */
         "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
         "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
         "    str    r10, [sp, #44]\n"
@@ -1207,8 +1201,7 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    ldrb   r0, [ip, #44]\n"
         "    eor    r0, r0, #1\n"
         "    strb   r0, [ip, #44]\n"         /* cur ^= 1 */
-        "    ldr    r0, [sp, #44]\n"
-        "    ldr    r2, [sp, #56]\n"
+        "    ldrd   r2, r0, [sp, #40]\n"     /* out, the next run out */
         "    sub    r0, r0, r2\n"
         "    lsr    r0, r0, #4\n"
         "    strb   r0, [ip, #43]\n"         /* n_run */
