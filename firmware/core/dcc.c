@@ -433,6 +433,77 @@ static inline int32_t row_block_end(const int32_t *psi, int32_t p, int32_t end, 
     "    ssat   r0, #16, r2\n"                                                                    \
     "    strh   r0, [ip, #36]\n"         /* u_last */                                              \
     "    .endm\n"
+
+/* The band's first line (first_row_above, first_col_above: the first of the
+ * lines whose key exceeds t), shared by the falling and the rising step
+ * (round 18; the same instructions the two open-coded copies of round 17
+ * had): from the last tick's line (the hint, byte \hint of the instance
+ * in r0), up to two lines either way one by one, beyond them a bisection
+ * over the lines left (at most 5 halvings for 32 lines, where round 16
+ * walked a line at a time, 8 instructions a line). r4 the lines' start
+ * table, r3 their count, r6 t; \key turns a line's start (a register) into
+ * its key. The answer in r2 and the hint; clobbers r3, r9 and \tmp. */
+#define DCC_LINE_SEARCH_MACRO                                                                      \
+    "    .macro dcc_line_search key, tmp, hint\n"                                                   \
+    "    ldrb   r2, [r0, #\\hint]\n"     /* k = the hint */                                          \
+    "    cbz    r2, 11f\n"                                                                         \
+    "    add    r9, r4, r2, lsl #1\n"                                                              \
+    "    ldrh   r9, [r9, #-2]\n"                                                                   \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    ble    11f\n"                                                                             \
+    "    subs   r2, r2, #1\n"            /* line k - 1 exceeds t: the answer is at most k - 1 */   \
+    "    beq    12f\n"                                                                             \
+    "    add    r9, r4, r2, lsl #1\n"                                                              \
+    "    ldrh   r9, [r9, #-2]\n"                                                                   \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    ble    12f\n"                   /* line k - 2 does not: one line down */                  \
+    "    subs   r2, r2, #1\n"                                                                      \
+    "    beq    12f\n"                                                                             \
+    "    add    r9, r4, r2, lsl #1\n"                                                              \
+    "    ldrh   r9, [r9, #-2]\n"                                                                   \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    ble    12f\n"                   /* two lines down */                                      \
+    "    subs   r3, r2, #1\n"            /* line k - 3 exceeds t: bisect over [0, k - 3] */        \
+    "    movs   r2, #0\n"                                                                          \
+    "    b      14f\n"                                                                             \
+    "11: cmp    r2, r3\n"                                                                          \
+    "    bge    12f\n"                                                                             \
+    "    ldrh   r9, [r4, r2, lsl #1]\n"                                                            \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    bgt    12f\n"                   /* the hint's line */                                     \
+    "    adds   r2, r2, #1\n"            /* line k does not exceed t */                            \
+    "    cmp    r2, r3\n"                                                                          \
+    "    bge    12f\n"                                                                             \
+    "    ldrh   r9, [r4, r2, lsl #1]\n"                                                            \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    bgt    12f\n"                   /* one line up */                                         \
+    "    adds   r2, r2, #1\n"            /* nor k + 1 */                                           \
+    "    cmp    r2, r3\n"                                                                          \
+    "    bge    12f\n"                                                                             \
+    "    ldrh   r9, [r4, r2, lsl #1]\n"                                                            \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    bgt    12f\n"                   /* two lines up */                                        \
+    "    adds   r2, r2, #1\n"            /* nor k + 2: bisect over [k + 3, n] */                   \
+    "    b      14f\n"                                                                             \
+    "13: add    r9, r2, r3\n"            /* the first line in [r2, r3] exceeding t (line r3 does, \
+                                         * or r3 = n) */                                          \
+    "    lsrs   r9, r9, #1\n"                                                                      \
+    "    ldrh   \\tmp, [r4, r9, lsl #1]\n"                                                         \
+    "    \\key   \\tmp\n"                                                                           \
+    "    cmp    \\tmp, r6\n"                                                                       \
+    "    ite    gt\n"                                                                              \
+    "    movgt  r3, r9\n"                                                                          \
+    "    addle  r2, r9, #1\n"                                                                      \
+    "14: cmp    r2, r3\n"                                                                          \
+    "    blt    13b\n"                                                                             \
+    "12: strb   r2, [r0, #\\hint]\n"                                                               \
+    "    .endm\n"
 #endif
 
 /*
@@ -571,6 +642,11 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
 {
     __asm__ volatile(
         DCC_LAW_OUT_MACRO
+        DCC_LINE_SEARCH_MACRO
+        /* a row's key: n1 at its first index (th in lr) */
+        "    .macro dcc_key_n1 reg\n"
+        "    ldrsh  \\reg, [lr, \\reg, lsl #1]\n"
+        "    .endm\n"
         /* psi[r0 .. r2) = r3 (index bounds, r0 <= r2; four per pass, as
          * fill_i32): the count in r6 (round 18: counted down, the last
          * one to three by the count's two low bits in the flags, 9
@@ -645,66 +721,7 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
          * v - xsat), from the last falling tick's: up to two rows either
          * way one by one, beyond them a bisection (round 17) */
         "    mov    lr, r1\n"                /* n1 */
-        "    ldrb   r2, [r0, #47]\n"         /* k = row_cur */
-        "    cbz    r2, 11f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    ble    11f\n"
-        "    subs   r2, r2, #1\n"             /* row k - 1 exceeds t: the answer is at most k - 1 */
-        "    beq    12f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    ble    12f\n"                    /* row k - 2 does not: one row down */
-        "    subs   r2, r2, #1\n"
-        "    beq    12f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    ble    12f\n"                    /* two rows down */
-        "    subs   r3, r2, #1\n"             /* row k - 3 exceeds t: bisect over [0, k - 3] */
-        "    movs   r2, #0\n"
-        "    b      14f\n"
-        "11: cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* the hint's row */
-        "    adds   r2, r2, #1\n"             /* row k does not exceed t */
-        "    cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* one row up */
-        "    adds   r2, r2, #1\n"             /* nor k + 1 */
-        "    cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* two rows up */
-        "    adds   r2, r2, #1\n"             /* nor k + 2: bisect over [k + 3, n_rows] */
-        "    b      14f\n"
-        /* the first row in [r2, r3] exceeding t (row r3 does, or r3 =
-         * n_rows): at most 5 halvings for 32 rows, where round 16 walked one
-         * row at a time (8 instructions a row) */
-        "13: add    r9, r2, r3\n"
-        "    lsrs   r9, r9, #1\n"
-        "    ldrh   r10, [r4, r9, lsl #1]\n"
-        "    ldrsh  r10, [lr, r10, lsl #1]\n"
-        "    cmp    r10, r6\n"
-        "    ite    gt\n"
-        "    movgt  r3, r9\n"
-        "    addle  r2, r9, #1\n"
-        "14: cmp    r2, r3\n"
-        "    blt    13b\n"
-        "12: strb   r2, [r0, #47]\n"
+        "    dcc_line_search dcc_key_n1, r10, 47\n" /* k = row_cur, then the answer */
         "    add    r4, r4, r2, lsl #1\n"    /* &row_start[k] */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
         "    add    r9, r0, #188\n"
@@ -878,7 +895,9 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    pop    {r1, r2, r4-r11, pc}\n"
         "    .purgem dcc_fill\n"
         "    .purgem dcc_block_end\n"
-        "    .purgem dcc_law_out\n");
+        "    .purgem dcc_law_out\n"
+        "    .purgem dcc_line_search\n"
+        "    .purgem dcc_key_n1\n");
 }
 
 /*
@@ -910,6 +929,12 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
 {
     __asm__ volatile(
         DCC_LAW_OUT_MACRO
+        DCC_LINE_SEARCH_MACRO
+        /* a column's key: n2 at its first order position (order in r10) */
+        "    .macro dcc_key_n2 reg\n"
+        "    add    \\reg, r10, \\reg, lsl #2\n"
+        "    ldrsh  \\reg, [\\reg, #2]\n"
+        "    .endm\n"
         /* psi[ord entries [p, r1)] = r3, two per pass (as scatter_i32);
          * clobbers p, b (the last pair's bound), t0, t1 */
         "    .macro dcc_scatter p, b, t0, t1\n"
@@ -957,77 +982,11 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    movs   r2, #0\n"
         "    ldrb   lr, [r0, #41]\n"         /* n2_banded */
         "    cmp    lr, #0\n"
-        "    beq    13f\n"
+        "    beq    19f\n"
         "    ldrsh  lr, [r0, #34]\n"         /* v_prev */
         "    sub    r6, lr, r6\n"            /* t = v_prev - xsat */
-        "    ldrb   r2, [r0, #49]\n"         /* k = col_cur */
-        "    cbz    r2, 11f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    ble    11f\n"
-        "    subs   r2, r2, #1\n"             /* column k - 1 exceeds t: the answer is at most k - 1 */
-        "    beq    12f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    ble    12f\n"                    /* column k - 2 does not: one column down */
-        "    subs   r2, r2, #1\n"
-        "    beq    12f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    ble    12f\n"                    /* two columns down */
-        "    subs   r3, r2, #1\n"             /* column k - 3 exceeds t: bisect over [0, k - 3] */
-        "    movs   r2, #0\n"
-        "    b      15f\n"
-        "11: cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* the hint's column */
-        "    adds   r2, r2, #1\n"             /* column k does not exceed t */
-        "    cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* one column up */
-        "    adds   r2, r2, #1\n"             /* nor k + 1 */
-        "    cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* two columns up */
-        "    adds   r2, r2, #1\n"             /* nor k + 2: bisect over [k + 3, n_cols] */
-        "    b      15f\n"
-        /* the first column in [r2, r3] exceeding t (column r3 does, or r3 =
-         * n_cols): at most 5 halvings for 32 columns, where round 16 walked one
-         * column at a time (8 instructions a column) */
-        "14: add    r9, r2, r3\n"
-        "    lsrs   r9, r9, #1\n"
-        "    ldrh   lr, [r4, r9, lsl #1]\n"
-        "    add    lr, r10, lr, lsl #2\n"
-        "    ldrsh  lr, [lr, #2]\n"
-        "    cmp    lr, r6\n"
-        "    ite    gt\n"
-        "    movgt  r3, r9\n"
-        "    addle  r2, r9, #1\n"
-        "15: cmp    r2, r3\n"
-        "    blt    14b\n"
-        "12: strb   r2, [r0, #49]\n"
-        "13: add    r4, r4, r2, lsl #1\n"    /* &col_start[k] */
+        "    dcc_line_search dcc_key_n2, lr, 49\n" /* k = col_cur, then the answer */
+        "19: add    r4, r4, r2, lsl #1\n"    /* &col_start[k] */
         "    ldrh   r1, [r4]\n"
         "    add    r1, r10, r1, lsl #2\n"   /* its first position (round 18: then each column's from the last one's end) */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
@@ -1215,7 +1174,9 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    add    sp, #64\n"
         "    pop    {r1, r2, r4-r11, pc}\n"
         "    .purgem dcc_scatter\n"
-        "    .purgem dcc_law_out\n");
+        "    .purgem dcc_law_out\n"
+        "    .purgem dcc_line_search\n"
+        "    .purgem dcc_key_n2\n");
 }
 #endif
 
