@@ -413,7 +413,7 @@ static inline int32_t row_block_end(const int32_t *psi, int32_t p, int32_t end, 
 
 #if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
 /* The law's output u = sat_q15(rshift_rnd(v C - kacc + yd g, 24)) from the
- * new kacc in r2:r3, v in r4, yd in r1, the instance in ip (round 18: the
+ * new kacc in r7:r8, v in r4, yd in r1, the instance in ip (round 18: the
  * steps end with it, so the law's tick reads kacc once and needs no frame
  * of its own); u in r0 and u_last_q15. The rounding constant starts the sum
  * (2^23 - kacc, both products by SMLAL); |v C|, |kacc| and |yd g| are each
@@ -423,8 +423,8 @@ static inline int32_t row_block_end(const int32_t *psi, int32_t p, int32_t end, 
     "    .macro dcc_law_out\n"                                                                     \
     "    ldr    r5, [ip, #16]\n"         /* C (its low word) */                                    \
     "    ldr    r6, [ip, #0]\n"                                                                    \
-    "    rsbs   r2, r2, #0x800000\n"                                                              \
-    "    sbc    r3, r3, r3, lsl #1\n"    /* 2^23 - kacc */                                         \
+    "    rsbs   r2, r7, #0x800000\n"                                                              \
+    "    sbc    r3, r8, r8, lsl #1\n"    /* 2^23 - kacc */                                         \
     "    ldr    r6, [r6, #28]\n"         /* g */                                                   \
     "    smlal  r2, r3, r4, r5\n"                                                                  \
     "    smlal  r2, r3, r1, r6\n"                                                                  \
@@ -608,20 +608,24 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * 60 instructions per row visited, round 14); here the row's state lives
  * in registers and the per-tick constants in a frame of their own, one
  * load each where a row uses them. It does the whole falling step of
- * dcc_ops with runs after the reversal's bookkeeping (ops_update, below):
- * the band's first row (first_row_above's answer: the hint's row or up to
+ * dcc_ops with runs after the reversal's bookkeeping (piezo_dcc_process,
+ * below, jumps here with v in r3 and yd in r1): the band's first row
+ * (first_row_above's answer by dcc_line_search: the hint's row or up to
  * two rows below or above it, two to four compares, else a bisection over
  * the rows left, at most 5 halvings for n_rows <= 32, where round 16 walked
  * a row at a time, 8 instructions a row, after a user's step), the rows,
- * the runs out, kacc and v_prev.
+ * the runs out, kacc and v_prev, then the law's output (dcc_law_out, round
+ * 18), returned in r0.
  *
- * r4 &row_start[k + 1] once a row is read, r5 psi, r7:r8 dk, r9 the old
- * run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
+ * r4 &row_start[k + 1] once a row is read, r5 psi, r7:r8 kacc (round 18:
+ * the moves' products added to it as they are made, no 64-bit add at the
+ * end), r9 the old run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
  * r3 r, lr the run's weight sum; r6, ip scratch.
  * Frame: [sp] th (n1), #4 v_prev, #8 v, #12 xsat, #16 slope, #20 rmax
  * (a row's first four words in one LDM, round 16),
- * #24 old_end, #28 out_end (one STRD, round 18), #32 psum, #36
- * &row_start[n_rows], #40 r10 while a block's end is searched, #44 out,
+ * #24 old_end, #28 out, #32 psum, #36 &row_start[n_rows], #40 out_end,
+ * #44 th again (the pairs stored by one STRD each, out_end and th read by
+ * one LDRD where a run is recorded; round 18),
  * #48 dcc, #52 yd (pushed r0, r1: the step ends with the law's output).
  */
 typedef char piezo_dcc_fall_m4_layout_check_t[
@@ -668,19 +672,21 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    strmi  r3, [r0]\n"
         "    .endm\n"
         /* r2 = row_block_end(psi, r0, r1, r6): gallop from the row's end,
-         * then bisect; clobbers ip (hi), lr (step, mid), r10 */
+         * then bisect; clobbers ip (hi), lr (step, mid) and r1 (round 18:
+         * the row's end, read back from row_start after it, one LDRH, where
+         * r10 was spilled and reloaded around it) */
         "    .macro dcc_block_end\n"
         "    sub    ip, r1, #1\n"
-        "    ldr    r10, [r5, ip, lsl #2]\n"
         "    mov    r2, r1\n"
-        "    cmp    r10, r6\n"
+        "    ldr    r1, [r5, ip, lsl #2]\n"
+        "    cmp    r1, r6\n"
         "    beq    9f\n"
         "    mov    lr, #1\n"
         "4:  sub    r2, ip, lr\n"
         "    cmp    r2, r0\n"
         "    ble    5f\n"
-        "    ldr    r10, [r5, r2, lsl #2]\n"
-        "    cmp    r10, r6\n"
+        "    ldr    r1, [r5, r2, lsl #2]\n"
+        "    cmp    r1, r6\n"
         "    beq    6f\n"
         "    mov    ip, r2\n"
         "    lsl    lr, lr, #1\n"
@@ -691,8 +697,8 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    bge    9f\n"
         "    add    lr, r2, ip\n"
         "    asr    lr, lr, #1\n"
-        "    ldr    r10, [r5, lr, lsl #2]\n"
-        "    cmp    r10, r6\n"
+        "    ldr    r1, [r5, lr, lsl #2]\n"
+        "    cmp    r1, r6\n"
         "    ite    eq\n"
         "    addeq  r2, lr, #1\n"
         "    movne  ip, lr\n"
@@ -721,22 +727,22 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
          * v - xsat), from the last falling tick's: up to two rows either
          * way one by one, beyond them a bisection (round 17) */
         "    mov    lr, r1\n"                /* n1 */
-        "    dcc_line_search dcc_key_n1, r10, 47\n" /* k = row_cur, then the answer */
+        "    dcc_line_search dcc_key_n1, r7, 47\n" /* k = row_cur, then the answer */
         "    add    r4, r4, r2, lsl #1\n"    /* &row_start[k] */
+        "    cmp    r4, r10\n"               /* k = n_rows: no row moves (the flags kept to the test
+                                             * below: nothing between sets them; round 18) */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
         "    add    r9, r0, #188\n"
         "    eor    r2, r3, #1\n"
+        "    strb   r2, [r0, #44]\n"         /* cur ^= 1 now (round 18: the step reads it no more) */
         "    add    r10, r9, r2, lsl #6\n"   /* out = run[cur ^ 1] */
         "    add    r9, r9, r3, lsl #6\n"    /* old = run[cur] */
-        "    str    r10, [sp, #44]\n"
         "    add    r2, r10, #64\n"          /* out_end */
         "    ldrb   r3, [r0, #43]\n"         /* n_run */
         "    add    r3, r9, r3, lsl #4\n"    /* old_end */
-        "    strd   r3, r2, [sp, #24]\n"     /* both in one (round 18) */
-        "    movs   r7, #0\n"
-        "    movs   r8, #0\n"
-        "    ldr    ip, [sp, #36]\n"
-        "    cmp    r4, ip\n"
+        "    strd   r3, r10, [sp, #24]\n"    /* old_end, out */
+        "    strd   r2, lr, [sp, #40]\n"     /* out_end, th: both by one LDRD where a run is recorded (round 18) */
+        "    ldrd   r7, r8, [r0, #24]\n"     /* kacc: the moves add to it (round 18) */
         "    bhs    .Ldf_done\n"
 
         ".Ldf_row:\n"
@@ -795,9 +801,8 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    cmp    r6, lr\n"
         "    bne    .Ldf_diag\n"
         /* a row entering the band with its first operators at rmax */
-        "    str    r10, [sp, #40]\n"
         "    dcc_block_end\n"
-        "    ldr    r10, [sp, #40]\n"
+        "    ldrh   r1, [r4]\n"              /* end */
         "    ldr    ip, [sp, #32]\n"
         "    ldr    lr, [ip, r2, lsl #2]\n"
         "    ldr    ip, [ip, r0, lsl #2]\n"
@@ -825,18 +830,17 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    str    r3, [r5, r0, lsl #2]\n"
         "    mov    r6, lr\n"                /* b */
         "    add    r0, r0, #1\n"            /* from j + 1 */
-        "    str    r10, [sp, #40]\n"
         "    dcc_block_end\n"
         "    sub    r6, r3, r6\n"            /* r - b */
         "    ldr    ip, [sp, #32]\n"
         "    ldr    lr, [ip, r2, lsl #2]\n"  /* psum[e] */
         "    add    ip, ip, r0, lsl #2\n"
-        "    ldr    r10, [ip]\n"             /* psum[j + 1] */
-        "    sub    r10, lr, r10\n"
-        "    smlal  r7, r8, r6, r10\n"       /* (r - b) (psum[e] - psum[j + 1]) */
+        "    ldr    r1, [ip]\n"              /* psum[j + 1] */
+        "    sub    r1, lr, r1\n"
+        "    smlal  r7, r8, r6, r1\n"        /* (r - b) (psum[e] - psum[j + 1]) */
         "    ldr    ip, [ip, #-4]\n"
         "    sub    lr, lr, ip\n"            /* csum = psum[e] - psum[j] */
-        "    ldr    r10, [sp, #40]\n"
+        "    ldrh   r1, [r4]\n"              /* end */
         "    dcc_fill\n"
         "    mov    r0, r2\n"
         "    b      .Ldf_scan\n"
@@ -862,11 +866,10 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    ldrh   r1, [r4, #-2]\n"         /* j */
         "    subs   r2, r0, r1\n"            /* operators that moved */
         "    ble    .Ldf_next\n"
-        "    ldr    ip, [sp, #28]\n"
+        "    ldrd   ip, r6, [sp, #40]\n"     /* out_end, th */
         "    cmp    r10, ip\n"
         "    bhs    .Ldf_next\n"
-        "    ldr    ip, [sp, #0]\n"
-        "    ldrsh  ip, [ip, r1, lsl #1]\n"  /* n1 */
+        "    ldrsh  ip, [r6, r1, lsl #1]\n"  /* n1 */
         "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
         "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
         "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
@@ -877,17 +880,11 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
 
         ".Ldf_done:\n"
         "    ldrd   ip, r1, [sp, #48]\n"     /* dcc, yd */
-        "    ldrb   r0, [ip, #44]\n"
-        "    eor    r0, r0, #1\n"
-        "    strb   r0, [ip, #44]\n"         /* cur ^= 1 */
-        "    ldr    r0, [sp, #44]\n"
+        "    ldr    r0, [sp, #28]\n"
         "    sub    r0, r10, r0\n"
         "    lsr    r0, r0, #4\n"
         "    strb   r0, [ip, #43]\n"         /* n_run */
-        "    ldrd   r2, r3, [ip, #24]\n"
-        "    adds   r2, r2, r7\n"
-        "    adc    r3, r3, r8\n"
-        "    strd   r2, r3, [ip, #24]\n"     /* kacc += dk (runs: const_w) */
+        "    strd   r7, r8, [ip, #24]\n"     /* kacc (runs: const_w) */
         "    ldr    r4, [sp, #8]\n"
         "    strh   r4, [ip, #34]\n"         /* v_prev = v */
         "    dcc_law_out\n"
@@ -908,9 +905,11 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
  * high one n2); the prefix sums of the n2 order are read at the same offset
  * from an order pointer (psum + n_ops + 1 - order, in bytes). The band's
  * first column is found as the falling step's first row (the hint, up to
- * two columns either way, else a bisection; round 17).
+ * two columns either way, else a bisection; round 17; the same macro since
+ * round 18). Entered and left as the falling step (v in r3, yd in r1, the
+ * law's output in r0).
  *
- * r4 &col_start[k + 1] once a column is read, r5 psi, r7:r8 dk, r9 the old
+ * r4 &col_start[k + 1] once a column is read, r5 psi, r7:r8 kacc, r9 the old
  * run, r11 c; in a column r0 the position (pointer), r1 the column's end, r2
  * n2 then scratch, r3 r, r6 q (where the moving suffix starts), lr the
  * run's weight sum; r10, ip scratch. Frame: [sp] order, #4 v, #8 xsat, #12
@@ -973,8 +972,8 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    sub    lr, lr, r10\n"           /* psum + n_ops + 1 - order (bytes) */
         "    add    r4, r0, #122\n"          /* col_start */
         "    ldrb   r3, [r0, #48]\n"         /* n_cols */
-        "    add    r9, r4, r3, lsl #1\n"
-        "    strd   r9, lr, [sp, #32]\n"
+        "    add    r8, r4, r3, lsl #1\n"    /* &col_start[n_cols], kept past the search */
+        "    strd   r8, lr, [sp, #32]\n"
         /* the band's first column (first_col_above: the first whose n2
          * exceeds v_prev - xsat; every column without n2_banded), from the
          * last rising tick's: up to two columns either way one by one,
@@ -987,11 +986,14 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    sub    r6, lr, r6\n"            /* t = v_prev - xsat */
         "    dcc_line_search dcc_key_n2, lr, 49\n" /* k = col_cur, then the answer */
         "19: add    r4, r4, r2, lsl #1\n"    /* &col_start[k] */
+        "    cmp    r4, r8\n"                /* k = n_cols: no column moves (the flags kept to the
+                                             * test below: nothing between sets them; round 18) */
         "    ldrh   r1, [r4]\n"
         "    add    r1, r10, r1, lsl #2\n"   /* its first position (round 18: then each column's from the last one's end) */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
         "    add    r9, r0, #188\n"
         "    eor    r2, r3, #1\n"
+        "    strb   r2, [r0, #44]\n"         /* cur ^= 1 now (round 18: the step reads it no more) */
         "    add    r10, r9, r2, lsl #6\n"   /* out = run[cur ^ 1] */
         "    add    r9, r9, r3, lsl #6\n"    /* old = run[cur] */
         "    add    r2, r10, #64\n"          /* out_end */
@@ -999,10 +1001,7 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    add    r3, r9, r3, lsl #4\n"    /* old_end */
         "    strd   r10, r10, [sp, #40]\n"   /* out, the next run out */
         "    strd   r2, r3, [sp, #48]\n"     /* out_end, old_end (round 18) */
-        "    movs   r7, #0\n"
-        "    movs   r8, #0\n"
-        "    ldr    ip, [sp, #32]\n"
-        "    cmp    r4, ip\n"
+        "    ldrd   r7, r8, [r0, #24]\n"     /* kacc: the moves add to it (round 18) */
         "    bhs    .Ldr_done\n"
 
         ".Ldr_col:\n"                         /* r1: the column's first position (the last one's end) */
@@ -1157,17 +1156,11 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
 
         ".Ldr_done:\n"
         "    ldrd   ip, r1, [sp, #64]\n"     /* dcc, yd */
-        "    ldrb   r0, [ip, #44]\n"
-        "    eor    r0, r0, #1\n"
-        "    strb   r0, [ip, #44]\n"         /* cur ^= 1 */
         "    ldrd   r2, r0, [sp, #40]\n"     /* out, the next run out */
         "    sub    r0, r0, r2\n"
         "    lsr    r0, r0, #4\n"
         "    strb   r0, [ip, #43]\n"         /* n_run */
-        "    ldrd   r2, r3, [ip, #24]\n"
-        "    adds   r2, r2, r7\n"
-        "    adc    r3, r3, r8\n"
-        "    strd   r2, r3, [ip, #24]\n"     /* kacc += dk */
+        "    strd   r7, r8, [ip, #24]\n"     /* kacc */
         "    ldr    r4, [sp, #4]\n"
         "    strh   r4, [ip, #34]\n"         /* v_prev = v */
         "    dcc_law_out\n"
@@ -1411,7 +1404,9 @@ static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *d
 static inline __attribute__((always_inline)) int16_t process_c(struct piezo_dcc *dcc, int16_t yd_q15)
 {
     const int16_t v = dcc->u_last_q15;
-    dcc_ops(dcc, v);
+    if (v != dcc->v_prev_q15) { /* (dcc_ops returns at once then; its call is saved) */
+        dcc_ops(dcc, v);
+    }
     /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
     int64_t acc;
     if (dcc->runs) {
@@ -1486,12 +1481,12 @@ __attribute__((naked, noinline)) int16_t piezo_dcc_process(struct piezo_dcc *dcc
         "    bgt.w  dcc_rise_m4\n"
         "    b.w    dcc_fall_m4\n"
         "3:  b.w    dcc_process_scan\n"
-        "4:  push   {r4, r5, r6, lr}\n"      /* no move: the output alone */
+        "4:  push   {r4-r8, lr}\n"           /* no move: the output alone */
         "    mov    r4, r3\n"
         "    mov    ip, r0\n"
-        "    ldrd   r2, r3, [r0, #24]\n"     /* kacc */
+        "    ldrd   r7, r8, [r0, #24]\n"     /* kacc */
         "    dcc_law_out\n"
-        "    pop    {r4, r5, r6, pc}\n"
+        "    pop    {r4-r8, pc}\n"
         "    .purgem dcc_law_out\n");
 }
 
