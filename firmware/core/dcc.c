@@ -647,9 +647,9 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
     __asm__ volatile(
         DCC_LAW_OUT_MACRO
         DCC_LINE_SEARCH_MACRO
-        /* a row's key: n1 at its first index (th in lr) */
+        /* a row's key: n1 at its first index (th in r1) */
         "    .macro dcc_key_n1 reg\n"
-        "    ldrsh  \\reg, [lr, \\reg, lsl #1]\n"
+        "    ldrsh  \\reg, [r1, \\reg, lsl #1]\n"
         "    .endm\n"
         /* psi[r0 .. r2) = r3 (index bounds, r0 <= r2; four per pass, as
          * fill_i32): the count in r6 (round 18: counted down, the last
@@ -708,16 +708,15 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
 
         "    push   {r0, r1, r4-r11, lr}\n"  /* dcc, yd kept for the output */
         "    sub    sp, #48\n"
-        "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    r1, [ip, #0]\n"          /* n1 */
+        "    ldm    r0, {r4, r5}\n"          /* coeffs, psi in one (round 18) */
+        "    ldr    r1, [r4, #0]\n"          /* n1 */
         "    ldrsh  r2, [r0, #34]\n"         /* v_prev */
-        "    ldr    r6, [ip, #20]\n"         /* xsat */
-        "    ldr    r7, [ip, #16]\n"         /* slope */
-        "    ldrsh  r8, [ip, #12]\n"         /* rmax */
+        "    ldr    r6, [r4, #20]\n"         /* xsat */
+        "    ldr    r7, [r4, #16]\n"         /* slope */
+        "    ldrsh  r8, [r4, #12]\n"         /* rmax */
         "    stm    sp, {r1, r2, r3, r6, r7, r8}\n" /* the frame's first six words in one (v in r3) */
         "    sub    r6, r3, r6\n"            /* t = v - xsat */
-        "    ldr    r11, [ip, #24]\n"        /* c */
-        "    ldr    r5, [r0, #4]\n"          /* psi */
+        "    ldr    r11, [r4, #24]\n"        /* c */
         "    ldr    r9, [r0, #52]\n"         /* psum */
         "    add    r4, r0, #56\n"           /* row_start */
         "    ldrb   r3, [r0, #46]\n"         /* n_rows */
@@ -726,7 +725,6 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         /* the band's first row (first_row_above: the first whose n1 exceeds
          * v - xsat), from the last falling tick's: up to two rows either
          * way one by one, beyond them a bisection (round 17) */
-        "    mov    lr, r1\n"                /* n1 */
         "    dcc_line_search dcc_key_n1, r7, 47\n" /* k = row_cur, then the answer */
         "    add    r4, r4, r2, lsl #1\n"    /* &row_start[k] */
         "    cmp    r4, r10\n"               /* k = n_rows: no row moves (the flags kept to the test
@@ -741,7 +739,7 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    ldrb   r3, [r0, #43]\n"         /* n_run */
         "    add    r3, r9, r3, lsl #4\n"    /* old_end */
         "    strd   r3, r10, [sp, #24]\n"    /* old_end, out */
-        "    strd   r2, lr, [sp, #40]\n"     /* out_end, th: both by one LDRD where a run is recorded (round 18) */
+        "    strd   r2, r1, [sp, #40]\n"     /* out_end, th: both by one LDRD where a run is recorded (round 18) */
         "    ldrd   r7, r8, [r0, #24]\n"     /* kacc: the moves add to it (round 18) */
         "    bhs    .Ldf_done\n"
 
@@ -955,18 +953,16 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
 
         "    push   {r0, r1, r4-r11, lr}\n"  /* dcc, yd kept for the output */
         "    sub    sp, #64\n"
-        "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    r2, [r0, #8]\n"          /* order (v in r3) */
-        "    ldr    r6, [ip, #20]\n"         /* xsat */
-        "    ldr    r7, [ip, #16]\n"         /* slope */
-        "    ldrsh  r8, [ip, #12]\n"         /* rmax */
+        "    ldm    r0, {r1, r5, r10}\n"     /* coeffs, psi, order in one (round 18; v in r3) */
+        "    mov    r2, r10\n"
+        "    ldr    r6, [r1, #20]\n"         /* xsat */
+        "    ldr    r7, [r1, #16]\n"         /* slope */
+        "    ldrsh  r8, [r1, #12]\n"         /* rmax */
         "    stm    sp, {r2, r3, r6, r7, r8}\n" /* the frame's first five words in one */
-        "    mov    r10, r2\n"               /* order */
-        "    ldr    r11, [ip, #24]\n"        /* c */
-        "    ldr    r5, [r0, #4]\n"          /* psi */
+        "    ldr    r11, [r1, #24]\n"        /* c */
         "    ldr    lr, [r0, #52]\n"         /* psum */
         "    str    lr, [sp, #24]\n"
-        "    ldrh   r2, [ip, #8]\n"          /* n_ops */
+        "    ldrh   r2, [r1, #8]\n"          /* n_ops */
         "    add    lr, lr, r2, lsl #2\n"
         "    add    lr, lr, #4\n"
         "    sub    lr, lr, r10\n"           /* psum + n_ops + 1 - order (bytes) */
