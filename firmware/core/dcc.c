@@ -411,6 +411,101 @@ static inline int32_t row_block_end(const int32_t *psi, int32_t p, int32_t end, 
     return lo;
 }
 
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* The law's output u = sat_q15(rshift_rnd(v C - kacc + yd g, 24)) from the
+ * new kacc in r7:r8, v in r4, yd in r1, the instance in ip (round 18: the
+ * steps end with it, so the law's tick reads kacc once and needs no frame
+ * of its own); u in r0 and u_last_q15. The rounding constant starts the sum
+ * (2^23 - kacc, both products by SMLAL); |v C|, |kacc| and |yd g| are each
+ * below 2^46 (|C| <= sum |c_j| < 2^31, c_abs_31), so the rounded value fits
+ * an int32 and SSAT alone clamps it. Clobbers r2, r3, r5, r6. */
+#define DCC_LAW_OUT_MACRO                                                                          \
+    "    .macro dcc_law_out\n"                                                                     \
+    "    ldr    r5, [ip, #16]\n"         /* C (its low word) */                                    \
+    "    ldr    r6, [ip, #0]\n"                                                                    \
+    "    rsbs   r2, r7, #0x800000\n"                                                              \
+    "    sbc    r3, r8, r8, lsl #1\n"    /* 2^23 - kacc */                                         \
+    "    ldr    r6, [r6, #28]\n"         /* g */                                                   \
+    "    smlal  r2, r3, r4, r5\n"                                                                  \
+    "    smlal  r2, r3, r1, r6\n"                                                                  \
+    "    lsrs   r2, r2, #24\n"                                                                    \
+    "    orr    r2, r2, r3, lsl #8\n"    /* acc >> 24 */                                           \
+    "    ssat   r0, #16, r2\n"                                                                    \
+    "    strh   r0, [ip, #36]\n"         /* u_last */                                              \
+    "    .endm\n"
+
+/* The band's first line (first_row_above, first_col_above: the first of the
+ * lines whose key exceeds t), shared by the falling and the rising step
+ * (round 18; the same instructions the two open-coded copies of round 17
+ * had): from the last tick's line (the hint, byte \hint of the instance
+ * in r0), up to two lines either way one by one, beyond them a bisection
+ * over the lines left (at most 5 halvings for 32 lines, where round 16
+ * walked a line at a time, 8 instructions a line). r4 the lines' start
+ * table, r3 their count, r6 t; \key turns a line's start (a register) into
+ * its key. The answer in r2 and the hint; clobbers r3, r9 and \tmp. */
+#define DCC_LINE_SEARCH_MACRO                                                                      \
+    "    .macro dcc_line_search key, tmp, hint\n"                                                   \
+    "    ldrb   r2, [r0, #\\hint]\n"     /* k = the hint */                                          \
+    "    cbz    r2, 11f\n"                                                                         \
+    "    add    r9, r4, r2, lsl #1\n"                                                              \
+    "    ldrh   r9, [r9, #-2]\n"                                                                   \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    ble    11f\n"                                                                             \
+    "    subs   r2, r2, #1\n"            /* line k - 1 exceeds t: the answer is at most k - 1 */   \
+    "    beq    12f\n"                                                                             \
+    "    add    r9, r4, r2, lsl #1\n"                                                              \
+    "    ldrh   r9, [r9, #-2]\n"                                                                   \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    ble    12f\n"                   /* line k - 2 does not: one line down */                  \
+    "    subs   r2, r2, #1\n"                                                                      \
+    "    beq    12f\n"                                                                             \
+    "    add    r9, r4, r2, lsl #1\n"                                                              \
+    "    ldrh   r9, [r9, #-2]\n"                                                                   \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    ble    12f\n"                   /* two lines down */                                      \
+    "    subs   r3, r2, #1\n"            /* line k - 3 exceeds t: bisect over [0, k - 3] */        \
+    "    movs   r2, #0\n"                                                                          \
+    "    b      14f\n"                                                                             \
+    "11: cmp    r2, r3\n"                                                                          \
+    "    bge    12f\n"                                                                             \
+    "    ldrh   r9, [r4, r2, lsl #1]\n"                                                            \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    bgt    12f\n"                   /* the hint's line */                                     \
+    "    adds   r2, r2, #1\n"            /* line k does not exceed t */                            \
+    "    cmp    r2, r3\n"                                                                          \
+    "    bge    12f\n"                                                                             \
+    "    ldrh   r9, [r4, r2, lsl #1]\n"                                                            \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    bgt    12f\n"                   /* one line up */                                         \
+    "    adds   r2, r2, #1\n"            /* nor k + 1 */                                           \
+    "    cmp    r2, r3\n"                                                                          \
+    "    bge    12f\n"                                                                             \
+    "    ldrh   r9, [r4, r2, lsl #1]\n"                                                            \
+    "    \\key   r9\n"                                                                              \
+    "    cmp    r9, r6\n"                                                                          \
+    "    bgt    12f\n"                   /* two lines up */                                        \
+    "    adds   r2, r2, #1\n"            /* nor k + 2: bisect over [k + 3, n] */                   \
+    "    b      14f\n"                                                                             \
+    "13: add    r9, r2, r3\n"            /* the first line in [r2, r3] exceeding t (line r3 does, \
+                                         * or r3 = n) */                                          \
+    "    lsrs   r9, r9, #1\n"                                                                      \
+    "    ldrh   \\tmp, [r4, r9, lsl #1]\n"                                                         \
+    "    \\key   \\tmp\n"                                                                           \
+    "    cmp    \\tmp, r6\n"                                                                       \
+    "    ite    gt\n"                                                                              \
+    "    movgt  r3, r9\n"                                                                          \
+    "    addle  r2, r9, #1\n"                                                                      \
+    "14: cmp    r2, r3\n"                                                                          \
+    "    blt    13b\n"                                                                             \
+    "12: strb   r2, [r0, #\\hint]\n"                                                               \
+    "    .endm\n"
+#endif
+
 /*
  * Falling to v with runs (const_w, n_rows, c_abs_31; docs/kernels-kp.md, "DCC:
  * runs"). In a row (one n1, index order = n2 order) psi is non-increasing
@@ -513,20 +608,25 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * 60 instructions per row visited, round 14); here the row's state lives
  * in registers and the per-tick constants in a frame of their own, one
  * load each where a row uses them. It does the whole falling step of
- * dcc_ops with runs after the reversal's bookkeeping (ops_update, below):
- * the band's first row (first_row_above's answer: the hint's row or up to
+ * dcc_ops with runs after the reversal's bookkeeping (piezo_dcc_process,
+ * below, jumps here with v in r3 and yd in r1): the band's first row
+ * (first_row_above's answer by dcc_line_search: the hint's row or up to
  * two rows below or above it, two to four compares, else a bisection over
  * the rows left, at most 5 halvings for n_rows <= 32, where round 16 walked
  * a row at a time, 8 instructions a row, after a user's step), the rows,
- * the runs out, kacc and v_prev.
+ * the runs out, kacc and v_prev, then the law's output (dcc_law_out, round
+ * 18), returned in r0.
  *
- * r4 &row_start[k + 1] once a row is read, r5 psi, r7:r8 dk, r9 the old
- * run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
+ * r4 &row_start[k + 1] once a row is read, r5 psi, r7:r8 kacc (round 18:
+ * the moves' products added to it as they are made, no 64-bit add at the
+ * end), r9 the old run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
  * r3 r, lr the run's weight sum; r6, ip scratch.
  * Frame: [sp] th (n1), #4 v_prev, #8 v, #12 xsat, #16 slope, #20 rmax
  * (a row's first four words in one LDM, round 16),
- * #24 old_end, #28 out_end, #32 psum, #36 &row_start[n_rows], #40 r10
- * while a block's end is searched, #44 out, #48 dcc (pushed r0).
+ * #24 old_end, #28 out, #32 psum, #36 &row_start[n_rows], #40 out_end,
+ * #44 th again (the pairs stored by one STRD each, out_end and th read by
+ * one LDRD where a run is recorded; round 18),
+ * #48 dcc, #52 yd (pushed r0, r1: the step ends with the law's output).
  */
 typedef char piezo_dcc_fall_m4_layout_check_t[
     (offsetof(struct piezo_dcc, coeffs) == 0u && offsetof(struct piezo_dcc, psi_q15) == 4u &&
@@ -542,45 +642,51 @@ typedef char piezo_dcc_fall_m4_layout_check_t[
      offsetof(struct piezo_kp_grid, slope_q16) == 16u && offsetof(struct piezo_kp_grid, xsat_q15) == 20u &&
      offsetof(struct piezo_dcc_coeffs, c_q24) == 24u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, int32_t v)
+static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
 {
-    (void)dcc;
-    (void)v;
     __asm__ volatile(
-        /* psi[r0 .. r2) = r3 (index bounds; four per pass, as fill_i32);
-         * clobbers r0, r6, ip */
+        DCC_LAW_OUT_MACRO
+        DCC_LINE_SEARCH_MACRO
+        /* a row's key: n1 at its first index (th in r1) */
+        "    .macro dcc_key_n1 reg\n"
+        "    ldrsh  \\reg, [r1, \\reg, lsl #1]\n"
+        "    .endm\n"
+        /* psi[r0 .. r2) = r3 (index bounds, r0 <= r2; four per pass, as
+         * fill_i32): the count in r6 (round 18: counted down, the last
+         * one to three by the count's two low bits in the flags, 9
+         * instructions besides the passes where the end pointer's
+         * compares took 11 or 12); clobbers r0, r6 */
         "    .macro dcc_fill\n"
+        "    sub    r6, r2, r0\n"
         "    add    r0, r5, r0, lsl #2\n"
-        "    add    ip, r5, r2, lsl #2\n"
-        "    sub    r6, ip, #12\n"
-        "    cmp    r0, r6\n"
-        "    bhs    2f\n"
+        "    subs   r6, r6, #4\n"
+        "    blo    2f\n"
         "1:  strd   r3, r3, [r0], #8\n"
         "    strd   r3, r3, [r0], #8\n"
-        "    cmp    r0, r6\n"
-        "    blo    1b\n"
-        "2:  sub    r6, ip, r0\n"
-        "    cmp    r6, #8\n"
-        "    blt    3f\n"
-        "    strd   r3, r3, [r0], #8\n"
-        "3:  cmp    r0, ip\n"
-        "    it     lo\n"
-        "    strlo  r3, [r0]\n"
+        "    subs   r6, r6, #4\n"
+        "    bhs    1b\n"
+        "2:  lsls   r6, r6, #31\n"         /* bit 1 of the count to C, bit 0 to N */
+        "    it     cs\n"
+        "    strdcs r3, r3, [r0], #8\n"
+        "    it     mi\n"
+        "    strmi  r3, [r0]\n"
         "    .endm\n"
         /* r2 = row_block_end(psi, r0, r1, r6): gallop from the row's end,
-         * then bisect; clobbers ip (hi), lr (step, mid), r10 */
+         * then bisect; clobbers ip (hi), lr (step, mid) and r1 (round 18:
+         * the row's end, read back from row_start after it, one LDRH, where
+         * r10 was spilled and reloaded around it) */
         "    .macro dcc_block_end\n"
         "    sub    ip, r1, #1\n"
-        "    ldr    r10, [r5, ip, lsl #2]\n"
         "    mov    r2, r1\n"
-        "    cmp    r10, r6\n"
+        "    ldr    r1, [r5, ip, lsl #2]\n"
+        "    cmp    r1, r6\n"
         "    beq    9f\n"
         "    mov    lr, #1\n"
         "4:  sub    r2, ip, lr\n"
         "    cmp    r2, r0\n"
         "    ble    5f\n"
-        "    ldr    r10, [r5, r2, lsl #2]\n"
-        "    cmp    r10, r6\n"
+        "    ldr    r1, [r5, r2, lsl #2]\n"
+        "    cmp    r1, r6\n"
         "    beq    6f\n"
         "    mov    ip, r2\n"
         "    lsl    lr, lr, #1\n"
@@ -591,8 +697,8 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    bge    9f\n"
         "    add    lr, r2, ip\n"
         "    asr    lr, lr, #1\n"
-        "    ldr    r10, [r5, lr, lsl #2]\n"
-        "    cmp    r10, r6\n"
+        "    ldr    r1, [r5, lr, lsl #2]\n"
+        "    cmp    r1, r6\n"
         "    ite    eq\n"
         "    addeq  r2, lr, #1\n"
         "    movne  ip, lr\n"
@@ -600,18 +706,17 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "9:\n"
         "    .endm\n"
 
-        "    push   {r0, r4-r11, lr}\n"
+        "    push   {r0, r1, r4-r11, lr}\n"  /* dcc, yd kept for the output */
         "    sub    sp, #48\n"
-        "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    r2, [ip, #0]\n"          /* n1 */
-        "    ldrsh  r3, [r0, #34]\n"         /* v_prev */
-        "    mov    r4, r1\n"                /* v */
-        "    ldr    r6, [ip, #20]\n"         /* xsat */
-        "    ldr    r7, [ip, #16]\n"         /* slope */
-        "    ldrsh  r8, [ip, #12]\n"         /* rmax */
-        "    stm    sp, {r2, r3, r4, r6, r7, r8}\n" /* the frame's first six words in one */
-        "    ldr    r11, [ip, #24]\n"        /* c */
-        "    ldr    r5, [r0, #4]\n"          /* psi */
+        "    ldm    r0, {r4, r5}\n"          /* coeffs, psi in one (round 18) */
+        "    ldr    r1, [r4, #0]\n"          /* n1 */
+        "    ldrsh  r2, [r0, #34]\n"         /* v_prev */
+        "    ldr    r6, [r4, #20]\n"         /* xsat */
+        "    ldr    r7, [r4, #16]\n"         /* slope */
+        "    ldrsh  r8, [r4, #12]\n"         /* rmax */
+        "    stm    sp, {r1, r2, r3, r6, r7, r8}\n" /* the frame's first six words in one (v in r3) */
+        "    sub    r6, r3, r6\n"            /* t = v - xsat */
+        "    ldr    r11, [r4, #24]\n"        /* c */
         "    ldr    r9, [r0, #52]\n"         /* psum */
         "    add    r4, r0, #56\n"           /* row_start */
         "    ldrb   r3, [r0, #46]\n"         /* n_rows */
@@ -620,84 +725,22 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         /* the band's first row (first_row_above: the first whose n1 exceeds
          * v - xsat), from the last falling tick's: up to two rows either
          * way one by one, beyond them a bisection (round 17) */
-        "    sub    r6, r1, r6\n"            /* t = v - xsat */
-        "    mov    lr, r2\n"                /* n1 */
-        "    ldrb   r2, [r0, #47]\n"         /* k = row_cur */
-        "    cbz    r2, 11f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    ble    11f\n"
-        "    subs   r2, r2, #1\n"             /* row k - 1 exceeds t: the answer is at most k - 1 */
-        "    beq    12f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    ble    12f\n"                    /* row k - 2 does not: one row down */
-        "    subs   r2, r2, #1\n"
-        "    beq    12f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    ble    12f\n"                    /* two rows down */
-        "    subs   r3, r2, #1\n"             /* row k - 3 exceeds t: bisect over [0, k - 3] */
-        "    movs   r2, #0\n"
-        "    b      14f\n"
-        "11: cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* the hint's row */
-        "    adds   r2, r2, #1\n"             /* row k does not exceed t */
-        "    cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* one row up */
-        "    adds   r2, r2, #1\n"             /* nor k + 1 */
-        "    cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    ldrsh  r9, [lr, r9, lsl #1]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* two rows up */
-        "    adds   r2, r2, #1\n"             /* nor k + 2: bisect over [k + 3, n_rows] */
-        "    b      14f\n"
-        /* the first row in [r2, r3] exceeding t (row r3 does, or r3 =
-         * n_rows): at most 5 halvings for 32 rows, where round 16 walked one
-         * row at a time (8 instructions a row) */
-        "13: add    r9, r2, r3\n"
-        "    lsrs   r9, r9, #1\n"
-        "    ldrh   r10, [r4, r9, lsl #1]\n"
-        "    ldrsh  r10, [lr, r10, lsl #1]\n"
-        "    cmp    r10, r6\n"
-        "    ite    gt\n"
-        "    movgt  r3, r9\n"
-        "    addle  r2, r9, #1\n"
-        "14: cmp    r2, r3\n"
-        "    blt    13b\n"
-        "12: strb   r2, [r0, #47]\n"
+        "    dcc_line_search dcc_key_n1, r7, 47\n" /* k = row_cur, then the answer */
         "    add    r4, r4, r2, lsl #1\n"    /* &row_start[k] */
+        "    cmp    r4, r10\n"               /* k = n_rows: no row moves (the flags kept to the test
+                                             * below: nothing between sets them; round 18) */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
         "    add    r9, r0, #188\n"
         "    eor    r2, r3, #1\n"
+        "    strb   r2, [r0, #44]\n"         /* cur ^= 1 now (round 18: the step reads it no more) */
         "    add    r10, r9, r2, lsl #6\n"   /* out = run[cur ^ 1] */
         "    add    r9, r9, r3, lsl #6\n"    /* old = run[cur] */
-        "    str    r10, [sp, #44]\n"
-        "    add    lr, r10, #64\n"
-        "    str    lr, [sp, #28]\n"         /* out_end */
-        "    ldrb   lr, [r0, #43]\n"         /* n_run */
-        "    add    lr, r9, lr, lsl #4\n"
-        "    str    lr, [sp, #24]\n"         /* old_end */
-        "    movs   r7, #0\n"
-        "    movs   r8, #0\n"
-        "    ldr    ip, [sp, #36]\n"
-        "    cmp    r4, ip\n"
+        "    add    r2, r10, #64\n"          /* out_end */
+        "    ldrb   r3, [r0, #43]\n"         /* n_run */
+        "    add    r3, r9, r3, lsl #4\n"    /* old_end */
+        "    strd   r3, r10, [sp, #24]\n"    /* old_end, out */
+        "    strd   r2, r1, [sp, #40]\n"     /* out_end, th: both by one LDRD where a run is recorded (round 18) */
+        "    ldrd   r7, r8, [r0, #24]\n"     /* kacc: the moves add to it (round 18) */
         "    bhs    .Ldf_done\n"
 
         ".Ldf_row:\n"
@@ -735,10 +778,8 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         ".Ldf_old_ge:\n"
         "    bne    .Ldf_norun\n"
         /* the row's run moves as one */
-        "    ldr    lr, [r9, #0]\n"          /* csum */
-        "    ldr    ip, [r9, #4]\n"          /* lvl */
-        "    ldrh   r2, [r9, #10]\n"         /* k */
-        "    add    r9, r9, #16\n"
+        "    ldrd   lr, ip, [r9], #16\n"     /* csum, lvl (round 18: one LDRD) */
+        "    ldrh   r2, [r9, #-6]\n"         /* k */
         "    add    r2, r0, r2\n"            /* p = j + k */
         "    cmp    r3, ip\n"
         "    beq    .Ldf_run_same\n"
@@ -750,17 +791,16 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    b      .Ldf_scan\n"
 
         ".Ldf_norun:\n"
-        "    ldr    ip, [sp, #32]\n"         /* psum */
-        "    cmp    ip, #0\n"
-        "    beq    .Ldf_plain\n"
-        "    ldr    r6, [r5, r0, lsl #2]\n"  /* psi[j] */
+        "    ldr    r6, [sp, #32]\n"         /* psum */
+        "    cbnz   r6, 29f\n"               /* (one instruction less than CMP, BEQ) */
+        "    b      .Ldf_plain\n"
+        "29: ldr    r6, [r5, r0, lsl #2]\n"  /* psi[j] */
         "    ldr    lr, [sp, #20]\n"
         "    cmp    r6, lr\n"
         "    bne    .Ldf_diag\n"
         /* a row entering the band with its first operators at rmax */
-        "    str    r10, [sp, #40]\n"
         "    dcc_block_end\n"
-        "    ldr    r10, [sp, #40]\n"
+        "    ldrh   r1, [r4]\n"              /* end */
         "    ldr    ip, [sp, #32]\n"
         "    ldr    lr, [ip, r2, lsl #2]\n"
         "    ldr    ip, [ip, r0, lsl #2]\n"
@@ -788,18 +828,17 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    str    r3, [r5, r0, lsl #2]\n"
         "    mov    r6, lr\n"                /* b */
         "    add    r0, r0, #1\n"            /* from j + 1 */
-        "    str    r10, [sp, #40]\n"
         "    dcc_block_end\n"
         "    sub    r6, r3, r6\n"            /* r - b */
         "    ldr    ip, [sp, #32]\n"
         "    ldr    lr, [ip, r2, lsl #2]\n"  /* psum[e] */
         "    add    ip, ip, r0, lsl #2\n"
-        "    ldr    r10, [ip]\n"             /* psum[j + 1] */
-        "    sub    r10, lr, r10\n"
-        "    smlal  r7, r8, r6, r10\n"       /* (r - b) (psum[e] - psum[j + 1]) */
+        "    ldr    r1, [ip]\n"              /* psum[j + 1] */
+        "    sub    r1, lr, r1\n"
+        "    smlal  r7, r8, r6, r1\n"        /* (r - b) (psum[e] - psum[j + 1]) */
         "    ldr    ip, [ip, #-4]\n"
         "    sub    lr, lr, ip\n"            /* csum = psum[e] - psum[j] */
-        "    ldr    r10, [sp, #40]\n"
+        "    ldrh   r1, [r4]\n"              /* end */
         "    dcc_fill\n"
         "    mov    r0, r2\n"
         "    b      .Ldf_scan\n"
@@ -825,11 +864,10 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    ldrh   r1, [r4, #-2]\n"         /* j */
         "    subs   r2, r0, r1\n"            /* operators that moved */
         "    ble    .Ldf_next\n"
-        "    ldr    ip, [sp, #28]\n"
+        "    ldrd   ip, r6, [sp, #40]\n"     /* out_end, th */
         "    cmp    r10, ip\n"
         "    bhs    .Ldf_next\n"
-        "    ldr    ip, [sp, #0]\n"
-        "    ldrsh  ip, [ip, r1, lsl #1]\n"  /* n1 */
+        "    ldrsh  ip, [r6, r1, lsl #1]\n"  /* n1 */
         "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
         "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
         "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
@@ -839,24 +877,22 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
         "    blo    .Ldf_row\n"
 
         ".Ldf_done:\n"
-        "    ldr    r0, [sp, #48]\n"
-        "    ldrb   r1, [r0, #44]\n"
-        "    eor    r1, r1, #1\n"
-        "    strb   r1, [r0, #44]\n"         /* cur ^= 1 */
-        "    ldr    r1, [sp, #44]\n"
-        "    sub    r1, r10, r1\n"
-        "    lsr    r1, r1, #4\n"
-        "    strb   r1, [r0, #43]\n"         /* n_run */
-        "    ldrd   r2, r3, [r0, #24]\n"
-        "    adds   r2, r2, r7\n"
-        "    adc    r3, r3, r8\n"
-        "    strd   r2, r3, [r0, #24]\n"     /* kacc += dk (runs: const_w) */
-        "    ldr    r1, [sp, #8]\n"
-        "    strh   r1, [r0, #34]\n"         /* v_prev = v */
+        "    ldrd   ip, r1, [sp, #48]\n"     /* dcc, yd */
+        "    ldr    r0, [sp, #28]\n"
+        "    sub    r0, r10, r0\n"
+        "    lsr    r0, r0, #4\n"
+        "    strb   r0, [ip, #43]\n"         /* n_run */
+        "    strd   r7, r8, [ip, #24]\n"     /* kacc (runs: const_w) */
+        "    ldr    r4, [sp, #8]\n"
+        "    strh   r4, [ip, #34]\n"         /* v_prev = v */
+        "    dcc_law_out\n"
         "    add    sp, #48\n"
-        "    pop    {r2, r4-r11, pc}\n"
+        "    pop    {r1, r2, r4-r11, pc}\n"
         "    .purgem dcc_fill\n"
-        "    .purgem dcc_block_end\n");
+        "    .purgem dcc_block_end\n"
+        "    .purgem dcc_law_out\n"
+        "    .purgem dcc_line_search\n"
+        "    .purgem dcc_key_n1\n");
 }
 
 /*
@@ -867,26 +903,35 @@ static __attribute__((naked, noinline)) void dcc_fall_m4(struct piezo_dcc *dcc, 
  * high one n2); the prefix sums of the n2 order are read at the same offset
  * from an order pointer (psum + n_ops + 1 - order, in bytes). The band's
  * first column is found as the falling step's first row (the hint, up to
- * two columns either way, else a bisection; round 17).
+ * two columns either way, else a bisection; round 17; the same macro since
+ * round 18). Entered and left as the falling step (v in r3, yd in r1, the
+ * law's output in r0).
  *
- * r4 &col_start[k + 1] once a column is read, r5 psi, r7:r8 dk, r9 the old
+ * r4 &col_start[k + 1] once a column is read, r5 psi, r7:r8 kacc, r9 the old
  * run, r11 c; in a column r0 the position (pointer), r1 the column's end, r2
  * n2 then scratch, r3 r, r6 q (where the moving suffix starts), lr the
  * run's weight sum; r10, ip scratch. Frame: [sp] order, #4 v, #8 xsat, #12
- * slope, #16 rmax, #20 old_end, #24 out_end, #28 psum, #32
- * &col_start[n_cols], #36 the sums' offset, #40 n2, #44 the next run out,
- * #56 out, #64 dcc (#48, #52 unused since round 17).
+ * slope, #16 rmax, #24 psum, #32 &col_start[n_cols], #36 the sums' offset,
+ * #40 out, #44 the next run out, #48 out_end, #52 old_end (in pairs: one
+ * LDRD per run out and at the end, one STRD each at the start, round 18),
+ * #64 dcc, #68 yd (#20, #28, #56, #60 unused). A run's n2 is read back from the column's last
+ * order entry (its high half) when the run is recorded, not kept per column.
  */
 typedef char piezo_dcc_rise_m4_layout_check_t[
     (offsetof(struct piezo_dcc, order) == 8u && offsetof(struct piezo_dcc, n2_banded) == 41u &&
      offsetof(struct piezo_dcc, n_cols) == 48u && offsetof(struct piezo_dcc, col_cur) == 49u &&
      offsetof(struct piezo_dcc, col_start) == 122u && offsetof(struct piezo_kp_grid, n_ops) == 8u) ? 1 : -1];
 
-static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, int32_t v)
+static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
 {
-    (void)dcc;
-    (void)v;
     __asm__ volatile(
+        DCC_LAW_OUT_MACRO
+        DCC_LINE_SEARCH_MACRO
+        /* a column's key: n2 at its first order position (order in r10) */
+        "    .macro dcc_key_n2 reg\n"
+        "    add    \\reg, r10, \\reg, lsl #2\n"
+        "    ldrsh  \\reg, [\\reg, #2]\n"
+        "    .endm\n"
         /* psi[ord entries [p, r1)] = r3, two per pass (as scatter_i32);
          * clobbers p, b (the last pair's bound), t0, t1 */
         "    .macro dcc_scatter p, b, t0, t1\n"
@@ -906,28 +951,25 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "3:\n"
         "    .endm\n"
 
-        "    push   {r0, r4-r11, lr}\n"
+        "    push   {r0, r1, r4-r11, lr}\n"  /* dcc, yd kept for the output */
         "    sub    sp, #64\n"
-        "    ldr    ip, [r0, #0]\n"          /* coeffs */
-        "    ldr    r2, [r0, #8]\n"          /* order */
-        "    mov    r3, r1\n"                /* v */
-        "    ldr    r6, [ip, #20]\n"         /* xsat */
-        "    ldr    r7, [ip, #16]\n"         /* slope */
-        "    ldrsh  r8, [ip, #12]\n"         /* rmax */
+        "    ldm    r0, {r1, r5, r10}\n"     /* coeffs, psi, order in one (round 18; v in r3) */
+        "    mov    r2, r10\n"
+        "    ldr    r6, [r1, #20]\n"         /* xsat */
+        "    ldr    r7, [r1, #16]\n"         /* slope */
+        "    ldrsh  r8, [r1, #12]\n"         /* rmax */
         "    stm    sp, {r2, r3, r6, r7, r8}\n" /* the frame's first five words in one */
-        "    mov    r10, r2\n"               /* order */
-        "    ldr    r11, [ip, #24]\n"        /* c */
-        "    ldr    r5, [r0, #4]\n"          /* psi */
+        "    ldr    r11, [r1, #24]\n"        /* c */
         "    ldr    lr, [r0, #52]\n"         /* psum */
-        "    str    lr, [sp, #28]\n"
-        "    ldrh   r2, [ip, #8]\n"          /* n_ops */
+        "    str    lr, [sp, #24]\n"
+        "    ldrh   r2, [r1, #8]\n"          /* n_ops */
         "    add    lr, lr, r2, lsl #2\n"
         "    add    lr, lr, #4\n"
         "    sub    lr, lr, r10\n"           /* psum + n_ops + 1 - order (bytes) */
         "    add    r4, r0, #122\n"          /* col_start */
         "    ldrb   r3, [r0, #48]\n"         /* n_cols */
-        "    add    r9, r4, r3, lsl #1\n"
-        "    strd   r9, lr, [sp, #32]\n"
+        "    add    r8, r4, r3, lsl #1\n"    /* &col_start[n_cols], kept past the search */
+        "    strd   r8, lr, [sp, #32]\n"
         /* the band's first column (first_col_above: the first whose n2
          * exceeds v_prev - xsat; every column without n2_banded), from the
          * last rising tick's: up to two columns either way one by one,
@@ -935,103 +977,35 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    movs   r2, #0\n"
         "    ldrb   lr, [r0, #41]\n"         /* n2_banded */
         "    cmp    lr, #0\n"
-        "    beq    13f\n"
+        "    beq    19f\n"
         "    ldrsh  lr, [r0, #34]\n"         /* v_prev */
         "    sub    r6, lr, r6\n"            /* t = v_prev - xsat */
-        "    ldrb   r2, [r0, #49]\n"         /* k = col_cur */
-        "    cbz    r2, 11f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    ble    11f\n"
-        "    subs   r2, r2, #1\n"             /* column k - 1 exceeds t: the answer is at most k - 1 */
-        "    beq    12f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    ble    12f\n"                    /* column k - 2 does not: one column down */
-        "    subs   r2, r2, #1\n"
-        "    beq    12f\n"
-        "    add    r9, r4, r2, lsl #1\n"
-        "    ldrh   r9, [r9, #-2]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    ble    12f\n"                    /* two columns down */
-        "    subs   r3, r2, #1\n"             /* column k - 3 exceeds t: bisect over [0, k - 3] */
-        "    movs   r2, #0\n"
-        "    b      15f\n"
-        "11: cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* the hint's column */
-        "    adds   r2, r2, #1\n"             /* column k does not exceed t */
-        "    cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* one column up */
-        "    adds   r2, r2, #1\n"             /* nor k + 1 */
-        "    cmp    r2, r3\n"
-        "    bge    12f\n"
-        "    ldrh   r9, [r4, r2, lsl #1]\n"
-        "    add    r9, r10, r9, lsl #2\n"
-        "    ldrsh  r9, [r9, #2]\n"
-        "    cmp    r9, r6\n"
-        "    bgt    12f\n"                    /* two columns up */
-        "    adds   r2, r2, #1\n"             /* nor k + 2: bisect over [k + 3, n_cols] */
-        "    b      15f\n"
-        /* the first column in [r2, r3] exceeding t (column r3 does, or r3 =
-         * n_cols): at most 5 halvings for 32 columns, where round 16 walked one
-         * column at a time (8 instructions a column) */
-        "14: add    r9, r2, r3\n"
-        "    lsrs   r9, r9, #1\n"
-        "    ldrh   lr, [r4, r9, lsl #1]\n"
-        "    add    lr, r10, lr, lsl #2\n"
-        "    ldrsh  lr, [lr, #2]\n"
-        "    cmp    lr, r6\n"
-        "    ite    gt\n"
-        "    movgt  r3, r9\n"
-        "    addle  r2, r9, #1\n"
-        "15: cmp    r2, r3\n"
-        "    blt    14b\n"
-        "12: strb   r2, [r0, #49]\n"
-        "13: add    r4, r4, r2, lsl #1\n"    /* &col_start[k] */
+        "    dcc_line_search dcc_key_n2, lr, 49\n" /* k = col_cur, then the answer */
+        "19: add    r4, r4, r2, lsl #1\n"    /* &col_start[k] */
+        "    cmp    r4, r8\n"                /* k = n_cols: no column moves (the flags kept to the
+                                             * test below: nothing between sets them; round 18) */
+        "    ldrh   r1, [r4]\n"
+        "    add    r1, r10, r1, lsl #2\n"   /* its first position (round 18: then each column's from the last one's end) */
         "    ldrb   r3, [r0, #44]\n"         /* cur */
         "    add    r9, r0, #188\n"
         "    eor    r2, r3, #1\n"
+        "    strb   r2, [r0, #44]\n"         /* cur ^= 1 now (round 18: the step reads it no more) */
         "    add    r10, r9, r2, lsl #6\n"   /* out = run[cur ^ 1] */
         "    add    r9, r9, r3, lsl #6\n"    /* old = run[cur] */
-        "    str    r10, [sp, #56]\n"
-        "    str    r10, [sp, #44]\n"
-        "    add    lr, r10, #64\n"
-        "    str    lr, [sp, #24]\n"         /* out_end */
-        "    ldrb   lr, [r0, #43]\n"         /* n_run */
-        "    add    lr, r9, lr, lsl #4\n"
-        "    str    lr, [sp, #20]\n"         /* old_end */
-        "    movs   r7, #0\n"
-        "    movs   r8, #0\n"
-        "    ldr    ip, [sp, #32]\n"
-        "    cmp    r4, ip\n"
+        "    add    r2, r10, #64\n"          /* out_end */
+        "    ldrb   r3, [r0, #43]\n"         /* n_run */
+        "    add    r3, r9, r3, lsl #4\n"    /* old_end */
+        "    strd   r10, r10, [sp, #40]\n"   /* out, the next run out */
+        "    strd   r2, r3, [sp, #48]\n"     /* out_end, old_end (round 18) */
+        "    ldrd   r7, r8, [r0, #24]\n"     /* kacc: the moves add to it (round 18) */
         "    bhs    .Ldr_done\n"
 
-        ".Ldr_col:\n"
-        "    ldrh   r0, [r4], #2\n"          /* pos */
-        "    ldrh   r1, [r4]\n"              /* end */
+        ".Ldr_col:\n"                         /* r1: the column's first position (the last one's end) */
+        "    mov    r0, r1\n"
+        "    ldrh   r1, [r4, #2]!\n"         /* end */
         "    ldm    sp, {r2, r3, ip}\n"      /* order, v, xsat in one (round 16) */
-        "    add    r0, r2, r0, lsl #2\n"
         "    add    r1, r2, r1, lsl #2\n"
         "    ldrsh  r2, [r0, #2]\n"          /* n2 */
-        "    str    r2, [sp, #40]\n"
         "    subs   r3, r3, r2\n"            /* x = v - n2 */
         "    ble    .Ldr_done\n"             /* n2 >= v from here on: r = 0 */
         "    cmp    r3, ip\n"
@@ -1044,7 +1018,7 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         ".Ldr_sat:\n"
         "    ldr    r3, [sp, #16]\n"
         ".Ldr_ridge:\n"
-        "    ldr    lr, [sp, #20]\n"         /* old_end */
+        "    ldr    lr, [sp, #52]\n"         /* old_end */
         ".Ldr_old:\n"
         "    cmp    r9, lr\n"
         "    bhs    .Ldr_norun\n"
@@ -1056,10 +1030,8 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         ".Ldr_old_ge:\n"
         "    bne    .Ldr_norun\n"
         /* the column's run moves as one */
-        "    ldr    lr, [r9, #0]\n"          /* csum */
-        "    ldr    ip, [r9, #4]\n"          /* lvl */
-        "    ldrh   r2, [r9, #10]\n"         /* k */
-        "    add    r9, r9, #16\n"
+        "    ldrd   lr, ip, [r9], #16\n"     /* csum, lvl (round 18: one LDRD) */
+        "    ldrh   r2, [r9, #-6]\n"         /* k */
         "    sub    r2, r1, r2, lsl #2\n"    /* q: the run's first position */
         "    cmp    r3, ip\n"
         "    beq    .Ldr_join\n"
@@ -1089,31 +1061,29 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    b      .Ldr_rec\n"
 
         ".Ldr_norun:\n"
-        "    mov    lr, #0\n"
         /* operators that do not move, then (a suffix) all that do */
         "22: cmp    r0, r1\n"
         "    bhs    .Ldr_next\n"            /* none moves: no run out (round 17) */
         "    ldrh   ip, [r0]\n"
-        "    ldr    ip, [r5, ip, lsl #2]\n"
-        "    cmp    ip, r3\n"
+        "    ldr    r10, [r5, ip, lsl #2]\n" /* kept: the first mover's psi (round 18) */
+        "    cmp    r10, r3\n"
         "    blt    23f\n"
         "    add    r0, r0, #4\n"
         "    b      22b\n"
         "23: mov    r6, r0\n"                /* q */
-        "    mov    r2, r1\n"                /* z: from z on at 0 */
-        "    ldr    ip, [sp, #28]\n"
-        "    cmp    ip, #0\n"
-        "    beq    .Ldr_each\n"            /* (r0 < r1 here) */
+        "    ldr    r2, [sp, #24]\n"         /* psum */
+        "    cbnz   r2, 29f\n"               /* (one instruction less than CMP, BEQ) */
+        "    mov    r2, r1\n"                /* no prefix sums: z = end */
+        "    b      .Ldr_each0\n"           /* (r0 < r1 here) */
+        "29: mov    r2, r1\n"                /* z: from z on at 0 */
         "    ldrh   ip, [r1, #-4]\n"
         "    ldr    ip, [r5, ip, lsl #2]\n"
         "    cmp    ip, #0\n"
-        "    bne    .Ldr_each\n"
-        /* its last operators at 0: their first by bisection */
+        "    bne    .Ldr_each0\n"
+        /* its last operators at 0: their first by bisection (none when
+         * the first mover, its psi still in r10, is at 0) */
         "    mov    r2, r0\n"
-        "    mov    r10, r0\n"
-        "    ldrh   ip, [r0]\n"
-        "    ldr    ip, [r5, ip, lsl #2]\n"
-        "    cmp    ip, #0\n"
+        "    cmp    r10, #0\n"
         "    beq    25f\n"
         "    add    r2, r0, #4\n"
         "    sub    r10, r1, #4\n"
@@ -1150,6 +1120,8 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "27:\n"
         "    dcc_scatter r2, r0, ip, r10\n"
         "    b      .Ldr_rec\n"
+        ".Ldr_each0:\n"
+        "    mov    lr, #0\n"                /* the run's weight sum (the zero block sets its own) */
         ".Ldr_each:\n"                        /* [e, z) move one by one */
         "    cmp    r0, r2\n"
         "    bhs    .Ldr_rec\n"
@@ -1165,13 +1137,11 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         ".Ldr_rec:\n"                         /* the run out: [q, end) */
         "    subs   r2, r1, r6\n"            /* (two positions in one array: no overflow) */
         "    ble    .Ldr_next\n"
-        "    ldr    r10, [sp, #44]\n"
-        "    ldr    ip, [sp, #24]\n"
+        "    ldrd   r10, ip, [sp, #44]\n"    /* the next run out, out_end */
         "    cmp    r10, ip\n"
         "    bhs    .Ldr_next\n"
-        "    lsr    r2, r2, #2\n"
-        "    ldr    ip, [sp, #40]\n"
-        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
+        "    ldrsh  ip, [r1, #-2]\n"         /* n2: the column's last entry's high half (round 18) */
+        "    pkhbt  ip, ip, r2, lsl #14\n"   /* thr and k (r2 = 4 k) as one word (round 16) */
         "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
         "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
         "    str    r10, [sp, #44]\n"
@@ -1181,24 +1151,21 @@ static __attribute__((naked, noinline)) void dcc_rise_m4(struct piezo_dcc *dcc, 
         "    blo    .Ldr_col\n"
 
         ".Ldr_done:\n"
-        "    ldr    r0, [sp, #64]\n"
-        "    ldrb   r1, [r0, #44]\n"
-        "    eor    r1, r1, #1\n"
-        "    strb   r1, [r0, #44]\n"         /* cur ^= 1 */
-        "    ldr    r1, [sp, #44]\n"
-        "    ldr    r2, [sp, #56]\n"
-        "    sub    r1, r1, r2\n"
-        "    lsr    r1, r1, #4\n"
-        "    strb   r1, [r0, #43]\n"         /* n_run */
-        "    ldrd   r2, r3, [r0, #24]\n"
-        "    adds   r2, r2, r7\n"
-        "    adc    r3, r3, r8\n"
-        "    strd   r2, r3, [r0, #24]\n"     /* kacc += dk */
-        "    ldr    r1, [sp, #4]\n"
-        "    strh   r1, [r0, #34]\n"         /* v_prev = v */
+        "    ldrd   ip, r1, [sp, #64]\n"     /* dcc, yd */
+        "    ldrd   r2, r0, [sp, #40]\n"     /* out, the next run out */
+        "    sub    r0, r0, r2\n"
+        "    lsr    r0, r0, #4\n"
+        "    strb   r0, [ip, #43]\n"         /* n_run */
+        "    strd   r7, r8, [ip, #24]\n"     /* kacc */
+        "    ldr    r4, [sp, #4]\n"
+        "    strh   r4, [ip, #34]\n"         /* v_prev = v */
+        "    dcc_law_out\n"
         "    add    sp, #64\n"
-        "    pop    {r2, r4-r11, pc}\n"
-        "    .purgem dcc_scatter\n");
+        "    pop    {r1, r2, r4-r11, pc}\n"
+        "    .purgem dcc_scatter\n"
+        "    .purgem dcc_law_out\n"
+        "    .purgem dcc_line_search\n"
+        "    .purgem dcc_key_n2\n");
 }
 #endif
 
@@ -1417,46 +1384,6 @@ void piezo_dcc_ops_update_c(struct piezo_dcc *dcc, int16_t v_q15)
     dcc_ops(dcc, v_q15);
 }
 
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-/* A tick with runs and a new input: the reversal's three stores (as
- * dcc_ops), then the whole step in Thumb-2. */
-static inline __attribute__((always_inline)) void runs_step(struct piezo_dcc *dcc, int16_t v_q15)
-{
-    const int8_t dir = v_q15 > dcc->v_prev_q15 ? 1 : -1;
-    if (dir != dcc->dir) { /* reversal, as dcc_ops */
-        dcc->xi_q15 = dcc->v_prev_q15;
-        dcc->dir = dir;
-        dcc->n_run = 0u;
-    }
-    if (dir > 0) {
-        dcc_rise_m4(dcc, v_q15);
-    } else {
-        dcc_fall_m4(dcc, v_q15);
-    }
-}
-#endif
-
-/* The operators' step (the law's own call inlines it: one call less). */
-static inline __attribute__((always_inline)) void ops_update(struct piezo_dcc *dcc, int16_t v_q15)
-{
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    /* with runs: the whole step in Thumb-2 */
-    if (v_q15 == dcc->v_prev_q15) {
-        return;
-    }
-    if (dcc->runs) {
-        runs_step(dcc, v_q15);
-        return;
-    }
-#endif
-    dcc_ops(dcc, v_q15);
-}
-
-void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
-{
-    ops_update(dcc, v_q15);
-}
-
 /* The law's output from sum_j Psi_j c_j (Q39): the feedthrough, rounded and
  * saturated; kept as the next tick's input. */
 static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *dcc, int64_t acc,
@@ -1468,35 +1395,15 @@ static inline __attribute__((always_inline)) int16_t dcc_out(struct piezo_dcc *d
     return u;
 }
 
-int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
+/* The law's tick with the C kernels: the operators (dcc_ops, which also
+ * takes the runs), then the sum. */
+static inline __attribute__((always_inline)) int16_t process_c(struct piezo_dcc *dcc, int16_t yd_q15)
 {
     const int16_t v = dcc->u_last_q15;
-    /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
-#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
-    if (dcc->runs) {
-        /* runs tested once for the step and the sum (round 16: gcc tested
-         * the byte again after the step's call) */
-        if (v != dcc->v_prev_q15) {
-            runs_step(dcc, v);
-        }
-        /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product. The
-         * rounding constant starts the sum (2^23 - kacc, then the two
-         * products by SMLAL: round 17, 2 instructions fewer than adding it
-         * to the sum at the end); the same integers, every step exact in
-         * int64 */
-        int64_t acc = ((int64_t)1 << 23) - dcc->kacc;
-        acc = piezo_mlal(acc, v, (int32_t)dcc->csum);
-        acc = piezo_mlal(acc, yd_q15, dcc->coeffs->g_q24);
-        /* |v C|, |kacc| = |sum psi_j c_j| and |yd g| are each below
-         * 2^15 2^31 (|psi_j|, |v|, |yd| <= 2^15; sum |c_j| and g below 2^31),
-         * so |acc| < 2^48 and acc rounded to q15 fits an int32: SSAT alone
-         * clamps it, as piezo_sat_q15 would (4 instructions fewer) */
-        const int16_t u = (int16_t)__builtin_arm_ssat((int32_t)(acc >> 24), 16u);
-        dcc->u_last_q15 = u;
-        return u;
+    if (v != dcc->v_prev_q15) { /* (dcc_ops returns at once then; its call is saved) */
+        dcc_ops(dcc, v);
     }
-#endif
-    ops_update(dcc, v);
+    /* sum_j Psi_j c_j = sum_j (v - psi_j) c_j = v C - sum_j psi_j c_j */
     int64_t acc;
     if (dcc->runs) {
         /* |C| <= sum |c_j| < 2^31 (c_abs_31): one 32 x 32 product */
@@ -1513,3 +1420,94 @@ int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
     }
     return dcc_out(dcc, acc, yd_q15);
 }
+
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__)
+/* Without the runs (the RKP kind's changing weights, a plane the runs do not
+ * handle): the C tick, out of the Thumb-2 entry's way. */
+static __attribute__((noinline, used)) int16_t dcc_process_scan(struct piezo_dcc *dcc, int16_t yd_q15)
+{
+    return process_c(dcc, yd_q15);
+}
+
+/*
+ * Cortex-M4: the law's tick with runs in Thumb-2 (round 18). gcc's C tick
+ * (round 17's) pushed six registers, moved the arguments to saved ones,
+ * called the step and read kacc back after it (32 instructions besides the
+ * step at tick 203). Here the tick tests runs, compares v = u_last with
+ * v_prev, makes the reversal's three stores (as dcc_ops) and jumps into the
+ * rising or falling step with v in r3 and yd in r1; the step ends with the
+ * output (dcc_law_out, kacc still in registers) and returns it. A tick
+ * without a move takes the output alone. test_dcc's walks compare it with
+ * the band scan's C law and, through piezo_dcc_ops_update (below), every
+ * operator and the step's state with the C step.
+ */
+typedef char piezo_dcc_process_m4_layout_check_t[
+    (offsetof(struct piezo_dcc, runs) == 50u && offsetof(struct piezo_dcc, u_last_q15) == 36u &&
+     offsetof(struct piezo_dcc, v_prev_q15) == 34u && offsetof(struct piezo_dcc, xi_q15) == 32u &&
+     offsetof(struct piezo_dcc, dir) == 38u && offsetof(struct piezo_dcc, n_run) == 43u &&
+     offsetof(struct piezo_dcc, csum) == 16u && offsetof(struct piezo_dcc, kacc) == 24u &&
+     offsetof(struct piezo_dcc_coeffs, g_q24) == 28u) ? 1 : -1];
+
+__attribute__((naked, noinline)) int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
+{
+    (void)dcc;
+    (void)yd_q15;
+    __asm__ volatile(
+        DCC_LAW_OUT_MACRO
+        "    ldrb   r2, [r0, #50]\n"         /* runs */
+        "    cbz    r2, 3f\n"
+        "    ldrsh  r3, [r0, #36]\n"         /* v = u_last: the operators' input */
+        "    ldrsh  r2, [r0, #34]\n"         /* v_prev */
+        "    cmp    r3, r2\n"
+        "    beq    4f\n"
+        "    ldrsb  ip, [r0, #38]\n"         /* dir */
+        "    blt    1f\n"
+        "    cmp    ip, #1\n"
+        "    beq.w  dcc_rise_m4\n"
+        "    movs   ip, #1\n"                /* a reversal to rising */
+        "    b      2f\n"
+        "1:  cmn    ip, #1\n"
+        "    beq.w  dcc_fall_m4\n"
+        "    mov    ip, #-1\n"               /* a reversal to falling */
+        "2:  strh   r2, [r0, #32]\n"         /* xi = v_prev */
+        "    strb   ip, [r0, #38]\n"         /* dir */
+        "    movs   r2, #0\n"
+        "    strb   r2, [r0, #43]\n"         /* n_run = 0: the runs are the other direction's */
+        "    cmp    ip, #0\n"
+        "    bgt.w  dcc_rise_m4\n"
+        "    b.w    dcc_fall_m4\n"
+        "3:  b.w    dcc_process_scan\n"
+        "4:  push   {r4-r8, lr}\n"           /* no move: the output alone */
+        "    mov    r4, r3\n"
+        "    mov    ip, r0\n"
+        "    ldrd   r7, r8, [r0, #24]\n"     /* kacc */
+        "    dcc_law_out\n"
+        "    pop    {r4-r8, pc}\n"
+        "    .purgem dcc_law_out\n");
+}
+
+/* The operators alone: on the Cortex-M4 with runs, the law's Thumb-2 tick on
+ * input v (u_last set to v and put back; the output is dropped), so that
+ * test_dcc's twin tests compare that path with the C step. */
+void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    if (dcc->runs) {
+        const int16_t u = dcc->u_last_q15;
+        dcc->u_last_q15 = v_q15;
+        (void)piezo_dcc_process(dcc, 0);
+        dcc->u_last_q15 = u;
+        return;
+    }
+    dcc_ops(dcc, v_q15);
+}
+#else
+void piezo_dcc_ops_update(struct piezo_dcc *dcc, int16_t v_q15)
+{
+    dcc_ops(dcc, v_q15);
+}
+
+int16_t piezo_dcc_process(struct piezo_dcc *dcc, int16_t yd_q15)
+{
+    return process_c(dcc, yd_q15);
+}
+#endif
