@@ -96,3 +96,53 @@ def test_a_sensor_curve_that_breaks_one_recording_is_vetoed_a_history_dependent_
     c = cand("creep", broken)
     assert S._first_exact([c], fctx, None, None, 1.0, lambda *a: None) is c
     assert c.veto is None and c.worsened[0] == "triangle"
+
+
+def _steps_with_initial_state(curve_um):
+    """A steps recording (normalized levels q) whose first two dwells, low in the range, carry the unknown
+    initial state's level (0.3 um, until the drive reaches the top end), plus a sensor curve of ``curve_um``."""
+    rng = np.random.default_rng(7)
+    q = np.repeat([-0.9, -0.7, 0.9, 0.1, -0.3, 0.5, -0.8, 0.7, 0.0, -0.5, 0.3, 0.8], 400)
+    span = np.zeros(q.size)
+    span[:800] = 0.3                                   # [um] the two histories' difference until the top end
+    e = span + curve_um * (q ** 2 - np.mean(q ** 2)) + 0.01 * rng.normal(size=q.size)
+    return q, span, e, (np.arange(q.size) // 200) % 2
+
+
+def _curve_fold_ratios(q, e, fold, span=None):
+    # the curve's held-out ratio against its own intercept refitted alone, as select._evaluate; with ``span`` also
+    # against the initial state's gain within [-1, 1] (select.nuisance_bounds)
+    from piezoctl.ident.terms import TERMS
+    X = np.column_stack([TERMS["sensor_nonlinearity"].basis(q, 0.0, 1.0), np.ones(q.size)])
+    out = []
+    for f in (0, 1):
+        train, test = fold == f, fold == 1 - f
+        idx = np.flatnonzero(train)
+        nu = None if span is None else (span[idx, None], span[test, None], (np.array([-1.0]), np.array([1.0])))
+        _, before, _ = _fit_predict(X[:, -1:], e, train, test, rows=e.size, nuis=nu)
+        _, after, _ = _fit_predict(X, e, train, test, rows=e.size, nuis=nu)
+        out.append(float(np.sqrt(np.mean((e[test] - after) ** 2) / np.mean((e[test] - before) ** 2))))
+    return out
+
+
+def test_the_sensor_curve_is_nested_against_the_unknown_initial_state():
+    # round 18: the curve's intercept and q^2 take a level at one end of the stroke as a curve; the initial state's
+    # bounded gain explains it (a null is not credited), and beside it a true curve is judged on its own size
+    import types
+    from piezoctl.diagnose import significance as sg
+    from piezoctl.diagnose.select import nuisance_bounds, term_nuisance
+    from piezoctl.ident.terms import TERMS
+    term = TERMS["sensor_nonlinearity"]
+    ctx = types.SimpleNamespace(nuisance=np.ones((6, 2)), init_nuisance=np.full((6, 3), 2.0), accepted_flex=None,
+                                n_rec=3)
+    N = term_nuisance(ctx, term)
+    assert N.shape == (6, 5) and np.all(N[:, 2:] == 2.0)     # the initial state's columns, last
+    lo, hi = nuisance_bounds(ctx, term, N)
+    assert np.all(lo[2:] == -1.0) and np.all(hi[2:] == 1.0) and np.all(np.isinf(lo[:2]))
+
+    q, span, e, fold = _steps_with_initial_state(0.0)        # no curve: the level alone
+    assert max(_curve_fold_ratios(q, e, fold)) < sg.RATIO_MAX          # without the state it passed as a curve
+    assert min(_curve_fold_ratios(q, e, fold, span)) > 0.99
+    q, span, e, fold = _steps_with_initial_state(0.1)        # a curve beside the level
+    alone, nested = _curve_fold_ratios(q, e, fold), _curve_fold_ratios(q, e, fold, span)
+    assert max(nested) < 0.6 * min(alone)
