@@ -1090,22 +1090,9 @@ class SensorOffset(Term):
 
 
 class SensorNonlinearity(Term):
-    """A static map of the measured displacement ``y += c2 q^2 + c3 q^3`` (q = y about the recordings' centre,
-    normalized), the same on every recording (``same_on_every_recording``), with a constant that goes to the
-    model's offset.
-
-    Round 18: tested nested against the unknown initial state too (``initial_state``, as creep, drift and the
-    offset are). A recording that starts at one end of the stroke (the foreign reveal's steps begin with dwells
-    low in the range before the drive visits both ends) carries a level the base cannot know, of the size of the
-    loop's memory; the curve's intercept and its even q^2 take it as a level where y is low, and beside it the
-    curve's own improvement was judged on a residual that also held this level (held-out s120-057: fold ratios
-    0.75/0.78, credited 0.82; nested against it 0.70/0.71, credited 0.76). The model's coefficients are still
-    fitted without those columns (``select._evaluate``: the refined model has no state per recording)."""
-
     name = "sensor_nonlinearity"
     intercept = True
     same_on_every_recording = True
-    initial_state = True   # a level per recording at one end of the stroke: the unknown initial state sets one too
     signature = "static function of the measured displacement"
 
     @staticmethod
