@@ -229,13 +229,14 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    sub    r1, r1, r2, lsl #1\n"     /* c - 2 f: a column's pairs are at it + 2 fp */
         "    add    r11, r10, r5, lsl #2\n"   /* a_end */
         "    lsl    r6, lr, #8\n"             /* u 2^8 (fits: |u| <= 2^20) */
-        "    movs   r7, #0\n"                 /* K: the lower branch can win iff */
-        "    cmp    lr, #0\n"                 /* ((a_j - K) ^ (u >> 31)) < 0: u > 0 and */
-        "    beq    8f\n"                     /* a < 1 (K = 2^24), u < 0 and a > 1 */
-        "    mov    r7, #0x1000000\n"         /* (K = 2^24 + 1: ~(a - K) = 2^24 - a), */
-        "    it     lt\n"                     /* never at u = 0 (K = 0, a > 0) */
-        "    addlt  r7, r7, #1\n"
-        "8:  lsls   r3, r3, #2\n"
+        "    mov    r7, #0x1000000\n"         /* K: the lower branch can win iff */
+        "    sub    r7, r7, lr, asr #31\n"    /* ((a_j - K) ^ (u >> 31)) < 0: u >= 0 and */
+                                               /* a < 1 (K = 2^24), u < 0 and a > 1 */
+                                               /* (K = 2^24 + 1: ~(a - K) = 2^24 - a); at */
+                                               /* u = 0 the lower-branch loop for a < 1 (it */
+                                               /* cannot win there: -r <= hi; round 18: */
+                                               /* 2 instructions for K instead of 6) */
+        "    lsls   r3, r3, #2\n"
         "    stm    sp, {r1, r2, r3, r6, r7, r11, r12}\n"
         "    beq    7f\n"                     /* n_r == 0 (the lsls) */
         "1:  ldm    sp, {r1, r2, r3, r6, r7}\n" /* column (r10 = &a_j) */
@@ -274,7 +275,11 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    b      6f\n"
         "32: str    r4, [r2], #4\n"
         "    smlal  r8, r9, r5, r12\n"
-        "    b      6f\n"
+        "    str    r3, [sp, #4]\n"           /* the column's end (6 below), in line */
+        "    ldr    r11, [sp, #20]\n"         /* (round 18: no branch to it) */
+        "    cmp    r10, r11\n"
+        "    bne    1b\n"
+        "    b      7f\n"
         "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r11, r4, [r1], #8\n"       /* c, w */
         "    add    r11, r11, r6\n"            /* hi = A_j + c */
