@@ -390,7 +390,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
     (void)u_q15;
     (void)u_prev_q15;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's rest
-     * count (n_r - m_j, uint16), r6 r7 r12 scratch, r8:r9 acc, r10:r11
+     * count in bytes (4 (n_r - m_j), uint16), r6 r7 r12 scratch, r8:r9 acc, r10:r11
      * run_w, lr u, r5 the counts' end; at [sp]: W = c2 + 4 - 2 f (the
      * weights' copy beside the constants: the weight of the output at fp is
      * at W + 2 fp; round 17, second part), the thresholds, n_r * 4 (one LDM
@@ -418,23 +418,23 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    ldrh   r7, [r3, #14]\n"          /* n_a */
         "    ldr    r3, [r3, #0]\n"           /* r */
         "    add    r5, r4, r7, lsl #1\n"     /* the counts' end */
+        "    lsl    r12, r12, #2\n"          /* n_r * 4 */
         "    cmp    r6, #1\n"
         "    bne    8f\n"
         "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */
         "    mla    r9, r11, r1, r9\n"
         "    b      9f\n"
         "8:  movs   r10, #0\n"                /* new runs: run_w = 0, every rest n_r */
-        "    movs   r11, #0\n"
+        "    movs   r11, #0\n"                /* (in bytes, n_r * 4) */
         "    mov    r6, r4\n"
         "81: strh   r12, [r6], #2\n"
         "    cmp    r6, r5\n"
         "    bne    81b\n"
-        "9:  lsl    r12, r12, #2\n"
-        "    stm    sp, {r0, r3, r12}\n"
-        "1:  ldrh   r7, [r4]\n"               /* column: its rest */
+        "9:  stm    sp, {r0, r3, r12}\n"
+        "1:  ldrh   r7, [r4]\n"               /* column: its rest, in bytes */
         "    ldm    sp, {r0, r1, r12}\n"      /* W, rp = r, n_r * 4 */
         "    add    r3, r2, r12\n"            /* the column's end */
-        "    sub    r6, r3, r7, lsl #2\n"     /* the run's end */
+        "    sub    r6, r3, r7\n"             /* the run's end */
         "    sub    r6, r6, #4\n"             /* its stores two per pass while fp < r6 */
         "    cmp    r2, r6\n"
         "    bhs    22f\n"
@@ -452,8 +452,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    beq    4f\n"
         "    add    r0, r0, r2, lsl #1\n"     /* wp = W + 2 fp: its weight */
         "    tst    r6, #4\n"
-        "    beq    2f\n"
-        "    b      3f\n"                    /* odd: enter at the pair's second */
+        "    bne    3f\n"                    /* odd: enter at the pair's second */
         "2:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
@@ -476,8 +475,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    adc    r11, r11, r6, asr #31\n"
         "    cmp    r2, r3\n"
         "    bne    2b\n"
-        "4:  sub    r6, r3, r2\n"             /* the column's new rest */
-        "    lsr    r6, r6, #2\n"
+        "4:  sub    r6, r3, r2\n"             /* the column's new rest, in bytes */
         "    strh   r6, [r4], #2\n"
         "    mov    r2, r3\n"                  /* the next column starts where this one ends */
         "    cmp    r4, r5\n"
@@ -544,7 +542,7 @@ static inline void store_run(int32_t *f, const int32_t *r, size_t n, int32_t u, 
  * of the sum is d * run_w, run_w = the sum of their weights over the whole
  * bank (p->run_w_q24, int64: |run_w| < 2^8 * 2^31, |d| <= 2^21, as the
  * classical run), and they are only stored; each column's scan goes on from
- * m_j. Each column keeps n_r - m_j (uint16, the operators after its run),
+ * m_j. Each column keeps 4 (n_r - m_j) (uint16, the bytes after its run),
  * after the constants and weights in the work array (bytes 8 n_ops + 2 j:
  * PIEZO_PLAY_WORK_LEN).
  * p->run_dir is +1 while they hold; a falling sample sets it to -1 and
@@ -555,16 +553,19 @@ static inline unsigned char *upi_runs(const struct piezo_play *p)
     return (unsigned char *)p->c2_q15 + p->n_ops * sizeof(int64_t);
 }
 
+/* The rest counts are kept in bytes, 4 (n_r - m_j) (round 18: rise_m4
+ * subtracts it from the column's end and stores it without shifts; n_r <=
+ * PIEZO_PLAY_MAX_OPS, so 4 n_r fits uint16). */
 static inline size_t m_get(const unsigned char *m, size_t j)
 {
     uint16_t v;
     memcpy(&v, m + j * sizeof v, sizeof v);
-    return v;
+    return v / 4u;
 }
 
 static inline void m_set(unsigned char *m, size_t j, size_t v)
 {
-    const uint16_t x = (uint16_t)v;
+    const uint16_t x = (uint16_t)(v * 4u);
     memcpy(m + j * sizeof x, &x, sizeof x);
 }
 
