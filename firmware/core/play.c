@@ -450,9 +450,21 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    str    r7, [r2], #4\n"
         "30: subs   r6, r3, r2\n"             /* the scan from the run's end */
         "    beq    4f\n"
-        "    add    r0, r0, r2, lsl #1\n"     /* wp = W + 2 fp: its weight */
-        "    tst    r6, #4\n"
-        "    bne    3f\n"                    /* odd: enter at the pair's second */
+        "    ldr    r12, [r1], #4\n"          /* its first operator alone (round 18: */
+        "    ldr    r7, [r2]\n"               /* on a steady rise it is the one that */
+        "    sub    r12, lr, r12\n"           /* ends the scan; 7 instructions then, */
+        "    subs   r7, r12, r7\n"            /* 10 through the pair loop) */
+        "    ble    4f\n"
+        "    str    r12, [r2], #4\n"
+        "    add    r0, r0, r2, lsl #1\n"     /* wp = W + 2 fp: the next one's weight, */
+        "    ldr    r12, [r0, #-8]\n"         /* this one's 8 bytes before it */
+        "    smlal  r8, r9, r12, r7\n"
+        "    adds   r10, r10, r12\n"          /* run_w += w */
+        "    adc    r11, r11, r12, asr #31\n"
+        "    cmp    r2, r3\n"
+        "    beq    4f\n"
+        "    tst    r6, #4\n"                 /* an even count left: the pair's first */
+        "    beq    3f\n"                    /* odd: enter at the pair's second */
         "2:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
