@@ -112,7 +112,8 @@ int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
  * = (h u 2^17 + 2^31) >> 32, the rounded high word of (2 h) (u 2^16); 2 h
  * fits int32 because |h| < 2^30 and u 2^16 because u is q15 (-2^31 at
  * u = -1). The same integers as the 64-bit product, shift and round (5
- * instructions per step); at h = 2^30 exactly (sum |p_m| = 64, refused
+ * instructions per step); the add of p_m is folded into it (SMMLAR). At
+ * h = 2^30 exactly (sum |p_m| = 64, refused
  * since round 18) 2 h would wrap. */
 static inline int32_t piezo_eupi_poly_hu_q24(const int32_t *p_q24, uint16_t n_p, int16_t u_q15)
 {
@@ -127,7 +128,7 @@ static inline int32_t piezo_eupi_poly_hu_q24(const int32_t *p_q24, uint16_t n_p,
     const int32_t *q = p_q24 + n_p;
     int32_t h = *--q;
     while (q != p_q24) {
-        h = piezo_mul_hi_rnd(2 * h, u16) + *--q;
+        h = piezo_mul_hi_rnd_add(2 * h, u16, *--q); /* one SMMLAR */
     }
     return piezo_mul_hi_rnd(2 * h, u16);
 }
