@@ -423,13 +423,6 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    bne    8f\n"
         "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */
         "    mla    r9, r11, r1, r9\n"
-        "    b      9f\n"
-        "8:  movs   r10, #0\n"                /* new runs: run_w = 0, every rest n_r */
-        "    movs   r11, #0\n"                /* (in bytes, n_r * 4) */
-        "    mov    r6, r4\n"
-        "81: strh   r12, [r6], #2\n"
-        "    cmp    r6, r5\n"
-        "    bne    81b\n"
         "9:  stm    sp, {r0, r3, r12}\n"
         "1:  ldrh   r7, [r4]\n"               /* column: its rest, in bytes */
         "    ldm    sp, {r0, r1, r12}\n"      /* W, rp = r, n_r * 4 */
@@ -494,12 +487,24 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    bne    1b\n"
         "    ldr    r0, [sp, #16]\n"          /* p */
         "    strd   r10, r11, [r0, #32]\n"    /* run_w */
-        "7:  add    sp, #16\n"
+        "    strd   r8, r9, [r0, #16]\n"      /* p->acc_q39 (round 18: p loaded once) */
+        "    add    sp, #20\n"                /* the state and the pushed p */
+        "    mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    pop    {r4-r11, pc}\n"
+        "7:  add    sp, #16\n"                /* no operators */
         "    ldr    r2, [sp], #4\n"           /* p */
         "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
         "    mov    r0, r8\n"
         "    mov    r1, r9\n"
-        "    pop    {r4-r11, pc}\n");
+        "    pop    {r4-r11, pc}\n"
+        "8:  movs   r10, #0\n"                /* new runs: run_w = 0, every rest n_r */
+        "    movs   r11, #0\n"                /* (in bytes, n_r * 4); out of line: the */
+        "    mov    r6, r4\n"                 /* runs that go on reach 9 without a branch */
+        "81: strh   r12, [r6], #2\n"
+        "    cmp    r6, r5\n"
+        "    bne    81b\n"
+        "    b      9b\n");
 }
 
 #endif
