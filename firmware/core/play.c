@@ -218,15 +218,13 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    mov    r3, #-1\n"
         "    strb   r3, [r0, #29]\n"          /* run_dir = -1: the rising runs end */
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
-        "    ldr    ip, [r0, #0]\n"           /* coef */
-        "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    r1, [r0, #8]\n"           /* the pairs */
+        "    ldm    r0, {r1, r2, r3}\n"       /* coef, f, the pairs (round 18: one LDM) */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
-        "    ldrh   r3, [ip, #12]\n"          /* n_r */
-        "    ldrh   r5, [ip, #14]\n"          /* n_a */
-        "    ldr    r10, [ip, #4]\n"          /* a */
-        "    ldr    r12, [ip, #0]\n"          /* r */
-        "    sub    r1, r1, r2, lsl #1\n"     /* c - 2 f: a column's pairs are at it + 2 fp */
+        "    ldrh   r4, [r1, #12]\n"          /* n_r */
+        "    ldrh   r5, [r1, #14]\n"          /* n_a */
+        "    ldr    r10, [r1, #4]\n"          /* a */
+        "    ldr    r12, [r1, #0]\n"          /* r */
+        "    sub    r1, r3, r2, lsl #1\n"     /* c - 2 f: a column's pairs are at it + 2 fp */
         "    add    r11, r10, r5, lsl #2\n"   /* a_end */
         "    lsl    r6, lr, #8\n"             /* u 2^8 (fits: |u| <= 2^20) */
         "    mov    r7, #0x1000000\n"         /* K: the lower branch can win iff */
@@ -236,7 +234,7 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
                                                /* u = 0 the lower-branch loop for a < 1 (it */
                                                /* cannot win there: -r <= hi; round 18: */
                                                /* 2 instructions for K instead of 6) */
-        "    lsls   r3, r3, #2\n"
+        "    lsls   r3, r4, #2\n"
         "    stm    sp, {r1, r2, r3, r6, r7, r11, r12}\n"
         "    beq    7f\n"                     /* n_r == 0 (the lsls) */
         "1:  ldm    sp, {r1, r2, r3, r6, r7}\n" /* column (r10 = &a_j) */
@@ -405,19 +403,18 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    movs   r7, #1\n"
         "    strb   r7, [r0, #29]\n"          /* run_dir = 1 */
         "    ldrd   r10, r11, [r0, #32]\n"    /* run_w */
-        "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    r4, [r0, #8]\n"           /* the constants, */
-        "    ldr    r7, [r0, #12]\n"          /* n_ops pairs of them: the rest counts follow */
-        "    ldr    r3, [r0, #0]\n"           /* coef */
+        "    ldm    r0, {r0, r2, r4, r7}\n"   /* coef, f, the constants (n_ops pairs of */
+                                               /* them: the rest counts follow), n_ops */
+                                               /* (round 18: one LDM for four LDRs) */
+        "    ldrh   r12, [r0, #12]\n"         /* n_r */
+        "    ldrh   r5, [r0, #14]\n"          /* n_a */
+        "    ldr    r3, [r0, #0]\n"           /* r */
         "    add    r0, r4, #4\n"
         "    sub    r0, r0, r2, lsl #1\n"     /* W */
         "    add    r4, r4, r7, lsl #3\n"
-        "    ldrh   r12, [r3, #12]\n"         /* n_r */
         "    cmp    r12, #0\n"
         "    beq    7f\n"
-        "    ldrh   r7, [r3, #14]\n"          /* n_a */
-        "    ldr    r3, [r3, #0]\n"           /* r */
-        "    add    r5, r4, r7, lsl #1\n"     /* the counts' end */
+        "    add    r5, r4, r5, lsl #1\n"     /* the counts' end */
         "    lsl    r12, r12, #2\n"          /* n_r * 4 */
         "    cmp    r6, #1\n"
         "    bne    8f\n"
