@@ -712,10 +712,9 @@ static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *
     (void)u_prev_q15;
     __asm__ volatile(
         "    push   {r4-r11, lr}\n"
-        "    ldr    r3, [r0, #0]\n"           /* coef */
+        "    ldm    r0, {r3, ip}\n"           /* coef, f (round 18: one LDM) */
         "    str    r1, [r0, #24]\n"          /* u_prev = u */
         "    ldrd   r4, r5, [r0, #16]\n"      /* acc */
-        "    ldr    ip, [r0, #4]\n"           /* f */
         "    ldr    r6, [r3, #0]\n"           /* r */
         "    ldr    r7, [r3, #8]\n"           /* w */
         "    ldrh   lr, [r3, #12]\n"          /* n_r */
