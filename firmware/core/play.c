@@ -239,16 +239,15 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    beq    7f\n"                     /* n_r == 0 (the lsls) */
         "1:  ldm    sp, {r1, r2, r3, r6, r7}\n" /* column (r10 = &a_j) */
         "    add    r1, r1, r2, lsl #1\n"     /* its pairs */
-        "    add    r3, r3, r2\n"             /* its outputs' end */
         "    ldr    r11, [r10], #4\n"          /* a_j */
         "    smmulr r6, r11, r6\n"            /* the rounded high word (a_j u 2^8 + 2^31) >> 32 */
         "    subs   r7, r11, r7\n"            /* is A_j = rshift_rnd(a_j u, 24) */
         "    eors   r7, r7, lr, asr #31\n"
         "    bmi    5f\n"
-        "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
-        "    tst    r12, #4\n"
-        "    beq    31f\n"
-        "    ldrd   r11, r4, [r1], #8\n"      /* odd: one first (its c and w) */
+        "    lsls   r12, r3, #30\n"           /* upper branch only, two per pass: C = */
+        "    add    r3, r3, r2\n"             /* n_r odd (r3 = n_r * 4 until this add, */
+        "    bcc    31f\n"                    /* its outputs' end after; round 18) */
+        "33: ldrd   r11, r4, [r1], #8\n"      /* odd: one first (its c and w) */
         "    ldr    r12, [r2]\n"
         "    add    r11, r11, r6\n"           /* hi = A_j + c */
         "    subs   r7, r11, r12\n"           /* d = hi - F: F < hi ends the scan */
@@ -278,7 +277,8 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    cmp    r10, r11\n"
         "    bne    1b\n"
         "    b      7f\n"
-        "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
+        "5:  add    r3, r3, r2\n"             /* its outputs' end */
+        "    ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r11, r4, [r1], #8\n"       /* c, w */
         "    add    r11, r11, r6\n"            /* hi = A_j + c */
         "    ldr    r7, [r0], #4\n"
@@ -300,7 +300,7 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    str    r11, [r2], #4\n"
         "    smlal  r8, r9, r4, r7\n"
         "    cmp    r2, r3\n"
-        "    bne    3b\n"                      /* the rest by the upper-branch loop */
+        "    bne    3f\n"                      /* the rest by the upper-branch loop */
         "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
         "    ldr    r11, [sp, #20]\n"
         "    cmp    r10, r11\n"
@@ -310,7 +310,11 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
         "    mov    r0, r8\n"
         "    mov    r1, r9\n"
-        "    pop    {r4-r11, pc}\n");
+        "    pop    {r4-r11, pc}\n"
+        "3:  sub    r12, r3, r2\n"             /* after a lower-branch prefix: the rest's */
+        "    tst    r12, #4\n"                 /* parity */
+        "    beq    31b\n"
+        "    b      33b\n");
 }
 
 #endif
