@@ -45,7 +45,8 @@ int piezo_eupi_check_upi_poly(const struct piezo_play_coef *upi,
     for (size_t m = 0; m < n_p; m++) {
         sum += p_q24[m] < 0 ? -(int64_t)p_q24[m] : (int64_t)p_q24[m];
     }
-    return sum > PIEZO_EUPI_POLY_SUM_MAX_Q24 ? PIEZO_EINVAL : PIEZO_OK;
+    /* strict: sum |p_m| = 64 lets h reach 2^30, and 2 h wraps (eupi.h) */
+    return sum >= PIEZO_EUPI_POLY_SUM_MAX_Q24 ? PIEZO_EINVAL : PIEZO_OK;
 }
 
 int piezo_eupi_init(struct piezo_eupi *m, const struct piezo_eupi_coef *coef,

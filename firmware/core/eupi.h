@@ -18,11 +18,14 @@
  *                     [0, 32767], non-decreasing; a_q24 = a_j > 0;
  *                     w_q24 = d_ij >= 0, row-major (i, j).
  *   p_q24[n_p]        Q7.24 coefficients of u^2 .. u^(n_p + 1),
- *                     n_p <= PIEZO_EUPI_MAX_POLY, sum |p_m| <= 64.
+ *                     n_p <= PIEZO_EUPI_MAX_POLY, sum |p_m| < 64 (strict,
+ *                     round 18: sum |p_m| <= 2^30 - 1 in Q7.24).
  *   p0_q24            Q7.24 constant term.
  *
  * Rounding: the play operators as in play.h; each Horner step rounds to Q7.24
- * with piezo_rshift_rnd64(h * u, 15); the output rounds the Q39 sum once with
+ * with piezo_rshift_rnd64(h * u, 15) (computed as the rounded high word of
+ * (2 h) (u 2^16), the same integer while |h| < 2^30: see
+ * piezo_eupi_poly_hu_q24); the output rounds the Q39 sum once with
  * piezo_rshift_rnd64(acc, 24).
  *
  * Saturation: the output is clamped to q15 by piezo_sat_q15() (the golden model
@@ -34,7 +37,8 @@
  * outputs stay in [-1, 1) and unparallel outputs in [-2, 1), i.e. below 2^16
  * in q15 units. A weight is below 2^31 in Q7.24, so each product of the Q39
  * accumulator is below 2^47 and a0 * u below 2^46; the Horner value h stays
- * below sum |p_m| + n_p LSB <= 2^30 (fits int32) and P below 2^46 in Q39.
+ * within sum |p_m| <= 2^30 - 1 (a rounded h u 2^-15 is at most |h| for
+ * |u| <= 1), so 2 h fits int32, and P is below 2^46 in Q39.
  * With at most 2 * 256 operators the sum stays below 2^57: the int64
  * accumulator cannot overflow.
  */
@@ -49,7 +53,9 @@
 #include "play.h"
 
 #define PIEZO_EUPI_MAX_POLY 8u                      /* powers u^2 .. u^9 */
-#define PIEZO_EUPI_POLY_SUM_MAX_Q24 ((int64_t)64 << 24)  /* sum |p_m| <= 64 */
+/* sum |p_m| must stay below this (strict): |h| < 2^30, so the Horner step's
+ * 2 h fits int32 (one SMMULR, piezo_eupi_poly_hu_q24). */
+#define PIEZO_EUPI_POLY_SUM_MAX_Q24 ((int64_t)64 << 24)
 
 /* Entries of the caller's state (int32) and work (int64) arrays. */
 #define PIEZO_EUPI_STATE_LEN(n_cpi, n_upi_r, n_upi_a) \
@@ -77,7 +83,7 @@ struct piezo_eupi {
  * state_q15: PIEZO_EUPI_STATE_LEN(cpi.n_r, upi.n_r, upi.n_a) entries;
  * work_q39: PIEZO_EUPI_WORK_LEN(upi.n_r, upi.n_a) entries (may be NULL if 0).
  * Returns PIEZO_OK, PIEZO_EINVAL, PIEZO_EORDER or PIEZO_ERANGE (play.h, plus:
- * a0 <= 0, a threshold >= 1, a negative weight, sum |p_m| > 64, a classical
+ * a0 <= 0, a threshold >= 1, a negative weight, sum |p_m| >= 64, a classical
  * bank with slopes or a UPI grid without, n_p > PIEZO_EUPI_MAX_POLY).
  */
 int piezo_eupi_init(struct piezo_eupi *m, const struct piezo_eupi_coef *coef,
@@ -99,7 +105,16 @@ int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
  * about as much as the polynomial's own multiplies). */
 /* The polynomial's part above its constant, hu = rshift_rnd(h u, 15) in
  * Q24 with h by Horner, so that P(u) = p0 2^15 + hu u (Q39); 0 for n_p == 0.
- * |hu| <= sum |p_m| + n_p (each step rounds by 1/2 LSB at most, |u| <= 1). */
+ * |h|, |hu| <= sum |p_m| < 2^30 (init's strict bound; a rounded h u 2^-15
+ * is at most |h| for |u| <= 1).
+ *
+ * Each step is one SMMULR on the Cortex-M4 (round 18): rshift_rnd(h u, 15)
+ * = (h u 2^17 + 2^31) >> 32, the rounded high word of (2 h) (u 2^16); 2 h
+ * fits int32 because |h| < 2^30 and u 2^16 because u is q15 (-2^31 at
+ * u = -1). The same integers as the 64-bit product, shift and round (5
+ * instructions per step); the add of p_m is folded into it (SMMLAR). At
+ * h = 2^30 exactly (sum |p_m| = 64, refused
+ * since round 18) 2 h would wrap. */
 static inline int32_t piezo_eupi_poly_hu_q24(const int32_t *p_q24, uint16_t n_p, int16_t u_q15)
 {
     if (n_p == 0u) {
@@ -107,13 +122,15 @@ static inline int32_t piezo_eupi_poly_hu_q24(const int32_t *p_q24, uint16_t n_p,
     }
     /* h = p_Np; h = h * u + p_m down to m = 2; hu = h * u. By a pointer
      * that walks down to p_q24 (round 17: no index and its scaled address
-     * before the loop, 1 instruction per sample on Thumb-2). */
+     * before the loop, 1 instruction per sample on Thumb-2). u 2^16 as a
+     * product: no left shift of a negative value. */
+    const int32_t u16 = (int32_t)u_q15 * 65536;
     const int32_t *q = p_q24 + n_p;
     int32_t h = *--q;
     while (q != p_q24) {
-        h = (int32_t)(piezo_mul_rshift_rnd(h, u_q15, 15u) + *--q);
+        h = piezo_mul_hi_rnd_add(2 * h, u16, *--q); /* one SMMLAR */
     }
-    return (int32_t)piezo_mul_rshift_rnd(h, u_q15, 15u);
+    return piezo_mul_hi_rnd(2 * h, u16);
 }
 
 /* P(u) in Q39, inline: the same integers as piezo_eupi_poly_q39. */

@@ -26,7 +26,8 @@
  *                    [0, PIEZO_PLAY_WIDE_MAX_Q15] (q15-scaled int32, may exceed
  *                    1.0), non-decreasing; w_q24 = b'_i of any sign.
  *   upi, p_q24, n_p, p0_q24
- *                    as in eupi.h (thresholds < 1, d_ij >= 0, sum |p_m| <= 64).
+ *                    as in eupi.h (thresholds < 1, d_ij >= 0, sum |p_m| < 64;
+ *                    the G2 bound below keeps it <= 16).
  *   kex_q24          Q7.24, any sign.
  *   Bound on G2:     2 * sum d_ij + sum |p_m| + |p0| + |k_ex| <= 16
  *                    (PIEZO_EUPI_INV_G2_MAX_Q24).

@@ -149,6 +149,20 @@ static inline int32_t piezo_mul_hi_rnd(int32_t a, int32_t b)
 #endif
 }
 
+/** c + piezo_mul_hi_rnd(a, b), one SMMLAR on the Cortex-M4 (round 18: the
+ * Horner step's add folded into the multiply; the core forms c 2^32 + a b
+ * + 2^31 in 64 bits, so the sum is exact; the caller keeps it in int32). */
+static inline int32_t piezo_mul_hi_rnd_add(int32_t a, int32_t b, int32_t c)
+{
+#if defined(__thumb2__) && defined(__ARM_ARCH_7EM__) && defined(__GNUC__)
+    int32_t r;
+    __asm__("smmlar %0, %1, %2, %3" : "=r"(r) : "r"(a), "r"(b), "r"(c));
+    return r;
+#else
+    return c + (int32_t)piezo_rshift_rnd64((int64_t)a * b, 32u);
+#endif
+}
+
 /** Clamp a wide value to the int32 range (q24, q16 intermediates). */
 static inline int32_t piezo_sat_i32(int64_t x)
 {

@@ -218,38 +218,36 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    mov    r3, #-1\n"
         "    strb   r3, [r0, #29]\n"          /* run_dir = -1: the rising runs end */
         "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
-        "    ldr    ip, [r0, #0]\n"           /* coef */
-        "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    r1, [r0, #8]\n"           /* the pairs */
+        "    ldm    r0, {r1, r2, r3}\n"       /* coef, f, the pairs (round 18: one LDM) */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
-        "    ldrh   r3, [ip, #12]\n"          /* n_r */
-        "    ldrh   r5, [ip, #14]\n"          /* n_a */
-        "    ldr    r10, [ip, #4]\n"          /* a */
-        "    ldr    r12, [ip, #0]\n"          /* r */
-        "    sub    r1, r1, r2, lsl #1\n"     /* c - 2 f: a column's pairs are at it + 2 fp */
+        "    ldrh   r4, [r1, #12]\n"          /* n_r */
+        "    ldrh   r5, [r1, #14]\n"          /* n_a */
+        "    ldr    r10, [r1, #4]\n"          /* a */
+        "    ldr    r12, [r1, #0]\n"          /* r */
+        "    sub    r1, r3, r2, lsl #1\n"     /* c - 2 f: a column's pairs are at it + 2 fp */
         "    add    r11, r10, r5, lsl #2\n"   /* a_end */
         "    lsl    r6, lr, #8\n"             /* u 2^8 (fits: |u| <= 2^20) */
-        "    movs   r7, #0\n"                 /* K: the lower branch can win iff */
-        "    cmp    lr, #0\n"                 /* ((a_j - K) ^ (u >> 31)) < 0: u > 0 and */
-        "    beq    8f\n"                     /* a < 1 (K = 2^24), u < 0 and a > 1 */
-        "    mov    r7, #0x1000000\n"         /* (K = 2^24 + 1: ~(a - K) = 2^24 - a), */
-        "    it     lt\n"                     /* never at u = 0 (K = 0, a > 0) */
-        "    addlt  r7, r7, #1\n"
-        "8:  lsls   r3, r3, #2\n"
+        "    mov    r7, #0x1000000\n"         /* K: the lower branch can win iff */
+        "    sub    r7, r7, lr, asr #31\n"    /* ((a_j - K) ^ (u >> 31)) < 0: u >= 0 and */
+                                               /* a < 1 (K = 2^24), u < 0 and a > 1 */
+                                               /* (K = 2^24 + 1: ~(a - K) = 2^24 - a); at */
+                                               /* u = 0 the lower-branch loop for a < 1 (it */
+                                               /* cannot win there: -r <= hi; round 18: */
+                                               /* 2 instructions for K instead of 6) */
+        "    lsls   r3, r4, #2\n"
         "    stm    sp, {r1, r2, r3, r6, r7, r11, r12}\n"
         "    beq    7f\n"                     /* n_r == 0 (the lsls) */
         "1:  ldm    sp, {r1, r2, r3, r6, r7}\n" /* column (r10 = &a_j) */
         "    add    r1, r1, r2, lsl #1\n"     /* its pairs */
-        "    add    r3, r3, r2\n"             /* its outputs' end */
         "    ldr    r11, [r10], #4\n"          /* a_j */
         "    smmulr r6, r11, r6\n"            /* the rounded high word (a_j u 2^8 + 2^31) >> 32 */
         "    subs   r7, r11, r7\n"            /* is A_j = rshift_rnd(a_j u, 24) */
         "    eors   r7, r7, lr, asr #31\n"
         "    bmi    5f\n"
-        "3:  sub    r12, r3, r2\n"             /* upper branch only, two per pass */
-        "    tst    r12, #4\n"
-        "    beq    31f\n"
-        "    ldrd   r11, r4, [r1], #8\n"      /* odd: one first (its c and w) */
+        "    lsls   r12, r3, #30\n"           /* upper branch only, two per pass: C = */
+        "    add    r3, r3, r2\n"             /* n_r odd (r3 = n_r * 4 until this add, */
+        "    bcc    31f\n"                    /* its outputs' end after; round 18) */
+        "33: ldrd   r11, r4, [r1], #8\n"      /* odd: one first (its c and w) */
         "    ldr    r12, [r2]\n"
         "    add    r11, r11, r6\n"           /* hi = A_j + c */
         "    subs   r7, r11, r12\n"           /* d = hi - F: F < hi ends the scan */
@@ -274,8 +272,13 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    b      6f\n"
         "32: str    r4, [r2], #4\n"
         "    smlal  r8, r9, r5, r12\n"
-        "    b      6f\n"
-        "5:  ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
+        "    str    r3, [sp, #4]\n"           /* the column's end (6 below), in line */
+        "    ldr    r11, [sp, #20]\n"         /* (round 18: no branch to it) */
+        "    cmp    r10, r11\n"
+        "    bne    1b\n"
+        "    b      7f\n"
+        "5:  add    r3, r3, r2\n"             /* its outputs' end */
+        "    ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r11, r4, [r1], #8\n"       /* c, w */
         "    add    r11, r11, r6\n"            /* hi = A_j + c */
         "    ldr    r7, [r0], #4\n"
@@ -297,7 +300,7 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    str    r11, [r2], #4\n"
         "    smlal  r8, r9, r4, r7\n"
         "    cmp    r2, r3\n"
-        "    bne    3b\n"                      /* the rest by the upper-branch loop */
+        "    bne    3f\n"                      /* the rest by the upper-branch loop */
         "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
         "    ldr    r11, [sp, #20]\n"
         "    cmp    r10, r11\n"
@@ -307,7 +310,11 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
         "    mov    r0, r8\n"
         "    mov    r1, r9\n"
-        "    pop    {r4-r11, pc}\n");
+        "    pop    {r4-r11, pc}\n"
+        "3:  sub    r12, r3, r2\n"             /* after a lower-branch prefix: the rest's */
+        "    tst    r12, #4\n"                 /* parity */
+        "    beq    31b\n"
+        "    b      33b\n");
 }
 
 #endif
@@ -385,7 +392,7 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
     (void)u_q15;
     (void)u_prev_q15;
     /* r0 wp, r1 rp, r2 fp, r3 the column's end of fp, r4 the column's rest
-     * count (n_r - m_j, uint16), r6 r7 r12 scratch, r8:r9 acc, r10:r11
+     * count in bytes (4 (n_r - m_j), uint16), r6 r7 r12 scratch, r8:r9 acc, r10:r11
      * run_w, lr u, r5 the counts' end; at [sp]: W = c2 + 4 - 2 f (the
      * weights' copy beside the constants: the weight of the output at fp is
      * at W + 2 fp; round 17, second part), the thresholds, n_r * 4 (one LDM
@@ -400,36 +407,28 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    movs   r7, #1\n"
         "    strb   r7, [r0, #29]\n"          /* run_dir = 1 */
         "    ldrd   r10, r11, [r0, #32]\n"    /* run_w */
-        "    ldr    r2, [r0, #4]\n"           /* f */
-        "    ldr    r4, [r0, #8]\n"           /* the constants, */
-        "    ldr    r7, [r0, #12]\n"          /* n_ops pairs of them: the rest counts follow */
-        "    ldr    r3, [r0, #0]\n"           /* coef */
+        "    ldm    r0, {r0, r2, r4, r7}\n"   /* coef, f, the constants (n_ops pairs of */
+                                               /* them: the rest counts follow), n_ops */
+                                               /* (round 18: one LDM for four LDRs) */
+        "    ldrh   r12, [r0, #12]\n"         /* n_r */
+        "    ldrh   r5, [r0, #14]\n"          /* n_a */
+        "    ldr    r3, [r0, #0]\n"           /* r */
         "    add    r0, r4, #4\n"
         "    sub    r0, r0, r2, lsl #1\n"     /* W */
         "    add    r4, r4, r7, lsl #3\n"
-        "    ldrh   r12, [r3, #12]\n"         /* n_r */
         "    cmp    r12, #0\n"
         "    beq    7f\n"
-        "    ldrh   r7, [r3, #14]\n"          /* n_a */
-        "    ldr    r3, [r3, #0]\n"           /* r */
-        "    add    r5, r4, r7, lsl #1\n"     /* the counts' end */
+        "    add    r5, r4, r5, lsl #1\n"     /* the counts' end */
+        "    lsl    r12, r12, #2\n"          /* n_r * 4 */
         "    cmp    r6, #1\n"
         "    bne    8f\n"
         "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */
         "    mla    r9, r11, r1, r9\n"
-        "    b      9f\n"
-        "8:  movs   r10, #0\n"                /* new runs: run_w = 0, every rest n_r */
-        "    movs   r11, #0\n"
-        "    mov    r6, r4\n"
-        "81: strh   r12, [r6], #2\n"
-        "    cmp    r6, r5\n"
-        "    bne    81b\n"
-        "9:  lsl    r12, r12, #2\n"
-        "    stm    sp, {r0, r3, r12}\n"
-        "1:  ldrh   r7, [r4]\n"               /* column: its rest */
+        "9:  stm    sp, {r0, r3, r12}\n"
+        "1:  ldrh   r7, [r4]\n"               /* column: its rest, in bytes */
         "    ldm    sp, {r0, r1, r12}\n"      /* W, rp = r, n_r * 4 */
         "    add    r3, r2, r12\n"            /* the column's end */
-        "    sub    r6, r3, r7, lsl #2\n"     /* the run's end */
+        "    sub    r6, r3, r7\n"             /* the run's end */
         "    sub    r6, r6, #4\n"             /* its stores two per pass while fp < r6 */
         "    cmp    r2, r6\n"
         "    bhs    22f\n"
@@ -445,10 +444,21 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    str    r7, [r2], #4\n"
         "30: subs   r6, r3, r2\n"             /* the scan from the run's end */
         "    beq    4f\n"
-        "    add    r0, r0, r2, lsl #1\n"     /* wp = W + 2 fp: its weight */
-        "    tst    r6, #4\n"
-        "    beq    2f\n"
-        "    b      3f\n"                    /* odd: enter at the pair's second */
+        "    ldr    r12, [r1], #4\n"          /* its first operator alone (round 18: */
+        "    ldr    r7, [r2]\n"               /* on a steady rise it is the one that */
+        "    sub    r12, lr, r12\n"           /* ends the scan; 7 instructions then, */
+        "    subs   r7, r12, r7\n"            /* 10 through the pair loop) */
+        "    ble    4f\n"
+        "    str    r12, [r2], #4\n"
+        "    add    r0, r0, r2, lsl #1\n"     /* wp = W + 2 fp: the next one's weight, */
+        "    ldr    r12, [r0, #-8]\n"         /* this one's 8 bytes before it */
+        "    smlal  r8, r9, r12, r7\n"
+        "    adds   r10, r10, r12\n"          /* run_w += w */
+        "    adc    r11, r11, r12, asr #31\n"
+        "    cmp    r2, r3\n"
+        "    beq    4f\n"
+        "    tst    r6, #4\n"                 /* an even count left: the pair's first */
+        "    beq    3f\n"                    /* odd: enter at the pair's second */
         "2:  ldr    r6, [r1], #4\n"
         "    ldr    r7, [r2]\n"
         "    sub    r6, lr, r6\n"
@@ -471,20 +481,31 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    adc    r11, r11, r6, asr #31\n"
         "    cmp    r2, r3\n"
         "    bne    2b\n"
-        "4:  sub    r6, r3, r2\n"             /* the column's new rest */
-        "    lsr    r6, r6, #2\n"
+        "4:  sub    r6, r3, r2\n"             /* the column's new rest, in bytes */
         "    strh   r6, [r4], #2\n"
         "    mov    r2, r3\n"                  /* the next column starts where this one ends */
         "    cmp    r4, r5\n"
         "    bne    1b\n"
         "    ldr    r0, [sp, #16]\n"          /* p */
         "    strd   r10, r11, [r0, #32]\n"    /* run_w */
-        "7:  add    sp, #16\n"
+        "    strd   r8, r9, [r0, #16]\n"      /* p->acc_q39 (round 18: p loaded once) */
+        "    add    sp, #20\n"                /* the state and the pushed p */
+        "    mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    pop    {r4-r11, pc}\n"
+        "7:  add    sp, #16\n"                /* no operators */
         "    ldr    r2, [sp], #4\n"           /* p */
         "    strd   r8, r9, [r2, #16]\n"      /* p->acc_q39 */
         "    mov    r0, r8\n"
         "    mov    r1, r9\n"
-        "    pop    {r4-r11, pc}\n");
+        "    pop    {r4-r11, pc}\n"
+        "8:  movs   r10, #0\n"                /* new runs: run_w = 0, every rest n_r */
+        "    movs   r11, #0\n"                /* (in bytes, n_r * 4); out of line: the */
+        "    mov    r6, r4\n"                 /* runs that go on reach 9 without a branch */
+        "81: strh   r12, [r6], #2\n"
+        "    cmp    r6, r5\n"
+        "    bne    81b\n"
+        "    b      9b\n");
 }
 
 #endif
@@ -539,7 +560,7 @@ static inline void store_run(int32_t *f, const int32_t *r, size_t n, int32_t u, 
  * of the sum is d * run_w, run_w = the sum of their weights over the whole
  * bank (p->run_w_q24, int64: |run_w| < 2^8 * 2^31, |d| <= 2^21, as the
  * classical run), and they are only stored; each column's scan goes on from
- * m_j. Each column keeps n_r - m_j (uint16, the operators after its run),
+ * m_j. Each column keeps 4 (n_r - m_j) (uint16, the bytes after its run),
  * after the constants and weights in the work array (bytes 8 n_ops + 2 j:
  * PIEZO_PLAY_WORK_LEN).
  * p->run_dir is +1 while they hold; a falling sample sets it to -1 and
@@ -550,16 +571,19 @@ static inline unsigned char *upi_runs(const struct piezo_play *p)
     return (unsigned char *)p->c2_q15 + p->n_ops * sizeof(int64_t);
 }
 
+/* The rest counts are kept in bytes, 4 (n_r - m_j) (round 18: rise_m4
+ * subtracts it from the column's end and stores it without shifts; n_r <=
+ * PIEZO_PLAY_MAX_OPS, so 4 n_r fits uint16). */
 static inline size_t m_get(const unsigned char *m, size_t j)
 {
     uint16_t v;
     memcpy(&v, m + j * sizeof v, sizeof v);
-    return v;
+    return v / 4u;
 }
 
 static inline void m_set(unsigned char *m, size_t j, size_t v)
 {
-    const uint16_t x = (uint16_t)v;
+    const uint16_t x = (uint16_t)(v * 4u);
     memcpy(m + j * sizeof x, &x, sizeof x);
 }
 
@@ -692,10 +716,9 @@ static __attribute__((naked, noinline, used)) int64_t cpi_m4(struct piezo_play *
     (void)u_prev_q15;
     __asm__ volatile(
         "    push   {r4-r11, lr}\n"
-        "    ldr    r3, [r0, #0]\n"           /* coef */
+        "    ldm    r0, {r3, ip}\n"           /* coef, f (round 18: one LDM) */
         "    str    r1, [r0, #24]\n"          /* u_prev = u */
         "    ldrd   r4, r5, [r0, #16]\n"      /* acc */
-        "    ldr    ip, [r0, #4]\n"           /* f */
         "    ldr    r6, [r3, #0]\n"           /* r */
         "    ldr    r7, [r3, #8]\n"           /* w */
         "    ldrh   lr, [r3, #12]\n"          /* n_r */

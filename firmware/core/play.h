@@ -66,7 +66,7 @@
  * |d * run_w| < 2^60; the new sum is the exact one, within the bound below) and they are only stored; the scan goes on
  * from operator run_n. A reversal starts the run anew from operator 0.
  * Unparallel banks keep the rising runs the same way, one per column (the
- * operators 0..m_j-1 that moved hold u_prev - r_i; n_r - m_j in the work array
+ * operators 0..m_j-1 that moved hold u_prev - r_i; 4 (n_r - m_j) in the work array
  * after the constants, run_w the sum over all columns); a falling sample
  * ends them (run_dir = -1).
  *

@@ -227,6 +227,54 @@ static void test_each_check_has_its_reason(void **state)
     assert_refused(upload(S1, img, SIL_EUPI_IMG_LEN), PIEZO_TABLE_REASON_OUTPUT_RANGE);
 }
 
+/* img = the calibrated EUPI inverse image with its polynomial (the last
+ * section) replaced by p[0..n-1]; returns the image's length. */
+static uint32_t eupi_with_poly(const int32_t *p, uint32_t n)
+{
+    piezo_table_info_t info;
+    eupi_copy(&info);
+    const piezo_section_t *po = piezo_table_section(&info, PIEZO_SECTION_EUPI_POLY_Q24);
+    uint8_t *hdr = elem0(&info, PIEZO_SECTION_EUPI_POLY_Q24) - 8;
+    assert_true((uint32_t)(hdr - img) + 8u + 4u * po->count + 4u == SIL_EUPI_IMG_LEN); /* the last one */
+    put32(hdr + 4, n);
+    for (uint32_t k = 0; k < n; k++) {
+        put32(hdr + 8 + 4u * k, (uint32_t)p[k]);
+    }
+    const uint32_t len = (uint32_t)(hdr - img) + 8u + 4u * n + 4u;
+    put32(img + PIEZO_TABLE_HDR_PAYLOAD_LEN_OFFSET, len - PIEZO_TABLE_HDR_BYTES - 4u);
+    fix_crc(img, len);
+    ctl.staged_len = 0u;
+    return len;
+}
+
+/* The polynomial's bound sum |p_m| < 64 (strict since round 18: eupi.h,
+ * the Horner step's SMMULR needs |h| < 2^30). A table cannot state more
+ * than 16 per coefficient (the section's range), so it takes four terms of
+ * 16: refused at the kernel's init (out_of_range; the inverse's G2 bound,
+ * 16 FS, refuses it too), the running table unchanged. The same four-term
+ * section with the calibrated terms and a zero u^5 term is committed. */
+static void test_poly_sum_bound_is_refused(void **state)
+{
+    (void)state;
+    piezo_table_info_t info;
+    setup_with_table();
+
+    const int32_t at_bound[4] = {16 << 24, -(16 << 24), 16 << 24, -(16 << 24)};
+    uint32_t len = eupi_with_poly(at_bound, 4u);
+    assert_refused(upload(S1, img, len), PIEZO_TABLE_REASON_OUT_OF_RANGE);
+
+    eupi_copy(&info);
+    const piezo_section_t *po = piezo_table_section(&info, PIEZO_SECTION_EUPI_POLY_Q24);
+    int32_t cal[PIEZO_CS_MAX_POLY] = {0};
+    assert_true(po->count < 4u);
+    for (uint32_t k = 0; k < po->count; k++) {
+        cal[k] = (int32_t)piezo_le32(po->data + 4u * k);
+    }
+    len = eupi_with_poly(cal, 4u);
+    assert_int_equal(upload(S1, img, len), PIEZO_TABLE_REASON_OK);
+    assert_true(piezo_ctl_active_crc(&ctl) == piezo_le32(img + len - 4u));
+}
+
 /* The DCC table with its weights' sign inverted (each in range): the drive
  * falls while the reference rises. */
 /* The CPI-inverse thresholds r'_i act on v = y_r - G2, up to 17 FS
@@ -416,6 +464,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_sixteen_absurd_images_are_refused),
         cmocka_unit_test(test_each_check_has_its_reason),
+        cmocka_unit_test(test_poly_sum_bound_is_refused),
         cmocka_unit_test(test_cpi_inverse_threshold_above_full_scale),
         cmocka_unit_test(test_sweep_refuses_an_inverted_table),
         cmocka_unit_test(test_sweep_time),

@@ -157,8 +157,54 @@ static void test_init_refuses_bad_coefficients(void **state)
     c.n_p = 2;
     p[0] = INT32_MAX; /* 128 */
     assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
+    /* The bound is strict (round 18): sum = 64 lets h reach 2^30 (eupi.h). */
     p[0] = (int32_t)(PIEZO_EUPI_POLY_SUM_MAX_Q24 - PIEZO_Q24_ONE / 50); /* sum = 64 */
+    assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_EINVAL);
+    p[0] -= 1; /* sum = 64 - 2^-24 */
     assert_int_equal(piezo_eupi_init(&m, &c, st, 6, wk, 5), PIEZO_OK);
+}
+
+/* The Horner steps as the 64-bit product, round and shift (eupi.h's
+ * Rounding), written apart from the kernel's SMMULR form. */
+static int32_t poly_hu_ref(const int32_t *p, uint16_t n_p, int16_t u)
+{
+    int64_t h = p[n_p - 1u];
+    for (uint16_t m = n_p - 1u; m > 0u; m--) {
+        h = piezo_rshift_rnd64(h * u, 15u) + p[m - 1u];
+    }
+    return (int32_t)piezo_rshift_rnd64(h * u, 15u);
+}
+
+/* At the strict bound's edge, sum |p_m| = 2^30 - 1: the SMMULR steps give
+ * the 64-bit form's integers on every q15 input, u = -1 and 1 - 2^-15
+ * included, with h as large as the bound allows (both signs, 1 to 3
+ * terms). The largest coefficient first makes |h| = 2^30 - 1 at u = -1. */
+static void test_poly_at_the_strict_bound(void **state)
+{
+    (void)state;
+    const int32_t top = (int32_t)(PIEZO_EUPI_POLY_SUM_MAX_Q24 - 1);
+    const int32_t sets[][3] = {
+        {top, 0, 0},
+        {-top, 0, 0},
+        {1, top - 1, 0},
+        {-(top / 2), top - top / 2, 0},
+        {top / 3, -(top / 3), top - 2 * (top / 3)},
+        {-5, 12345, -(top - 12350)},
+    };
+    const uint16_t n[] = {1, 1, 2, 2, 3, 3};
+    for (size_t s = 0; s < sizeof n / sizeof n[0]; s++) {
+        int64_t sum = 0;
+        for (uint16_t m = 0; m < n[s]; m++) {
+            sum += sets[s][m] < 0 ? -(int64_t)sets[s][m] : sets[s][m];
+        }
+        assert_true(sum == PIEZO_EUPI_POLY_SUM_MAX_Q24 - 1);
+        for (int32_t u = -32768; u <= 32767; u += (u > -32700 && u < 32700) ? 97 : 1) {
+            const int16_t uq = (int16_t)u;
+            assert_int_equal(piezo_eupi_poly_hu_q24(sets[s], n[s], uq), poly_hu_ref(sets[s], n[s], uq));
+        }
+    }
+    /* |hu| reaches the bound: hu = -(2^30 - 1) for p = {2^30 - 1}, u = -1. */
+    assert_int_equal(piezo_eupi_poly_hu_q24(sets[0], 1, INT16_MIN), -top);
 }
 
 int main(void)
@@ -174,6 +220,7 @@ int main(void)
         cmocka_unit_test(test_split_run_carries_state),
         cmocka_unit_test(test_poly_by_hand),
         cmocka_unit_test(test_init_refuses_bad_coefficients),
+        cmocka_unit_test(test_poly_at_the_strict_bound),
     };
     return cmocka_run_group_tests_name("eupi", tests, NULL, NULL);
 }

@@ -222,6 +222,37 @@ def test_quantizers_raise_on_overflow():
         geupi.quantize_poly([40.0, -30.0], 0.0)                        # sum |p| > 64
 
 
+def test_poly_sum_bound_is_strict():
+    # round 18: sum |p_m| < 64 (eupi.h); exactly 64 is refused, one Q7.24
+    # LSB less is accepted, and the golden Horner refuses a set beyond it
+    with pytest.raises(QOverflowError, match="not below 64"):
+        geupi.quantize_poly([40.0, -24.0], 0.0)
+    p_q, _ = geupi.quantize_poly([40.0, -(24.0 - 2.0**-24)], 0.0)
+    assert int(np.sum(np.abs(p_q))) == geupi.POLY_SUM_MAX_Q24 - 1
+    geupi.poly_q39(p_q, 0, -32768)
+    with pytest.raises(QOverflowError):
+        geupi.poly_q39(np.array([1 << 30]), 0, 5)
+
+
+def _smmulr(a, b):
+    # SMMULR on int32 operands: the rounded high word of the 64-bit product
+    assert np.all((a >= -2**31) & (a < 2**31)) and np.all((b >= -2**31) & (b < 2**31))
+    return (a * b + (1 << 31)) >> 32
+
+
+def test_horner_step_by_smmulr_is_exact_below_the_bound():
+    # eupi.h's step rshift_rnd(h u, 15) as SMMULR(2 h, u 2^16): equal for
+    # every q15 u and every |h| < 2^30 (sum |p_m| < 64 bounds |h|); at
+    # h = 2^30, 2 h does not fit int32 and its wrap (-2^31) is wrong
+    u = np.arange(-32768, 32768, dtype=np.int64)
+    rng = np.random.default_rng(18)
+    hs = [2**30 - 1, -(2**30 - 1), -(2**30), 1, -1, 0] + [int(x) for x in rng.integers(-2**30 + 1, 2**30, 20)]
+    for h in hs:
+        assert np.array_equal(_smmulr(np.int64(2 * h), u * 65536), fixed.rshift_rnd(h * u, 15)), h
+    wrapped = _smmulr(np.int64(-(2**31)), u * 65536)        # 2 h for h = 2^30, wrapped
+    assert not np.array_equal(wrapped, fixed.rshift_rnd((2**30) * u, 15))
+
+
 def test_golden_play_bank_equals_float_on_exact_coefficients():
     # thresholds and input on the q15 grid, slopes powers of two: exact in
     # float, so the golden classical outputs equal play_outputs bit for bit

@@ -23,7 +23,7 @@ __all__ = [
 ]
 
 MAX_POLY = 8                    # PIEZO_EUPI_MAX_POLY
-POLY_SUM_MAX_Q24 = 64 << 24     # PIEZO_EUPI_POLY_SUM_MAX_Q24
+POLY_SUM_MAX_Q24 = 64 << 24     # PIEZO_EUPI_POLY_SUM_MAX_Q24; sum |p_m| must stay below it
 
 
 @dataclass(frozen=True)
@@ -57,13 +57,29 @@ def reference_params() -> EUPIParams:
 
 
 def quantize_poly(p, p0) -> tuple[np.ndarray, int]:
-    """Quantize polynomial coefficients to Q7.24 and check ``eupi.h``'s bounds."""
+    """Quantize polynomial coefficients to Q7.24 and check ``eupi.h``'s bounds.
+
+    The sum bound is strict (round 18): ``sum |p_m| < 64`` keeps the Horner
+    value ``|h| < 2^30``, where ``piezo_eupi_poly_hu_q24``'s one-``SMMULR``
+    step (the rounded high word of ``(2 h) (u 2^16)``) equals
+    ``rshift_rnd(h u, 15)``; at ``sum |p_m| = 64`` it would not.
+
+    Raises
+    ------
+    ValueError
+        More than :data:`MAX_POLY` terms.
+    QOverflowError
+        A coefficient does not fit Q7.24, or ``sum |p_m|`` (Q7.24 units)
+        is not below 64.
+    """
     p = np.atleast_1d(np.asarray(p, dtype=np.float64))
     p_q = np.atleast_1d(fixed.to_q(p, Q24)) if p.size else np.zeros(0, dtype=np.int64)
     if p_q.size > MAX_POLY:
         raise ValueError(f"{p_q.size} polynomial terms exceed {MAX_POLY}")
-    if int(np.sum(np.abs(p_q))) > POLY_SUM_MAX_Q24:
-        raise QOverflowError("sum |p_m| exceeds 64")
+    total = int(np.sum(np.abs(p_q)))
+    if total >= POLY_SUM_MAX_Q24:
+        raise QOverflowError(f"sum |p_m| = {total / 2**24:.9g} is not below 64 "
+                             "(eupi.h's strict bound on the polynomial)")
     return p_q.astype(np.int64), fixed.to_q(float(p0), Q24)
 
 
@@ -99,6 +115,9 @@ def poly_q39(p_q24, p0_q24: int, u_q15):
     c0 = int(p0_q24) << 15
     if not p:
         return c0 if scalar else np.full(u.shape, c0, dtype=np.int64)
+    if sum(abs(c) for c in p) >= POLY_SUM_MAX_Q24:
+        # the C's SMMULR step needs |h| < 2^30 (eupi.h): not a valid model
+        raise QOverflowError("sum |p_m| is not below 64 (eupi.h's strict bound)")
     h = p[-1] if scalar else np.full(u.shape, p[-1], dtype=np.int64)
     for c in p[-2::-1]:
         h = fixed.rshift_rnd(h * u, 15) + c
