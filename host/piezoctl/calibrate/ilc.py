@@ -39,7 +39,7 @@ import numpy as np
 
 from .. import interface
 
-__all__ = ["ILC", "learn", "probe", "loop_from_probe", "periodic_score", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
+__all__ = ["ILC", "learn", "probe", "loop_from_probe", "periodic_score", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "same_reference", "learn_on_controller"]
 
 FF_MAX = interface.HOLDING_REGISTERS["wave_ff_levels"][2]   # the register map's; a target may hold fewer
 
@@ -414,7 +414,15 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
 
     ``f_cut_hz`` is lowered to 0.4 x the controller's table entries x ``f0_hz``
     (the table's own band). Returns :func:`learn`'s result plus ``lag_s``,
-    ``decimation``, ``n_entries``, ``f_cut_hz``.
+    ``decimation``, ``n_entries``, ``f_cut_hz`` and ``records_repeated`` (records
+    taken again: a reference that was not the wave's, :func:`same_reference`, or
+    a fault in the first trial's record).
+
+    Raises
+    ------
+    DeviceError
+        No two of :data:`REF_RECORDS` records without correction held the same
+        reference without a fault.
     """
     tick = float(ctl.identity.tick_hz)
     f_cut_hz = min(f_cut_hz, 0.4 * capacity(ctl) * f0_hz)
