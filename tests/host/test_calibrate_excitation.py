@@ -44,3 +44,15 @@ def test_banded_chirp_gives_the_delay_and_the_resonance():
     assert group_delay_ticks(frf, TICK, f_res / 3.0) == round(expected)
     # the joined phase is continuous across the band edges
     assert np.max(np.abs(np.diff(frf.phase_deg[frf.f_hz < 800]))) < 20.0
+
+
+def test_a_phase_that_is_not_a_line_gives_no_delay():
+    # round 18: the 140 Hz two-axis stage's coherent points below 47 Hz (calibration L3, axis 1):
+    # the phase scatters by +-45 deg about any line; its slope had been read as 32 ticks of delay
+    from piezoctl.ident.tf import FRF
+    f = np.array([39.7, 40.9, 42.1, 42.7, 43.3, 43.9, 44.6, 45.2, 45.8])
+    ph = np.array([27.3, 42.0, 27.8, -25.9, -5.5, -5.0, 37.6, -40.9, 45.4])
+    assert group_delay_ticks(FRF(f, np.ones_like(f), ph, None), TICK, 47.0) == 0
+    # the same frequencies on a line of 3 ticks (and an offset): read as 3 ticks
+    line = -360.0 * f * 3 / TICK - 5.0
+    assert group_delay_ticks(FRF(f, np.ones_like(f), line, None), TICK, 47.0) == 3

@@ -263,3 +263,60 @@ def test_absent_usb_device_is_a_clear_error():
 def test_errors_are_cli_errors():
     for cls in (PortSpecError, PortUnreachableError, ModbusExceptionError, ProtocolError):
         assert issubclass(cls, TransportError) and issubclass(cls, CliError)
+
+
+class LateServer:
+    """A Modbus TCP server (FC 16 only) on a thread that answers its first request
+    ``late_s`` [s] late, as a controller stalled on a loaded machine does, and
+    counts the requests that reach it."""
+
+    def __init__(self, late_s: float):
+        import threading
+        self.late_s = late_s
+        self.requests = []
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(1)
+        self.port = self.sock.getsockname()[1]
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self):
+        import time
+        conn, _ = self.sock.accept()
+        conn.settimeout(10.0)
+        buf = b""
+        try:
+            while True:
+                while len(buf) < 7 or len(buf) < 6 + struct.unpack(">H", buf[4:6])[0]:
+                    chunk = conn.recv(4096)
+                    if not chunk:
+                        return
+                    buf += chunk
+                n = 6 + struct.unpack(">H", buf[4:6])[0]
+                req, buf = buf[:n], buf[n:]
+                self.requests.append(req)
+                if len(self.requests) == 1:
+                    time.sleep(self.late_s)
+                tid, unit, fc, addr, count = struct.unpack(">HxxxxBBHH", req[:12])
+                conn.sendall(struct.pack(">HHHBBHH", tid, 0, 6, unit, fc, addr, count))
+        except OSError:
+            return
+        finally:
+            conn.close()
+
+
+def test_a_late_tcp_answer_is_waited_for_and_the_request_never_sent_twice():
+    # round 18: pymodbus sent a request again after 1 s without an answer (retries=1); a controller
+    # stalled that long executed it twice (a start_wave: the learning trial's wave restarted mid-record)
+    from piezoctl.transport import open_port
+    srv = LateServer(late_s=1.6)
+    c = open_port(f"tcp:127.0.0.1:{srv.port}", timeout=1.0)
+    try:
+        c.write_holding(4100, [7])
+        c.write_holding(4100, [8])
+    finally:
+        c.close()
+    srv.thread.join(5.0)
+    # each write reached the controller exactly once, in order
+    assert [struct.unpack(">H", r[13:15])[0] for r in srv.requests] == [7, 8]

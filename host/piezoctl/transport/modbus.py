@@ -16,12 +16,24 @@ __all__ = ["PymodbusClient"]
 _FUNCTION_NAMES = {3: "read holding", 4: "read input", 16: "write holding",
                    23: "read/write holding"}
 
+# Over TCP a request is sent once and its answer waited for at least this long [s]. TCP
+# delivers the request or the connection fails, so sending it again after a timeout
+# never recovers a lost one: it only makes the controller execute it twice. Until
+# round 18 pymodbus did so after 1 s without an answer (retries=1): a controller that
+# stalled for a second (the SIL controller on a loaded machine) ran a command such as
+# start_wave twice, and a learning trial restarted its wave mid-record
+# (docs/calibrate.md, "Round 18").
+TCP_ANSWER_MIN_S = 5.0
+
 
 class PymodbusClient(RegisterClient):
     """A controller behind a pymodbus TCP or RTU client."""
 
     def __init__(self, spec: PortSpec, *, unit: int = interface.MODBUS_UNIT_ID,
                  timeout: float = 1.0, retries: int = 1):
+        """``timeout`` [s] per answer; ``retries``: times a request without an answer is sent
+        again on RTU (a frame the line lost). Over TCP a request is never sent again and its
+        answer is waited for ``max(timeout, TCP_ANSWER_MIN_S)``."""
         from pymodbus.client import ModbusSerialClient, ModbusTcpClient
         from pymodbus import FramerType
 
@@ -31,8 +43,8 @@ class PymodbusClient(RegisterClient):
         self._last_ok = time.monotonic()
         self.reconnects = 0
         if spec.kind == "tcp":
-            self._client = ModbusTcpClient(spec.host, port=spec.port, timeout=timeout,
-                                           retries=retries)
+            self._client = ModbusTcpClient(spec.host, port=spec.port,
+                                           timeout=max(timeout, TCP_ANSWER_MIN_S), retries=0)
         elif spec.kind == "rtu":
             self._client = ModbusSerialClient(spec.device, framer=FramerType.RTU,
                                               baudrate=spec.baud, parity=spec.parity,
