@@ -76,7 +76,7 @@ from .misfit import credited_ratio
 from .solve import lstsq_box, train_rows
 
 __all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute",
-           "step_response_test", "creep_on_steps", "drift_beyond_plane_test", "refit_plane", "DRIFT_BEYOND_PLANE"]
+           "step_response_test", "creep_on_steps", "drift_on_pair", "pair_level_test", "drift_beyond_plane_test", "refit_plane", "DRIFT_BEYOND_PLANE"]
 
 SIGNATURES = ("creep", "thermal_drift", "sensor_offset")
 ALPHA_SIGNATURE = sg.ALPHA / len(SIGNATURES)   # Bonferroni over the three signatures
@@ -351,6 +351,45 @@ def creep_on_steps(evals, ctxs, es, fold_all, block_all, rows, log) -> None:
                             f"alone ({step_phrase(st)}); combined (Bonferroni) p = {p:.1e}"
                             + ("" if sized_all else ", sized on the dwells") + ".")
         c.p = p
+        c.significant = True
+
+
+def drift_on_pair(evals, ctxs, es, nuisances, fold_all, block_all, rows, log) -> None:
+    """A drift candidate refused by the credited ratio alone passes when recordings that sweep between the same
+    extremes differ in level (round 18).
+
+    The credited ratio (``misfit.credited_ratio``) credits a candidate only with the improvement beyond the base's
+    misfit on calibration histories it did not see; a drift's improvement lies in the level band, where that misfit
+    is largest (development s119-001, generalized PI: fold ratios 0.59/0.68, p 1.8e-5, credited 0.86, its level
+    band 0.106 um against the misfit's 0.103 um). On the major loop between the same extremes the base's misfit is
+    one function of the drive and its direction in both recordings (:func:`sweep_extremes`), so the difference of
+    their levels (:func:`same_shape_pairs`) is a test in which that misfit cancels: what changed on the session
+    clock between them. Each pair's ``t = d / se`` is tested two-sided with Student's t at ``bins - 1`` degrees of
+    freedom, Bonferroni over the pairs, against the candidate's own level (``p_max``); every pair must move the
+    same way. The exact check on all samples still decides, and the slow signatures name the slow effect as
+    before. Development s119-001: +0.222 +- 0.001 um over 38 s between the two triangles."""
+    from scipy import stats as st
+    c = next((x for x in evals if x.name == "thermal_drift"), None)
+    if c is None or c.significant or not getattr(c, "credited_only", False):
+        return
+    designs = [(N, lo, hi, signature_groups(ctx)) for ctx, (N, lo, hi) in zip(ctxs, nuisances)]
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctxs[0].valid)])
+    tr = level_trend_test(designs, es, fold_all, block_all, rec, ctxs[0], rows)
+    pairs = (tr or {}).get("same_shape") or []
+    if not pairs:
+        return
+    ps = [float(2 * st.t.sf(abs(p["level_difference_um"]) / p["se_um"], max(p["bins"] - 1, 1))) for p in pairs]
+    p = min(1.0, len(ps) * min(ps))
+    one_way = len({np.sign(q["level_difference_um"]) for q in pairs}) == 1
+    text = "; ".join(f"recordings {q['recordings'][0]} and {q['recordings'][1]} differ by "
+                     f"{q['level_difference_um']:+.4f} +- {q['se_um']:.4f} um over {q['dt_s']:.0f} s" for q in pairs)
+    log(f"    drift on the same-shape pairs: {text}; p = {p:.1e} (level {c.p_max:.1e}), one way {one_way}")
+    if p < c.p_max and one_way:
+        c.discrimination = (f"Its improvement lies in the level band, where the base's misfit on calibration "
+                            f"histories it did not see is as large (credited ratio {c.credited:.2f}); on recordings "
+                            f"that sweep between the same extremes, where that misfit is the same in both, the level "
+                            f"changed on the session clock: {text} (p = {p:.1e}).")
+        c.veto = None
         c.significant = True
 
 
@@ -1302,7 +1341,7 @@ def attribute(evals, tests) -> str | None:
                 "the level shows no trend within the recordings, but their blocks scatter too much to exclude a "
                 "drift that reached it at a steady rate since the calibration: " + trend_phrase(tr))}
             text += "; a drift cannot be excluded (" + trend_phrase(tr) + ")"
-        own = chosen.discrimination + " " if chosen.name == "creep" and chosen.discrimination else ""
+        own = chosen.discrimination + " " if chosen.name in ("creep", "thermal_drift") and chosen.discrimination else ""
         chosen.discrimination = own + "Attribution: " + text + "."   # creep_on_steps' sentence kept
     for c in passed:
         if c is not chosen:
