@@ -103,3 +103,33 @@ def test_a_refusal_by_the_drifts_model_is_not_lifted_by_the_pair():
     evals = [_cand("sensor_offset", True, 0.2)]
     attribute(evals, tests)
     assert not evals[0].significant
+
+
+def _drift_cand(credited_only=True):
+    return types.SimpleNamespace(name="thermal_drift", significant=False, veto="credited 0.86" if credited_only
+                                 else "not significant", credited=0.86, credited_only=credited_only, p=1.8e-5,
+                                 p_max=1e-3, fold_ratios=[0.59, 0.68], discrimination=None)
+
+
+def _run_on_pairs(monkeypatch, cand, diffs):
+    pairs = [{"recordings": [0, 2], "level_difference_um": d, "se_um": 0.007, "dt_s": 38.0, "bins": 31}
+             for d in diffs]
+    monkeypatch.setattr(ss, "signature_groups", lambda ctx: {})
+    monkeypatch.setattr(ss, "level_trend_test", lambda *a, **k: {"same_shape": pairs})
+    ctx = types.SimpleNamespace(valid=[np.ones(10, bool)] * 3)
+    ss.drift_on_pair([cand], [ctx, ctx], [None, None], [(None, None, None)] * 2, None, None, 1000, lambda *a: None)
+    return cand
+
+
+def test_a_drift_refused_by_the_credited_ratio_passes_on_a_pair_that_moved(monkeypatch):
+    """s119-001-like: the two triangles differ by 0.25 +- 0.007 um; the base's misfit cancels on the pair."""
+    c = _run_on_pairs(monkeypatch, _drift_cand(), [0.246])
+    assert c.significant and c.veto is None and "differ by +0.2460" in c.discrimination
+
+
+@pytest.mark.parametrize("cand,diffs", [(True, [0.01]),           # within the pair's error (t 1.4)
+                                        (True, [0.2, -0.2]),      # two pairs, opposite ways
+                                        (False, [0.246])])        # refused for another reason than the credit
+def test_a_drift_does_not_pass_on_a_pair_that_did_not_move_one_way_or_when_refused_otherwise(monkeypatch, cand, diffs):
+    c = _run_on_pairs(monkeypatch, _drift_cand(cand), diffs)
+    assert not c.significant and c.veto is not None
