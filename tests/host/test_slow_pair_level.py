@@ -34,8 +34,8 @@ def test_the_pairs_common_level_is_the_offset_and_not_the_walks():
         assert q["level_um"] - p["level_um"] == pytest.approx(0.15, abs=1e-9)
 
 
-def _pair(c, se=0.01):
-    return {"level_um": c, "level_se_um": se}
+def _pair(c, se=0.01, d=0.0):
+    return {"level_um": c, "level_se_um": se, "level_difference_um": d}
 
 
 def test_a_pair_level_beyond_the_base_misfit_holds_and_one_within_it_does_not():
@@ -47,6 +47,10 @@ def test_a_pair_level_beyond_the_base_misfit_holds_and_one_within_it_does_not():
     assert not ss.pair_level_test([_pair(0.1)], mis)["holds"]          # within q s_L
     assert not ss.pair_level_test([_pair(0.4, se=0.2)], mis)["holds"]  # the pair's own error too large
     assert not ss.pair_level_test([_pair(0.4), _pair(-0.4)], mis)["holds"]   # no one level
+    # s117-027-like (a Bouc-Wen null): the two loops 0.2 um apart carry their own history, the level is not one
+    # sensor zero's; the same level with the loops agreeing holds
+    assert not ss.pair_level_test([_pair(0.45, d=0.2)], _misfit(0.11))["holds"]
+    assert ss.pair_level_test([_pair(0.45, d=0.02)], _misfit(0.11))["holds"]
     assert ss.pair_level_test([], mis) is None
     assert ss.pair_level_test([_pair(0.4)], {"histories": [], "mse_um2": {"level": 0.0}}) is None
 

@@ -829,9 +829,14 @@ def pair_level_test(pairs, misfit) -> dict | None:
     A drift moves between them (the difference, :func:`level_trend_test`); the base's misfit on the loop is one
     history's, bounded by its level RMS on calibration histories it did not see, ``s_L`` (``misfit.py``,
     ``H`` histories; the reveal's loop lies between the calibrated extremes, where the calibration's own
-    triangles were fitted). A pair's level **lies beyond** it when ``|c| > q sqrt(s_L^2 + se^2)``, ``q`` the
-    two-sided Student-t quantile at ``ALPHA`` / (number of pairs) with ``H - 1`` degrees of freedom and ``se``
-    the pair's own error. It **holds** when every pair does, with one sign.
+    triangles were fitted). But a Duhem-type loop (Bouc-Wen, Coleman-Hodgdon) does not wipe out at the first turn:
+    it approaches its limit loop over cycles, so each recording's loop carries some of its own history, and the
+    pair's difference ``d`` shows how much (development null s117-027, Bouc-Wen: the two triangles 0.20 um apart on
+    the base's residual, their common level +0.45 um against ``s_L`` = 0.11 um). What differs between two traversals
+    of one loop is history or a drift, not a sensor zero, and the common level is read only beyond it too. A pair's
+    level **lies beyond** the base's misfit when ``|c| > q sqrt(s_L^2 + se^2 + d^2)``, ``q`` the two-sided
+    Student-t quantile at ``ALPHA`` / (number of pairs) with ``H - 1`` degrees of freedom and ``se`` the pair's own
+    error. It **holds** when every pair does, with one sign.
 
     Development s119-033 (offset, Coleman-Hodgdon): the reveal walk sits 0.7 um off the two triangles, so the
     joint fit's one constant per session is not the offset's alone there (unique ratio 0.93, p 4.7e-3), while the
@@ -840,8 +845,8 @@ def pair_level_test(pairs, misfit) -> dict | None:
     Returns
     -------
     dict or None
-        ``levels_um``, ``se_um``, ``base_level_rms_um``, ``histories``, ``quantile``, ``beyond`` (per pair) and
-        ``holds``; None without a pair or without the base's misfit.
+        ``levels_um``, ``se_um``, ``differences_um``, ``base_level_rms_um``, ``histories``, ``quantile``,
+        ``beyond`` (per pair) and ``holds``; None without a pair or without the base's misfit.
     """
     from scipy import stats as st
     if not pairs or not misfit or not misfit.get("histories"):
@@ -851,8 +856,10 @@ def pair_level_test(pairs, misfit) -> dict | None:
     q = float(st.t.isf(0.5 * sg.ALPHA / len(pairs), max(h - 1, 1)))
     c = np.array([p["level_um"] for p in pairs])
     se = np.array([p["level_se_um"] for p in pairs])
-    beyond = np.abs(c) > q * np.sqrt(s_l ** 2 + se ** 2)
-    return {"levels_um": [float(x) for x in c], "se_um": [float(x) for x in se], "base_level_rms_um": s_l,
+    d = np.array([p["level_difference_um"] for p in pairs])
+    beyond = np.abs(c) > q * np.sqrt(s_l ** 2 + se ** 2 + d ** 2)
+    return {"levels_um": [float(x) for x in c], "se_um": [float(x) for x in se],
+            "differences_um": [float(x) for x in d], "base_level_rms_um": s_l,
             "histories": h, "quantile": q, "beyond": [bool(x) for x in beyond],
             "holds": bool(np.all(beyond) and np.all(np.sign(c) == np.sign(c[0])))}
 
@@ -861,9 +868,10 @@ def pair_level_phrase(pl: dict) -> str:
     """The pairs' common level (:func:`pair_level_test`), in words."""
     return (f"recordings sweeping between the same extremes sit at "
             f"{', '.join(f'{c:+.3f} +- {e:.3f}' for c, e in zip(pl['levels_um'], pl['se_um']))} um on their "
-            f"common loop, " + ("beyond" if pl["holds"] else "not beyond")
+            f"common loop and differ by {', '.join(f'{d:+.3f}' for d in pl['differences_um'])} um, "
+            + ("beyond" if pl["holds"] else "not beyond")
             + f" {pl['quantile']:.2f} x the base's own level misfit on calibration histories it did not see "
-            f"({pl['base_level_rms_um']:.3f} um RMS over {pl['histories']} histories)")
+            f"({pl['base_level_rms_um']:.3f} um RMS over {pl['histories']} histories) with that difference")
 
 
 def trend_phrase(tr: dict) -> str:
