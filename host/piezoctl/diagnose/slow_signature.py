@@ -61,6 +61,12 @@ history's misfit (a reveal walk sits 0.2 to 2 um off the triangles), so round 12
 drift's signature holds between the blocks when the level *trends* within the recordings on the scale each
 recording's own ~1 s block levels show (:func:`level_trend_test`), and an offset whose recordings cannot exclude a
 drift at the rate that would have reached its level is reported with ``thermal_drift`` as the pair.
+
+Round 18 (docs/diagnose.md, "Round 18: offset, drift and the rate null"): the recordings that sweep between the same
+extremes (round 16's pair) carry the base's misfit on one loop, which the calibration bounds; their *common* level
+is the offset's signature when it lies beyond that misfit and beyond what differs between them
+(:func:`pair_level_test`; the walk's history level no longer hides the offset), and their *difference* lets a drift
+candidate refused only by the credited ratio pass (:func:`drift_on_pair`).
 """
 
 from __future__ import annotations
