@@ -24,7 +24,7 @@ from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_s
 from . import significance as sg
 from .misfit import credited_ratio, ratios_above, ratios_where
 from .discriminate import discriminate_group, highpassed, separate
-from .slow_signature import SIGNATURES, attribute, creep_on_steps, signature_tests
+from .slow_signature import SIGNATURES, attribute, creep_on_steps, drift_on_pair, signature_tests
 from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",
@@ -175,6 +175,7 @@ class Candidate:
     heldout: tuple | None = None              # (before, correction, fold, block, rec): signature.HELDOUT_CHECKED only
     whole: dict | None = None                 # round 16, a term judged above the calibration's band: the edge [Hz]
     #                                           and its fold and credited ratios on the whole residual
+    credited_only: bool = False               # round 18: it passed every gate but the credited ratio
 
     @property
     def below_gates(self) -> bool:
@@ -629,6 +630,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     if significant:   # round 15: a fit whose size is not the term's physics (the rate term's widening)
         veto = next((w for w in (term.implausible(ctxs[0], c[0], c[4]) for c in chosen) if w), None)
         significant = veto is None
+    credited_only = bool(significant and not within(cr))
     if significant and not within(cr):
         significant = False
         veto = (f"its held-out improvement lies within what the base's error on calibration histories it did not "
@@ -650,7 +652,8 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     return Candidate(term=term, ratio=na / nb if nb > 0 else 1.0, fold_ratios=fold_ratios, nrmse_before=nb,
                      nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
-                     veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held, whole=whole)
+                     veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held, whole=whole,
+                     credited_only=credited_only)
 
 
 def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):
@@ -987,6 +990,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         for c in evals:
             c.selection_round = len(accepted) + 1
         creep_on_steps(evals, fctx, es, fold_all, block_all, rows, log)   # round 13: creep's test after the steps
+        drift_on_pair(evals, fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows, log)   # round 18
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
         _supersede(evals)
         if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term

@@ -61,6 +61,12 @@ history's misfit (a reveal walk sits 0.2 to 2 um off the triangles), so round 12
 drift's signature holds between the blocks when the level *trends* within the recordings on the scale each
 recording's own ~1 s block levels show (:func:`level_trend_test`), and an offset whose recordings cannot exclude a
 drift at the rate that would have reached its level is reported with ``thermal_drift`` as the pair.
+
+Round 18 (docs/diagnose.md, "Round 18: offset, drift and the rate null"): the recordings that sweep between the same
+extremes (round 16's pair) carry the base's misfit on one loop, which the calibration bounds; their *common* level
+is the offset's signature when it lies beyond that misfit and beyond what differs between them
+(:func:`pair_level_test`; the walk's history level no longer hides the offset), and their *difference* lets a drift
+candidate refused only by the credited ratio pass (:func:`drift_on_pair`).
 """
 
 from __future__ import annotations
@@ -76,7 +82,7 @@ from .misfit import credited_ratio
 from .solve import lstsq_box, train_rows
 
 __all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute",
-           "step_response_test", "creep_on_steps", "drift_beyond_plane_test", "refit_plane", "DRIFT_BEYOND_PLANE"]
+           "step_response_test", "creep_on_steps", "drift_on_pair", "pair_level_test", "drift_beyond_plane_test", "refit_plane", "DRIFT_BEYOND_PLANE"]
 
 SIGNATURES = ("creep", "thermal_drift", "sensor_offset")
 ALPHA_SIGNATURE = sg.ALPHA / len(SIGNATURES)   # Bonferroni over the three signatures
@@ -354,6 +360,45 @@ def creep_on_steps(evals, ctxs, es, fold_all, block_all, rows, log) -> None:
         c.significant = True
 
 
+def drift_on_pair(evals, ctxs, es, nuisances, fold_all, block_all, rows, log) -> None:
+    """A drift candidate refused by the credited ratio alone passes when recordings that sweep between the same
+    extremes differ in level (round 18).
+
+    The credited ratio (``misfit.credited_ratio``) credits a candidate only with the improvement beyond the base's
+    misfit on calibration histories it did not see; a drift's improvement lies in the level band, where that misfit
+    is largest (development s119-001, generalized PI: fold ratios 0.59/0.68, p 1.8e-5, credited 0.86, its level
+    band 0.106 um against the misfit's 0.103 um). On the major loop between the same extremes the base's misfit is
+    one function of the drive and its direction in both recordings (:func:`sweep_extremes`), so the difference of
+    their levels (:func:`same_shape_pairs`) is a test in which that misfit cancels: what changed on the session
+    clock between them. Each pair's ``t = d / se`` is tested two-sided with Student's t at ``bins - 1`` degrees of
+    freedom, Bonferroni over the pairs, against the candidate's own level (``p_max``); every pair must move the
+    same way. The exact check on all samples still decides, and the slow signatures name the slow effect as
+    before. Development s119-001: +0.222 +- 0.001 um over 38 s between the two triangles."""
+    from scipy import stats as st
+    c = next((x for x in evals if x.name == "thermal_drift"), None)
+    if c is None or c.significant or not getattr(c, "credited_only", False):
+        return
+    designs = [(N, lo, hi, signature_groups(ctx)) for ctx, (N, lo, hi) in zip(ctxs, nuisances)]
+    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctxs[0].valid)])
+    tr = level_trend_test(designs, es, fold_all, block_all, rec, ctxs[0], rows)
+    pairs = (tr or {}).get("same_shape") or []
+    if not pairs:
+        return
+    ps = [float(2 * st.t.sf(abs(p["level_difference_um"]) / p["se_um"], max(p["bins"] - 1, 1))) for p in pairs]
+    p = min(1.0, len(ps) * min(ps))
+    one_way = len({np.sign(q["level_difference_um"]) for q in pairs}) == 1
+    text = "; ".join(f"recordings {q['recordings'][0]} and {q['recordings'][1]} differ by "
+                     f"{q['level_difference_um']:+.4f} +- {q['se_um']:.4f} um over {q['dt_s']:.0f} s" for q in pairs)
+    log(f"    drift on the same-shape pairs: {text}; p = {p:.1e} (level {c.p_max:.1e}), one way {one_way}")
+    if p < c.p_max and one_way:
+        c.discrimination = (f"Its improvement lies in the level band, where the base's misfit on calibration "
+                            f"histories it did not see is as large (credited ratio {c.credited:.2f}); on recordings "
+                            f"that sweep between the same extremes, where that misfit is the same in both, the level "
+                            f"changed on the session clock: {text} (p = {p:.1e}).")
+        c.veto = None
+        c.significant = True
+
+
 def level_columns(ctx) -> np.ndarray:
     """Per sensor-zero column (a session other than the calibration's, or a recording), the output level and the
     drive level within it: ``yb`` and ``u`` centred on their means over that column's settled samples, zero
@@ -576,7 +621,9 @@ def same_shape_pairs(ctx, rs, rec, tt, tol: float = SWEEP_TOL) -> list:
     list of dict
         Per pair ``(i, j)`` (``i`` recorded first) of one sensor-zero column other than the calibration's:
         ``level_difference_um``, ``se_um``, ``per_fold_um``, ``dt_s`` (between the mean times of the samples
-        used), ``slope_um_per_s``, ``se_slope_um_per_s``, ``bins``.
+        used), ``slope_um_per_s``, ``se_slope_um_per_s``, ``bins``; round 18: ``column`` (the sensor-zero
+        column) and the pair's common level on the same bins, ``level_um`` +- ``level_se_um`` (the bins'
+        scatter and the fold models' disagreement, as the difference's).
     """
     cols = [ctx.offset_of(i) for i in range(ctx.n_rec)]
     info = {}
@@ -612,6 +659,7 @@ def same_shape_pairs(ctx, rs, rec, tt, tol: float = SWEEP_TOL) -> list:
             if not np.isfinite(dt_) or dt_ == 0:
                 continue
             ds, ses, nb = [], [], 0
+            cs, cses = [], []
             for r in rs:
                 means = []
                 for k, (b, use) in zip((i, j), bins):
@@ -629,17 +677,26 @@ def same_shape_pairs(ctx, rs, rec, tt, tol: float = SWEEP_TOL) -> list:
                 ds.append(float(0.5 * (per[0].mean() + per[1].mean())))
                 ses.append(float(0.5 * np.sqrt(sum(x.var(ddof=1) / x.size for x in per))))
                 nb = sum(x.size for x in per) - 1
+                # round 18: the pair's common level on the same bins (an offset's, plus the base's misfit on the
+                # major loop, which both share), read the same way: per direction, then the mean of the two
+                both = (0.5 * (means[0] + means[1])).reshape(2, SWEEP_BINS)
+                com = [x[np.isfinite(y)] for x, y in zip(both, diff)]
+                cs.append(float(0.5 * (com[0].mean() + com[1].mean())))
+                cses.append(float(0.5 * np.sqrt(sum(x.var(ddof=1) / x.size for x in com))))
             if len(ds) != len(rs):
                 continue
             dd = float(np.mean(ds))
             se = float(np.sqrt(np.mean(np.square(ses)) + (0.25 * (ds[0] - ds[-1]) ** 2 if len(ds) > 1 else 0.0)))
             if se <= 0:
                 continue
+            cc = float(np.mean(cs))
+            cse = float(np.sqrt(np.mean(np.square(cses)) + (0.25 * (cs[0] - cs[-1]) ** 2 if len(cs) > 1 else 0.0)))
             first, second = (i, j) if dt_ > 0 else (j, i)
             sgn = float(np.sign(dt_))
             out.append({"recordings": [int(first), int(second)], "level_difference_um": dd * sgn, "se_um": se,
                         "per_fold_um": [x * sgn for x in ds], "dt_s": abs(dt_), "slope_um_per_s": dd / dt_,
-                        "se_slope_um_per_s": se / abs(dt_), "bins": int(nb)})
+                        "se_slope_um_per_s": se / abs(dt_), "bins": int(nb), "column": int(cols[i]),
+                        "level_um": cc, "level_se_um": cse})
     return out
 
 
@@ -686,7 +743,8 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
         ``slopes_um_per_s`` (per recording tested), ``slope_um_per_s``, ``se_um_per_s``, ``t``, ``dof``, ``p``,
         ``trends``; ``same_shape`` (the pairs of :func:`same_shape_pairs` pooled); ``levels_um``, ``needed_um_per_s``,
         ``excludes_drift`` and ``against_level`` (the slope significantly opposite in sign to every column's level,
-        round 17) (None when the session clock is unknown). None when no recording qualifies.
+        round 17) (None when the session clock is unknown); ``pair_level`` (round 18, :func:`pair_level_test`).
+        None when no recording qualifies.
     """
     from scipy import stats as st
     cols = [ctx.offset_of(i) for i in range(ctx.n_rec)]
@@ -762,7 +820,64 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
         out.update(levels_um=lv, needed_um_per_s=need, quantile=q,
                    excludes_drift=bool(all(abs(slope - g) > q * se for g in need)),
                    against_level=bool(all(slope * np.sign(c) < -q * se for c in lv)))
+    out["pair_level"] = pair_level_test(pairs, ctx.misfit)
     return out
+
+
+def pair_level_test(pairs, misfit) -> dict | None:
+    """Whether recordings that sweep between the same extremes sit at one level beyond the base's misfit there
+    (round 18): the offset's signature on the pair.
+
+    On the major loop between the same extremes the base's misfit is one function of the drive and its direction
+    in both recordings of a pair (:func:`sweep_extremes`), so their common level (``same_shape_pairs``'
+    ``level_um``, read bin by bin as the difference is) is the base's level misfit on that loop plus what both
+    share: a moved sensor zero, which is one constant on every recording of its session whatever the drive did.
+    A drift moves between them (the difference, :func:`level_trend_test`); the base's misfit on the loop is one
+    history's, bounded by its level RMS on calibration histories it did not see, ``s_L`` (``misfit.py``,
+    ``H`` histories; the reveal's loop lies between the calibrated extremes, where the calibration's own
+    triangles were fitted). But a Duhem-type loop (Bouc-Wen, Coleman-Hodgdon) does not wipe out at the first turn:
+    it approaches its limit loop over cycles, so each recording's loop carries some of its own history, and the
+    pair's difference ``d`` shows how much (development null s117-027, Bouc-Wen: the two triangles 0.20 um apart on
+    the base's residual, their common level +0.45 um against ``s_L`` = 0.11 um). What differs between two traversals
+    of one loop is history or a drift, not a sensor zero, and the common level is read only beyond it too. A pair's
+    level **lies beyond** the base's misfit when ``|c| > q sqrt(s_L^2 + se^2 + d^2)``, ``q`` the two-sided
+    Student-t quantile at ``ALPHA`` / (number of pairs) with ``H - 1`` degrees of freedom and ``se`` the pair's own
+    error. It **holds** when every pair does, with one sign.
+
+    Development s119-033 (offset, Coleman-Hodgdon): the reveal walk sits 0.7 um off the two triangles, so the
+    joint fit's one constant per session is not the offset's alone there (unique ratio 0.93, p 4.7e-3), while the
+    triangles agree with each other at -0.69 and -0.71 um against ``s_L`` = 0.086 um.
+
+    Returns
+    -------
+    dict or None
+        ``levels_um``, ``se_um``, ``differences_um``, ``base_level_rms_um``, ``histories``, ``quantile``,
+        ``beyond`` (per pair) and ``holds``; None without a pair or without the base's misfit.
+    """
+    from scipy import stats as st
+    if not pairs or not misfit or not misfit.get("histories"):
+        return None
+    h = len(misfit["histories"])
+    s_l = float(np.sqrt(misfit["mse_um2"]["level"]))
+    q = float(st.t.isf(0.5 * sg.ALPHA / len(pairs), max(h - 1, 1)))
+    c = np.array([p["level_um"] for p in pairs])
+    se = np.array([p["level_se_um"] for p in pairs])
+    d = np.array([p["level_difference_um"] for p in pairs])
+    beyond = np.abs(c) > q * np.sqrt(s_l ** 2 + se ** 2 + d ** 2)
+    return {"levels_um": [float(x) for x in c], "se_um": [float(x) for x in se],
+            "differences_um": [float(x) for x in d], "base_level_rms_um": s_l,
+            "histories": h, "quantile": q, "beyond": [bool(x) for x in beyond],
+            "holds": bool(np.all(beyond) and np.all(np.sign(c) == np.sign(c[0])))}
+
+
+def pair_level_phrase(pl: dict) -> str:
+    """The pairs' common level (:func:`pair_level_test`), in words."""
+    return (f"recordings sweeping between the same extremes sit at "
+            f"{', '.join(f'{c:+.3f} +- {e:.3f}' for c, e in zip(pl['levels_um'], pl['se_um']))} um on their "
+            f"common loop and differ by {', '.join(f'{d:+.3f}' for d in pl['differences_um'])} um, "
+            + ("beyond" if pl["holds"] else "not beyond")
+            + f" {pl['quantile']:.2f} x the base's own level misfit on calibration histories it did not see "
+            f"({pl['base_level_rms_um']:.3f} um RMS over {pl['histories']} histories) with that difference")
 
 
 def trend_phrase(tr: dict) -> str:
@@ -1100,6 +1215,24 @@ def _trends(t) -> bool:
     return bool(t.trend and t.trend.get("trends"))
 
 
+def _pair_level(t) -> bool:
+    """The recordings that sweep between the same extremes sit at one level beyond the base's misfit
+    (:func:`pair_level_test`): the offset's signature on the pair."""
+    return bool(t.trend and (t.trend.get("pair_level") or {}).get("holds"))
+
+
+def _level_refused(t) -> bool:
+    """The offset's level cannot be told from the base's misfit (:func:`offset_level_test`'s refusal), unless the
+    recordings that sweep between the same extremes sit beyond it (round 18, :func:`pair_level_test`): the joint
+    fit's one constant per session also takes each other recording's history misfit (development s119-048, offset
+    -0.46 um on a Bouc-Wen law: the walk 0.3 um above the triangles, the session's constant -0.14 um within
+    2.95 x 0.070 um; the two triangles at -0.40 +- 0.03 um), the pair's level only the loop's, which both share."""
+    lv = t.level
+    if lv is None or not lv.get("refused"):
+        return False
+    return not (lv.get("within_base_misfit") and not lv.get("within_drift_misfit") and _pair_level(t))
+
+
 def _precedence(tests, passed, sized=()) -> list:
     """The holding signatures in the order their terms are offered: by unique ratio, a drift before an offset
     (a drift leaves a level too: the offset's unique contribution then holds as well). A signature holds at
@@ -1123,7 +1256,8 @@ def _precedence(tests, passed, sized=()) -> list:
     steps 0.04 (p 2.4e-9), the offset's unique ratio 0.18 against creep's 0.33: named ``sensor_offset`` first.
     Between the drift and creep the unique ratio decides, as before."""
     order = sorted((t for t in tests if t.holds or (t.confirms and t.name in passed)
-                    or (t.name == "thermal_drift" and _trends(t))), key=lambda t: t.unique_ratio)
+                    or (t.name == "thermal_drift" and _trends(t))
+                    or (t.name == "sensor_offset" and _pair_level(t))), key=lambda t: t.unique_ratio)
     names = [t.name for t in order]
     if "sensor_offset" in names:
         leave = [n for n in names[names.index("sensor_offset") + 1:] if n in ("thermal_drift", "creep")]
@@ -1157,13 +1291,15 @@ def attribute(evals, tests) -> str | None:
     trend = next((t.trend for t in tests if t.trend), None)
     if trend:
         figures += "; " + trend_phrase(trend)
+        if trend.get("pair_level"):
+            figures += "; " + pair_level_phrase(trend["pair_level"])
     chosen = None
     refused = None
     sized = {c.name for c in slow if not c.veto and (c.significant or _sized(c))}
     order = _precedence(tests, {c.name for c in passed}, sized)
     for n in order:
         c = next((x for x in slow if x.name == n), None)
-        if c is not None and by[n].level is not None and by[n].level["refused"]:
+        if c is not None and _level_refused(by[n]):
             refused = level_phrase(by[n].level)   # round 11: an offset the base's misfit could be
             continue
         if c is not None and not c.veto and (c.significant or _sized(c)):
@@ -1178,7 +1314,7 @@ def attribute(evals, tests) -> str | None:
         # the drift that left that level (development s118-002, offset -0.78 um: +0.49 +- 0.11 nm/s, t 4.6)
         if c is not None and n == "thermal_drift" and not c.veto and "sensor_offset" in sized \
                 and "sensor_offset" in order[order.index(n):] \
-                and not ((by["sensor_offset"].level or {}).get("refused")) \
+                and not _level_refused(by["sensor_offset"]) \
                 and not (by[n].trend or {}).get("against_level"):
             chosen = c
             break
@@ -1193,6 +1329,9 @@ def attribute(evals, tests) -> str | None:
         if by[chosen.name].holds or (by[chosen.name].confirms and chosen.significant):
             text = (f"of the slow terms, the signature of {chosen.name} holds beyond the other two and the base's "
                     f"misfit at p < {level:.1e} ({figures})")
+        elif chosen.name == "sensor_offset":   # round 18: the same-shape pair's common level (_precedence)
+            text = (f"of the slow terms, the offset's signature holds on the recordings that sweep between the same "
+                    f"extremes: {pair_level_phrase(by[chosen.name].trend['pair_level'])} ({figures})")
         else:   # round 15: the level's trend within the recordings (_precedence)
             text = (f"of the slow terms, the drift's signature holds on the recordings' own scale: "
                     f"{trend_phrase(by[chosen.name].trend)} ({figures})")
@@ -1216,7 +1355,7 @@ def attribute(evals, tests) -> str | None:
                 "the level shows no trend within the recordings, but their blocks scatter too much to exclude a "
                 "drift that reached it at a steady rate since the calibration: " + trend_phrase(tr))}
             text += "; a drift cannot be excluded (" + trend_phrase(tr) + ")"
-        own = chosen.discrimination + " " if chosen.name == "creep" and chosen.discrimination else ""
+        own = chosen.discrimination + " " if chosen.name in ("creep", "thermal_drift") and chosen.discrimination else ""
         chosen.discrimination = own + "Attribution: " + text + "."   # creep_on_steps' sentence kept
     for c in passed:
         if c is not chosen:
