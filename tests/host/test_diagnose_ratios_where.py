@@ -1,5 +1,5 @@
 """A term that acts only where the drive left the calibrated range is sized on those samples (round 17,
-misfit.ratios_where, select.beyond_calibrated_mask; round 18: its block test there too, select.where_it_acts): the base's misfit on the in-range histories neither helps nor
+misfit.ratios_where, select.beyond_calibrated_mask): the base's misfit on the in-range histories neither helps nor
 hides it, and the base's misfit energy is still subtracted from what it is credited with."""
 
 import types
@@ -7,8 +7,7 @@ import types
 import numpy as np
 
 from piezoctl.diagnose import misfit
-from piezoctl.diagnose import significance as sg
-from piezoctl.diagnose.select import BEYOND_GUARD_S, beyond_calibrated_mask, where_it_acts
+from piezoctl.diagnose.select import BEYOND_GUARD_S, beyond_calibrated_mask
 from piezoctl.ident.terms import TERMS
 
 N = 20_000
@@ -71,43 +70,3 @@ def test_the_mask_holds_the_guard_after_the_drive_returns():
 def test_only_the_asymmetric_term_is_sized_beyond_the_edge():
     assert TERMS["asymmetric_hysteresis"].acts_beyond_calibration
     assert not any(t.acts_beyond_calibration for n, t in TERMS.items() if n != "asymmetric_hysteresis")
-
-
-def _knee_ctx(u, cal_hi=120.0):
-    s = types.SimpleNamespace(u=np.asarray(u, float), dt=1e-3)
-    return types.SimpleNamespace(signals=[s], valid=[np.ones(s.u.size, bool)], cal_u_lo=0.0, cal_u_hi=cal_hi)
-
-
-def test_where_it_acts_needs_the_flag_and_a_knee_in_every_fold():
-    u = np.concatenate([np.full(500, 50.0), np.full(100, 130.0), np.full(500, 50.0)])
-    ctx, used = _knee_ctx(u), np.ones(u.size, bool)
-    asym = TERMS["asymmetric_hysteresis"]
-    w = where_it_acts(ctx, asym, [(1, 121.0), (1, 122.0, 3.0)], used)
-    assert w is not None and np.array_equal(w, beyond_calibrated_mask(ctx))
-    assert where_it_acts(ctx, asym, [(1, 121.0), None], used) is None     # a whole-stroke fit in one fold
-    assert where_it_acts(ctx, TERMS["saturation"], [(1, 121.0)] * 2, used) is None
-    assert where_it_acts(_knee_ctx(np.full(1100, 50.0)), asym, [(1, 121.0)] * 2, used) is None   # never beyond
-
-
-def test_the_block_test_is_taken_where_the_knee_acts():
-    """Round 18: ten blocks with an excursion beyond the edge, the correction taking its extra exactly, and ten
-    in-range blocks where the nested refit's constant shifts the residual by 0.05 um (made worse): on every active
-    unit the test fails; on the units where the term can act it passes."""
-    rng = np.random.default_rng(3)
-    nb, lb = 20, 1000
-    u = np.full(nb * lb, 50.0)
-    for b in range(0, nb, 2):
-        u[b * lb + 400:b * lb + 600] = 130.0
-    ctx, used = _knee_ctx(u), np.ones(u.size, bool)
-    w = where_it_acts(ctx, TERMS["asymmetric_hysteresis"], [(1, 121.0)] * 2, used)
-    e = 0.1 * rng.standard_normal(u.size) + np.where(w, 0.3, 0.0)
-    corr = np.where(w, 0.3, -0.05)
-    blocks, rec = np.arange(u.size) // lb, np.zeros(u.size, int)
-    p_max = sg.ALPHA / 12
-
-    def p_of(c):
-        units = sg.test_units(e, blocks, rec, 1e-3, c)
-        return sg.active_block_test(e, e - corr, c, blocks, units)[1]
-
-    assert p_of(corr) > p_max
-    assert p_of(np.where(w, corr, 0.0)) < p_max

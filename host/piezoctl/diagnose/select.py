@@ -518,21 +518,6 @@ def beyond_calibrated_mask(ctx) -> np.ndarray:
     return np.concatenate(out)
 
 
-def where_it_acts(ctx, term, settings, used) -> np.ndarray | None:
-    """The used samples where a term of the drive beyond the calibrated edge can act (:func:`beyond_calibrated_mask`),
-    when ``term.acts_beyond_calibration`` and every fold's setting is a knee (not None); else None.
-
-    Round 17 sized such a term there (``misfit.ratios_where``); round 18 also takes its block test's active units
-    there. A knee setting's columns are zero inside the calibrated range: what its nested fit changes there is the
-    nuisance's refit and the constant beside it, not the term, and those in-range units drowned the units where it
-    acts (held-out s120-044, Preisach: 13 units beyond the edge, every one improved, log ratio 2.4 on average, beside
-    10 in-range units at -0.15: p 1.2e-02; on the units beyond the edge alone 6.5e-05)."""
-    if not term.acts_beyond_calibration or any(st is None for st in settings):
-        return None
-    w = beyond_calibrated_mask(ctx)[used]
-    return w if np.any(w) else None
-
-
 def residual(ctx):
     return np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
 
@@ -611,10 +596,8 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     nb = float(np.sqrt(np.mean(rb_res ** 2)) / span)
     na = float(np.sqrt(np.mean(ra_res ** 2)) / span)
     rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctxs[0].valid)])[used]
-    beyond = where_it_acts(ctxs[0], term, best_st, used)
-    corr_test = pred_after[used] if beyond is None else np.where(beyond, pred_after[used], 0.0)
-    units = sg.test_units(rb_res, block_all[used], rec, ctxs[0].dt, corr_test)
-    t, p, n_act = sg.active_block_test(rb_res, ra_res, corr_test, block_all[used], units)
+    units = sg.test_units(rb_res, block_all[used], rec, ctxs[0].dt, pred_after[used])
+    t, p, n_act = sg.active_block_test(rb_res, ra_res, pred_after[used], block_all[used], units)
     neff = sg.effective_n(rb_res)
     dbic = sg.bic_delta(float(np.sum(rb_res ** 2)), float(np.sum(ra_res ** 2)), neff, k)
     within = (lambda x: x <= ratio_max) if ratio_max < FURTHER_RATIO_MAX else (lambda x: x < ratio_max)
@@ -627,9 +610,11 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         if fr_above is not None:
             whole = {"above_hz": float(edge), "fold_ratios": list(fold_ratios), "credited_ratio": cr}
             fold_ratios, cr = fr_above, cr_above
-    if beyond is not None and whole is None:
+    if term.acts_beyond_calibration and whole is None and all(st is not None for st in best_st):
         # round 17: a knee setting in both folds acts only beyond the edge: sized on the samples where it can act
-        fr_w, cr_w = ratios_where(rb_res, pred_after[used], fold_all[used], beyond, ctxs[0].misfit)
+        w = beyond_calibrated_mask(ctxs[0])[used]
+        fr_w, cr_w = ratios_where(rb_res, pred_after[used], fold_all[used], w, ctxs[0].misfit) if np.any(w) else (
+            None, None)
         if fr_w is not None:
             whole = {"beyond_calibrated_range": True, "fold_ratios": list(fold_ratios), "credited_ratio": cr}
             fold_ratios, cr = fr_w, cr_w
