@@ -136,3 +136,29 @@ def test_selection_vetoes_a_coupling_candidate_whose_motion_does_not_hold():
         _coupling_motion([c], [ctx, ctx], [e, e], fold, block, 200000, lambda *a: None)
         assert c.significant is kept and (c.veto is None) is kept, c.veto
         assert c.signature_check["passed"] is kept and "motion" in c.signature_check
+
+
+def test_after_a_first_term_a_small_coupling_is_named_by_its_motion_and_a_null_is_not():
+    """Round 18: after a first term a coupling is tested at the further gate (select.CHECKED_TERMS) and kept only when
+    its motion holds. A coupling (the other axis' motion about its mean) worth a held-out ratio of about 0.9 beside
+    60 nm left by the first term fails the first round's 0.8 gate, passes the further one, and its motion test keeps
+    it; with the same leftover and the other axis swept in one recording but no coupling, nothing is kept.
+    (A drift taken by the coupling's level columns: test_selection_vetoes_a_coupling_candidate_whose_motion_does_not_hold.)"""
+    from piezoctl.diagnose import select as S
+
+    left = lambda s: 0.06 * np.random.default_rng(100 + s.index).normal(size=s.t.size)
+    term = TERMS["cross_coupling"]
+    p_max = sg.ALPHA / 10
+    for u2s, effect, kept in (([_sine, _sine, _held], lambda s: 0.0012 * (s.u2 - s.u2.mean()) + left(s), True),
+                              ([_held, _sine, _held], left, False)):
+        rng = np.random.default_rng(6)
+        ctx = _ctx(rng, u2s)
+        _, e, fold = _run(ctx, effect, rng)
+        block = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+        later = S._evaluate([ctx, ctx], term, [e, e], fold, block, 200000, p_max, S._ratio_max(term, ["a term"]))
+        if kept:
+            first = S._evaluate([ctx, ctx], term, [e, e], fold, block, 200000, p_max, S._ratio_max(term, []))
+            assert not first.significant and max(first.fold_ratios) > sg.RATIO_MAX, first.fold_ratios
+            assert later.significant and later.below_gates, (later.fold_ratios, later.credited, later.p)
+        S._coupling_motion([later], [ctx, ctx], [e, e], fold, block, 200000, lambda *a: None)
+        assert (later.significant and later.veto is None) is kept, (later.fold_ratios, later.p, later.veto)

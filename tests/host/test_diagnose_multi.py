@@ -49,8 +49,11 @@ def test_size_gates_by_round():
     assert S._ratio_max(TERMS["thermal_drift"], ["a term"]) == S.FURTHER_RATIO_MAX
     assert S._ratio_max(TERMS["creep"], ["a term"]) == S.FURTHER_RATIO_MAX
     assert S._ratio_max(TERMS["delay"], ["a term"]) == S.FURTHER_RATIO_MAX
+    # round 18: the coupling's motion test tells it from a base misfit and a drift (test_coupling_signature.py)
+    assert S._ratio_max(TERMS["cross_coupling"], ["a term"]) == S.FURTHER_RATIO_MAX
+    assert S._ratio_max(TERMS["cross_coupling"], []) == sg.RATIO_MAX
     # no signature test of its own, or one that does not tell it from a base misfit or a drift: the first gates
-    for name in ("saturation", "amplifier_slew_limit", "sensor_offset", "cross_coupling"):
+    for name in ("saturation", "amplifier_slew_limit", "sensor_offset"):
         assert S._ratio_max(TERMS[name], ["a term"]) == sg.RATIO_MAX, name
 
 

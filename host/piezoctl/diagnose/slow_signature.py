@@ -201,6 +201,12 @@ def dwell_ids(ctx, s) -> np.ndarray:
     least the creep chain's fastest time constant (shorter, its tail cannot be told from a level). The
     recording's first hold is not a dwell: no step of the recording precedes it (what went before the recording
     is unknown).
+
+    Held means both the command ``s.u`` and the model's drive after its drive terms ``s.v`` (round 18): a slew
+    limit in the model keeps ramping its drive after the command stopped (a 150 V step at 4.7 V/ms: 30 ms), and
+    until its ramp ends the model's output is not constant; a dwell counted from the command's stop started
+    inside the ramp, whose misfit (microns, with the step's sign) creep's columns then took (two-effect
+    s116-001, s116-005: `creep` named after the slew limit in place of the drift).
     """
     from ..dsp import filt
     u = np.asarray(s.u, float)
@@ -209,6 +215,8 @@ def dwell_ids(ctx, s) -> np.ndarray:
     if u.size < 3:
         return ids
     still = np.abs(np.diff(u, prepend=u[0])) <= STEP_STILL * max(float(np.ptp(u)), 1e-12)
+    v = np.asarray(s.v, float)
+    still &= np.abs(np.diff(v, prepend=v[0])) <= STEP_STILL * max(float(np.ptp(v)), 1e-12)
     still[0] = False
     noise = _noise_um(s.y, still)
     b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
