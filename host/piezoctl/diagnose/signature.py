@@ -324,19 +324,20 @@ def below_unity(tr: Transfer) -> Transfer:
     return dataclasses.replace(tr, f=tr.f[keep], T=tr.T[keep], g2=tr.g2[keep], var=tr.var[keep])
 
 
-def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label):
+def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label, f_alt=None):
     """Fit ``a shape_of(theta)`` over ``grid`` and test it against the loop's latency (:func:`latency_fit`, the
     same free gain): F = chi2_latency / chi2_shape on (2 K - 2, 2 K - 2) degrees of freedom, level ``ALPHA``.
     Both chi-squares carry the same misfit of the unidentified dynamics; only a shape that explains the
     residual's transfer clearly better than a latency passes. ``s2`` (dispersion) cancels in F; it scales the
-    reported chi-squares."""
+    reported chi-squares. ``f_alt`` [Hz]: the alternative's stage mode lies above it and ``f_band`` (round 18, the
+    delay: the band the base states its dynamics identified in)."""
     full = tr
     tr = below_unity(tr)
     if tr.k < 2:
         return {"term": name, "testable": False, "passed": True, "figures": {"bins": 0, "identified_band_hz": f_band},
                 "reason": f"no informative bin of the residual's transfer where |T| is not above 1 ({full.k} bins)"}
     th, a, c = _best(tr, grid, shape_of)
-    (d_lat, f0, z), a_lat, c_lat = unidentified_fit(tr, dt, f_band)
+    (d_lat, f0, z), a_lat, c_lat = unidentified_fit(tr, dt, max(f_band, f_alt or 0.0))
     chi0 = _scaled_fit(tr, np.ones(tr.k, complex))[1]
     dof, dof_alt = max(2 * tr.k - 2, 1), max(2 * tr.k - 4, 1)   # gain and setting; gain, latency, mode
     F = (c_lat / dof_alt) / max(c / dof, 1e-300)
@@ -383,7 +384,8 @@ def within_band(tr: Transfer, f_top: float) -> Transfer:
 SHAPE_MIN_BINS = 3
 
 
-def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: float | None = None) -> dict:
+def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: float | None = None,
+                f_dynamics: float | None = None) -> dict:
     """A delay's shape: ``T = a exp(-j 2 pi f d)``, ``d`` from 0 to 64 samples (quarter-sample steps).
 
     ``f_drive`` [Hz] (round 14): the band the recordings' drive excites (:func:`drive_band_hz`). When given and
@@ -393,7 +395,14 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
     a base whose dynamics are static: F = 0.58 on 166 bins to 3.7 kHz, F = 27.9, p = 6e-5 on the 5 bins to the
     drive's 167 Hz, delay 0.85 ms with the loop's sample). With fewer than 2 bins there (after :func:`below_unity`)
     every bin is used, as before; with 2 (round 17: fewer than ``SHAPE_MIN_BINS``) the shape is not testable where
-    the delay acts, and every bin is where it is not: not testable, as a shape test on too few bins is."""
+    the delay acts, and every bin is where it is not: not testable, as a shape test on too few bins is.
+
+    ``f_dynamics`` [Hz] (round 18): the band the base states its dynamics identified in (``base_info``, twice the
+    band of the calibration's H increments; ``unmodeled_resonance`` is offered only above it). The alternative's
+    mode of the stage lies above it: a mode below it would be in the base's G. From ``f_band`` (the calibration's
+    band) the alternative took a lightly damped mode at the band's edge, whose phase falls like a delay's, and
+    refused held-out s120-038 (a true 1.8 ms delay, static base: fold ratios 0.12/0.12; alternative a 63 Hz mode,
+    F = 2.3, p = 0.027; from the base's 120 Hz: F = 4.8, p = 2.8e-4). None: from ``f_band`` (as before)."""
     grid = np.arange(0.0, 64.25, 0.25) * dt
     shape = lambda d, f: np.exp(-2j * np.pi * f * d)   # noqa: E731
     label = "phase linear in frequency through zero with a flat magnitude of a delay"
@@ -402,14 +411,15 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
         part = within_band(tr, f_drive)
         k = below_unity(part).k
         if k >= SHAPE_MIN_BINS:
-            r = _shape_test(part, s2, f_band, dt, "delay", grid, shape, label + f" up to the drive's {f_drive:.0f} Hz")
+            r = _shape_test(part, s2, f_band, dt, "delay", grid, shape, label + f" up to the drive's {f_drive:.0f} Hz",
+                            f_dynamics)
         elif k >= 2:
             r = {"term": "delay", "testable": False, "passed": True,
                  "figures": {"bins": k, "bins_informative": part.k, "identified_band_hz": float(f_band)},
                  "reason": f"{k} informative bins where |T| is not above 1 up to the drive's {f_drive:.0f} Hz: too "
                            f"few for the shape test (at least {SHAPE_MIN_BINS})"}
     if r is None:
-        r = _shape_test(tr, s2, f_band, dt, "delay", grid, shape, label)
+        r = _shape_test(tr, s2, f_band, dt, "delay", grid, shape, label, f_dynamics)
     r["figures"]["delay_s"] = r["figures"].pop("setting", None)
     r["figures"]["drive_band_hz"] = None if f_drive is None else float(f_drive)
     return r
@@ -548,7 +558,7 @@ def check_slew_absent(heldout, us, dt, limit_v_per_s, nperseg=None) -> dict:
 
 
 def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None,
-                    drive_band=False) -> dict | None:
+                    drive_band=False, f_dynamics=None) -> dict | None:
     """The signature check of one candidate (None: the term has none here).
 
     Parameters
@@ -570,6 +580,9 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None
         The slew limit's held-out figures for :func:`check_slew_absent` (before, correction, fold, block, rec).
     drive_band : bool
         Test the delay's shape up to the band the drives ``us`` excite (:func:`drive_band_hz`, round 14).
+    f_dynamics : float, optional
+        The band the base states its dynamics identified in [Hz]: the delay's alternative lies above it
+        (:func:`check_delay`, round 18).
     """
     if name not in DRIVE_TERMS:
         return None
@@ -589,7 +602,7 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None
                 "reason": "the recordings give no informative bin of the residual's transfer"}
     s2, _ = dispersion(tr, f_band)
     if name == "delay":
-        return check_delay(tr, s2, f_band, dt, drive_band_hz(us, dt) if drive_band else None)
+        return check_delay(tr, s2, f_band, dt, drive_band_hz(us, dt) if drive_band else None, f_dynamics)
     if name == "amplifier_bandwidth":
         return check_bandwidth(tr, s2, f_band, dt)
     return check_mode(tr, s2, f_band, float(setting[0]), float(setting[1]))
@@ -611,4 +624,5 @@ def check_in_context(ctx, name, setting, f_band, cache=None, heldout=None) -> di
             tr = transfer(xs, ys, ctx.dt)
             if cache is not None:
                 cache["transfer"] = tr
-    return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr, heldout=heldout, drive_band=True)
+    return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr, heldout=heldout, drive_band=True,
+                           f_dynamics=getattr(ctx, "dynamics_band_hz", None))
