@@ -151,20 +151,22 @@ def transfer_peak(tr: Transfer, f_above: float | None = None) -> tuple[int, bool
     bins, Bonferroni); when no bin does, the bin of the largest ``|T - 1|^2 / var`` and False. One definition for
     where the mode is offered (:func:`mode_frequencies`) and where its check looks (:func:`check_mode`).
 
-    ``f_above`` [Hz] (round 18): only a peak above it counts: among the informative bins above ``f_above`` (in
-    their order), the significant local maximum of ``|T - 1|`` that stands highest above its surroundings (its
-    prominence: the height above the higher of the lowest points on either side before a higher bin or the end;
-    the first and last bins are no peak), the prominence itself significant against the variance of the peak's
-    bin and that base's (the same chi-square level). Below ``f_above`` lies the base's misfit of its own modes (the band its
+    ``f_above`` [Hz] (round 18): only a peak above it counts. When the largest significant deviation lies above
+    it, that bin, as without ``f_above``. Else, among the informative bins above ``f_above`` (in their order), the
+    significant local maximum of ``|T - 1|`` that stands highest above its surroundings (its prominence: the
+    height above the higher of the lowest points on either side before a higher bin or the end; the first and
+    last bins are no peak), the prominence itself significant against the variance of the peak's bin and that
+    base's (the same chi-square level). Below ``f_above`` lies the base's misfit of its own modes (the band its
     dynamics were identified in, or a concealed mode's own ``f / sqrt(2)``), and a deviation falling from there is
     that misfit's skirt, its ripples included, not a mode: held-out s119-021's largest deviation lay inside the
-    band (1000 Hz) and offered nothing while its mode stood above it (2880 Hz); on development s115-052 the skirt
-    above the band is larger than the mode's own peak (1.9 against 1.6). No significant peak there: the largest
-    ``|T - 1|^2 / var`` above ``f_above`` (or overall) and False."""
+    band (1000 Hz, |T - 1| 5.0) and nothing was offered while its mode stood above it (2880 Hz, 1.35); on
+    development s115-052 the skirt just above the band is larger than the mode's own peak (1.9 against 1.6). No
+    significant peak there: the largest ``|T - 1|^2 / var`` above ``f_above`` (or overall) and False."""
     q = np.abs(tr.T - 1.0) ** 2 / tr.var
     sig = stats.chi2.sf(q, 2) < ALPHA / max(tr.k, 1)
     dev = np.abs(tr.T - 1.0)
-    if f_above is not None:
+    i = int(np.argmax(np.where(sig, dev, -1.0)))
+    if f_above is not None and not (np.any(sig) and tr.f[i] > f_above):
         idx = np.flatnonzero(tr.f > f_above)
         if idx.size == 0:
             return int(np.argmax(q)), False
@@ -179,7 +181,7 @@ def transfer_peak(tr: Transfer, f_above: float | None = None) -> tuple[int, bool
         return int(idx[pk[keep][np.argmax(props["prominences"][keep])]]), True
     if not np.any(sig):
         return int(np.argmax(q)), False
-    return int(np.argmax(np.where(sig, dev, -1.0))), True
+    return i, True
 
 
 def _half_band(freq_hz: float, damping: float, df: float) -> float:
