@@ -441,11 +441,12 @@ def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: 
 
     The peak is the largest ``|T - 1|`` over the informative bins where it deviates from 0 beyond the estimate's
     own variance (chi-square with 2 degrees of freedom, level ``ALPHA`` over the number of bins; where it lies
-    is the question, not how well a model fits, so ``s2`` is not applied). Round 18: the largest such local
-    maximum above the calibration's band ``f_band`` and the mode's own ``f / sqrt(2)`` (:func:`transfer_peak`
-    with ``f_above``; the edge the term is sized above, ``UnmodeledResonance.acts_above_hz``: below it the branch
-    moves less than its static share, and what peaks there is the base's misfit of its own modes). Not testable
-    when no informative bin lies within the mode's half-power band."""
+    is the question, not how well a model fits, so ``s2`` is not applied). Round 18: when that bin lies at or
+    below the higher of the calibration's band ``f_band`` and the mode's own ``f / sqrt(2)`` (the edge the term
+    is sized above, ``UnmodeledResonance.acts_above_hz``: below it the branch moves less than its static share,
+    and what peaks there is the base's misfit of its own modes), the most prominent significant peak above that
+    edge instead (:func:`transfer_peak` with ``f_above``). Not testable when no informative bin lies within the
+    mode's half-power band."""
     half = _half_band(freq_hz, damping, tr.df)
     near = np.abs(tr.f - freq_hz) <= half
     i, significant = transfer_peak(tr, f_above=max(float(f_band), float(freq_hz) / np.sqrt(2.0)))
