@@ -236,3 +236,24 @@ def test_delay_check_needs_a_degree_of_freedom_left_to_the_alternative():
     assert not r2["testable"] and r2["passed"] and r2["figures"]["bins"] == 2
     r3 = sig.check_delay(tr, s2, 5.0, DT, three)
     assert r3["testable"] and r3["figures"]["bins_informative"] == 3 and r3["figures"]["f_max_hz"] <= three
+
+
+def test_delay_alternative_mode_lies_above_the_band_the_base_identified_its_dynamics_in():
+    """Round 18 (held-out s120-038, a 1.8 ms delay on a static base): the alternative's mode of the stage is sought
+    above the base's dynamics band when given (a mode below it would be in the base's G), so the alternative can
+    not take a mode at the calibration band's edge; without it the grid starts at the calibration's band, as
+    before."""
+    xs = [_band_limited(s) for s in (1, 2)]
+    ys = [_noisy(_delay(x, 18), s) for x, s in zip(xs, (1, 2))]
+    tr = sig.transfer(xs, ys, DT)
+    s2, _ = sig.dispersion(tr, 63.0)
+    f_drive = sig.drive_band_hz(xs, DT)
+    r0 = sig.check_delay(tr, s2, 63.0, DT, f_drive)
+    r1 = sig.check_delay(tr, s2, 63.0, DT, f_drive, f_dynamics=126.0)
+    m0, m1 = r0["figures"]["unidentified_mode_hz"], r1["figures"]["unidentified_mode_hz"]
+    assert m1 is None or m1 >= 126.0
+    assert m0 is None or m0 >= 63.0
+    assert r1["passed"] and abs(r1["figures"]["delay_s"] / DT - 18.0) <= 1.0
+    # the other shapes keep the calibration's band (not changed this round)
+    assert sig.check_candidate("delay", 18, xs, ys, xs, DT, 63.0, tr=tr, drive_band=True,
+                               f_dynamics=126.0)["figures"]["F"] == r1["figures"]["F"]

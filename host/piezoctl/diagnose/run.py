@@ -131,6 +131,7 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None, dynamics_band
               peak_freqs=loc.peak_frequencies([r[v] for r, v in zip(resid, valid)], dt), y_span=span,
               mode_freqs=_mode_freqs(base, sigs, valid, cal, cal_k0, dt, dynamics_band_hz),
               cal_band_hz=calibration_band_hz(cal, cal_k0),
+              dynamics_band_hz=None if dynamics_band_hz is None else float(dynamics_band_hz),
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
               cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
               cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),

@@ -116,6 +116,8 @@ class Ctx:
     misfit: dict | None = None      # the base's error on held-out calibration histories (misfit.base_misfit)
     cal_band_hz: float | None = None  # the calibration's band (discriminate.calibration_band_hz) [Hz]; a term that
     #                                   acts above it is judged on the residual above it (round 16)
+    dynamics_band_hz: float | None = None  # the band the base states its dynamics identified in [Hz] (round 18: the
+    #                                        delay's shape check's alternative lies above it)
     mode_freqs: list | None = None  # where unmodeled_resonance is offered (round 12: the residual transfer's
     #                                 significant peak, signature.mode_frequencies); None: at peak_freqs
     accepted_flex: np.ndarray | None = None  # (n_settled, m): the accepted terms' own flexibility (their gains and

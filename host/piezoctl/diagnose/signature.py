@@ -46,6 +46,7 @@ import dataclasses
 
 import numpy as np
 from scipy import stats
+from scipy.signal import find_peaks
 
 from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
 from .discriminate import rate_band_hz
@@ -144,16 +145,43 @@ def transfer(xs, ys, dt, keep=None, nperseg=None) -> Transfer | None:
                     segments=nd)
 
 
-def transfer_peak(tr: Transfer) -> tuple[int, bool]:
+def transfer_peak(tr: Transfer, f_above: float | None = None) -> tuple[int, bool]:
     """(index, significant): the bin of the largest ``|T - 1|`` among the informative bins where it deviates from 0
     beyond the estimate's own variance (chi-square with 2 degrees of freedom, level ``ALPHA`` over the number of
     bins, Bonferroni); when no bin does, the bin of the largest ``|T - 1|^2 / var`` and False. One definition for
-    where the mode is offered (:func:`mode_frequencies`) and where its check looks (:func:`check_mode`)."""
+    where the mode is offered (:func:`mode_frequencies`) and where its check looks (:func:`check_mode`).
+
+    ``f_above`` [Hz] (round 18): only a peak above it counts. When the largest significant deviation lies above
+    it, that bin, as without ``f_above``. Else, among the informative bins above ``f_above`` (in their order), the
+    significant local maximum of ``|T - 1|`` that stands highest above its surroundings (its prominence: the
+    height above the higher of the lowest points on either side before a higher bin or the end; the first and
+    last bins are no peak), the prominence itself significant against the variance of the peak's bin and that
+    base's (the same chi-square level). Below ``f_above`` lies the base's misfit of its own modes (the band its
+    dynamics were identified in, or a concealed mode's own ``f / sqrt(2)``), and a deviation falling from there is
+    that misfit's skirt, its ripples included, not a mode: held-out s119-021's largest deviation lay inside the
+    band (1000 Hz, |T - 1| 5.0) and nothing was offered while its mode stood above it (2880 Hz, 1.35); on
+    development s115-052 the skirt just above the band is larger than the mode's own peak (1.9 against 1.6). No
+    significant peak there: the largest ``|T - 1|^2 / var`` above ``f_above`` (or overall) and False."""
     q = np.abs(tr.T - 1.0) ** 2 / tr.var
     sig = stats.chi2.sf(q, 2) < ALPHA / max(tr.k, 1)
+    dev = np.abs(tr.T - 1.0)
+    i = int(np.argmax(np.where(sig, dev, -1.0)))
+    if f_above is not None and not (np.any(sig) and tr.f[i] > f_above):
+        idx = np.flatnonzero(tr.f > f_above)
+        if idx.size == 0:
+            return int(np.argmax(q)), False
+        pk, props = find_peaks(dev[idx], prominence=0.0)
+        # the peak stands above its surroundings beyond the two bins' own variance (the same level)
+        lo, hi = idx[props["left_bases"]], idx[props["right_bases"]]
+        base = np.where(dev[lo] >= dev[hi], lo, hi)
+        qp = props["prominences"] ** 2 / (tr.var[idx[pk]] + tr.var[base])
+        keep = sig[idx[pk]] & (stats.chi2.sf(qp, 2) < ALPHA / max(tr.k, 1))
+        if not np.any(keep):
+            return int(idx[np.argmax(q[idx])]), False
+        return int(idx[pk[keep][np.argmax(props["prominences"][keep])]]), True
     if not np.any(sig):
         return int(np.argmax(q)), False
-    return int(np.argmax(np.where(sig, np.abs(tr.T - 1.0), -1.0))), True
+    return i, True
 
 
 def _half_band(freq_hz: float, damping: float, df: float) -> float:
@@ -190,11 +218,14 @@ def mode_frequencies(tr: Transfer | None, f_min: float = 80.0, notches=()) -> li
     """Round 12: where ``unmodeled_resonance`` is offered: the residual transfer's significant peak
     (:func:`transfer_peak`), the one place its signature check (:func:`check_mode`) lets a mode pass.
 
-    Returns ``[f]`` [Hz] (the mode's grid is +-3 % around it), ``[]`` when ``|T - 1|`` deviates nowhere
-    significantly (every mode would fail its check) or peaks at or below ``f_min`` (the diagnosis passes the band
-    the calibration identified the dynamics in, at least the residual spectrum's 80 Hz floor: the term's signature
-    is a mode above that band; inside it the base's G was fitted, and development null s110-027's transfer peaked
-    at its own main mode, 418 Hz inside its 535 Hz band, which the first form named), and None when the
+    Returns ``[f]`` [Hz] (the mode's grid is +-3 % around it), ``[]`` when ``|T - 1|`` has no significant peak
+    above ``f_min`` (every mode would fail its check; the diagnosis passes the band the calibration identified the
+    dynamics in, at least the residual spectrum's 80 Hz floor: the term's signature is a mode above that band;
+    inside it the base's G was fitted, and development null s110-027's transfer peaked at its own main mode, 418 Hz
+    inside its 535 Hz band, which the first form named). Round 18: the largest significant peak *above*
+    ``f_min`` (``transfer_peak(tr, f_above=f_min)``), also when a larger deviation lies inside the band (until
+    round 17 nothing was offered then: held-out s119-021, its stage's main mode misfit at 1000 Hz |T - 1| 5.0
+    inside the 1817 Hz band, the concealed 2817 Hz mode's peak 1.35 at 2880 Hz). None when the
     recordings give no transfer estimate (the residual spectrum's peaks are used then). ``notches``:
     :func:`model_notches` of the current model's dynamics; a peak within a notch's half-power band
     (``|damping| f``, at least the mode grid's 3 % and one bin) is the model's own
@@ -209,8 +240,8 @@ def mode_frequencies(tr: Transfer | None, f_min: float = 80.0, notches=()) -> li
     check (the transfer peaks at 930 Hz); offering only where the check can pass keeps the two consistent."""
     if tr is None:
         return None
-    i, significant = transfer_peak(tr)
-    if not significant or tr.f[i] <= f_min:
+    i, significant = transfer_peak(tr, f_above=f_min)
+    if not significant:
         return []
     f0 = float(tr.f[i])
     if any(abs(f0 - fz) <= _half_band(fz, z, tr.df) for fz, z in notches):
@@ -295,19 +326,20 @@ def below_unity(tr: Transfer) -> Transfer:
     return dataclasses.replace(tr, f=tr.f[keep], T=tr.T[keep], g2=tr.g2[keep], var=tr.var[keep])
 
 
-def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label):
+def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label, f_alt=None):
     """Fit ``a shape_of(theta)`` over ``grid`` and test it against the loop's latency (:func:`latency_fit`, the
     same free gain): F = chi2_latency / chi2_shape on (2 K - 2, 2 K - 2) degrees of freedom, level ``ALPHA``.
     Both chi-squares carry the same misfit of the unidentified dynamics; only a shape that explains the
     residual's transfer clearly better than a latency passes. ``s2`` (dispersion) cancels in F; it scales the
-    reported chi-squares."""
+    reported chi-squares. ``f_alt`` [Hz]: the alternative's stage mode lies above it and ``f_band`` (round 18, the
+    delay: the band the base states its dynamics identified in)."""
     full = tr
     tr = below_unity(tr)
     if tr.k < 2:
         return {"term": name, "testable": False, "passed": True, "figures": {"bins": 0, "identified_band_hz": f_band},
                 "reason": f"no informative bin of the residual's transfer where |T| is not above 1 ({full.k} bins)"}
     th, a, c = _best(tr, grid, shape_of)
-    (d_lat, f0, z), a_lat, c_lat = unidentified_fit(tr, dt, f_band)
+    (d_lat, f0, z), a_lat, c_lat = unidentified_fit(tr, dt, max(f_band, f_alt or 0.0))
     chi0 = _scaled_fit(tr, np.ones(tr.k, complex))[1]
     dof, dof_alt = max(2 * tr.k - 2, 1), max(2 * tr.k - 4, 1)   # gain and setting; gain, latency, mode
     F = (c_lat / dof_alt) / max(c / dof, 1e-300)
@@ -354,7 +386,8 @@ def within_band(tr: Transfer, f_top: float) -> Transfer:
 SHAPE_MIN_BINS = 3
 
 
-def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: float | None = None) -> dict:
+def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: float | None = None,
+                f_dynamics: float | None = None) -> dict:
     """A delay's shape: ``T = a exp(-j 2 pi f d)``, ``d`` from 0 to 64 samples (quarter-sample steps).
 
     ``f_drive`` [Hz] (round 14): the band the recordings' drive excites (:func:`drive_band_hz`). When given and
@@ -364,7 +397,14 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
     a base whose dynamics are static: F = 0.58 on 166 bins to 3.7 kHz, F = 27.9, p = 6e-5 on the 5 bins to the
     drive's 167 Hz, delay 0.85 ms with the loop's sample). With fewer than 2 bins there (after :func:`below_unity`)
     every bin is used, as before; with 2 (round 17: fewer than ``SHAPE_MIN_BINS``) the shape is not testable where
-    the delay acts, and every bin is where it is not: not testable, as a shape test on too few bins is."""
+    the delay acts, and every bin is where it is not: not testable, as a shape test on too few bins is.
+
+    ``f_dynamics`` [Hz] (round 18): the band the base states its dynamics identified in (``base_info``, twice the
+    band of the calibration's H increments; ``unmodeled_resonance`` is offered only above it). The alternative's
+    mode of the stage lies above it: a mode below it would be in the base's G. From ``f_band`` (the calibration's
+    band) the alternative took a lightly damped mode at the band's edge, whose phase falls like a delay's, and
+    refused held-out s120-038 (a true 1.8 ms delay, static base: fold ratios 0.12/0.12; alternative a 63 Hz mode,
+    F = 2.3, p = 0.027; from the base's 120 Hz: F = 4.8, p = 2.8e-4). None: from ``f_band`` (as before)."""
     grid = np.arange(0.0, 64.25, 0.25) * dt
     shape = lambda d, f: np.exp(-2j * np.pi * f * d)   # noqa: E731
     label = "phase linear in frequency through zero with a flat magnitude of a delay"
@@ -373,14 +413,15 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
         part = within_band(tr, f_drive)
         k = below_unity(part).k
         if k >= SHAPE_MIN_BINS:
-            r = _shape_test(part, s2, f_band, dt, "delay", grid, shape, label + f" up to the drive's {f_drive:.0f} Hz")
+            r = _shape_test(part, s2, f_band, dt, "delay", grid, shape, label + f" up to the drive's {f_drive:.0f} Hz",
+                            f_dynamics)
         elif k >= 2:
             r = {"term": "delay", "testable": False, "passed": True,
                  "figures": {"bins": k, "bins_informative": part.k, "identified_band_hz": float(f_band)},
                  "reason": f"{k} informative bins where |T| is not above 1 up to the drive's {f_drive:.0f} Hz: too "
                            f"few for the shape test (at least {SHAPE_MIN_BINS})"}
     if r is None:
-        r = _shape_test(tr, s2, f_band, dt, "delay", grid, shape, label)
+        r = _shape_test(tr, s2, f_band, dt, "delay", grid, shape, label, f_dynamics)
     r["figures"]["delay_s"] = r["figures"].pop("setting", None)
     r["figures"]["drive_band_hz"] = None if f_drive is None else float(f_drive)
     return r
@@ -400,11 +441,15 @@ def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: 
 
     The peak is the largest ``|T - 1|`` over the informative bins where it deviates from 0 beyond the estimate's
     own variance (chi-square with 2 degrees of freedom, level ``ALPHA`` over the number of bins; where it lies
-    is the question, not how well a model fits, so ``s2`` is not applied). Not testable when no informative bin
-    lies within the mode's half-power band."""
+    is the question, not how well a model fits, so ``s2`` is not applied). Round 18: when that bin lies at or
+    below the higher of the calibration's band ``f_band`` and the mode's own ``f / sqrt(2)`` (the edge the term
+    is sized above, ``UnmodeledResonance.acts_above_hz``: below it the branch moves less than its static share,
+    and what peaks there is the base's misfit of its own modes), the most prominent significant peak above that
+    edge instead (:func:`transfer_peak` with ``f_above``). Not testable when no informative bin lies within the
+    mode's half-power band."""
     half = _half_band(freq_hz, damping, tr.df)
     near = np.abs(tr.f - freq_hz) <= half
-    i, significant = transfer_peak(tr)
+    i, significant = transfer_peak(tr, f_above=max(float(f_band), float(freq_hz) / np.sqrt(2.0)))
     fig = {"bins": tr.k, "segments": tr.n_d, "mode_hz": float(freq_hz), "half_band_hz": half,
            "identified_band_hz": float(f_band), "dispersion": float(s2)}
     if not np.any(near):
@@ -516,7 +561,7 @@ def check_slew_absent(heldout, us, dt, limit_v_per_s, nperseg=None) -> dict:
 
 
 def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None,
-                    drive_band=False) -> dict | None:
+                    drive_band=False, f_dynamics=None) -> dict | None:
     """The signature check of one candidate (None: the term has none here).
 
     Parameters
@@ -538,6 +583,9 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None
         The slew limit's held-out figures for :func:`check_slew_absent` (before, correction, fold, block, rec).
     drive_band : bool
         Test the delay's shape up to the band the drives ``us`` excite (:func:`drive_band_hz`, round 14).
+    f_dynamics : float, optional
+        The band the base states its dynamics identified in [Hz]: the delay's alternative lies above it
+        (:func:`check_delay`, round 18).
     """
     if name not in DRIVE_TERMS:
         return None
@@ -557,7 +605,7 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None
                 "reason": "the recordings give no informative bin of the residual's transfer"}
     s2, _ = dispersion(tr, f_band)
     if name == "delay":
-        return check_delay(tr, s2, f_band, dt, drive_band_hz(us, dt) if drive_band else None)
+        return check_delay(tr, s2, f_band, dt, drive_band_hz(us, dt) if drive_band else None, f_dynamics)
     if name == "amplifier_bandwidth":
         return check_bandwidth(tr, s2, f_band, dt)
     return check_mode(tr, s2, f_band, float(setting[0]), float(setting[1]))
@@ -579,4 +627,5 @@ def check_in_context(ctx, name, setting, f_band, cache=None, heldout=None) -> di
             tr = transfer(xs, ys, ctx.dt)
             if cache is not None:
                 cache["transfer"] = tr
-    return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr, heldout=heldout, drive_band=True)
+    return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr, heldout=heldout, drive_band=True,
+                           f_dynamics=getattr(ctx, "dynamics_band_hz", None))
