@@ -784,7 +784,51 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    dcc_fill\n"
         ".Ldf_run_same:\n"
         "    mov    r0, r2\n"
-        "    b      .Ldf_scan\n"
+        /* the row's next operators join while psi > r (round 18: the run's
+         * path falls through to them, the other rows' paths branch here;
+         * the rows without a run or a block at rmax, .Ldf_plain, out of line) */
+        ".Ldf_scan:\n"
+        "    cmp    r0, r1\n"
+        "    bge    .Ldf_scan_end\n"
+        ".Ldf_scan_op:\n"
+        "    ldr    ip, [r5, r0, lsl #2]\n"
+        "    subs   ip, r3, ip\n"
+        "    bge    .Ldf_scan_end\n"         /* psi <= r: the rest of the row stays */
+        "    ldr    r2, [r11, r0, lsl #2]\n"
+        "    smlal  r7, r8, ip, r2\n"
+        "    add    lr, lr, r2\n"
+        "    str    r3, [r5, r0, lsl #2]\n"
+        "    adds   r0, r0, #1\n"
+        "    cmp    r0, r1\n"
+        "    blt    .Ldf_scan_op\n"
+        ".Ldf_scan_end:\n"
+        "    ldrh   r1, [r4, #-2]\n"         /* j */
+        "    subs   r2, r0, r1\n"            /* operators that moved */
+        "    ble    .Ldf_next\n"
+        "    ldrd   ip, r6, [sp, #40]\n"     /* out_end, th */
+        "    cmp    r10, ip\n"
+        "    bhs    .Ldf_next\n"
+        "    ldrsh  ip, [r6, r1, lsl #1]\n"  /* n1 */
+        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
+        "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
+        "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
+        ".Ldf_next:\n"
+        "    ldr    ip, [sp, #36]\n"
+        "    cmp    r4, ip\n"
+        "    blo    .Ldf_row\n"
+
+        ".Ldf_done:\n"
+        "    ldrd   ip, r1, [sp, #48]\n"     /* dcc, yd */
+        "    ldr    r0, [sp, #28]\n"
+        "    sub    r0, r10, r0\n"
+        "    lsr    r0, r0, #4\n"
+        "    strb   r0, [ip, #43]\n"         /* n_run */
+        "    strd   r7, r8, [ip, #24]\n"     /* kacc (runs: const_w) */
+        "    ldr    r4, [sp, #8]\n"
+        "    strh   r4, [ip, #34]\n"         /* v_prev = v */
+        "    dcc_law_out\n"
+        "    add    sp, #48\n"
+        "    pop    {r1, r2, r4-r11, pc}\n"
 
         ".Ldf_norun:\n"
         "    ldr    r6, [sp, #32]\n"         /* psum */
@@ -841,49 +885,7 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
 
         ".Ldf_plain:\n"
         "    mov    lr, #0\n"
-        /* the row's next operators join while psi > r */
-        ".Ldf_scan:\n"
-        "    cmp    r0, r1\n"
-        "    bge    .Ldf_scan_end\n"
-        ".Ldf_scan_op:\n"
-        "    ldr    ip, [r5, r0, lsl #2]\n"
-        "    subs   ip, r3, ip\n"
-        "    bge    .Ldf_scan_end\n"         /* psi <= r: the rest of the row stays */
-        "    ldr    r2, [r11, r0, lsl #2]\n"
-        "    smlal  r7, r8, ip, r2\n"
-        "    add    lr, lr, r2\n"
-        "    str    r3, [r5, r0, lsl #2]\n"
-        "    adds   r0, r0, #1\n"
-        "    cmp    r0, r1\n"
-        "    blt    .Ldf_scan_op\n"
-        ".Ldf_scan_end:\n"
-        "    ldrh   r1, [r4, #-2]\n"         /* j */
-        "    subs   r2, r0, r1\n"            /* operators that moved */
-        "    ble    .Ldf_next\n"
-        "    ldrd   ip, r6, [sp, #40]\n"     /* out_end, th */
-        "    cmp    r10, ip\n"
-        "    bhs    .Ldf_next\n"
-        "    ldrsh  ip, [r6, r1, lsl #1]\n"  /* n1 */
-        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
-        "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
-        "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
-        ".Ldf_next:\n"
-        "    ldr    ip, [sp, #36]\n"
-        "    cmp    r4, ip\n"
-        "    blo    .Ldf_row\n"
-
-        ".Ldf_done:\n"
-        "    ldrd   ip, r1, [sp, #48]\n"     /* dcc, yd */
-        "    ldr    r0, [sp, #28]\n"
-        "    sub    r0, r10, r0\n"
-        "    lsr    r0, r0, #4\n"
-        "    strb   r0, [ip, #43]\n"         /* n_run */
-        "    strd   r7, r8, [ip, #24]\n"     /* kacc (runs: const_w) */
-        "    ldr    r4, [sp, #8]\n"
-        "    strh   r4, [ip, #34]\n"         /* v_prev = v */
-        "    dcc_law_out\n"
-        "    add    sp, #48\n"
-        "    pop    {r1, r2, r4-r11, pc}\n"
+        "    b      .Ldf_scan\n"            /* (round 18: out of line, the run path falls through) */
         "    .purgem dcc_fill\n"
         "    .purgem dcc_block_end\n"
         "    .purgem dcc_law_out\n"
