@@ -622,7 +622,7 @@ static int64_t dcc_fall_runs(struct piezo_dcc *dcc, int32_t v, int32_t dv)
  * end), r9 the old run, r10 the next run out, r11 c; in a row r0 j then p, r1 end, r2 n1,
  * r3 r, lr the run's weight sum; r6, ip scratch.
  * Frame: [sp] th (n1), #4 v_prev, #8 v, #12 xsat, #16 slope, #20 rmax
- * (a row's first four words in one LDM, round 16),
+ * (a row's first five words in one LDM: four in round 16, slope too since round 18),
  * #24 old_end, #28 out, #32 psum, #36 &row_start[n_rows], #40 out_end,
  * #44 th again (the pairs stored by one STRD each, out_end and th read by
  * one LDRD where a run is recorded; round 18),
@@ -746,26 +746,22 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         ".Ldf_row:\n"
         "    ldrh   r0, [r4], #2\n"          /* j */
         "    ldrh   r1, [r4]\n"              /* end */
-        "    ldm    sp, {r2, r3, ip, lr}\n"  /* th, v_prev, v, xsat in one (round 16) */
+        "    ldm    sp, {r2, r3, r6, ip, lr}\n" /* th, v_prev, v, xsat, slope in one (round 18:
+                                             * slope without a load of its own; xsat unused) */
         "    ldrsh  r2, [r2, r0, lsl #1]\n"  /* n1 */
         "    cmp    r2, r3\n"
         "    bge    .Ldf_done\n"             /* n1 >= v_prev (x <= dv): psi = 0 by (A) */
-        "    subs   r3, ip, r2\n"            /* x = v - n1 */
-        "    cmp    r3, lr\n"
-        "    bge    .Ldf_sat\n"
-        "    cmp    r3, #0\n"
-        "    ble    .Ldf_zero\n"
-        "    ldr    lr, [sp, #16]\n"
+        /* r = 0 for x <= 0, else (x slope + 2^15) >> 16: x clamped at 0
+         * by one BIC gives 0 there too. x < xsat on every row visited (the
+         * band starts at the first n1 above v - xsat, n1 rises from row
+         * to row), so the C step's rmax case is never taken here (round 18:
+         * 5 instructions a row where the compares, branches and the
+         * slope's load took 10) */
+        "    sub    r3, r6, r2\n"            /* x = v - n1 */
+        "    bic    r3, r3, r3, asr #31\n"   /* max(x, 0) */
         "    mul    r3, r3, lr\n"
         "    add    r3, r3, #32768\n"
         "    asrs   r3, r3, #16\n"
-        "    b      .Ldf_ridge\n"
-        ".Ldf_sat:\n"
-        "    ldr    r3, [sp, #20]\n"
-        "    b      .Ldf_ridge\n"
-        ".Ldf_zero:\n"
-        "    movs   r3, #0\n"
-        ".Ldf_ridge:\n"
         "    ldr    lr, [sp, #24]\n"         /* old_end */
         ".Ldf_old:\n"
         "    cmp    r9, lr\n"
@@ -788,7 +784,51 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
         "    dcc_fill\n"
         ".Ldf_run_same:\n"
         "    mov    r0, r2\n"
-        "    b      .Ldf_scan\n"
+        /* the row's next operators join while psi > r (round 18: the run's
+         * path falls through to them, the other rows' paths branch here;
+         * the rows without a run or a block at rmax, .Ldf_plain, out of line) */
+        ".Ldf_scan:\n"
+        "    cmp    r0, r1\n"
+        "    bge    .Ldf_scan_end\n"
+        ".Ldf_scan_op:\n"
+        "    ldr    ip, [r5, r0, lsl #2]\n"
+        "    subs   ip, r3, ip\n"
+        "    bge    .Ldf_scan_end\n"         /* psi <= r: the rest of the row stays */
+        "    ldr    r2, [r11, r0, lsl #2]\n"
+        "    smlal  r7, r8, ip, r2\n"
+        "    add    lr, lr, r2\n"
+        "    str    r3, [r5, r0, lsl #2]\n"
+        "    adds   r0, r0, #1\n"
+        "    cmp    r0, r1\n"
+        "    blt    .Ldf_scan_op\n"
+        ".Ldf_scan_end:\n"
+        "    ldrh   r1, [r4, #-2]\n"         /* j */
+        "    subs   r2, r0, r1\n"            /* operators that moved */
+        "    ble    .Ldf_next\n"
+        "    ldrd   ip, r6, [sp, #40]\n"     /* out_end, th */
+        "    cmp    r10, ip\n"
+        "    bhs    .Ldf_next\n"
+        "    ldrsh  ip, [r6, r1, lsl #1]\n"  /* n1 */
+        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
+        "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
+        "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
+        ".Ldf_next:\n"
+        "    ldr    ip, [sp, #36]\n"
+        "    cmp    r4, ip\n"
+        "    blo    .Ldf_row\n"
+
+        ".Ldf_done:\n"
+        "    ldrd   ip, r1, [sp, #48]\n"     /* dcc, yd */
+        "    ldr    r0, [sp, #28]\n"
+        "    sub    r0, r10, r0\n"
+        "    lsr    r0, r0, #4\n"
+        "    strb   r0, [ip, #43]\n"         /* n_run */
+        "    strd   r7, r8, [ip, #24]\n"     /* kacc (runs: const_w) */
+        "    ldr    r4, [sp, #8]\n"
+        "    strh   r4, [ip, #34]\n"         /* v_prev = v */
+        "    dcc_law_out\n"
+        "    add    sp, #48\n"
+        "    pop    {r1, r2, r4-r11, pc}\n"
 
         ".Ldf_norun:\n"
         "    ldr    r6, [sp, #32]\n"         /* psum */
@@ -845,49 +885,7 @@ static __attribute__((naked, noinline, used)) void dcc_fall_m4(void)
 
         ".Ldf_plain:\n"
         "    mov    lr, #0\n"
-        /* the row's next operators join while psi > r */
-        ".Ldf_scan:\n"
-        "    cmp    r0, r1\n"
-        "    bge    .Ldf_scan_end\n"
-        ".Ldf_scan_op:\n"
-        "    ldr    ip, [r5, r0, lsl #2]\n"
-        "    subs   ip, r3, ip\n"
-        "    bge    .Ldf_scan_end\n"         /* psi <= r: the rest of the row stays */
-        "    ldr    r2, [r11, r0, lsl #2]\n"
-        "    smlal  r7, r8, ip, r2\n"
-        "    add    lr, lr, r2\n"
-        "    str    r3, [r5, r0, lsl #2]\n"
-        "    adds   r0, r0, #1\n"
-        "    cmp    r0, r1\n"
-        "    blt    .Ldf_scan_op\n"
-        ".Ldf_scan_end:\n"
-        "    ldrh   r1, [r4, #-2]\n"         /* j */
-        "    subs   r2, r0, r1\n"            /* operators that moved */
-        "    ble    .Ldf_next\n"
-        "    ldrd   ip, r6, [sp, #40]\n"     /* out_end, th */
-        "    cmp    r10, ip\n"
-        "    bhs    .Ldf_next\n"
-        "    ldrsh  ip, [r6, r1, lsl #1]\n"  /* n1 */
-        "    pkhbt  ip, ip, r2, lsl #16\n"   /* thr and k as one word (round 16) */
-        "    strd   lr, r3, [r10], #8\n"     /* csum, lvl */
-        "    str    ip, [r10], #8\n"         /* thr, k; the spare left alone */
-        ".Ldf_next:\n"
-        "    ldr    ip, [sp, #36]\n"
-        "    cmp    r4, ip\n"
-        "    blo    .Ldf_row\n"
-
-        ".Ldf_done:\n"
-        "    ldrd   ip, r1, [sp, #48]\n"     /* dcc, yd */
-        "    ldr    r0, [sp, #28]\n"
-        "    sub    r0, r10, r0\n"
-        "    lsr    r0, r0, #4\n"
-        "    strb   r0, [ip, #43]\n"         /* n_run */
-        "    strd   r7, r8, [ip, #24]\n"     /* kacc (runs: const_w) */
-        "    ldr    r4, [sp, #8]\n"
-        "    strh   r4, [ip, #34]\n"         /* v_prev = v */
-        "    dcc_law_out\n"
-        "    add    sp, #48\n"
-        "    pop    {r1, r2, r4-r11, pc}\n"
+        "    b      .Ldf_scan\n"            /* (round 18: out of line, the run path falls through) */
         "    .purgem dcc_fill\n"
         "    .purgem dcc_block_end\n"
         "    .purgem dcc_law_out\n"
@@ -1003,14 +1001,14 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         ".Ldr_col:\n"                         /* r1: the column's first position (the last one's end) */
         "    mov    r0, r1\n"
         "    ldrh   r1, [r4, #2]!\n"         /* end */
-        "    ldm    sp, {r2, r3, ip}\n"      /* order, v, xsat in one (round 16) */
+        "    ldm    sp, {r2, r3, ip, lr}\n"  /* order, v, xsat, slope in one (round 16; slope since
+                                             * round 18: no load of its own) */
         "    add    r1, r2, r1, lsl #2\n"
         "    ldrsh  r2, [r0, #2]\n"          /* n2 */
         "    subs   r3, r3, r2\n"            /* x = v - n2 */
         "    ble    .Ldr_done\n"             /* n2 >= v from here on: r = 0 */
         "    cmp    r3, ip\n"
         "    bge    .Ldr_sat\n"
-        "    ldr    lr, [sp, #12]\n"
         "    mul    r3, r3, lr\n"
         "    add    r3, r3, #32768\n"
         "    asrs   r3, r3, #16\n"

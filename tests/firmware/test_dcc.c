@@ -291,9 +291,10 @@ static uint32_t walk_rand(uint32_t n)
     return (uint32_t)(((uint64_t)(piezo_test_lcg(&walk_rng) >> 8) * n) >> 24);
 }
 
-static struct piezo_dcc_coeffs walk_plane(uint16_t L)
+/* The plane's L levels over [-32768, hi] (walk_plane: the whole range). */
+static struct piezo_dcc_coeffs walk_plane_to(uint16_t L, int32_t hi)
 {
-    const int32_t lo = -32768, hi = 32767;
+    const int32_t lo = -32768;
     uint16_t j = 0;
     for (uint16_t i = 0; i < L; i++) {
         for (uint16_t k = i; k < L; k++) {
@@ -310,6 +311,11 @@ static struct piezo_dcc_coeffs walk_plane(uint16_t L)
     dc.grid.nmin_q15 = (int16_t)lo;
     dc.c_q24 = walk_c;
     return dc;
+}
+
+static struct piezo_dcc_coeffs walk_plane(uint16_t L)
+{
+    return walk_plane_to(L, 32767);
 }
 
 /* The next input of a walk: monotone segments of random length, half of
@@ -442,11 +448,11 @@ static void test_runs_on_random_walks(void **state)
 /* Two instances on one walk plane of L levels (seeded), d with the prefix
  * sums when sums is set, both with constant weights: the Thumb-2 step's and
  * the C step's twins of step_check and jump_check. */
-static void twin_init(uint16_t L, uint32_t seed, int sums, struct piezo_dcc_coeffs *dc, struct piezo_dcc *d,
-                      struct piezo_dcc *e)
+static void twin_init_to(uint16_t L, int32_t hi, uint32_t seed, int sums, struct piezo_dcc_coeffs *dc,
+                         struct piezo_dcc *d, struct piezo_dcc *e)
 {
     walk_rng = seed;
-    *dc = walk_plane(L);
+    *dc = walk_plane_to(L, hi);
     assert_int_equal(piezo_dcc_init(d, dc, cpsi_a, zo_a, PIEZO_KP_MAX_OPS), PIEZO_OK);
     if (sums) {
         assert_int_equal(with_sums(d, dc), 1);
@@ -454,6 +460,12 @@ static void twin_init(uint16_t L, uint32_t seed, int sums, struct piezo_dcc_coef
     assert_int_equal(piezo_dcc_init(e, dc, cpsi_b, zo_b, PIEZO_KP_MAX_OPS), PIEZO_OK);
     piezo_dcc_const_weights(d);
     piezo_dcc_const_weights(e);
+}
+
+static void twin_init(uint16_t L, uint32_t seed, int sums, struct piezo_dcc_coeffs *dc, struct piezo_dcc *d,
+                      struct piezo_dcc *e)
+{
+    twin_init_to(L, 32767, seed, sums, dc, d, e);
 }
 
 /* The step piezo_dcc_ops_update takes (on the Cortex-M4 the falling rows
@@ -604,6 +616,81 @@ static void test_search_after_large_jumps(void **state)
     }
 }
 
+/* An empty band (round 18): a plane whose levels span the range's lower
+ * half only, so an input above its top level plus xsat leaves no row in the
+ * falling band (v - xsat >= every n1) and, once v_prev is there too, no
+ * column in the rising one: the steps' exit before their loops (on the
+ * Cortex-M4 the flags of the line table's end test). Inputs anywhere above
+ * the plane's middle, now and then a small move; the step against the C
+ * step (state, runs and hints) and both against the oracle every tick.
+ * Returns the falling ticks with an empty band (*rising: the rising ones). */
+static unsigned empty_check(uint16_t L, uint32_t seed, size_t n, int sums, unsigned *rising)
+{
+    struct piezo_dcc_coeffs dc;
+    struct piezo_dcc d, e;
+    twin_init_to(L, 0, seed, sums, &dc, &d, &e);
+    assert_true(d.runs && d.n2_banded && d.n_rows == L && d.n_cols == L);
+    const int32_t xsat = dc.grid.xsat_q15, top = walk_n2[L - 1u]; /* the top level: last n1 = last n2 */
+    assert_true(top + xsat < 32767 - 4000);                         /* room for empty bands */
+    for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+        walk_psi[j] = 0;
+    }
+    int32_t v_prev = dc.grid.nmin_q15;
+    unsigned falls = 0u;
+    *rising = 0u;
+    for (size_t k = 0; k < n; k++) {
+        const int32_t v = walk_rand(4u) == 0u ? v_prev + (int32_t)walk_rand(601u) - 300
+                                              : -16384 + (int32_t)walk_rand(49152u);
+        const int16_t vq = (int16_t)(v > 32767 ? 32767 : (v < -32768 ? -32768 : v));
+        falls += vq < v_prev && vq - xsat >= top;
+        *rising += vq > v_prev && v_prev - xsat >= top;
+        walk_oracle(&dc.grid, v_prev, vq);
+        piezo_dcc_ops_update(&d, vq);
+        piezo_dcc_ops_update_c(&e, vq);
+        int64_t kacc = 0;
+        for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
+            if (d.psi_q15[j] != walk_psi[j] || e.psi_q15[j] != walk_psi[j]) {
+                fail_msg("L %u seed %lu tick %lu v %d (from %ld) operator %u: psi %ld (C %ld), oracle %ld",
+                         (unsigned)L, (unsigned long)seed, (unsigned long)k, vq, (long)v_prev, (unsigned)j,
+                         (long)d.psi_q15[j], (long)e.psi_q15[j], (long)walk_psi[j]);
+            }
+            kacc += (int64_t)walk_psi[j] * walk_c[j];
+        }
+        if (d.kacc != kacc || e.kacc != kacc || d.v_prev_q15 != e.v_prev_q15 || d.n_run != e.n_run ||
+            d.cur != e.cur || d.row_cur != e.row_cur || d.col_cur != e.col_cur) {
+            fail_msg("L %u seed %lu tick %lu v %d (from %ld): kacc %lld (C %lld, oracle %lld), n_run %u (%u), "
+                     "cur %u (%u), rows %u (%u), columns %u (%u)",
+                     (unsigned)L, (unsigned long)seed, (unsigned long)k, vq, (long)v_prev, (long long)d.kacc,
+                     (long long)e.kacc, (long long)kacc, d.n_run, e.n_run, d.cur, e.cur, d.row_cur, e.row_cur,
+                     d.col_cur, e.col_cur);
+        }
+        for (uint8_t i = 0; i < d.n_run; i++) {
+            const struct piezo_dcc_run *a = &d.run[d.cur][i], *b = &e.run[e.cur][i];
+            if (a->csum != b->csum || a->lvl != b->lvl || a->thr != b->thr || a->k != b->k) {
+                fail_msg("L %u seed %lu tick %lu run %u: (%ld, %ld, %d, %u) against (%ld, %ld, %d, %u)",
+                         (unsigned)L, (unsigned long)seed, (unsigned long)k, (unsigned)i, (long)a->csum,
+                         (long)a->lvl, a->thr, a->k, (long)b->csum, (long)b->lvl, b->thr, b->k);
+            }
+        }
+        v_prev = vq;
+    }
+    return falls;
+}
+
+static void test_empty_band(void **state)
+{
+    (void)state;
+    static const uint16_t planes[] = {10u, 20u, 30u};
+    for (size_t i = 0; i < N_OF(planes); i++) {
+        for (int sums = 0; sums <= 1; sums++) {
+            unsigned rising = 0u;
+            const unsigned falls = empty_check(planes[i], 15485863u + planes[i], 3000u, sums, &rising);
+            /* about one tick in six each way: some 500 of 3000 */
+            assert_true(falls >= 250u && rising >= 250u);
+        }
+    }
+}
+
 static enum piezo_err init_with(const struct piezo_dcc_coeffs *c, size_t n_state)
 {
     struct piezo_dcc d;
@@ -650,6 +737,7 @@ int main(void)
         cmocka_unit_test(test_runs_on_random_walks),
         cmocka_unit_test(test_step_matches_c_step),
         cmocka_unit_test(test_search_after_large_jumps),
+        cmocka_unit_test(test_empty_band),
         cmocka_unit_test(test_prefix_sums_checked),
     };
     return cmocka_run_group_tests_name("dcc", tests, NULL, NULL);
