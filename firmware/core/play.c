@@ -281,7 +281,12 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    ldr    r11, [sp, #24]\n"         /* (round 18: no branch to it) */
         "    cmp    r10, r11\n"
         "    bne    1b\n"
-        "    b      7f\n"
+        "    add    sp, #32\n"               /* the exit (7 below), in line: on a */
+        "    ldr    r2, [sp], #4\n"          /* fall the last column often ends here */
+        "    strd   r8, r9, [r2, #16]\n"     /* (round 18: no branch to it) */
+        "    mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    pop    {r4-r11, pc}\n"
         "5:  add    r3, r3, r2\n"             /* its outputs' end */
         "    ldr    r0, [sp, #20]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r11, r4, [r1], #8\n"       /* c, w */
