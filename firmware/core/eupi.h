@@ -117,20 +117,32 @@ int64_t piezo_eupi_poly_q39(const int32_t *p_q24, uint16_t n_p, int32_t p0_q24,
  * since round 18) 2 h would wrap. */
 static inline int32_t piezo_eupi_poly_hu_q24(const int32_t *p_q24, uint16_t n_p, int16_t u_q15)
 {
-    if (n_p == 0u) {
-        return 0;
-    }
-    /* h = p_Np; h = h * u + p_m down to m = 2; hu = h * u. By a pointer
-     * that walks down to p_q24 (round 17: no index and its scaled address
-     * before the loop, 1 instruction per sample on Thumb-2). u 2^16 as a
-     * product: no left shift of a negative value. */
+    /* h = p_Np; h = h * u + p_m down to m = 2; hu = h * u. Unrolled (round
+     * 18): one jump on n_p to the first term's load, then the steps fall
+     * through to the last, no loop counter or end test per step (3
+     * instructions per step, one SMMLAR each). u 2^16 as a product: no left
+     * shift of a negative value. */
     const int32_t u16 = (int32_t)u_q15 * 65536;
-    const int32_t *q = p_q24 + n_p;
-    int32_t h = *--q;
-    while (q != p_q24) {
-        h = piezo_mul_hi_rnd_add(2 * h, u16, *--q); /* one SMMLAR */
+    int32_t h;
+    switch (n_p) {
+    case 1u: h = p_q24[0]; goto s0;
+    case 2u: h = p_q24[1]; goto s1;
+    case 3u: h = p_q24[2]; goto s2;
+    case 4u: h = p_q24[3]; goto s3;
+    case 5u: h = p_q24[4]; goto s4;
+    case 6u: h = p_q24[5]; goto s5;
+    case 7u: h = p_q24[6]; goto s6;
+    case 8u: h = p_q24[7]; break; /* PIEZO_EUPI_MAX_POLY */
+    default: return 0;            /* n_p == 0 (init refuses n_p > 8) */
     }
-    return piezo_mul_hi_rnd(2 * h, u16);
+    h = piezo_mul_hi_rnd_add(2 * h, u16, p_q24[6]);
+s6: h = piezo_mul_hi_rnd_add(2 * h, u16, p_q24[5]);
+s5: h = piezo_mul_hi_rnd_add(2 * h, u16, p_q24[4]);
+s4: h = piezo_mul_hi_rnd_add(2 * h, u16, p_q24[3]);
+s3: h = piezo_mul_hi_rnd_add(2 * h, u16, p_q24[2]);
+s2: h = piezo_mul_hi_rnd_add(2 * h, u16, p_q24[1]);
+s1: h = piezo_mul_hi_rnd_add(2 * h, u16, p_q24[0]);
+s0: return piezo_mul_hi_rnd(2 * h, u16);
 }
 
 /* P(u) in Q39, inline: the same integers as piezo_eupi_poly_q39. */

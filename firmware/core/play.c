@@ -180,8 +180,10 @@ struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack */
     uint32_t f_step;     /* 8: n_r * 4, bytes of a column of outputs */
     int32_t u_8;         /* 12: u 2^8, SMMULR's operand */
     int32_t k;           /* 16: the lower branch's test constant K */
-    const int32_t *a_end;/* 20: one past the last slope */
-    const int32_t *r;    /* 24: thresholds */
+    const int32_t *r;    /* 20: thresholds */
+    const int32_t *a_end;/* 24: one past the last slope (round 18: after r, */
+                         /* so that r, loaded by the coefficients' LDM into */
+                         /* r8, is stored below it by the set-up's STM) */
     uint32_t pad;        /* 28: p sits at 32 */
 };
 /* the first five words in one LDM per column, the set-up's seven in one STM
@@ -189,9 +191,12 @@ struct upi_fall_args {   /* the column loop's state, on upi_fall_m4's stack */
  * pointer kept in r10, u 2^8 and K loaded with the rest; the weights with
  * the constants, no weight pointer per column) */
 typedef char piezo_upi_fall_args_layout_check_t[(offsetof(struct upi_fall_args, u_8) == 12u &&
-                                                 offsetof(struct upi_fall_args, a_end) == 20u &&
-                                                 offsetof(struct upi_fall_args, r) == 24u &&
+                                                 offsetof(struct upi_fall_args, r) == 20u &&
+                                                 offsetof(struct upi_fall_args, a_end) == 24u &&
                                                  sizeof(struct upi_fall_args) == 32u) ? 1 : -1];
+/* upi_fall_m4 reads n_r and n_a as one word and takes a_end = a + 4 n_a
+ * from it by one shift (lsr #14): exact while n_r < 2^14 (n_r <= n_ops) */
+typedef char piezo_upi_fall_n_r_bits_check_t[(PIEZO_PLAY_MAX_OPS < (1u << 14)) ? 1 : -1];
 /* upi_fall_m4 and rise_m4 read the instance and its coefficients directly */
 typedef char piezo_play_layout_check_t[(offsetof(struct piezo_play, coef) == 0u &&
                                         offsetof(struct piezo_play, f_q15) == 4u &&
@@ -217,15 +222,13 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    sub    sp, #32\n"                /* the column state at [sp] (upi_fall_args) */
         "    mov    r3, #-1\n"
         "    strb   r3, [r0, #29]\n"          /* run_dir = -1: the rising runs end */
-        "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
         "    ldm    r0, {r1, r2, r3}\n"       /* coef, f, the pairs (round 18: one LDM) */
         "    ldr    lr, [r0, #24]\n"          /* u (process stored it) */
-        "    ldrh   r4, [r1, #12]\n"          /* n_r */
-        "    ldrh   r5, [r1, #14]\n"          /* n_a */
-        "    ldr    r10, [r1, #4]\n"          /* a */
-        "    ldr    r12, [r1, #0]\n"          /* r */
+        "    ldm    r1, {r8, r10, r11, r12}\n" /* r, a, w (not used), n_r | n_a << 16 */
+                                               /* (round 18: one LDM for four loads) */
         "    sub    r1, r3, r2, lsl #1\n"     /* c - 2 f: a column's pairs are at it + 2 fp */
-        "    add    r11, r10, r5, lsl #2\n"   /* a_end */
+        "    add    r11, r10, r12, lsr #14\n" /* a_end = a + 4 n_a (n_r < 2^14: its bits */
+                                               /* shift out) */
         "    lsl    r6, lr, #8\n"             /* u 2^8 (fits: |u| <= 2^20) */
         "    mov    r7, #0x1000000\n"         /* K: the lower branch can win iff */
         "    sub    r7, r7, lr, asr #31\n"    /* ((a_j - K) ^ (u >> 31)) < 0: u >= 0 and */
@@ -234,9 +237,11 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
                                                /* u = 0 the lower-branch loop for a < 1 (it */
                                                /* cannot win there: -r <= hi; round 18: */
                                                /* 2 instructions for K instead of 6) */
-        "    lsls   r3, r4, #2\n"
-        "    stm    sp, {r1, r2, r3, r6, r7, r11, r12}\n"
-        "    beq    7f\n"                     /* n_r == 0 (the lsls) */
+        "    lsl    r3, r12, #16\n"
+        "    lsrs   r3, r3, #14\n"            /* n_r * 4 */
+        "    stm    sp, {r1, r2, r3, r6, r7, r8, r11}\n"
+        "    ldrd   r8, r9, [r0, #16]\n"      /* acc */
+        "    beq    7f\n"                     /* n_r == 0 (the lsrs) */
         "1:  ldm    sp, {r1, r2, r3, r6, r7}\n" /* column (r10 = &a_j) */
         "    add    r1, r1, r2, lsl #1\n"     /* its pairs */
         "    ldr    r11, [r10], #4\n"          /* a_j */
@@ -273,12 +278,17 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "32: str    r4, [r2], #4\n"
         "    smlal  r8, r9, r5, r12\n"
         "    str    r3, [sp, #4]\n"           /* the column's end (6 below), in line */
-        "    ldr    r11, [sp, #20]\n"         /* (round 18: no branch to it) */
+        "    ldr    r11, [sp, #24]\n"         /* (round 18: no branch to it) */
         "    cmp    r10, r11\n"
         "    bne    1b\n"
-        "    b      7f\n"
+        "    add    sp, #32\n"               /* the exit (7 below), in line: on a */
+        "    ldr    r2, [sp], #4\n"          /* fall the last column often ends here */
+        "    strd   r8, r9, [r2, #16]\n"     /* (round 18: no branch to it) */
+        "    mov    r0, r8\n"
+        "    mov    r1, r9\n"
+        "    pop    {r4-r11, pc}\n"
         "5:  add    r3, r3, r2\n"             /* its outputs' end */
-        "    ldr    r0, [sp, #24]\n"           /* with the lower branch: its prefix, one per pass */
+        "    ldr    r0, [sp, #20]\n"           /* with the lower branch: its prefix, one per pass */
         "51: ldrd   r11, r4, [r1], #8\n"       /* c, w */
         "    add    r11, r11, r6\n"            /* hi = A_j + c */
         "    ldr    r7, [r0], #4\n"
@@ -302,7 +312,7 @@ static __attribute__((naked, noinline, used)) int64_t upi_fall_m4(struct piezo_p
         "    cmp    r2, r3\n"
         "    bne    3f\n"                      /* the rest by the upper-branch loop */
         "6:  str    r3, [sp, #4]\n"            /* next column: fp's starts where this one ends */
-        "    ldr    r11, [sp, #20]\n"
+        "    ldr    r11, [sp, #24]\n"
         "    cmp    r10, r11\n"
         "    bne    1b\n"
         "7:  add    sp, #32\n"
@@ -416,10 +426,9 @@ static __attribute__((naked, noinline, used)) int64_t rise_m4(struct piezo_play 
         "    add    r0, r4, #4\n"
         "    sub    r0, r0, r2, lsl #1\n"     /* W */
         "    add    r4, r4, r7, lsl #3\n"
-        "    cmp    r12, #0\n"
-        "    beq    7f\n"
         "    add    r5, r4, r5, lsl #1\n"     /* the counts' end */
-        "    lsl    r12, r12, #2\n"          /* n_r * 4 */
+        "    lsls   r12, r12, #2\n"          /* n_r * 4 (round 18: its flags test */
+        "    beq    7f\n"                    /* n_r == 0, no CMP) */
         "    cmp    r6, #1\n"
         "    bne    8f\n"
         "    umlal  r8, r9, r10, r1\n"        /* the runs go on: acc += run_w d (d > 0) */

@@ -207,6 +207,30 @@ static void test_poly_at_the_strict_bound(void **state)
     assert_int_equal(piezo_eupi_poly_hu_q24(sets[0], 1, INT16_MIN), -top);
 }
 
+/* Every length the switch of piezo_eupi_poly_hu_q24 enters at (round 18:
+ * the steps unrolled, one jump on n_p to the first term's load): n_p = 0
+ * to PIEZO_EUPI_MAX_POLY against the 64-bit Horner above, coefficients of
+ * both signs and of different sizes (so that a step entered at the wrong
+ * term, or a term read twice, changes hu), every 61st q15 input and both
+ * ends. */
+static void test_poly_every_length(void **state)
+{
+    (void)state;
+    const int32_t p[PIEZO_EUPI_MAX_POLY] = {
+        50343993, -117441511, 83886157, -33585769,
+        184553618, -16777233, 100935124, -151309103,
+    }; /* Q7.24: 3, -7, 5, -2, 11, -1, 6, -9 and a little; sum |p_m| < 45 < 64 */
+    for (int32_t u = -32768; u <= 32767; u += 61) {
+        assert_int_equal(piezo_eupi_poly_hu_q24(p, 0u, (int16_t)u), 0);
+    }
+    for (uint16_t n = 1u; n <= PIEZO_EUPI_MAX_POLY; n++) {
+        for (int32_t u = -32768; u <= 32767; u += (u > -32700 && u < 32700) ? 61 : 1) {
+            const int16_t uq = (int16_t)u;
+            assert_int_equal(piezo_eupi_poly_hu_q24(p, n, uq), poly_hu_ref(p, n, uq));
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -221,6 +245,7 @@ int main(void)
         cmocka_unit_test(test_poly_by_hand),
         cmocka_unit_test(test_init_refuses_bad_coefficients),
         cmocka_unit_test(test_poly_at_the_strict_bound),
+        cmocka_unit_test(test_poly_every_length),
     };
     return cmocka_run_group_tests_name("eupi", tests, NULL, NULL);
 }
