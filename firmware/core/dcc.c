@@ -930,6 +930,21 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    add    \\reg, r10, \\reg, lsl #2\n"
         "    ldrsh  \\reg, [\\reg, #2]\n"
         "    .endm\n"
+        /* ord entries [r0, r2) moved to r3 one by one: kacc (r7:r8) += (r3 -
+         * psi) c, lr += c; then to done (written once for both run kinds) */
+        "    .macro dcc_each_move done\n"
+        ".Lmv\\@:\n"
+        "    cmp    r0, r2\n"
+        "    bhs    \\done\n"
+        "    ldrh   ip, [r0], #4\n"
+        "    ldr    r10, [r5, ip, lsl #2]\n"
+        "    sub    r10, r3, r10\n"
+        "    str    r3, [r5, ip, lsl #2]\n"
+        "    ldr    ip, [r11, ip, lsl #2]\n"
+        "    smlal  r7, r8, r10, ip\n"
+        "    add    lr, lr, ip\n"
+        "    b      .Lmv\\@\n"
+        "    .endm\n"
         /* psi[ord entries [p, r1)] = r3, two per pass (as scatter_i32);
          * clobbers p, b (the last pair's bound), t0, t1 */
         "    .macro dcc_scatter p, b, t0, t1\n"
@@ -1105,32 +1120,14 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         /* [e, z) one by one first, then the block [z, end) is stored with
          * z and e as the scatter's pointer and bound (both dead after it):
          * no spill of r4 and r9 around it (round 17, 4 per such column) */
-        "26: cmp    r0, r2\n"
-        "    bhs    27f\n"
-        "    ldrh   ip, [r0], #4\n"
-        "    ldr    r10, [r5, ip, lsl #2]\n"
-        "    sub    r10, r3, r10\n"
-        "    str    r3, [r5, ip, lsl #2]\n"
-        "    ldr    ip, [r11, ip, lsl #2]\n"
-        "    smlal  r7, r8, r10, ip\n"
-        "    add    lr, lr, ip\n"
-        "    b      26b\n"
+        "26: dcc_each_move 27f\n"
         "27:\n"
         "    dcc_scatter r2, r0, ip, r10\n"
         "    b      .Ldr_rec\n"
         ".Ldr_each0:\n"
         "    mov    lr, #0\n"                /* the run's weight sum (the zero block sets its own) */
         ".Ldr_each:\n"                        /* [e, z) move one by one */
-        "    cmp    r0, r2\n"
-        "    bhs    .Ldr_rec\n"
-        "    ldrh   ip, [r0], #4\n"
-        "    ldr    r10, [r5, ip, lsl #2]\n"
-        "    sub    r10, r3, r10\n"
-        "    str    r3, [r5, ip, lsl #2]\n"
-        "    ldr    ip, [r11, ip, lsl #2]\n"
-        "    smlal  r7, r8, r10, ip\n"
-        "    add    lr, lr, ip\n"
-        "    b      .Ldr_each\n"
+        "    dcc_each_move .Ldr_rec\n"
 
         ".Ldr_rec:\n"                         /* the run out: [q, end) */
         "    subs   r2, r1, r6\n"            /* (two positions in one array: no overflow) */
@@ -1161,6 +1158,7 @@ static __attribute__((naked, noinline, used)) void dcc_rise_m4(void)
         "    add    sp, #64\n"
         "    pop    {r1, r2, r4-r11, pc}\n"
         "    .purgem dcc_scatter\n"
+        "    .purgem dcc_each_move\n"
         "    .purgem dcc_law_out\n"
         "    .purgem dcc_line_search\n"
         "    .purgem dcc_key_n2\n");
