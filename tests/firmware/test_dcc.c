@@ -368,6 +368,23 @@ static void walk_oracle(const struct piezo_kp_grid *g, int32_t v_prev, int32_t v
     }
 }
 
+/* Every operator of d (and of its C twin e, when not NULL) against the oracle's; returns the oracle's kept sum
+ * sum psi_j c_j. Written once for the walk, the jump and the empty-band checks. */
+static int64_t walk_check_ops(const struct piezo_dcc *d, const struct piezo_dcc *e, uint16_t n_ops, unsigned L,
+                              unsigned long seed, unsigned long k, int v, long v_prev)
+{
+    int64_t kacc = 0;
+    for (uint16_t j = 0; j < n_ops; j++) {
+        const int32_t c_psi = e != NULL ? e->psi_q15[j] : d->psi_q15[j];
+        if (d->psi_q15[j] != walk_psi[j] || c_psi != walk_psi[j]) {
+            fail_msg("L %u seed %lu tick %lu v %d (from %ld) operator %u: psi %ld (C %ld), oracle %ld", L, seed, k,
+                     v, v_prev, (unsigned)j, (long)d->psi_q15[j], (long)c_psi, (long)walk_psi[j]);
+        }
+        kacc += (int64_t)walk_psi[j] * walk_c[j];
+    }
+    return kacc;
+}
+
 /* Runs (constant weights) against the oracle, every operator and the kept
  * sum every tick, on a walk with small and large reversals; and the law's
  * drive against the band scan (weights summed every tick). Returns the
@@ -398,15 +415,8 @@ static unsigned walk_check(uint16_t L, uint32_t seed, size_t n, int sums)
         dir = ndir;
         walk_oracle(&dc.grid, v_prev, v);
         piezo_dcc_ops_update(&d, v);
-        int64_t kacc = 0;
-        for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
-            if (d.psi_q15[j] != walk_psi[j]) {
-                fail_msg("L %u seed %lu tick %lu v %d operator %u: psi %ld, oracle %ld", (unsigned)L,
-                         (unsigned long)seed, (unsigned long)k, v, (unsigned)j, (long)d.psi_q15[j],
-                         (long)walk_psi[j]);
-            }
-            kacc += (int64_t)walk_psi[j] * walk_c[j];
-        }
+        const int64_t kacc =
+            walk_check_ops(&d, NULL, dc.grid.n_ops, L, (unsigned long)seed, (unsigned long)k, v, (long)v_prev);
         if (d.kacc != kacc) {
             fail_msg("L %u seed %lu tick %lu: kept sum %lld, oracle %lld", (unsigned)L, (unsigned long)seed,
                      (unsigned long)k, (long long)d.kacc, (long long)kacc);
@@ -586,15 +596,8 @@ static unsigned jump_check(uint16_t L, uint32_t seed, size_t n, int sums)
                      (unsigned)L, (unsigned long)seed, (unsigned long)k, vq, (long)v_prev, d.row_cur, e.row_cur,
                      d.col_cur, e.col_cur, row, col);
         }
-        int64_t kacc = 0;
-        for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
-            if (d.psi_q15[j] != walk_psi[j] || e.psi_q15[j] != walk_psi[j]) {
-                fail_msg("L %u seed %lu tick %lu v %d operator %u: psi %ld (C %ld), oracle %ld", (unsigned)L,
-                         (unsigned long)seed, (unsigned long)k, vq, (unsigned)j, (long)d.psi_q15[j],
-                         (long)e.psi_q15[j], (long)walk_psi[j]);
-            }
-            kacc += (int64_t)walk_psi[j] * walk_c[j];
-        }
+        const int64_t kacc =
+            walk_check_ops(&d, &e, dc.grid.n_ops, L, (unsigned long)seed, (unsigned long)k, vq, (long)v_prev);
         if (d.kacc != kacc || e.kacc != kacc) {
             fail_msg("L %u seed %lu tick %lu: kept sum %lld (C %lld), oracle %lld", (unsigned)L,
                      (unsigned long)seed, (unsigned long)k, (long long)d.kacc, (long long)e.kacc, (long long)kacc);
@@ -647,15 +650,8 @@ static unsigned empty_check(uint16_t L, uint32_t seed, size_t n, int sums, unsig
         walk_oracle(&dc.grid, v_prev, vq);
         piezo_dcc_ops_update(&d, vq);
         piezo_dcc_ops_update_c(&e, vq);
-        int64_t kacc = 0;
-        for (uint16_t j = 0; j < dc.grid.n_ops; j++) {
-            if (d.psi_q15[j] != walk_psi[j] || e.psi_q15[j] != walk_psi[j]) {
-                fail_msg("L %u seed %lu tick %lu v %d (from %ld) operator %u: psi %ld (C %ld), oracle %ld",
-                         (unsigned)L, (unsigned long)seed, (unsigned long)k, vq, (long)v_prev, (unsigned)j,
-                         (long)d.psi_q15[j], (long)e.psi_q15[j], (long)walk_psi[j]);
-            }
-            kacc += (int64_t)walk_psi[j] * walk_c[j];
-        }
+        const int64_t kacc =
+            walk_check_ops(&d, &e, dc.grid.n_ops, L, (unsigned long)seed, (unsigned long)k, vq, (long)v_prev);
         if (d.kacc != kacc || e.kacc != kacc || d.v_prev_q15 != e.v_prev_q15 || d.n_run != e.n_run ||
             d.cur != e.cur || d.row_cur != e.row_cur || d.col_cur != e.col_cur) {
             fail_msg("L %u seed %lu tick %lu v %d (from %ld): kacc %lld (C %lld, oracle %lld), n_run %u (%u), "
