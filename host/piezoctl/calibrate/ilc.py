@@ -39,7 +39,7 @@ import numpy as np
 
 from .. import interface
 
-__all__ = ["ILC", "learn", "probe", "loop_from_probe", "periodic_score", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "same_reference", "learn_on_controller"]
+__all__ = ["ILC", "learn", "probe", "loop_from_probe", "periodic_score", "loop_response", "lag_from_trial", "table_entries", "upload", "switch_off", "periodic_trial", "learn_on_controller"]
 
 FF_MAX = interface.HOLDING_REGISTERS["wave_ff_levels"][2]   # the register map's; a target may hold fewer
 
@@ -350,61 +350,23 @@ def _stop(ctl, max_ticks: int = 30000) -> None:
     ctl.command("stop_wave")
 
 
-def _record(ctl, m: int, periods: int, settle: int, decimation: int) -> dict:
-    """Start the loaded wave and record ``ref`` and ``y`` [um] over ``settle + periods``
-    periods of ``m`` frames; the wave ends by itself one period later (:func:`_end_after`)."""
-    _end_after(ctl, periods + settle)
-    cols = ctl.capture(["ref", "y"], m * (periods + settle), decimation=decimation, trigger="software",
-                       start_wave=True)
-    _stop(ctl)
-    return cols
-
-
-def _trial_error(cols: dict, n_ticks: int, m: int, periods: int, settle: int, preview_ticks: int,
-                 rms_all: list | None = None) -> np.ndarray:
-    """The error ``ref - y`` [um] of a :func:`_record` averaged over its periods after
-    ``settle``, indexed by the wave's own sample (the recorder sees the reference
-    ``preview_ticks`` late: shifted back exactly in the period's DFT)."""
-    e_all = (cols["ref"] - cols["y"])[settle * m:].reshape(periods, m)
-    if rms_all is not None:
-        rms_all.append(float(np.sqrt(np.mean(e_all ** 2))))
-    e = e_all.mean(axis=0)
-    spec = np.fft.rfft(e) * np.exp(2j * np.pi * np.arange(m // 2 + 1) * preview_ticks / n_ticks)
-    return np.fft.irfft(spec, n=m)
-
-
-def same_reference(a: np.ndarray, b: np.ndarray, lsb_um: float) -> bool:
-    """Whether two records of one wave's reference [um] hold the same samples (within half
-    an LSB ``lsb_um``).
-
-    The wave generator starts a wave at its first sample on the tick of the record's
-    trigger and the reference is recorded before the learned correction is added, so every
-    record of a learning holds the same reference to the bit, whatever the correction and
-    however late the host: one that differs was not indexed by the wave's own sample (the
-    wave restarted or stopped during it; round 18: a ``start_wave`` that the transport sent
-    twice), and its error says nothing about the correction played."""
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    return a.shape == b.shape and bool(np.all(np.abs(a - b) <= 0.5 * lsb_um))
-
-
 def periodic_trial(ctl, n_ticks: int, *, periods: int, settle_periods: int = 1, decimation: int = 1,
                    preview_ticks: int = 0, rms_all: list | None = None) -> np.ndarray:
     """Start the loaded wave, record ``ref`` and ``y``; the error ``r - y`` [um]
     averaged over ``periods`` whole periods after ``settle_periods``, indexed by
     the wave's own sample (the recorder sees the reference ``preview_ticks`` late)."""
     m = n_ticks // decimation
-    cols = _record(ctl, m, periods, settle_periods, decimation)
-    return _trial_error(cols, n_ticks, m, periods, settle_periods, preview_ticks, rms_all)
-
-
-REF_RECORDS = 4   # records of the first trial (no correction) tried for two with the same reference
-
-
-def _rearm(ctl) -> None:
-    """Clear a latched fault and arm again."""
-    ctl.arm(False)
-    ctl.command("clear_faults")
-    ctl.arm(True)
+    frames = m * (periods + settle_periods)
+    _end_after(ctl, periods + settle_periods)
+    cols = ctl.capture(["ref", "y"], frames, decimation=decimation, trigger="software", start_wave=True)
+    _stop(ctl)
+    e_all = (cols["ref"] - cols["y"])[settle_periods * m:].reshape(periods, m)
+    if rms_all is not None:
+        rms_all.append(float(np.sqrt(np.mean(e_all ** 2))))
+    e = e_all.mean(axis=0)
+    # recorded sample i is wave sample i - preview: shift back (exactly, in the period's DFT)
+    spec = np.fft.rfft(e) * np.exp(2j * np.pi * np.arange(m // 2 + 1) * preview_ticks / n_ticks)
+    return np.fft.irfft(spec, n=m)
 
 
 def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: float, iterations: int = 8,
@@ -414,15 +376,7 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
 
     ``f_cut_hz`` is lowered to 0.4 x the controller's table entries x ``f0_hz``
     (the table's own band). Returns :func:`learn`'s result plus ``lag_s``,
-    ``decimation``, ``n_entries``, ``f_cut_hz`` and ``records_repeated`` (records
-    taken again: a reference that was not the wave's, :func:`same_reference`, or
-    a fault in the first trial's record).
-
-    Raises
-    ------
-    DeviceError
-        No two of :data:`REF_RECORDS` records without correction held the same
-        reference without a fault.
+    ``decimation``, ``n_entries``, ``f_cut_hz``.
     """
     tick = float(ctl.identity.tick_hz)
     f_cut_hz = min(f_cut_hz, 0.4 * capacity(ctl) * f0_hz)
@@ -431,55 +385,33 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
     settle = settle_periods(f0_hz)
     dec = _decimation(n_ticks, ctl.identity.rec_capacity // 2 // (periods + settle))
     m = n_ticks // dec
-    lsb = ctl.scale.p_half / 32768.0
     switch_off(ctl)
-    # the first trial without correction also gives the loop's response at the wave's harmonics: it is
-    # used only once a second record holds the same reference where it is measured, after settling
-    # (same_reference; before it the preview shows where the last wave stopped), and no fault latched
-    # during it; until round 18 one record was taken as it came
-    used = slice(settle * m, None)
-    prev, repeated = None, 0
-    for _ in range(REF_RECORDS):
-        cols = _record(ctl, m, periods, settle, dec)
-        if ctl.status()["faults"]:
-            _rearm(ctl)
-            prev = None
-        elif prev is not None and same_reference(cols["ref"][used], prev["ref"][used], lsb):
-            break
-        else:
-            prev = cols
-        repeated += 1
-    else:
-        from ..device import DeviceError
-        raise DeviceError(f"learning at {f0_hz:g} Hz: no two of {REF_RECORDS} records of the wave held the same "
-                          "reference without a fault (the wave did not start on the recorder's trigger)")
-    repeated -= 1   # the second record of a valid pair is not a repetition
+    # the first trial without correction also gives the loop's response at the wave's harmonics
+    _end_after(ctl, periods + settle)
+    cols = ctl.capture(["ref", "y"], m * (periods + settle), decimation=dec, trigger="software", start_wave=True)
+    _stop(ctl)
     r = cols["ref"][settle * m:].reshape(periods, m).mean(axis=0)
     y = cols["y"][settle * m:].reshape(periods, m).mean(axis=0)
     lag = lag_from_trial(r, y, f0_hz, f_cut_hz)
     ilc = ILC(m, f0_hz, f_cut_hz, alpha=alpha, loop=loop_response(r, y, f0_hz, f_cut_hz))
     first = True
     rms_all = [float(np.sqrt(np.mean((cols["ref"] - cols["y"])[settle * m:] ** 2)))]
-    ref0 = cols["ref"][used]
 
     def trial(c):
-        nonlocal first, repeated
+        nonlocal first
         if first:   # already measured above (c = 0)
             first = False
             spec = np.fft.rfft(r - y) * np.exp(2j * np.pi * np.arange(m // 2 + 1) * preview_ticks / n_ticks)
             return np.fft.irfft(spec, n=m)
         upload(ctl, c, f0_hz)
-        rec = _record(ctl, m, periods, settle, dec)
-        if not same_reference(rec["ref"][used], ref0, lsb) and not ctl.status()["faults"]:
-            # not indexed by the wave's sample: its error says nothing of c; recorded once more
-            repeated += 1
-            rec = _record(ctl, m, periods, settle, dec)
-        e = _trial_error(rec, n_ticks, m, periods, settle, preview_ticks, rms_all)
-        if ctl.status()["faults"] or not same_reference(rec["ref"][used], ref0, lsb):
-            # the correction rang the stage past its sensor (or the record was not the
-            # wave's again): a failed trial (its error set large: refused), and the
-            # controller armed again
-            _rearm(ctl)
+        e = periodic_trial(ctl, n_ticks, periods=periods, settle_periods=settle, decimation=dec,
+                           preview_ticks=preview_ticks, rms_all=rms_all)
+        if ctl.status()["faults"]:
+            # the correction rang the stage past its sensor: a failed trial (its error, the
+            # disarmed stage's, is large: refused), and the controller armed again
+            ctl.arm(False)
+            ctl.command("clear_faults")
+            ctl.arm(True)
             e = np.full_like(e, 1e3 * max(1.0, float(np.sqrt(np.mean(e ** 2)))))
         if say:
             say(f"  trial {len(ilc.history) + 1}: {np.sqrt(np.mean(e ** 2)) * 1e3:.1f} nm RMS")
@@ -488,5 +420,5 @@ def learn_on_controller(ctl, f0_hz: float, *, preview_ticks: int, f_cut_hz: floa
     res = learn(trial, ilc, iterations)
     info = upload(ctl, res["best"], f0_hz)
     res.update({"rms_all_um": rms_all, "lag_s": lag, "decimation": dec, "n_entries": info["n"], "clipped": info["clipped"],
-                "f_cut_hz": f_cut_hz, "records_repeated": repeated})
+                "f_cut_hz": f_cut_hz})
     return res

@@ -451,8 +451,7 @@ def calibrate(ctl, out: pathlib.Path, *, kinds=("eupi", "kp"), f_sweep: float = 
                                           "trial_rms_um": [h["rms_um"] for h in res["history"]],
                                           "trial_rms_all_um": res["rms_all_um"],
                                           "lag_s": res["lag_s"], "f_cut_hz": res["f_cut_hz"],
-                                          "entries": res["n_entries"],
-                                          "records_repeated": res["records_repeated"]}}
+                                          "entries": res["n_entries"]}}
         # the reference not known in advance: no learning, each configuration as it is
         rnd = {k: _rms(runs[(k, RANDOM)]["ref"] - runs[(k, RANDOM)]["y"]) for k, _, _, _ in configs}
         rnd_bad = {k for k, lab, _, _ in configs if f"{lab}, random scan" in bad}
