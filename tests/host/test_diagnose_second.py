@@ -199,3 +199,32 @@ def test_an_end_that_follows_the_drives_history_is_fitted_with_its_backlash():
     assert c.significant and max(c.fold_ratios) < 0.2, c.fold_ratios
     assert all(st is not None and len(st) == 3 and st[2] > 0 for st in c.setting), c.setting
     assert max(c.fold_ratios) < 0.5 * min(c0.fold_ratios), (c.fold_ratios, c0.fold_ratios)
+
+
+def test_beyond_one_edge_only_the_knees_of_that_side_are_offered_without_a_constant():
+    """Round 19 (docs/diagnose.md, "Round 19: asymmetric hysteresis"): the recordings leave the calibrated range
+    below it only: no whole-stroke polynomial, only knees below the low edge, and no constant column (the extra is
+    zero on the calibrated side of the knee, so the model's offset is not moved). Beyond both edges the
+    whole-stroke form and its constant stay."""
+    ctx = _narrow(_ctx(np.random.default_rng(13)), -0.5, 0.95)
+    assert T.beyond_calibrated_sides(ctx, ASYM.STEP) == [-1]
+    st = ASYM.settings(ctx)
+    assert st and None not in st and {s[0] for s in st} == {-1}
+    s = ctx.signals[0]
+    X = ASYM.regressors(ctx, s, st[0])
+    assert X.shape[1] == 2 and ASYM.nuisance_columns(ctx, X.shape[1]) == []
+    p = ASYM.term(ctx, (-1, -0.55), np.array([0.3, -0.1]))
+    assert "_hysteresis" not in p and p["c2_um"] == 0.3 and p["c3_um"] == -0.1
+    both = _narrow(_ctx(np.random.default_rng(13)))
+    assert ASYM.settings(both)[0] is None and ASYM.regressors(both, both.signals[0], None).shape[1] == 3
+    assert ASYM.nuisance_columns(both, 3) == [2]
+
+
+def test_a_softer_end_beyond_one_edge_is_fitted_without_a_constant():
+    """Round 19: beyond one edge the softer end is fitted by that side's knee alone (two coefficients, no
+    constant), as well as with the constant beyond both edges (``test_an_end_that_follows_the_drives_history...``)."""
+    ctx = _narrow(_ctx(np.random.default_rng(3)), -0.5, 0.95)
+    c = _evaluate(ctx, ASYM, np.random.default_rng(4), _soften_play)
+    assert c.significant and max(c.fold_ratios) < 0.2, (c.fold_ratios, c.p)
+    for st, coef in zip(c.setting, c.coef):
+        assert st[0] == -1 and len(st) == 3 and len(coef) == 2, (st, coef)

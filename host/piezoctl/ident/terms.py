@@ -31,6 +31,7 @@ recording's signals (``t``, ``u``, ``u2``, ``dt``, ``v``, ``h``, ``hyst``, ``yb`
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import numpy as np
@@ -453,11 +454,21 @@ class AsymmetricHysteresis(Term):
     polynomial must bend the calibrated range too to follow it (held-out s110-044: the true extra beyond the
     knee, fitted in-sample beside the nested nuisance, leaves 0.08 of the residual, the polynomial 0.56). Knees
     lie on a grid from the calibrated drive's edge outward, on a side the recordings exceed it
-    (:attr:`KNEES`, fractions of the drive span; refined by halving the step like saturation's thresholds)."""
+    (:attr:`KNEES`, fractions of the drive span; refined by halving the step like saturation's thresholds).
+
+    Round 19: an asymmetry lies on one side. When the recordings leave the calibrated range on one side only, only
+    the knees of that side are offered, and without a constant: the extra is zero wherever the drive stays on the
+    calibrated side of the knee, so a constant fitted with it is a level shift of every recording (an offset is the
+    sensor offset's finding; the nested test's hysteresis nuisance has no constant either), and in the active-block
+    test it makes every in-range unit active (held-out s121-059: the true extra itself, fitted with a constant,
+    p 1.0e-2; without, 8.0e-5). The whole-stroke polynomial bends the calibrated range too, where the base absorbed
+    any asymmetry: it only took a null's base continuation beyond one edge (held-out s122-027, Maxwell slip, 0.42/0.38,
+    where the knee leaves 0.72/0.81). It and its constant (the mean of ``q^2``) are kept where the recordings leave the
+    range on both sides, there for every setting alike (the own stage's even term: both ends differ)."""
 
     name = "asymmetric_hysteresis"
     stage = "hysteresis"
-    intercept = True
+    intercept = False   # round 19: a constant column only where both sides are beyond the edge (``_constant``)
     acts_beyond_calibration = True   # knees at or beyond the calibrated edge (the whole-stroke setting is refused
     #                                  in range, and beside a knee its bend inside the range is the base's)
     signature = "even function of the drive (loop not point-symmetric), or an extra beyond a knee on one side"
@@ -481,8 +492,14 @@ class AsymmetricHysteresis(Term):
     def _span(self, ctx) -> float:
         return max(ctx.u_hi - ctx.u_lo, 1e-9)
 
+    def _constant(self, ctx) -> bool:
+        """Whether the whole-stroke polynomial is offered, and with it a constant column for every setting: unless
+        the recordings leave the calibrated range on exactly one side (where only that side's knees are offered,
+        no constant: the extra is zero on the calibrated side of the knee)."""
+        return len(beyond_calibrated_sides(ctx, self.STEP)) != 1
+
     def settings(self, ctx):
-        out = [None]
+        out = [None] if self._constant(ctx) else []
         span = self._span(ctx)
         for side, edge, reach in ((-1, ctx.cal_u_lo, ctx.u_lo), (1, ctx.cal_u_hi, ctx.u_hi)):
             if ctx.cal_u_hi <= ctx.cal_u_lo:   # no calibrated range known
@@ -509,7 +526,25 @@ class AsymmetricHysteresis(Term):
 
     def columns(self, ctx, s, setting):
         side, knee, b = (None, None, 0.0) if setting is None else (tuple(setting) + (0.0,))[:3]
-        return G(ctx.base, self.basis(s.u, ctx.u_mid_all, ctx.u_half_all, side, knee, b))
+        X = G(ctx.base, self.basis(s.u, ctx.u_mid_all, ctx.u_half_all, side, knee, b))
+        return np.column_stack([X, np.ones(X.shape[0])]) if self._constant(ctx) else X
+
+    def nuisance_columns(self, ctx, k: int) -> list:
+        return [k - 1] if self._constant(ctx) else []
+
+    def term(self, ctx, setting, coef) -> dict:
+        coef = np.asarray(coef, float)
+        if not self._constant(ctx):
+            return self.model_params(ctx, setting, coef)
+        out = dict(self.model_params(ctx, setting, coef[:-1]))   # the constant joins the model's offset
+        hp = copy.deepcopy(out.get("_hysteresis", ctx.base["hysteresis"]))
+        hp["offset"] = float(hp.get("offset", 0.0)) + float(coef[-1])
+        out["_hysteresis"] = hp
+        return out
+
+    def describe(self, ctx, setting, coef):
+        coef = np.asarray(coef, float)
+        return self.describe_own(ctx, setting, coef[:-1] if self._constant(ctx) else coef)
 
     def model_params(self, ctx, setting, coef):
         out = {"c2_um": float(coef[0]), "c3_um": float(coef[1]), "mid_v": float(ctx.u_mid_all),
