@@ -1241,6 +1241,18 @@ def _level_refused(t) -> bool:
     return not (lv.get("within_base_misfit") and not lv.get("within_drift_misfit") and _pair_level(t))
 
 
+def _unheld_below_gates(c, t) -> bool:
+    """A slow candidate that can pass only below the first round's size gates (a later round's candidate,
+    ``Candidate.below_gates``) and whose signature does not hold beyond the other two and the base's misfit
+    (``t.holds``): below the gates the signature is the evidence (``select._slow_beyond_gates``), so such a
+    candidate cannot be the slow effect's name, and its precedence (the level's trend, the offset's level taken
+    as a drift's) must not veto a holding one after it. Round 19, development s117-004 (creep + coupling, the
+    coupling accepted first): the drift, ordered first by the level's trend within the recordings (t = -3.9) and
+    chosen by the offset's size, vetoed creep, whose step-locked tail held (6 dwells 0.09, p 1.1e-7), and was then
+    vetoed itself (unique ratio 0.97, p 0.24): nothing was named."""
+    return bool(getattr(c, "below_gates", False) and not t.holds)
+
+
 def _precedence(tests, passed, sized=()) -> list:
     """The holding signatures in the order their terms are offered: by unique ratio, a drift before an offset
     (a drift leaves a level too: the offset's unique contribution then holds as well). A signature holds at
@@ -1307,6 +1319,8 @@ def attribute(evals, tests) -> str | None:
     order = _precedence(tests, {c.name for c in passed}, sized)
     for n in order:
         c = next((x for x in slow if x.name == n), None)
+        if c is not None and _unheld_below_gates(c, by[n]):
+            continue   # round 19: select._slow_beyond_gates would veto it; the next holding signature is the name
         if c is not None and _level_refused(by[n]):
             refused = level_phrase(by[n].level)   # round 11: an offset the base's misfit could be
             continue
