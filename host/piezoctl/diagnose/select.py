@@ -941,6 +941,7 @@ def _exact_on_dwells(c, fctx, fold_all, recs, span, log) -> bool:
     fr = [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0 else 1.0 for x in ex]
     log(f"    exact {c.name} sized on the dwells: {fr}")
     if max(fr) >= 1.0:
+        c.veto += f"; nor sized on the dwells after the steps (ratios {fr[0]:.2f}, {fr[1]:.2f})"
         return False
     n_ex = sum(x["n"] for x in ex)
     c.coef, c.exact, c.exact_fold_ratios, c.from_dwells, c.veto = list(c.dwell_coef), ex, fr, True, None
