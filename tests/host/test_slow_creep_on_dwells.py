@@ -82,3 +82,36 @@ def test_no_dwell_no_model():
         ctx.signals[i].u = ctx.signals[i].u + 1e-3 * np.sin(np.arange(ctx.signals[i].u.size))
     coef, *_ = _coef(ctx, lambda s: filt(*LP, _creep(s)), 8)
     assert coef is None
+
+
+def test_the_exact_check_takes_the_dwells_model_only_after_the_all_blocks_model_is_refused(monkeypatch):
+    """select._first_exact: the creep model fitted on all blocks first; refused, the dwells' model (``dwell_coef``)
+    is checked and, when it lowers the error in each fold, becomes the candidate's model; refused too, no name."""
+    from piezoctl.diagnose import select as S
+    fctx = [types.SimpleNamespace(names=["steps", "triangle"])] * 2
+    all_blocks, dwells = np.zeros(3), np.ones(3)
+
+    def cand(after_dwells):
+        sse = {id(all_blocks): 1.2, id(dwells): after_dwells}
+
+        def exact(ctx, c, f, fold_all, recs):
+            a = sse[id(c.coef[f])]
+            return {"sse_before": 1.0, "sse_after": a, "n": 10, "per_recording": [(0.5, 0.5 * a), (0.5, 0.5 * a)],
+                    "params": {}}
+        monkeypatch.setattr(S, "_exact_fold", exact)
+        c = S.Candidate(term=TERMS["creep"], ratio=0.9, fold_ratios=[0.9, 0.9], nrmse_before=0.02, nrmse_after=0.018,
+                        t=5.0, p=1e-9, n_active=40, p_max=1e-3, dbic=-50.0, n_eff=500.0, significant=True,
+                        setting=[None, None], coef=[all_blocks, all_blocks], credited=0.9)
+        c.dwell_coef = [dwells, dwells]
+        return c
+
+    c = cand(0.81)
+    assert S._first_exact([c], fctx, None, None, 1.0, lambda *a: None) is c
+    assert c.from_dwells and c.veto is None and c.coef[0] is dwells
+    assert c.exact_fold_ratios == [np.sqrt(0.81)] * 2 and "sized on the dwells" in c.discrimination
+    c = cand(1.1)
+    assert S._first_exact([c], fctx, None, None, 1.0, lambda *a: None) is None
+    assert not c.from_dwells and c.coef[0] is all_blocks and "nor sized on the dwells" in c.veto
+    c = cand(0.81)
+    c.dwell_coef = None   # no dwells' model (its step test did not hold): the refusal stands
+    assert S._first_exact([c], fctx, None, None, 1.0, lambda *a: None) is None and "exact simulation" in c.veto
