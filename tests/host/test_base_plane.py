@@ -227,3 +227,27 @@ def test_base_oracle_static_output_is_the_noise_free_output_before_the_modes():
         assert np.max(np.abs(ys - y0)) > 1e-6          # the modes do act: the two are not the same signal
         checked += 1
     assert checked >= 1
+
+
+def test_plays_offered_beyond_the_reversal_levels_only_when_asked_and_never_to_a_periodic_calibration(monkeypatch):
+    # round 19's switch (off): every play count of PLANE_PLAYS offered once the calibration reversed at more than two
+    # levels; a periodic calibration (two levels) keeps R = 1 either way
+    from piezoctl.ident import base as base_mod
+    fo = np.concatenate([np.linspace(3, 147, 3000)] + [np.concatenate([np.linspace(147, lv, 1500),
+                                                                         np.linspace(lv, 147, 1500)])
+                                                         for lv in (20.0, 60.0, 100.0)])
+    t = np.arange(int(4 * FS)) / FS
+    periodic = 75 + 70 * np.sin(2 * np.pi * 1.0 * t)
+
+    def stage(u):
+        return 0.2 * u + 3.0 * np.tanh((u - 75.0) / 40.0)
+
+    def allowed():
+        return {name: fit_base([_rec(u, stage(u))])["base_info"]["plane"]["plays_allowed"]
+                for name, u in (("forc", fo), ("periodic", periodic))}
+
+    before = allowed()
+    assert max(before["forc"]) < max(base_mod.PLANE_PLAYS) and before["periodic"] == [1]
+    monkeypatch.setattr(base_mod, "PLAYS_BY_REVERSALS", False)
+    after = allowed()
+    assert after["forc"] == list(base_mod.PLANE_PLAYS) and after["periodic"] == [1]
