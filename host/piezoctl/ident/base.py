@@ -83,7 +83,8 @@ BW_GAMMA_RATIOS = (-0.6, -0.3, 0.0, 0.3, 0.6)                    # gamma / beta;
 CV_BLOCKS = 32           # interleaved blocks per calibration recording in the size cross-validation
 PLAYS_BY_REVERSALS = True  # only R with 2 R reversal levels offered; False (round 19, off): every R of PLANE_PLAYS
                            # once the calibration reversed at more than two levels (docs/diagnose.md, "Round 19:
-                           # the base on nulls": with CV_BLOCKS = 512 the held-out error then halves on nulls)
+                           # the base on nulls": with CV_BLOCKS = 512 it halved seed 121's null error and was
+                           # worse on two of three of seed 122's)
 SIZE_TOLERANCE = 1.02    # the smallest size within 2 % of the best cross-validated error is chosen
 ORDERS = (0, 2, 4, 6)
 QS_LP_HZ = 20.0          # quasi-static: drive within QS_TOL of its zero-phase low-pass at this frequency
