@@ -201,3 +201,53 @@ def test_bench_base_noise_free_reference_is_the_measured_output_without_its_nois
         d = load_recording(path).y - y0
         assert abs(np.std(d) / sigma - 1.0) < 0.1
         assert abs(np.mean(d)) < 5 * sigma / np.sqrt(d.size) + case.stage.sensor.lsb_um
+
+
+def test_base_oracle_static_output_is_the_noise_free_output_before_the_modes():
+    # bench/base_oracle.py splits the base's error against the stage's static output: the law through the amplifier
+    # and the sensor without the modes. With a straight sensor and a negligible quantum the noise-free output is
+    # then the static displacement through the modes' filters (recordings without a warm-up run)
+    from piezoctl.bench.base_laws import _noise_free
+    from piezoctl.bench.base_oracle import static_outputs
+    from piezoctl.foreign.cases import draw_case
+    from piezoctl.foreign.stage import _filt, mode_filter
+    case = draw_case(105, 4, (), scale=0.2)
+    sensor = case.stage.sensor
+    sensor.nl_by_session = {0: 0.0}
+    sensor.lsb_um = 1e-12
+    assert len(case.stage.modes) >= 1
+    checked = 0
+    for r, ys, y0 in zip(case.reveal, static_outputs(case)[1], _noise_free(case)):
+        if r.warmup_s > 0:
+            continue
+        off = sensor.offset_by_session.get(r.session, sensor.offset_by_session[0])
+        x = (ys - off) / sensor.gain
+        y = sum(m.r * _filt(*mode_filter(m.f_hz, m.zeta), x) for m in case.stage.modes)
+        assert np.max(np.abs(sensor.gain * y + off - y0)) < 1e-9
+        assert np.max(np.abs(ys - y0)) > 1e-6          # the modes do act: the two are not the same signal
+        checked += 1
+    assert checked >= 1
+
+
+def test_plays_offered_beyond_the_reversal_levels_only_when_asked_and_never_to_a_periodic_calibration(monkeypatch):
+    # round 19's switch (off): every play count of PLANE_PLAYS offered once the calibration reversed at more than two
+    # levels; a periodic calibration (two levels) keeps R = 1 either way
+    from piezoctl.ident import base as base_mod
+    fo = np.concatenate([np.linspace(3, 147, 3000)] + [np.concatenate([np.linspace(147, lv, 1500),
+                                                                         np.linspace(lv, 147, 1500)])
+                                                         for lv in (20.0, 60.0, 100.0)])
+    t = np.arange(int(4 * FS)) / FS
+    periodic = 75 + 70 * np.sin(2 * np.pi * 1.0 * t)
+
+    def stage(u):
+        return 0.2 * u + 3.0 * np.tanh((u - 75.0) / 40.0)
+
+    def allowed():
+        return {name: fit_base([_rec(u, stage(u))])["base_info"]["plane"]["plays_allowed"]
+                for name, u in (("forc", fo), ("periodic", periodic))}
+
+    before = allowed()
+    assert max(before["forc"]) < max(base_mod.PLANE_PLAYS) and before["periodic"] == [1]
+    monkeypatch.setattr(base_mod, "PLAYS_BY_REVERSALS", False)
+    after = allowed()
+    assert after["forc"] == list(base_mod.PLANE_PLAYS) and after["periodic"] == [1]
