@@ -314,8 +314,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
             "name": a.name, "significant": True,
             "evidence": (f"{phrase[0].upper() + phrase[1:]}; adding it to the model lowers the exact held-out NRMSE "
                          f"from {a.exact_before:.4f} to {a.exact_after:.4f}"
-                         + (f" (above {a.exact_above['above_hz']:.0f} Hz, where it acts: from "
-                            f"{a.exact_above['nrmse_before']:.4f} to {a.exact_above['nrmse_after']:.4f})"
+                         + (f", above {a.exact_above['above_hz']:.0f} Hz, where it acts, from "
+                            f"{a.exact_above['nrmse_before']:.4f} to {a.exact_above['nrmse_after']:.4f}"
                             if a.exact_above else "") + " (active-block t and signed-rank tests on "
                          f"the linearized term, nested against a refit of the base's hysteresis, p = {a.p:.1e}, "
                          f"threshold {a.p_max:.1e})." + (f" {a.discrimination}" if a.discrimination else "")
