@@ -28,7 +28,8 @@ from scipy import signal as sig
 
 from .significance import unique_labels
 
-__all__ = ["BANDS", "split_bands", "band_energy", "base_misfit", "credited_ratio", "ratios_above", "ratios_where"]
+__all__ = ["BANDS", "split_bands", "band_energy", "base_misfit", "credited_ratio", "above_per_recording", "ratios_above",
+           "ratios_where"]
 
 BANDS = ("level", "slow", "fast")
 
@@ -166,6 +167,36 @@ def _one_band_credited(eb, ea, m) -> float:
     return float(np.sqrt(max(1.0 - credited / eb, 0.0)))
 
 
+def above_per_recording(e, rec, dt: float, edge_hz: float) -> tuple:
+    """(``e`` high-passed at ``edge_hz`` per recording, mask of the samples filtered): :func:`ratios_above`'s
+    filter (zero phase, fourth order Butterworth), recordings of at most ``ABOVE_MIN_SAMPLES`` left out.
+
+    Parameters
+    ----------
+    e : ndarray
+        A residual [um], each recording's samples contiguous.
+    rec : ndarray of int
+        Recording label of each sample.
+    dt : float
+        Sample period [s].
+    edge_hz : float
+        The band edge [Hz], below ``0.45 / dt``.
+
+    Returns
+    -------
+    (ndarray, ndarray of bool)
+        The high-passed residual [um] (zero where not filtered) and the filtered samples.
+    """
+    e = np.asarray(e, float)
+    sos = _highpass_sos(dt, edge_hz)
+    h, done = np.zeros_like(e), np.zeros(e.size, bool)
+    for i in unique_labels(rec):
+        m = rec == i
+        if np.sum(m) > ABOVE_MIN_SAMPLES:
+            h[m], done[m] = _above(e[m], sos), True
+    return h, done
+
+
 def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, misfit: dict | None) -> tuple:
     """(fold ratios, credited ratio) of a candidate on the residual above ``edge_hz`` (round 16).
 
@@ -203,13 +234,8 @@ def ratios_above(e_before, correction, fold, rec, dt: float, edge_hz: float, mis
     e_after = e_before - np.asarray(correction, float)
     if not 0.0 < edge_hz < 0.45 / dt:
         return None, None
-    sos = _highpass_sos(dt, edge_hz)
-    hb, ha = np.zeros_like(e_before), np.zeros_like(e_after)
-    done = np.zeros(e_before.size, bool)
-    for i in unique_labels(rec):
-        m = rec == i
-        if np.sum(m) > ABOVE_MIN_SAMPLES:
-            hb[m], ha[m], done[m] = _above(e_before[m], sos), _above(e_after[m], sos), True
+    hb, done = above_per_recording(e_before, rec, dt, edge_hz)
+    ha, _ = above_per_recording(e_after, rec, dt, edge_hz)
     if not np.any(done):
         return None, None
     frs = []

@@ -22,7 +22,7 @@ from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg
-from .misfit import _above, _highpass_sos, credited_ratio, ratios_above, ratios_where
+from .misfit import _above, _highpass_sos, above_per_recording, credited_ratio, ratios_above, ratios_where
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
                              drift_on_pair, signature_tests)
@@ -181,6 +181,7 @@ class Candidate:
     separation: list | None = None            # accepted: the pair tests against the round's others (discriminate.separate)
     slow_alternative: dict | None = None      # sensor_offset: a drift its levels cannot exclude (slow_signature.attribute)
     heldout: tuple | None = None              # (before, correction, fold, block, rec): signature.HELDOUT_CHECKED only
+    exact_above: dict | None = None           # round 19: the exact check above the edge it was sized above
     whole: dict | None = None                 # round 16, a term judged above the calibration's band: the edge [Hz]
     #                                           and its fold and credited ratios on the whole residual
     credited_only: bool = False               # round 18: it passed every gate but the credited ratio
@@ -762,8 +763,17 @@ def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
     rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])
     per = [(float(np.sum(e_old[test & (rec == i)] ** 2)), float(np.sum(e_new[test & (rec == i)] ** 2)))
            for i in range(len(ctx.valid))]
-    return {"params": new, "sse_before": float(np.sum(e_old[test] ** 2)), "sse_after": float(np.sum(e_new[test] ** 2)),
-            "n": int(np.sum(test)), "ys": ys, "per_recording": per}
+    out = {"params": new, "sse_before": float(np.sum(e_old[test] ** 2)), "sse_after": float(np.sum(e_new[test] ** 2)),
+           "n": int(np.sum(test)), "ys": ys, "per_recording": per}
+    edge = c.whole.get("above_hz") if c.whole else None
+    if edge:   # round 19: also above the edge it was sized above (misfit.ratios_above's filter, used samples)
+        used = fold_all >= 0
+        hb, done = above_per_recording(e_old[used], rec[used], ctx.dt, edge)
+        ha, _ = above_per_recording(e_new[used], rec[used], ctx.dt, edge)
+        t = done & test[used]
+        out["above"] = {"above_hz": float(edge), "sse_before": float(np.sum(hb[t] ** 2)),
+                        "sse_after": float(np.sum(ha[t] ** 2)), "n": int(np.sum(t))}
+    return out
 
 
 def pair_design(ctxs, cands, f):
@@ -936,6 +946,7 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
         c.exact_before = float(np.sqrt(sum(x["sse_before"] for x in ex) / max(n_ex, 1)) / span)
         c.exact_after = float(np.sqrt(sum(x["sse_after"] for x in ex) / max(n_ex, 1)) / span)
         log(f"    exact {c.name}: {c.exact_fold_ratios} {c.exact_before:.4f} -> {c.exact_after:.4f}")
+        c.exact_above = _exact_above(ex, span)
         worse = _worsened(ex, fctx[0].names)
         if max(c.exact_fold_ratios) < 1.0 and worse and c.term.same_on_every_recording:
             # round 17: a static map of the reading is the sensor's, the same on every recording it reads; a fit
@@ -978,6 +989,22 @@ def _exact_on_dwells(c, fctx, fold_all, recs, span, log) -> bool:
             f"each fold (ratios {fr[0]:.2f}, {fr[1]:.2f}).")
     c.discrimination = (c.discrimination + " " + note) if c.discrimination else note
     return True
+
+
+def _exact_above(ex, span) -> dict | None:
+    """Round 19: the exact check's figures above the edge a term was sized above (``Candidate.whole``'s
+    ``above_hz``: a mode's ``f / sqrt(2)`` or the calibration's band), pooled and per fold, from ``_exact_fold``'s
+    ``"above"``; None for a term sized on the whole residual. Below the edge the held-out error is the base's
+    misfit of its hysteresis and of its own modes, which the term does not act on (s121-021: the pooled exact
+    ratio 0.93 with the linearized one above the edge 0.55/0.51)."""
+    if not all("above" in x for x in ex):
+        return None
+    a = [x["above"] for x in ex]
+    n = max(sum(x["n"] for x in a), 1)
+    return {"above_hz": a[0]["above_hz"],
+            "fold_ratios": [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0 else 1.0 for x in a],
+            "nrmse_before": float(np.sqrt(sum(x["sse_before"] for x in a) / n) / span),
+            "nrmse_after": float(np.sqrt(sum(x["sse_after"] for x in a) / n) / span)}
 
 
 def _ratio_max(term, accepted) -> float:

@@ -895,7 +895,12 @@ class UnmodeledResonance(Term):
     nested_dynamics = True
     signature = "residual energy in a narrow band above the calibration band, ringing after corners"
     acts_above_calibration = True   # offered only above the calibration's band, where its columns act
-    DAMPINGS = (0.005, 0.01, 0.02, 0.05)
+    DAMPINGS = (0.005, 0.01, 0.02, 0.05)   # the vocabulary's mode dampings (coupling's modes, the delay's alternative)
+    # round 19: the dampings the mode is fitted at, the same range in steps of at most sqrt(2). A lightly damped
+    # ring decays as exp(-2 pi f zeta t); at a step of 2 (DAMPINGS) the envelope can be a third off one decay time
+    # after a corner, at sqrt(2) at most a sixth (development s122-006, 988 Hz at 0.016: refused by the block test
+    # at 0.01 and 0.02, p 0.025; at 0.016 p 7e-7)
+    SETTING_DAMPINGS = tuple(0.005 * 2.0 ** (k / 2) for k in range(7)) + (0.05,)   # 0.005, 0.0071, ..., 0.04, 0.05
 
     @staticmethod
     def basis(y, freq_hz, damping, dt) -> np.ndarray:
@@ -918,7 +923,7 @@ class UnmodeledResonance(Term):
     def settings(self, ctx):
         # around each offered frequency (a damped ring's peak is not exactly its mode frequency)
         return [(f * q, z) for f in self.frequencies(ctx) for q in (0.97, 0.98, 0.99, 1.0, 1.01, 1.02, 1.03)
-                for z in self.DAMPINGS]
+                for z in self.SETTING_DAMPINGS]
 
     def acts_above_hz(self, ctx, settings):
         """Round 17: the calibration's band or the mode's own, ``f / sqrt(2)``, whichever is higher [Hz]. Below
