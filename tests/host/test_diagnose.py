@@ -294,3 +294,27 @@ def test_drive_side_terms_offer_nothing_within_the_loops_own_latency():
     assert all(1.0 / (2 * np.pi * f) > LATENCY_SAMPLES * ctx.dt for f in grid + finer)
     # without the rule the grid reaches 2.5 kHz (a 0.06 ms lag): the test can fail
     assert max(grid) < 1.0 / (2 * np.pi * LATENCY_SAMPLES * ctx.dt) < 2500.0
+
+
+def test_bandwidth_offers_no_corner_inside_the_identified_band():
+    """Round 19: a pole whose corner lies inside the band the base identified its dynamics in acted on the
+    calibration there and is in G (the term's refit takes it again); its corner is offered above that band only,
+    the higher of the calibration's and the base's stated band, in the grid and in every refinement."""
+    from piezoctl.ident.terms import TERMS
+    bw = TERMS["amplifier_bandwidth"]
+    free = bw.settings(type("Ctx", (), {"dt": 1e-4})())
+    for cal, dyn in ((300.0, 120.0), (120.0, 300.0), (45.0, None)):
+        ctx = type("Ctx", (), {"dt": 1e-4, "cal_band_hz": cal, "dynamics_band_hz": dyn})()
+        edge = max(cal, dyn or 0.0)
+        grid = bw.settings(ctx)
+        finer = [f for lvl in (1, 2) for g in grid for f in bw.refine(ctx, g, lvl)]
+        assert grid and finer and bw.applicable(ctx)
+        assert all(f > edge for f in grid + finer)
+        assert grid == [f for f in free if f > edge]
+        # the grid without the rule has corners inside the band: the test can fail
+        assert min(free) < edge
+    # development null s121-018: calibration band 548 Hz, the base's 1089 Hz; above it every corner's lag is
+    # within the loop's latency (2 samples: below 796 Hz at 10 kHz), so the term is not offered at all
+    s18 = type("Ctx", (), {"dt": 1e-4, "cal_band_hz": 548.0, "dynamics_band_hz": 1089.0})()
+    assert any(f < 1089.0 for f in free)
+    assert bw.settings(s18) == [] and not bw.applicable(s18)

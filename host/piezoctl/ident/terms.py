@@ -357,7 +357,32 @@ class AmplifierBandwidth(_DriveTerm):
 
     def settings(self, ctx):
         fs = 1.0 / ctx.dt
-        return self.beyond_latency(ctx, [float(f) for f in np.geomspace(fs / 500.0, fs / 4.0, 14)])
+        return self.above_band(ctx, self.beyond_latency(ctx, [float(f) for f in np.geomspace(fs / 500.0, fs / 4.0, 14)]))
+
+    def applicable(self, ctx):
+        return bool(self.settings(ctx))
+
+    def refine(self, ctx, setting, level):
+        return self.above_band(ctx, super().refine(ctx, setting, level))
+
+    @staticmethod
+    def identified_band_hz(ctx) -> float:
+        """[Hz] the band the base's dynamics were identified in: the calibration's (``ctx.cal_band_hz``) or the band
+        the base states (``ctx.dynamics_band_hz``), whichever is higher; 0 when the context gives neither."""
+        return max(float(getattr(ctx, "cal_band_hz", None) or 0.0), float(getattr(ctx, "dynamics_band_hz", None) or 0.0))
+
+    def above_band(self, ctx, settings) -> list:
+        """Round 19: the corners above the band the base identified its dynamics in (:meth:`identified_band_hz`).
+
+        A first-order pole in front of H whose corner lies inside that band acted on the calibration there, and G,
+        fitted on it, took its attenuation and lag up to the band's top (the term's exact model refits G on the
+        calibration, so the refit cancels it there again); what such a term changes is only G's continuation above
+        the band, where the data say nothing about G (round 10). The mode is offered above the same band (round
+        12/14, ``diagnose.run._mode_freqs``). Development null s121-018 (Coleman-Hodgdon, stage modes at 439 and
+        504 Hz) was named ``amplifier_bandwidth`` at 324 Hz inside its 548 Hz calibration band and 1089 Hz
+        dynamics band; its held-out gain came from above 1 kHz (99.9 % of the residual transfer's deviation)."""
+        edge = self.identified_band_hz(ctx)
+        return [st for st in settings if float(st) > edge]
 
     def describe_own(self, ctx, fc, coef):
         return ({"hz": round(fc, 1)},
