@@ -21,7 +21,7 @@ from ..ident import refined
 from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
-from . import significance as sg
+from . import significance as sg, static_map
 from .misfit import credited_ratio, ratios_above, ratios_where
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import SIGNATURES, attribute, creep_on_steps, drift_on_pair, signature_tests
@@ -644,6 +644,14 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                 f"({'>' if ratio_max < FURTHER_RATIO_MAX else '>='} {ratio_max:g}; "
                 + ", ".join(f"{b} {np.sqrt(max(x['improvement_um2'], 0)):.4f} um against "
                             f"{np.sqrt(x['misfit_um2']):.4f} um" for b, x in bands.items()) + ")")
+    if (term.same_on_every_recording and not significant and not refusal and (veto is None or credited_only)
+            and ctxs[0] is ctxs[1]):
+        # round 19: a static map of y, refused beside the base's history-dependent misfit: judged on what every
+        # branch shares at equal y (static_map.py), where that misfit averages out and the map does not
+        bc = _branch_common(ctxs[0], term, es[0], fold_all, best_st[0])
+        if bc is not None and within(max(bc["fold_ratios"])) and bc["p"] < p_max and dbic < 0:
+            whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
+            fold_ratios, p, significant, veto, credited_only = list(bc["fold_ratios"]), bc["p"], True, None, False
     for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
         c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
     from .signature import HELDOUT_CHECKED
@@ -660,6 +668,21 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
                      veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held, whole=whole,
                      credited_only=credited_only)
+
+
+def _branch_common(ctx, term, e, fold_all, setting):
+    """``static_map.branch_common_test`` of ``term`` at ``setting`` on the used samples of the context ``ctx``
+    (the first round's: one model for both folds), nested against the term's nuisance."""
+    used = fold_all >= 0
+    y = np.concatenate([s.yb[v] for s, v in zip(ctx.signals, ctx.valid)])[used]
+    br, n0 = [], 0
+    for s, v in zip(ctx.signals, ctx.valid):
+        b = static_map.branches(s.u)[v] + n0
+        n0 = int(b.max()) + 1 if b.size else n0
+        br.append(b)
+    N = term_nuisance(ctx, term)
+    return static_map.branch_common_test(y, np.concatenate(br)[used], e[used], _design(ctx, term, setting).X[used],
+                                         None if N is None else N[used], fold_all[used])
 
 
 def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):
