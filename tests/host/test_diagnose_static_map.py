@@ -74,3 +74,13 @@ def test_too_few_bins_for_the_columns_is_no_test():
     y, b, e, X, fold, _ = _case(curve=True)
     N = np.random.default_rng(2).normal(size=(y.size, 30))   # more nuisance columns than bins
     assert branch_common_test(y, b, e, X, N, fold) is None
+
+
+def test_the_evidence_says_the_figures_are_the_branch_common_parts_and_gives_the_whole_residuals():
+    from piezoctl.diagnose.run import _branch_common_text
+    y, b, e, X, fold, _ = _case(curve=True)
+    bc = branch_common_test(y, b, e, X, None, fold)
+    text = _branch_common_text({"branch_common": bc, "fold_ratios": [0.76, 0.80], "p": 1.8e-2, "credited_ratio": 0.86})
+    assert "every branch shares at equal displacement" in text
+    assert f"{bc['n_bins']} held-out bins" in text
+    assert "0.76/0.80, p = 1.8e-02, credited ratio 0.86" in text
