@@ -80,7 +80,8 @@ def test_the_evidence_says_the_figures_are_the_branch_common_parts_and_gives_the
     from piezoctl.diagnose.run import _branch_common_text
     y, b, e, X, fold, _ = _case(curve=True)
     bc = branch_common_test(y, b, e, X, None, fold)
+    bc["credited_ratio"] = 0.35
     text = _branch_common_text({"branch_common": bc, "fold_ratios": [0.76, 0.80], "p": 1.8e-2, "credited_ratio": 0.86})
     assert "every branch shares at equal displacement" in text
-    assert f"{bc['n_bins']} held-out bins" in text
+    assert f"{bc['n_bins']} held-out bins" in text and "did not see, 0.35" in text
     assert "0.76/0.80, p = 1.8e-02, credited ratio 0.86" in text

@@ -307,7 +307,8 @@ def _branch_common_text(whole) -> str:
     bc = whole["branch_common"]
     return (f" Its fold ratios and p are those of the part of the residual every branch shares at equal displacement "
             f"(per bin of the output, the mean over the branches that visit it; {bc['n_bins']} held-out bins, "
-            f"{bc['before_um']:.4f} -> {bc['after_um']:.4f} um; p of a one-sided paired t-test on the bins): on the "
+            f"{bc['before_um']:.4f} -> {bc['after_um']:.4f} um; p of a one-sided paired t-test on the bins; credited "
+            f"beyond the base's misfit on calibration histories it did not see, {bc['credited_ratio']:.2f}): on the "
             f"whole residual, beside the base's misfit on histories the calibration did not show, they were "
             f"{whole['fold_ratios'][0]:.2f}/{whole['fold_ratios'][1]:.2f}, p = {whole['p']:.1e}, credited ratio "
             f"{whole['credited_ratio']:.2f}.")

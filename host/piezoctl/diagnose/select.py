@@ -22,7 +22,7 @@ from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg, static_map
-from .misfit import credited_ratio, ratios_above, ratios_where
+from .misfit import _one_band_credited, credited_ratio, ratios_above, ratios_where
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import SIGNATURES, attribute, creep_on_steps, drift_on_pair, signature_tests
 from .solve import lstsq_box as _lstsq_box, train_rows
@@ -648,10 +648,17 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             and ctxs[0] is ctxs[1]):
         # round 19: a static map of y, refused beside the base's history-dependent misfit: judged on what every
         # branch shares at equal y (static_map.py), where that misfit averages out and the map does not
+        # credited as the whole residual is: its gain there less the base's whole misfit energy per sample on
+        # held-out calibration histories (an upper bound of what that misfit leaves in the common part)
         bc = _branch_common(ctxs[0], term, es[0], fold_all, best_st[0])
-        if bc is not None and within(max(bc["fold_ratios"])) and bc["p"] < p_max and dbic < 0:
+        if bc is not None:
+            bc["credited_ratio"] = _one_band_credited(bc["before_um"] ** 2, bc["after_um"] ** 2, float(
+                sum(ctxs[0].misfit["mse_um2"].values())) if ctxs[0].misfit else 0.0)
+        if (bc is not None and within(max(bc["fold_ratios"])) and bc["p"] < p_max and within(bc["credited_ratio"])
+                and dbic < 0):
             whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
-            fold_ratios, p, significant, veto, credited_only = list(bc["fold_ratios"]), bc["p"], True, None, False
+            fold_ratios, p, cr = list(bc["fold_ratios"]), bc["p"], bc["credited_ratio"]
+            significant, veto, credited_only = True, None, False
     for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
         c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
     from .signature import HELDOUT_CHECKED
