@@ -85,3 +85,16 @@ def test_the_evidence_says_the_figures_are_the_branch_common_parts_and_gives_the
     assert "every branch shares at equal displacement" in text
     assert f"{bc['n_bins']} held-out bins" in text and "did not see, 0.35" in text
     assert "0.76/0.80, p = 1.8e-02, credited ratio 0.86" in text
+
+
+def test_a_map_common_to_one_recordings_branches_does_not_carry_to_the_others():
+    from piezoctl.diagnose.static_map import across_recordings
+    y, b, e, X, fold, c = _case(curve=True)
+    rec = np.repeat([0, 1, 2, 3], y.size // 4)   # two cycles per "recording"
+    q = X[:, 0] ** 0.5 * np.sign(X[:, 1])
+    r = across_recordings(y, b, rec, e, X)
+    assert len(r) == 4 and max(r.values()) < 1.0   # the sensor's curve: the others' map lowers each one's
+    # a misfit the same at equal y on the branches of recording 0 only (an even loop-shape error of its history)
+    e_one = np.where(rec == 0, 0.15 * (1 - q ** 2), 0.0) + np.random.default_rng(3).normal(0, 0.01, y.size)
+    r1 = across_recordings(y, b, rec, e_one, X)
+    assert max(r1.values()) > 1.0   # not the same map everywhere: the others predict recording 0 wrongly or it them

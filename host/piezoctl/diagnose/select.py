@@ -655,7 +655,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             bc["credited_ratio"] = _one_band_credited(bc["before_um"] ** 2, bc["after_um"] ** 2, float(
                 sum(ctxs[0].misfit["mse_um2"].values())) if ctxs[0].misfit else 0.0)
         if (bc is not None and within(max(bc["fold_ratios"])) and bc["p"] < p_max and within(bc["credited_ratio"])
-                and dbic < 0):
+                and dbic < 0 and bc["per_recording"] and max(bc["per_recording"].values()) < 1.0):
             whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
             fold_ratios, p, cr = list(bc["fold_ratios"]), bc["p"], bc["credited_ratio"]
             significant, veto, credited_only = True, None, False
@@ -688,8 +688,14 @@ def _branch_common(ctx, term, e, fold_all, setting):
         n0 = int(b.max()) + 1 if b.size else n0
         br.append(b)
     N = term_nuisance(ctx, term)
-    return static_map.branch_common_test(y, np.concatenate(br)[used], e[used], _design(ctx, term, setting).X[used],
-                                         None if N is None else N[used], fold_all[used])
+    X = _design(ctx, term, setting).X[used]
+    br = np.concatenate(br)[used]
+    bc = static_map.branch_common_test(y, br, e[used], X, None if N is None else N[used], fold_all[used])
+    if bc is not None:   # the same map on every recording: the others' map lowers each one's common part
+        rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])[used]
+        bc["per_recording"] = {ctx.names[i]: r for i, r in static_map.across_recordings(y, br, rec, e[used],
+                                                                                          X).items()}
+    return bc
 
 
 def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):

@@ -14,7 +14,10 @@ output; per bin, the mean over the branches that visit it of each branch's mean 
 that average unchanged; a misfit that differs between branches at equal y averages towards its common part. The
 curve is fitted (nested against the term's nuisance, reduced alike) on one fold's common part and predicts the
 other fold's, the folds being the selection's alternate blocks; sized by the two fold ratios and tested by a
-paired one-sided t-test on the bins' squared errors before and after.
+paired one-sided t-test on the bins' squared errors before and after. Being the sensor's, the map is also the same
+on every recording (round 17's ``Term.same_on_every_recording``): :func:`across_recordings` fits it on the other
+recordings' common parts and asks it to lower each recording's own (a misfit common to the branches of one
+recording, or of one kind of history, does not carry over: null s121-041, x1.00 to x1.21 on its three).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ MIN_CELL = 5         # samples of one branch in one bin for its mean to count
 MIN_BRANCHES = 2     # branches in a bin for a common part: a contrast needs two visits
 TURN = 0.02          # the drive turns when it moves back by this fraction of its span (ignores noise-sized wiggles)
 
-__all__ = ["branches", "common_averager", "branch_common_test", "N_BINS", "TURN"]
+__all__ = ["branches", "common_averager", "branch_common_test", "across_recordings", "N_BINS", "TURN"]
 
 
 def branches(u: np.ndarray, turn: float = TURN) -> np.ndarray:
@@ -96,6 +99,47 @@ def common_averager(ybin: np.ndarray, branch: np.ndarray, n_bins: int = N_BINS):
     return np.array(rows).reshape(len(rows), key.size), np.array(w, float)
 
 
+def _binned(y):
+    edges = np.quantile(y, np.linspace(0.0, 1.0, N_BINS + 1))
+    return np.clip(np.searchsorted(edges, y, side="right") - 1, 0, N_BINS - 1)
+
+
+def across_recordings(y: np.ndarray, branch: np.ndarray, rec: np.ndarray, e: np.ndarray, X: np.ndarray) -> dict:
+    """Per recording: the columns ``X`` fitted on the other recordings' branch-common parts predict its own.
+
+    Parameters
+    ----------
+    y, branch, e, X : ndarray
+        As in :func:`branch_common_test` (all used samples; bins over all of them).
+    rec : ndarray of int
+        Recording index of each sample.
+
+    Returns
+    -------
+    dict
+        {recording index: RMS after / before of its common part (weighted by branches per bin)}, for each
+        recording with more bins than columns while the others together have as many.
+    """
+    yb = _binned(y)
+    red = {}
+    for i in np.unique(rec):
+        idx = np.flatnonzero(rec == i)
+        A, w = common_averager(yb[idx], branch[idx])
+        if w.size > X.shape[1]:
+            red[int(i)] = (A @ e[idx], A @ X[idx], np.sqrt(w))
+    out = {}
+    for i, (e_i, x_i, s_i) in red.items():
+        others = [r for j, r in red.items() if j != i]
+        if sum(r[0].size for r in others) <= X.shape[1]:
+            continue
+        E, Z, S = (np.concatenate([r[0] for r in others]), np.vstack([r[1] for r in others]),
+                   np.concatenate([r[2] for r in others]))
+        th = np.linalg.lstsq(Z * S[:, None], E * S, rcond=None)[0]
+        before = float(np.sum(s_i ** 2 * e_i ** 2))
+        out[i] = float(np.sqrt(np.sum(s_i ** 2 * (e_i - x_i @ th) ** 2) / before)) if before > 0 else 1.0
+    return out
+
+
 def branch_common_test(y: np.ndarray, branch: np.ndarray, e: np.ndarray, X: np.ndarray, N: np.ndarray | None,
                        fold: np.ndarray) -> dict | None:
     """Cross-validated fit of the columns ``X`` on the branch-common part of the residual ``e``.
@@ -123,8 +167,7 @@ def branch_common_test(y: np.ndarray, branch: np.ndarray, e: np.ndarray, X: np.n
         held-out folds), ``n_bins``, ``before_um`` / ``after_um`` (the common part's weighted RMS); None when a fold
         has fewer bins than columns to fit.
     """
-    edges = np.quantile(y, np.linspace(0.0, 1.0, N_BINS + 1))
-    yb = np.clip(np.searchsorted(edges, y, side="right") - 1, 0, N_BINS - 1)
+    yb = _binned(y)
     Nn = np.zeros((e.size, 0)) if N is None else N
     red = {}
     for f in (0, 1):
