@@ -302,6 +302,18 @@ def _none_entry(last, fit, outside_doc, base_info, bands=None):
             "improvement": {"nrmse_before": fit["base"]["nrmse"], "nrmse_after": fit["base"]["nrmse"]}}
 
 
+def _branch_common_text(whole) -> str:
+    """The evidence's sentence for a sensor curve judged on the branch-common part (round 19, static_map.py)."""
+    bc = whole["branch_common"]
+    return (f" Its fold ratios and p are those of the part of the residual every branch shares at equal displacement "
+            f"(per bin of the output, the mean over the branches that visit it; {bc['n_bins']} held-out bins, "
+            f"{bc['before_um']:.4f} -> {bc['after_um']:.4f} um; p of a one-sided paired t-test on the bins; credited "
+            f"beyond the base's misfit on calibration histories it did not see, {bc['credited_ratio']:.2f}): on the "
+            f"whole residual, beside the base's misfit on histories the calibration did not show, they were "
+            f"{whole['fold_ratios'][0]:.2f}/{whole['fold_ratios'][1]:.2f}, p = {whole['p']:.1e}, credited ratio "
+            f"{whole['credited_ratio']:.2f}.")
+
+
 def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibration, recordings):
     """The diagnosis document (diagnosis.json's content)."""
     effects = []
@@ -323,6 +335,7 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             f"{a.fold_ratios[0]:.2f}/{a.fold_ratios[1]:.2f} and credited ratio {a.credited:.2f} are "
                             f"above the first round's {sg.RATIO_MAX} but below {a.ratio_max:g}, and its signature holds."
                             if a.below_gates else "")
+                         + (_branch_common_text(a.whole) if a.whole and "branch_common" in a.whole else "")
                          + (f" Caution: the refined model is worse on {a.worsened[0]} (held-out error x"
                             f"{a.worsened[1]:.2f} there): where it is wrong, this model does not hold."
                             if a.worsened else "") + (f" {sep_text}" if sep_text else "")),

@@ -21,8 +21,9 @@ from ..ident import refined
 from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
-from . import significance as sg
-from .misfit import _above, _highpass_sos, above_per_recording, credited_ratio, ratios_above, ratios_where
+from . import significance as sg, static_map
+from .misfit import (_above, _highpass_sos, _one_band_credited, above_per_recording, credited_ratio, ratios_above,
+                     ratios_where)
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
                              drift_on_pair, signature_tests)
@@ -668,6 +669,21 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                 f"({'>' if ratio_max < FURTHER_RATIO_MAX else '>='} {ratio_max:g}; "
                 + ", ".join(f"{b} {np.sqrt(max(x['improvement_um2'], 0)):.4f} um against "
                             f"{np.sqrt(x['misfit_um2']):.4f} um" for b, x in bands.items()) + ")")
+    if (term.same_on_every_recording and not significant and not refusal and (veto is None or credited_only)
+            and ctxs[0] is ctxs[1]):
+        # round 19: a static map of y, refused beside the base's history-dependent misfit: judged on what every
+        # branch shares at equal y (static_map.py), where that misfit averages out and the map does not
+        # credited as the whole residual is: its gain there less the base's whole misfit energy per sample on
+        # held-out calibration histories (an upper bound of what that misfit leaves in the common part)
+        bc = _branch_common(ctxs[0], term, es[0], fold_all, best_st[0])
+        if bc is not None:
+            bc["credited_ratio"] = _one_band_credited(bc["before_um"] ** 2, bc["after_um"] ** 2, float(
+                sum(ctxs[0].misfit["mse_um2"].values())) if ctxs[0].misfit else 0.0)
+        if (bc is not None and within(max(bc["fold_ratios"])) and bc["p"] < p_max and within(bc["credited_ratio"])
+                and dbic < 0 and bc["per_recording"] and max(bc["per_recording"].values()) < 1.0):
+            whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
+            fold_ratios, p, cr = list(bc["fold_ratios"]), bc["p"], bc["credited_ratio"]
+            significant, veto, credited_only = True, None, False
     for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
         c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
     from .signature import HELDOUT_CHECKED
@@ -684,6 +700,27 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
                      veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held, whole=whole,
                      credited_only=credited_only)
+
+
+def _branch_common(ctx, term, e, fold_all, setting):
+    """``static_map.branch_common_test`` of ``term`` at ``setting`` on the used samples of the context ``ctx``
+    (the first round's: one model for both folds), nested against the term's nuisance."""
+    used = fold_all >= 0
+    y = np.concatenate([s.yb[v] for s, v in zip(ctx.signals, ctx.valid)])[used]
+    br, n0 = [], 0
+    for s, v in zip(ctx.signals, ctx.valid):
+        b = static_map.branches(s.u)[v] + n0
+        n0 = int(b.max()) + 1 if b.size else n0
+        br.append(b)
+    N = term_nuisance(ctx, term)
+    X = _design(ctx, term, setting).X[used]
+    br = np.concatenate(br)[used]
+    bc = static_map.branch_common_test(y, br, e[used], X, None if N is None else N[used], fold_all[used])
+    if bc is not None:   # the same map on every recording: the others' map lowers each one's common part
+        rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])[used]
+        bc["per_recording"] = {ctx.names[i]: r for i, r in static_map.across_recordings(y, br, rec, e[used],
+                                                                                          X).items()}
+    return bc
 
 
 def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):

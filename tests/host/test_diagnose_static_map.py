@@ -1,0 +1,100 @@
+"""The sensor curve's test on the branch-common part of the residual (round 19, diagnose/static_map.py)."""
+
+import numpy as np
+
+from piezoctl.diagnose.static_map import branch_common_test, branches
+
+
+def _triangle(amps, n_half=400):
+    """A drive of triangles of the given amplitudes [V] around 50 V, one cycle each, and its direction."""
+    u, d = [], []
+    for a in amps:
+        up = np.linspace(50 - a, 50 + a, n_half)
+        u += [up, up[::-1]]
+        d += [np.ones(n_half), -np.ones(n_half)]
+    return np.concatenate(u), np.concatenate(d)
+
+
+def test_branches_turn_where_the_drive_turns_and_not_on_noise():
+    u, _ = _triangle([40, 30, 20])
+    b = branches(u)
+    assert b.max() + 1 == 6   # three cycles, each rising then falling
+    assert np.all(np.diff(b) >= 0)
+    rng = np.random.default_rng(1)
+    noisy = u + rng.normal(0, 0.05, u.size)   # 0.05 V against a 2 % play of an 80 V span
+    assert branches(noisy).max() + 1 == 6
+    steps = np.repeat([10, 30, 50, 70, 50, 30], 200).astype(float)   # a staircase up, then down
+    bs = branches(steps)
+    assert bs.max() + 1 == 2 and bs[0] == 0 and bs[-1] == 1   # dwells keep the branch that reached them
+
+
+def _case(curve: bool, seed=0):
+    """Triangles of several amplitudes; the residual is a history misfit (of opposite signs rising and falling, of
+    a size that depends on the loop's amplitude) plus, when ``curve``, a static map of y smaller than it."""
+    rng = np.random.default_rng(seed)
+    amps = [40, 25, 35, 15, 30, 20, 38, 28]
+    u, d = _triangle(amps)
+    y = 0.5 * u                                   # [um]
+    q = (y - y.mean()) / (0.5 * np.ptp(y))
+    size = np.repeat([0.006 * a for a in amps], 800)   # the misfit grows with the loop [um]
+    e = d * size * (1 - q ** 2) + rng.normal(0, 0.01, u.size)
+    c = 0.15 * q ** 2 + 0.1 * q ** 3
+    if curve:
+        e = e + c - np.mean(c)
+    X = np.column_stack([q ** 2, q ** 3, np.ones(u.size)])
+    fold = (np.arange(u.size) // 1600) % 2        # alternate blocks of two cycles
+    return y, branches(u), e, X, fold, c
+
+
+def test_a_static_curve_beside_a_larger_history_misfit_passes_on_the_branch_common_part():
+    y, b, e, X, fold, c = _case(curve=True)
+    # the whole residual: the curve's least squares on one fold predicts the other no better than 0.8
+    whole = []
+    for f in (0, 1):
+        th = np.linalg.lstsq(X[fold == f], e[fold == f], rcond=None)[0]
+        t = fold == 1 - f
+        whole.append(np.sqrt(np.mean((e[t] - X[t] @ th) ** 2) / np.mean(e[t] ** 2)))
+    assert min(whole) > 0.8
+    r = branch_common_test(y, b, e, X, None, fold)
+    assert r is not None
+    assert max(r["fold_ratios"]) < 0.5
+    assert r["p"] < 1e-3
+    assert r["after_um"] < 0.5 * r["before_um"]
+
+
+def test_the_history_misfit_alone_is_not_a_curve_to_the_branch_common_test():
+    y, b, e, X, fold, _ = _case(curve=False)
+    r = branch_common_test(y, b, e, X, None, fold)
+    assert r is not None
+    assert not (max(r["fold_ratios"]) <= 0.8 and r["p"] < 1e-3)   # the first round's gates (p: 0.01 / 12)
+    assert r["before_um"] < 0.2 * float(np.std(e))   # the misfit, 0.14 um RMS, averages out across branches
+
+
+def test_too_few_bins_for_the_columns_is_no_test():
+    y, b, e, X, fold, _ = _case(curve=True)
+    N = np.random.default_rng(2).normal(size=(y.size, 30))   # more nuisance columns than bins
+    assert branch_common_test(y, b, e, X, N, fold) is None
+
+
+def test_the_evidence_says_the_figures_are_the_branch_common_parts_and_gives_the_whole_residuals():
+    from piezoctl.diagnose.run import _branch_common_text
+    y, b, e, X, fold, _ = _case(curve=True)
+    bc = branch_common_test(y, b, e, X, None, fold)
+    bc["credited_ratio"] = 0.35
+    text = _branch_common_text({"branch_common": bc, "fold_ratios": [0.76, 0.80], "p": 1.8e-2, "credited_ratio": 0.86})
+    assert "every branch shares at equal displacement" in text
+    assert f"{bc['n_bins']} held-out bins" in text and "did not see, 0.35" in text
+    assert "0.76/0.80, p = 1.8e-02, credited ratio 0.86" in text
+
+
+def test_a_map_common_to_one_recordings_branches_does_not_carry_to_the_others():
+    from piezoctl.diagnose.static_map import across_recordings
+    y, b, e, X, fold, c = _case(curve=True)
+    rec = np.repeat([0, 1, 2, 3], y.size // 4)   # two cycles per "recording"
+    q = X[:, 0] ** 0.5 * np.sign(X[:, 1])
+    r = across_recordings(y, b, rec, e, X)
+    assert len(r) == 4 and max(r.values()) < 1.0   # the sensor's curve: the others' map lowers each one's
+    # a misfit the same at equal y on the branches of recording 0 only (an even loop-shape error of its history)
+    e_one = np.where(rec == 0, 0.15 * (1 - q ** 2), 0.0) + np.random.default_rng(3).normal(0, 0.01, y.size)
+    r1 = across_recordings(y, b, rec, e_one, X)
+    assert max(r1.values()) > 1.0   # not the same map everywhere: the others predict recording 0 wrongly or it them
