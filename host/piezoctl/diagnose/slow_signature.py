@@ -243,6 +243,34 @@ def dwell_ids(ctx, s) -> np.ndarray:
     return ids
 
 
+def _dwell_samples(ctx) -> tuple:
+    """(dwell label, time in its recording [s], recording index) of every settled sample of ``ctx``, over all its
+    recordings; dwell labels are unique across recordings (-1: not in a dwell)."""
+    dw, tt, rec = [], [], []
+    off = 0
+    for i, (s, v) in enumerate(zip(ctx.signals, ctx.valid)):
+        ids = dwell_ids(ctx, s)
+        ids = np.where(ids >= 0, ids + off, -1)
+        off = max(off, int(ids.max()) + 1)
+        dw.append(ids[v])
+        tt.append((np.arange(s.t.size) * s.dt)[v])
+        rec.append(np.full(int(np.sum(v)), i))
+    return np.concatenate(dw), np.concatenate(tt), np.concatenate(rec)
+
+
+def _centring_per_dwell(dwm):
+    """A function that subtracts, per dwell label of ``dwm``, each column's mean over that dwell's samples."""
+    order = np.argsort(dwm, kind="stable")
+    bounds = np.flatnonzero(np.diff(dwm[order])) + 1
+
+    def centred(X):
+        X = np.array(X, float, copy=True)
+        for seg in np.split(order, bounds):
+            X[seg] -= X[seg].mean(axis=0)
+        return X
+    return centred
+
+
 def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     """Creep's own signature on the responses to the drive's steps alone (round 13).
 
@@ -267,16 +295,7 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     taus = creep.taus(ctx)
     if not taus:
         return None
-    dw, tt, rec = [], [], []
-    off = 0
-    for i, (s, v) in enumerate(zip(ctx.signals, ctx.valid)):
-        ids = dwell_ids(ctx, s)
-        ids = np.where(ids >= 0, ids + off, -1)
-        off = max(off, int(ids.max()) + 1)
-        dw.append(ids[v])
-        tt.append((np.arange(s.t.size) * s.dt)[v])
-        rec.append(np.full(int(np.sum(v)), i))
-    dw, tt, rec = np.concatenate(dw), np.concatenate(tt), np.concatenate(rec)
+    dw, tt, rec = _dwell_samples(ctx)
     m = (dw >= 0) & (fold_all >= 0)
     ids = np.unique(dw[m])
     if ids.size < 2:
@@ -284,14 +303,7 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     dwm, fa, ba, ra = dw[m], fold_all[m], block_all[m], rec[m]
     if not (np.any(fa == 0) and np.any(fa == 1)):
         return None   # every dwell in one fold: nothing to fit on, or nothing to test on (s0-017: 2 dwells, 1 fold)
-    order = np.argsort(dwm, kind="stable")
-    bounds = np.flatnonzero(np.diff(dwm[order])) + 1
-
-    def centred(X):
-        X = np.array(X, float, copy=True)
-        for seg in np.split(order, bounds):
-            X[seg] -= X[seg].mean(axis=0)
-        return X
+    centred = _centring_per_dwell(dwm)
 
     recs = np.unique(ra)
     T = centred(np.column_stack([np.where(ra == r, tt[m], 0.0) for r in recs]))
@@ -417,29 +429,13 @@ def creep_coef_on_dwells(ctx, e, train, rows) -> np.ndarray | None:
     use = dwell_taus(ctx, taus)
     if not use:
         return None
-    dw, tt, rec, C_all = [], [], [], []
-    off = 0
-    for i, (s, v) in enumerate(zip(ctx.signals, ctx.valid)):
-        ids = dwell_ids(ctx, s)
-        ids = np.where(ids >= 0, ids + off, -1)
-        off = max(off, int(ids.max()) + 1)
-        dw.append(ids[v])
-        tt.append((np.arange(s.t.size) * s.dt)[v])
-        rec.append(np.full(int(np.sum(v)), i))
-        C_all.append(G(ctx.base, creep.basis(s.h, taus, s.dt))[v])
-    dw, tt, rec, C_all = np.concatenate(dw), np.concatenate(tt), np.concatenate(rec), np.vstack(C_all)
+    dw, tt, rec = _dwell_samples(ctx)
+    C_all = np.vstack([G(ctx.base, creep.basis(s.h, taus, s.dt))[v] for s, v in zip(ctx.signals, ctx.valid)])
     m = (dw >= 0) & np.asarray(train, bool)
     if np.unique(dw[m]).size < 2:
         return None
     dwm, ra = dw[m], rec[m]
-    order = np.argsort(dwm, kind="stable")
-    bounds = np.flatnonzero(np.diff(dwm[order])) + 1
-
-    def centred(X):
-        X = np.array(X, float, copy=True)
-        for seg in np.split(order, bounds):
-            X[seg] -= X[seg].mean(axis=0)
-        return X
+    centred = _centring_per_dwell(dwm)
 
     k = [taus.index(tau) for tau in use]
     T = centred(np.column_stack([np.where(ra == r, tt[m], 0.0) for r in np.unique(ra)]))
