@@ -977,11 +977,7 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
                 log(f"    signature {c.name}: {c.veto}")
                 continue
         ex = c.exact or [_exact_fold(fctx[f], c, f, fold_all, recs) for f in (0, 1)]
-        c.exact_fold_ratios = [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0 else 1.0
-                               for x in ex]
-        n_ex = sum(x["n"] for x in ex)
-        c.exact_before = float(np.sqrt(sum(x["sse_before"] for x in ex) / max(n_ex, 1)) / span)
-        c.exact_after = float(np.sqrt(sum(x["sse_after"] for x in ex) / max(n_ex, 1)) / span)
+        c.exact_fold_ratios, c.exact_before, c.exact_after = _exact_figures(ex, span)
         log(f"    exact {c.name}: {c.exact_fold_ratios} {c.exact_before:.4f} -> {c.exact_after:.4f}")
         c.exact_above = _exact_above(ex, span)
         worse = _worsened(ex, fctx[0].names)
@@ -1010,15 +1006,13 @@ def _exact_on_dwells(c, fctx, fold_all, recs, span, log) -> bool:
     refused = list(c.exact_fold_ratios)
     c2 = dataclasses.replace(c, coef=list(c.dwell_coef), exact=None)
     ex = [_exact_fold(fctx[f], c2, f, fold_all, recs) for f in (0, 1)]
-    fr = [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0 else 1.0 for x in ex]
+    fr, before, after = _exact_figures(ex, span)
     log(f"    exact {c.name} sized on the dwells: {fr}")
     if max(fr) >= 1.0:
         c.veto += f"; nor sized on the dwells after the steps (ratios {fr[0]:.2f}, {fr[1]:.2f})"
         return False
-    n_ex = sum(x["n"] for x in ex)
     c.coef, c.exact, c.exact_fold_ratios, c.from_dwells, c.veto = list(c.dwell_coef), ex, fr, True, None
-    c.exact_before = float(np.sqrt(sum(x["sse_before"] for x in ex) / max(n_ex, 1)) / span)
-    c.exact_after = float(np.sqrt(sum(x["sse_after"] for x in ex) / max(n_ex, 1)) / span)
+    c.exact_before, c.exact_after = before, after
     c.worsened = _worsened(ex, fctx[0].names)
     note = (f"Its model fitted on all blocks was refused by the exact check (ratios {refused[0]:.2f}, "
             f"{refused[1]:.2f}: the base's misfit there takes creep's columns); sized on the dwells after the steps "
@@ -1037,11 +1031,17 @@ def _exact_above(ex, span) -> dict | None:
     if not all("above" in x for x in ex):
         return None
     a = [x["above"] for x in ex]
-    n = max(sum(x["n"] for x in a), 1)
-    return {"above_hz": a[0]["above_hz"],
-            "fold_ratios": [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0 else 1.0 for x in a],
-            "nrmse_before": float(np.sqrt(sum(x["sse_before"] for x in a) / n) / span),
-            "nrmse_after": float(np.sqrt(sum(x["sse_after"] for x in a) / n) / span)}
+    fr, before, after = _exact_figures(a, span)
+    return {"above_hz": a[0]["above_hz"], "fold_ratios": fr, "nrmse_before": before, "nrmse_after": after}
+
+
+def _exact_figures(ex, span) -> tuple:
+    """(fold ratios, pooled NRMSE before, after) of the exact check's per-fold sums ``ex`` (``_exact_fold``'s
+    ``sse_before``, ``sse_after``, ``n``); ``span`` [um] normalizes. A fold with nothing before has ratio 1."""
+    fr = [float(np.sqrt(x["sse_after"] / x["sse_before"])) if x["sse_before"] > 0 else 1.0 for x in ex]
+    n = max(sum(x["n"] for x in ex), 1)
+    return (fr, float(np.sqrt(sum(x["sse_before"] for x in ex) / n) / span),
+            float(np.sqrt(sum(x["sse_after"] for x in ex) / n) / span))
 
 
 def _ratio_max(term, accepted) -> float:
