@@ -229,9 +229,10 @@ def test_base_oracle_static_output_is_the_noise_free_output_before_the_modes():
     assert checked >= 1
 
 
-def test_plays_offered_beyond_the_reversal_levels_only_when_asked_and_never_to_a_periodic_calibration(monkeypatch):
-    # round 19's switch (off): every play count of PLANE_PLAYS offered once the calibration reversed at more than two
-    # levels; a periodic calibration (two levels) keeps R = 1 either way
+def test_plays_offered_only_up_to_the_calibration_reversal_levels_and_one_to_a_periodic_calibration():
+    # R is offered only with 2 R distinct reversal levels (round 11); round 20 ran the cap lifted (every R of
+    # PLANE_PLAYS once the calibration reversed at more than two levels) through the diagnosis and removed it
+    # (docs/diagnose.md, "Round 20: the base's plane size")
     from piezoctl.ident import base as base_mod
     fo = np.concatenate([np.linspace(3, 147, 3000)] + [np.concatenate([np.linspace(147, lv, 1500),
                                                                          np.linspace(lv, 147, 1500)])
@@ -242,12 +243,8 @@ def test_plays_offered_beyond_the_reversal_levels_only_when_asked_and_never_to_a
     def stage(u):
         return 0.2 * u + 3.0 * np.tanh((u - 75.0) / 40.0)
 
-    def allowed():
-        return {name: fit_base([_rec(u, stage(u))])["base_info"]["plane"]["plays_allowed"]
-                for name, u in (("forc", fo), ("periodic", periodic))}
-
-    before = allowed()
-    assert max(before["forc"]) < max(base_mod.PLANE_PLAYS) and before["periodic"] == [1]
-    monkeypatch.setattr(base_mod, "PLAYS_BY_REVERSALS", False)
-    after = allowed()
-    assert after["forc"] == list(base_mod.PLANE_PLAYS) and after["periodic"] == [1]
+    forc = fit_base([_rec(fo, stage(fo))])["base_info"]["plane"]
+    assert 2 < forc["reversal_levels"] < 2 * max(base_mod.PLANE_PLAYS)
+    assert forc["plays_allowed"] == [R for R in base_mod.PLANE_PLAYS if R == 1 or 2 * R <= forc["reversal_levels"]]
+    assert forc["plays"] in forc["plays_allowed"]
+    assert fit_base([_rec(periodic, stage(periodic))])["base_info"]["plane"]["plays_allowed"] == [1]

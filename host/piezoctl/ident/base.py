@@ -81,10 +81,6 @@ RIDGES = (1e-6, 1e-4, 1e-2, 1e-1, 1.0)   # weights of the roughness penalty (rel
 BW_BETAS = tuple(float(x) for x in np.geomspace(0.5, 40.0, 7))   # Bouc-Wen column shapes [1/normalized drive]
 BW_GAMMA_RATIOS = (-0.6, -0.3, 0.0, 0.3, 0.6)                    # gamma / beta; Nelder-Mead refines
 CV_BLOCKS = 32           # interleaved blocks per calibration recording in the size cross-validation
-PLAYS_BY_REVERSALS = True  # only R with 2 R reversal levels offered; False (round 19, off): every R of PLANE_PLAYS
-                           # once the calibration reversed at more than two levels (docs/diagnose.md, "Round 19:
-                           # the base on nulls": with CV_BLOCKS = 512 it halved seed 121's null error and was
-                           # worse on two of three of seed 122's)
 SIZE_TOLERANCE = 1.02    # the smallest size within 2 % of the best cross-validated error is chosen
 ORDERS = (0, 2, 4, 6)
 QS_LP_HZ = 20.0          # quasi-static: drive within QS_TOL of its zero-phase low-pass at this frequency
@@ -613,7 +609,7 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
     best_bw = (None, (float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95)) * float(np.exp(z[0]))))
     # thresholds the calibration's reversals can resolve: at least two reversal levels per play threshold
     n_rev = reversal_levels(vs, k0s)
-    plays = [R for R in PLANE_PLAYS if R == 1 or 2 * R <= n_rev or (not PLAYS_BY_REVERSALS and n_rev > 2)]
+    plays = [R for R in PLANE_PLAYS if R == 1 or 2 * R <= n_rev]
     table, best = [], None
     for bw in (None, best_bw[1]):
         for R in plays:
