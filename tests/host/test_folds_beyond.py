@@ -5,7 +5,7 @@ import types
 
 import numpy as np
 
-from piezoctl.diagnose.select import make_masks
+from piezoctl.diagnose.select import FOLD_SHARE_MIN, make_masks
 
 DT = 1e-3
 EDGE_V = 120.0   # the calibrated drive range's upper edge
@@ -60,5 +60,17 @@ def test_without_excursions_the_folds_are_the_alternate_blocks():
     sigs = [_sig(*_triangle(1.3, lo=20.0, hi=110.0)), _sig(*_triangle(2.0, lo=30.0, hi=119.0))]
     old = make_masks(sigs, 0.5, 1.0)
     new = make_masks(sigs, 0.5, 1.0, [np.maximum(s.u - EDGE_V, 0.0) for s in sigs])
+    for a, b in zip(old, new):
+        assert all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def test_alternate_blocks_that_share_the_excursions_are_kept():
+    # peaks every 1.5 s fall in blocks of both parities: the alternate blocks already share the excursion
+    sigs = [_sig(*_triangle(1.5, delay_s=0.3))]
+    excursion = [np.maximum(s.u - EDGE_V, 0.0) for s in sigs]
+    old = make_masks(sigs, 0.0, 1.0)
+    share = _energy_per_fold(sigs, old[0], old[1])
+    assert share.min() >= FOLD_SHARE_MIN * share.max()
+    new = make_masks(sigs, 0.0, 1.0, excursion)
     for a, b in zip(old, new):
         assert all(np.array_equal(x, y) for x, y in zip(a, b))
