@@ -5,6 +5,7 @@ import types
 
 import numpy as np
 
+from piezoctl.diagnose.run import OUT_MARGIN, excursions
 from piezoctl.diagnose.select import FOLD_SHARE_MIN, make_masks
 
 DT = 1e-3
@@ -74,3 +75,13 @@ def test_alternate_blocks_that_share_the_excursions_are_kept():
     new = make_masks(sigs, 0.0, 1.0, excursion)
     for a, b in zip(old, new):
         assert all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def test_a_rounding_beyond_the_edge_keeps_the_alternate_blocks():
+    # the drive passes the calibrated edge by 1e-3 V (dev nulls s124-023, s124-032), every time in one fold
+    t, u = _triangle(2.0, lo=20.0, hi=EDGE_V + 1e-3, delay_s=0.5)
+    sigs = [_sig(t, u)]
+    assert excursions(sigs, 10.0, EDGE_V) is None
+    far = [_sig(t, np.where(u > EDGE_V, EDGE_V + 2 * OUT_MARGIN * (EDGE_V - 10.0), u))]
+    x = excursions(far, 10.0, EDGE_V)
+    assert x is not None and np.max(x[0]) > OUT_MARGIN * (EDGE_V - 10.0)
