@@ -98,6 +98,17 @@ def _cut(s, v):
                                v=s.v[v], h=s.h[v], hyst=s.hyst[v], yb=s.yb[v], ydyn=s.ydyn[v])
 
 
+def excursions(sigs, lo, hi):
+    """Per recording, the drive's excursion beyond the calibrated drive range ``[lo, hi]`` [V] (0 inside), for
+    :func:`select.make_masks`; None when no recording leaves the range by more than the outside report's margin
+    (``OUT_MARGIN`` of its span): a drive that passes the edge by a rounding (dev nulls s124-023, s124-032: about
+    1e-3 V) holds nothing a term beyond the edge could be tested on, and keeps the alternate blocks."""
+    margin = OUT_MARGIN * (hi - lo)
+    if not any(np.any((s.u > hi + margin) | (s.u < lo - margin)) for s in sigs):
+        return None
+    return [np.maximum(s.u - hi, 0.0) + np.maximum(lo - s.u, 0.0) for s in sigs]
+
+
 def locate(base, cal, recs, names, settle_s, block_s, misfit=None, dynamics_band_hz=None):
     """The context of the current model on the recordings and the residual analysis (``dynamics_band_hz``: the
     band the base states its dynamics identified in, ``base_info``; a mode is offered only above it).
@@ -109,7 +120,11 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None, dynamics_band
         samples outside the calibrated drive range (None when there are none).
     """
     sigs = make_signals(base, recs, names)
-    valid, fold, block = make_masks(sigs, settle_s, block_s)
+    cal_k0 = [min(int(round(settle_s / r.dt)), len(r) // 2) for r in cal]   # settled start per calibration file
+    cal_u_lo = min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0))
+    cal_u_hi = max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0))
+    # round 20: the blocks beyond the calibrated range shared between the folds by their excursion (make_masks)
+    valid, fold, block = make_masks(sigs, settle_s, block_s, excursions(sigs, cal_u_lo, cal_u_hi))
     dt = sigs[0].dt
     yv = np.concatenate([s.y[v] for s, v in zip(sigs, valid)])
     uv = np.concatenate([s.u[v] for s, v in zip(sigs, valid)])
@@ -119,7 +134,6 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None, dynamics_band
     span = float(np.ptp(yv)) or 1.0
     resid = [s.y - s.yb for s in sigs]
     u2c = [r.u2 for r in cal if r.u2 is not None]
-    cal_k0 = [min(int(round(settle_s / r.dt)), len(r) // 2) for r in cal]   # settled start per calibration file
     ctx = Ctx(base=base, signals=sigs, valid=valid, fold=fold, block=block, names=names, n_rec=len(sigs), dt=dt,
               duration=max(s.t[-1] - s.t[0] for s in sigs),
               u2_ref=float(np.mean(np.concatenate(u2c))) if u2c else 0.0,
@@ -133,8 +147,7 @@ def locate(base, cal, recs, names, settle_s, block_s, misfit=None, dynamics_band
               cal_band_hz=calibration_band_hz(cal, cal_k0),
               dynamics_band_hz=None if dynamics_band_hz is None else float(dynamics_band_hz),
               cal=cal, cal_h=[refined.simulate_parts(base, r.t, r.u)["h"] for r in cal], cal_k0=cal_k0,
-              cal_u_lo=min(float(np.min(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
-              cal_u_hi=max(float(np.max(r.u[k0:])) for r, k0 in zip(cal, cal_k0)),
+              cal_u_lo=cal_u_lo, cal_u_hi=cal_u_hi,
               misfit=misfit, **_drift_clock(cal, recs), **_offset_groups(cal, recs))
     # samples where the drive is (or within OUT_GUARD_S was) outside the calibrated range: the base model
     # extrapolates there. They stay in the selection - saturation or a sensor's curvature may show only there -
