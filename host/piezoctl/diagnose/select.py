@@ -22,8 +22,7 @@ from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg, static_map
-from .misfit import (_above, _highpass_sos, _one_band_credited, above_per_recording, credited_ratio, ratios_above,
-                     ratios_where)
+from .misfit import _one_band_credited, above_per_recording, credited_ratio, ratios_above, ratios_where
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
                              drift_on_pair, signature_tests)
@@ -107,7 +106,6 @@ class Ctx:
     design_cache: dict = dataclasses.field(default_factory=dict)
     nuisance: np.ndarray | None = None   # hysteresis_nuisance() of this model, computed on first use
     dyn_nuisance: np.ndarray | None = None   # dynamics_nuisance() of this model, computed on first use
-    dyn_nuisance_above: tuple | None = None   # (edge [Hz], dynamics_nuisance(ctx, edge)), computed on first use
     init_nuisance: np.ndarray | None = None  # initial_state_nuisance() of this model, computed on first use
     cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
     cal_u_hi: float = 0.0
@@ -384,19 +382,16 @@ def hysteresis_nuisance(ctx):
     return ctx.nuisance
 
 
-def dynamics_nuisance(ctx, above_hz: float | None = None):
+def dynamics_nuisance(ctx):
     """The drive-side and resonance terms' extra nuisance (n_settled, 2): the first and second time derivatives
     of the current model's dynamic output, i.e. free low-order corrections ``c1 s + c2 s^2`` of its dynamics G
     (unit static gain kept) refitted on the new data. Above the calibration's band G was not identified: a
     stage's own latency and the phase of its modes there look like a delay of a sample or two, and a
     drive-side term is credited only with what such a refit of G cannot absorb (round 5 named `delay` on
-    nulls whose fast reveal showed the stage's one-sample latency). Cached on the context.
-
-    ``above_hz`` [Hz] (round 19, ``Term.dynamics_nuisance_above_hz``): the corrections high-passed there per
-    recording (zero phase, ``misfit.ratios_above``'s filter), so that they correct G only where the calibration
-    did not identify it; None, or an edge not below the Nyquist frequency: in the whole band."""
-    if above_hz is not None and not 0.0 < float(above_hz) < 0.45 / ctx.dt:
-        above_hz = None
+    nulls whose fast reveal showed the stage's one-sample latency). Cached on the context. Round 20: the
+    corrections act in the whole band; only above the base's dynamics band (round 19's variant) they left a true
+    delay's in-band lag to the pole as well, and on null s121-005 the stage's own in-band lag was named
+    `amplifier_bandwidth` x0.14 (docs/diagnose.md "Round 19: delay", "Round 20: delay and bandwidth")."""
     if ctx.dyn_nuisance is None:
         cols = []
         for s, v in zip(ctx.signals, ctx.valid):
@@ -405,18 +400,7 @@ def dynamics_nuisance(ctx, above_hz: float | None = None):
             d2 = np.diff(d1, prepend=d1[0])
             cols.append(np.column_stack([d1, d2])[v])
         ctx.dyn_nuisance = np.vstack(cols)
-    if above_hz is None:
-        return ctx.dyn_nuisance
-    key = float(above_hz)
-    if ctx.dyn_nuisance_above is None or ctx.dyn_nuisance_above[0] != key:
-        sos = _highpass_sos(ctx.dt, key)
-        parts, i = [], 0
-        for v in ctx.valid:
-            n = int(np.sum(v))
-            parts.append(np.column_stack([_above(c, sos) for c in ctx.dyn_nuisance[i:i + n].T]))
-            i += n
-        ctx.dyn_nuisance_above = (key, np.vstack(parts))
-    return ctx.dyn_nuisance_above[1]
+    return ctx.dyn_nuisance
 
 
 def initial_state_nuisance(ctx):
@@ -460,7 +444,7 @@ def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True, accept
     if term.nested:
         parts.append(hysteresis_nuisance(ctx))
     if term.nested_dynamics and dynamics:
-        parts.append(dynamics_nuisance(ctx, term.dynamics_nuisance_above_hz(ctx)))
+        parts.append(dynamics_nuisance(ctx))
     if accepted and ctx.accepted_flex is not None:
         parts.append(ctx.accepted_flex)
     own_test = getattr(term, "test_nuisance", None)   # a term's own test-only nuisance (round 17: the rate term's)
@@ -785,8 +769,7 @@ def rebase(ctx, params, recs):
         sigs.append(dataclasses.replace(s, v=p["v"], h=p["h"], hyst=p["hyst"], yb=y, ydyn=p["y_dyn"] + off))
     cal_h = [refined.simulate_parts(params, r.t, r.u, r.u2)["h"] for r in ctx.cal]
     return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={},
-                               nuisance=None, dyn_nuisance=None, dyn_nuisance_above=None,
-                               init_nuisance=None)
+                               nuisance=None, dyn_nuisance=None, init_nuisance=None)
 
 
 def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
@@ -818,12 +801,7 @@ def pair_design(ctxs, cands, f):
     nested tests' nuisances with its bounds, and each candidate's columns at the setting its test chose there."""
     ctx, terms = ctxs[f], [c.term for c in cands]
     parts, lo, hi = [], [], []
-    # round 19: the dynamics corrections above a member's edge when one has it (each member is judged at least as
-    # freely as in its own nested test)
-    edges = [t.dynamics_nuisance_above_hz(ctx) for t in terms if t.nested_dynamics]
-    edge = max((x for x in edges if x is not None), default=None)
-    for flag, fn, bound in (("nested", hysteresis_nuisance, np.inf),
-                            ("nested_dynamics", lambda c: dynamics_nuisance(c, edge), np.inf),
+    for flag, fn, bound in (("nested", hysteresis_nuisance, np.inf), ("nested_dynamics", dynamics_nuisance, np.inf),
                             ("initial_state", initial_state_nuisance, 1.0)):
         if any(getattr(t, flag) for t in terms):
             N = fn(ctx)
