@@ -179,6 +179,8 @@ class Candidate:
     selection_round: int = 1                  # the round it was evaluated in (1: on the base)
     separation: list | None = None            # accepted: the pair tests against the round's others (discriminate.separate)
     slow_alternative: dict | None = None      # sensor_offset: a drift its levels cannot exclude (slow_signature.attribute)
+    delay_or_pole: dict | None = None         # round 20, delay and amplifier_bandwidth both significant: the gain test
+    #                                           between them (signature.delay_or_pole)
     heldout: tuple | None = None              # (before, correction, fold, block, rec): signature.HELDOUT_CHECKED only
     exact_above: dict | None = None           # round 19: the exact check above the edge it was sized above
     whole: dict | None = None                 # round 16, a term judged above the calibration's band: the edge [Hz]
@@ -846,6 +848,13 @@ def _separate(best, evals, fctx, es, fold_all, block_all, rows, log):
         best.separation = [r for r in best.separation if r["name"] != alt["name"]] + [
             {"name": alt["name"], "verdict": "inseparable", "reason": alt["reason"]}]
         log(f"    pair {best.name}/{alt['name']}: inseparable ({alt['reason']})")
+    g = best.delay_or_pole   # round 20: the delay and the pole told apart (or not) by the magnitude
+    if g is not None:
+        other = g["other"]
+        verdict = "inseparable" if g["verdict"] is None else "a"
+        best.separation = [r for r in best.separation if r["name"] != other] + [
+            {"name": other, "verdict": verdict, "reason": g["reason"]}]
+        log(f"    pair {best.name}/{other}: {verdict} by the gain ({g['reason']})")
 
 
 def _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check):
@@ -889,6 +898,42 @@ def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
         evals[i] = dd[k]
     for c in dd:
         c.discrimination = text
+
+
+LAG_PAIR = ("delay", "amplifier_bandwidth")
+
+
+def _delay_or_pole(evals, ctx, f_band, log):
+    """Round 20: when the delay and the amplifier's pole both pass their nested tests, they took the same lag (both
+    lag by about ``w tau`` in band; docs/diagnose.md "Round 20: delay and bandwidth"). Their magnitudes tell them
+    apart where the drives excite frequencies at which the pole's has fallen (:func:`signature.delay_or_pole` on the
+    current model's residual transfer, up to the drives' band): the shape that fits worse at level ``ALPHA`` is
+    refused (its shape is the other's), the one that fits better goes first. Where neither fits better both stay,
+    in their order, and the one named carries the other as an alternative the data cannot tell from it
+    (:func:`_separate`). Reorders ``evals`` in place."""
+    pair = [next((c for c in evals if c.name == n and c.significant and not c.veto), None) for n in LAG_PAIR]
+    if None in pair or f_band is None:
+        return
+    from .signature import delay_or_pole, drive_band_hz, transfer
+    xs = [np.asarray(s.yb, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    ys = [np.asarray(s.y, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    us = [np.asarray(s.u, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    tr = transfer(xs, ys, ctx.dt)
+    if tr is None:
+        g = {"verdict": None, "figures": {}, "reason": "the recordings give no informative bin of the residual's transfer"}
+    else:
+        g = delay_or_pole(tr, ctx.dt, f_band, drive_band_hz(us, ctx.dt))
+    log(f"    delay or pole: {g['verdict'] or 'not told apart'} ({g['reason']})")
+    for c, o in zip(pair, pair[::-1]):
+        c.delay_or_pole = {**g, "other": o.name}
+    if g["verdict"] is None:
+        return
+    win, lose = (pair[0], pair[1]) if g["verdict"] == "delay" else (pair[1], pair[0])
+    lose.veto = f"its shape is the {win.name}'s: " + g["reason"]
+    lose.delay_or_pole = None
+    i, j = evals.index(win), evals.index(lose)
+    if i > j:
+        evals.insert(j, evals.pop(i))
 
 
 def _supersede(evals):
@@ -1097,6 +1142,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         creep_model_on_dwells(evals, fctx, es, fold_all, block_all, rows, log)   # round 19: its model on the dwells
         drift_on_pair(evals, fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows, log)   # round 18
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
+        _delay_or_pole(evals, ctx_all, f_band, log)   # round 20: the pair told apart by the magnitude
         _supersede(evals)
         if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term
             tests = signature_tests(fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows)
