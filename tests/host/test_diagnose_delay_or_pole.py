@@ -105,12 +105,12 @@ def _ctx(shape):
     return types.SimpleNamespace(signals=sigs, valid=[np.ones(N, bool)] * 2, dt=DT)
 
 
-def test_selection_refuses_the_shape_the_other_fits_better_and_puts_the_winner_first():
+def test_selection_refuses_the_shape_the_other_fits_better_and_keeps_the_order():
     ctx = _ctx(lambda x: _delay(_pole(x, 250.0), 1))
-    d, b, r = _cand("delay"), _cand("amplifier_bandwidth"), _cand("unmodeled_resonance")
+    d, b, r = _cand("delay"), _cand("amplifier_bandwidth"), _cand("amplifier_slew_limit")
     evals = [d, r, b]
     S._delay_or_pole(evals, ctx, F_BAND, lambda *a: None)
-    assert evals == [b, d, r]
+    assert evals == [d, r, b] and r.veto is None   # the slew limit the discrimination put before the pole stays so
     assert d.veto and d.veto.startswith("its shape is the amplifier_bandwidth's")
     assert b.veto is None and b.delay_or_pole["other"] == "delay"
     assert b.delay_or_pole["verdict"] == "amplifier_bandwidth"

@@ -908,9 +908,9 @@ def _delay_or_pole(evals, ctx, f_band, log):
     lag by about ``w tau`` in band; docs/diagnose.md "Round 20: delay and bandwidth"). Their magnitudes tell them
     apart where the drives excite frequencies at which the pole's has fallen (:func:`signature.delay_or_pole` on the
     current model's residual transfer, up to the drives' band): the shape that fits worse at level ``ALPHA`` is
-    refused (its shape is the other's), the one that fits better goes first. Where neither fits better both stay,
-    in their order, and the one named carries the other as an alternative the data cannot tell from it
-    (:func:`_separate`). Reorders ``evals`` in place."""
+    refused (its shape is the other's); the order of the candidates is kept, so a third one the group's
+    discrimination put first (a slew limit) stays first. Where neither fits better both stay, and the one named
+    carries the other as an alternative the data cannot tell from it (:func:`_separate`)."""
     pair = [next((c for c in evals if c.name == n and c.significant and not c.veto), None) for n in LAG_PAIR]
     if None in pair or f_band is None:
         return
@@ -931,9 +931,6 @@ def _delay_or_pole(evals, ctx, f_band, log):
     win, lose = (pair[0], pair[1]) if g["verdict"] == "delay" else (pair[1], pair[0])
     lose.veto = f"its shape is the {win.name}'s: " + g["reason"]
     lose.delay_or_pole = None
-    i, j = evals.index(win), evals.index(lose)
-    if i > j:
-        evals.insert(j, evals.pop(i))
 
 
 def _supersede(evals):
