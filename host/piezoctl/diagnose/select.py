@@ -22,8 +22,7 @@ from ..ident.terms import Term
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg, static_map
-from .misfit import (_above, _highpass_sos, _one_band_credited, above_per_recording, credited_ratio, ratios_above,
-                     ratios_where)
+from .misfit import _one_band_credited, above_per_recording, credited_ratio, ratios_above, ratios_where
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
                              drift_on_pair, signature_tests)
@@ -107,7 +106,6 @@ class Ctx:
     design_cache: dict = dataclasses.field(default_factory=dict)
     nuisance: np.ndarray | None = None   # hysteresis_nuisance() of this model, computed on first use
     dyn_nuisance: np.ndarray | None = None   # dynamics_nuisance() of this model, computed on first use
-    dyn_nuisance_above: tuple | None = None   # (edge [Hz], dynamics_nuisance(ctx, edge)), computed on first use
     init_nuisance: np.ndarray | None = None  # initial_state_nuisance() of this model, computed on first use
     cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
     cal_u_hi: float = 0.0
@@ -181,6 +179,8 @@ class Candidate:
     selection_round: int = 1                  # the round it was evaluated in (1: on the base)
     separation: list | None = None            # accepted: the pair tests against the round's others (discriminate.separate)
     slow_alternative: dict | None = None      # sensor_offset: a drift its levels cannot exclude (slow_signature.attribute)
+    delay_or_pole: dict | None = None         # round 20, delay and amplifier_bandwidth both significant: the gain test
+    #                                           between them (signature.delay_or_pole)
     heldout: tuple | None = None              # (before, correction, fold, block, rec): signature.HELDOUT_CHECKED only
     exact_above: dict | None = None           # round 19: the exact check above the edge it was sized above
     whole: dict | None = None                 # round 16, a term judged above the calibration's band: the edge [Hz]
@@ -415,19 +415,16 @@ def hysteresis_nuisance(ctx):
     return ctx.nuisance
 
 
-def dynamics_nuisance(ctx, above_hz: float | None = None):
+def dynamics_nuisance(ctx):
     """The drive-side and resonance terms' extra nuisance (n_settled, 2): the first and second time derivatives
     of the current model's dynamic output, i.e. free low-order corrections ``c1 s + c2 s^2`` of its dynamics G
     (unit static gain kept) refitted on the new data. Above the calibration's band G was not identified: a
     stage's own latency and the phase of its modes there look like a delay of a sample or two, and a
     drive-side term is credited only with what such a refit of G cannot absorb (round 5 named `delay` on
-    nulls whose fast reveal showed the stage's one-sample latency). Cached on the context.
-
-    ``above_hz`` [Hz] (round 19, ``Term.dynamics_nuisance_above_hz``): the corrections high-passed there per
-    recording (zero phase, ``misfit.ratios_above``'s filter), so that they correct G only where the calibration
-    did not identify it; None, or an edge not below the Nyquist frequency: in the whole band."""
-    if above_hz is not None and not 0.0 < float(above_hz) < 0.45 / ctx.dt:
-        above_hz = None
+    nulls whose fast reveal showed the stage's one-sample latency). Cached on the context. Round 20: the
+    corrections act in the whole band; only above the base's dynamics band (round 19's variant) they left a true
+    delay's in-band lag to the pole as well, and on null s121-005 the stage's own in-band lag was named
+    `amplifier_bandwidth` x0.14 (docs/diagnose.md "Round 19: delay", "Round 20: delay and bandwidth")."""
     if ctx.dyn_nuisance is None:
         cols = []
         for s, v in zip(ctx.signals, ctx.valid):
@@ -436,18 +433,7 @@ def dynamics_nuisance(ctx, above_hz: float | None = None):
             d2 = np.diff(d1, prepend=d1[0])
             cols.append(np.column_stack([d1, d2])[v])
         ctx.dyn_nuisance = np.vstack(cols)
-    if above_hz is None:
-        return ctx.dyn_nuisance
-    key = float(above_hz)
-    if ctx.dyn_nuisance_above is None or ctx.dyn_nuisance_above[0] != key:
-        sos = _highpass_sos(ctx.dt, key)
-        parts, i = [], 0
-        for v in ctx.valid:
-            n = int(np.sum(v))
-            parts.append(np.column_stack([_above(c, sos) for c in ctx.dyn_nuisance[i:i + n].T]))
-            i += n
-        ctx.dyn_nuisance_above = (key, np.vstack(parts))
-    return ctx.dyn_nuisance_above[1]
+    return ctx.dyn_nuisance
 
 
 def initial_state_nuisance(ctx):
@@ -491,7 +477,7 @@ def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True, accept
     if term.nested:
         parts.append(hysteresis_nuisance(ctx))
     if term.nested_dynamics and dynamics:
-        parts.append(dynamics_nuisance(ctx, term.dynamics_nuisance_above_hz(ctx)))
+        parts.append(dynamics_nuisance(ctx))
     if accepted and ctx.accepted_flex is not None:
         parts.append(ctx.accepted_flex)
     own_test = getattr(term, "test_nuisance", None)   # a term's own test-only nuisance (round 17: the rate term's)
@@ -816,8 +802,7 @@ def rebase(ctx, params, recs):
         sigs.append(dataclasses.replace(s, v=p["v"], h=p["h"], hyst=p["hyst"], yb=y, ydyn=p["y_dyn"] + off))
     cal_h = [refined.simulate_parts(params, r.t, r.u, r.u2)["h"] for r in ctx.cal]
     return dataclasses.replace(ctx, base=params, signals=sigs, cal_h=cal_h, refit_cache={}, design_cache={},
-                               nuisance=None, dyn_nuisance=None, dyn_nuisance_above=None,
-                               init_nuisance=None)
+                               nuisance=None, dyn_nuisance=None, init_nuisance=None)
 
 
 def _exact_fold(ctx, c: Candidate, f, fold_all, recs) -> dict:
@@ -849,12 +834,7 @@ def pair_design(ctxs, cands, f):
     nested tests' nuisances with its bounds, and each candidate's columns at the setting its test chose there."""
     ctx, terms = ctxs[f], [c.term for c in cands]
     parts, lo, hi = [], [], []
-    # round 19: the dynamics corrections above a member's edge when one has it (each member is judged at least as
-    # freely as in its own nested test)
-    edges = [t.dynamics_nuisance_above_hz(ctx) for t in terms if t.nested_dynamics]
-    edge = max((x for x in edges if x is not None), default=None)
-    for flag, fn, bound in (("nested", hysteresis_nuisance, np.inf),
-                            ("nested_dynamics", lambda c: dynamics_nuisance(c, edge), np.inf),
+    for flag, fn, bound in (("nested", hysteresis_nuisance, np.inf), ("nested_dynamics", dynamics_nuisance, np.inf),
                             ("initial_state", initial_state_nuisance, 1.0)):
         if any(getattr(t, flag) for t in terms):
             N = fn(ctx)
@@ -899,6 +879,13 @@ def _separate(best, evals, fctx, es, fold_all, block_all, rows, log):
         best.separation = [r for r in best.separation if r["name"] != alt["name"]] + [
             {"name": alt["name"], "verdict": "inseparable", "reason": alt["reason"]}]
         log(f"    pair {best.name}/{alt['name']}: inseparable ({alt['reason']})")
+    g = best.delay_or_pole   # round 20: the delay and the pole told apart (or not) by the magnitude
+    if g is not None:
+        other = g["other"]
+        verdict = "inseparable" if g["verdict"] is None else "a"
+        best.separation = [r for r in best.separation if r["name"] != other] + [
+            {"name": other, "verdict": verdict, "reason": g["reason"]}]
+        log(f"    pair {best.name}/{other}: {verdict} by the gain ({g['reason']})")
 
 
 def _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check):
@@ -942,6 +929,39 @@ def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
         evals[i] = dd[k]
     for c in dd:
         c.discrimination = text
+
+
+LAG_PAIR = ("delay", "amplifier_bandwidth")
+
+
+def _delay_or_pole(evals, ctx, f_band, log):
+    """Round 20: when the delay and the amplifier's pole both pass their nested tests, they took the same lag (both
+    lag by about ``w tau`` in band; docs/diagnose.md "Round 20: delay and bandwidth"). Their magnitudes tell them
+    apart where the drives excite frequencies at which the pole's has fallen (:func:`signature.delay_or_pole` on the
+    current model's residual transfer, up to the drives' band): the shape that fits worse at level ``ALPHA`` is
+    refused (its shape is the other's); the order of the candidates is kept, so a third one the group's
+    discrimination put first (a slew limit) stays first. Where neither fits better both stay, and the one named
+    carries the other as an alternative the data cannot tell from it (:func:`_separate`)."""
+    pair = [next((c for c in evals if c.name == n and c.significant and not c.veto), None) for n in LAG_PAIR]
+    if None in pair or f_band is None:
+        return
+    from .signature import delay_or_pole, drive_band_hz, transfer
+    xs = [np.asarray(s.yb, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    ys = [np.asarray(s.y, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    us = [np.asarray(s.u, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
+    tr = transfer(xs, ys, ctx.dt)
+    if tr is None:
+        g = {"verdict": None, "figures": {}, "reason": "the recordings give no informative bin of the residual's transfer"}
+    else:
+        g = delay_or_pole(tr, ctx.dt, f_band, drive_band_hz(us, ctx.dt))
+    log(f"    delay or pole: {g['verdict'] or 'not told apart'} ({g['reason']})")
+    for c, o in zip(pair, pair[::-1]):
+        c.delay_or_pole = {**g, "other": o.name}
+    if g["verdict"] is None:
+        return
+    win, lose = (pair[0], pair[1]) if g["verdict"] == "delay" else (pair[1], pair[0])
+    lose.veto = f"its shape is the {win.name}'s: " + g["reason"]
+    lose.delay_or_pole = None
 
 
 def _supersede(evals):
@@ -1150,6 +1170,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         creep_model_on_dwells(evals, fctx, es, fold_all, block_all, rows, log)   # round 19: its model on the dwells
         drift_on_pair(evals, fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows, log)   # round 18
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
+        _delay_or_pole(evals, ctx_all, f_band, log)   # round 20: the pair told apart by the magnitude
         _supersede(evals)
         if any(c.significant and not c.veto and c.name in SIGNATURES for c in evals):   # which slow term
             tests = signature_tests(fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows)

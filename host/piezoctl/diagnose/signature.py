@@ -52,8 +52,8 @@ from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
 from .discriminate import rate_band_hz
 
 __all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies", "model_notches", "NOTCH_DAMPING",
-           "dispersion", "drive_band_hz", "within_band", "check_delay", "check_bandwidth", "check_mode", "check_slew",
-           "check_slew_absent", "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
+           "dispersion", "drive_band_hz", "within_band", "check_delay", "check_bandwidth", "delay_or_pole", "check_mode",
+           "check_slew", "check_slew_absent", "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
 
 ALPHA = 0.01                 # level of every test here
 SEG_S = 0.1                  # [s] segment length aimed at (10 Hz bins); shortened so each recording gives 4
@@ -434,6 +434,60 @@ def check_bandwidth(tr: Transfer, s2: float, f_band: float, dt: float) -> dict:
                     "magnitude falling and phase lagging together as one pole")
     r["figures"]["fc_hz"] = r["figures"].pop("setting", None)
     return r
+
+
+def delay_or_pole(tr: Transfer, dt: float, f_band: float, f_drive: float | None = None) -> dict:
+    """Round 20: a delay told from a first-order pole by the magnitude, on the bins the recordings' drive excites.
+
+    A delay ``e^{-j w d}`` and a pole ``1 / (1 + j w tau)`` lag alike at low frequency (``w d`` against
+    ``atan(w tau)``, both about ``w tau`` while ``w tau`` is small); they differ in the magnitude (a delay's stays
+    1, a pole's falls as ``1 / sqrt(1 + (w tau)^2)``) and in the phase's curvature (a delay's is linear to any
+    frequency, a pole's saturates at 90 degrees). Both are fitted to the residual's transfer with a free gain, as in
+    the shape tests: the delay ``a e^{-j w d}`` (the grid of :func:`check_delay`; ``d`` holds the loop's own
+    latency too), the pole ``a e^{-j w d0} / (1 + j f / fc)`` (the grid of :func:`check_bandwidth`, behind the
+    loop's latency ``d0`` up to ``LATENCY_SAMPLES``, which a stage has whatever its amplifier: development
+    s124-056, a true 364 Hz pole, lags 81 degrees at 540 Hz where the pole alone gives 56). Both carry the same
+    misfit of the unidentified dynamics; F = the one's weighted misfit per degree of freedom over the other's (2 K
+    - 2 and 2 K - 3 on K complex bins), level ``ALPHA`` each way. The bins: the informative ones up to the band the
+    drives excite (``f_drive``, :func:`drive_band_hz`; all when None): above it the transfer's bins are the
+    stage's own modes rung by the drive's harmonics (round 14), which neither shape fits. Unlike
+    :func:`check_delay`, also when the drive's band lies inside ``f_band``: there G took both lags, and the test
+    says the two are not told apart (development null s121-005, drive to 65 Hz in a 160 Hz band: on every bin to
+    4.7 kHz the stage's modes made it a pole, F 1.56).
+    Unlike the shape tests, the bins where ``|T|`` exceeds 1 are kept: a delay predicts ``|T| = a`` there as
+    everywhere, and a magnitude that does not fall is the evidence against the pole (development delays s124-007
+    and s124-022: ``|T|`` 1.00 to 1.12 to the drive's 230 Hz; the shape tests keep 6 and 7 of their 23 bins).
+
+    Returns a dict: ``verdict`` ``"delay"`` or ``"amplifier_bandwidth"`` when that shape fits better at level
+    ``ALPHA``, None when neither does (the recordings do not reach frequencies where the two differ measurably:
+    they are not told apart), with ``reason`` and ``figures``."""
+    part = tr if f_drive is None else within_band(tr, f_drive)
+    fig = {"bins": part.k, "f_drive_hz": None if f_drive is None else float(f_drive), "identified_band_hz": float(f_band)}
+    if part.k < SHAPE_MIN_BINS:
+        return {"verdict": None, "figures": fig,
+                "reason": f"{part.k} informative bins of the residual's transfer up to the drive's band: too few to tell "
+                          f"a delay's flat magnitude from a pole's falling one (at least {SHAPE_MIN_BINS})"}
+    d, a_d, c_d = _best(part, np.arange(0.0, 64.25, 0.25) * dt, lambda x, f: np.exp(-2j * np.pi * f * x))
+    lat = np.linspace(0.0, LATENCY_SAMPLES, int(round(4 * LATENCY_SAMPLES)) + 1) * dt
+    grid = [(fc, d0) for fc in np.geomspace(0.0005 / dt, 0.5 / dt, 200) for d0 in lat]
+    (fc, d0), a_p, c_p = _best(part, grid, lambda x, f: np.exp(-2j * np.pi * f * x[1]) / (1.0 + 1j * f / x[0]))
+    dof_d, dof_p = max(2 * part.k - 2, 1), max(2 * part.k - 3, 1)
+    F = (c_d / dof_d) / max(c_p / dof_p, 1e-300)   # > 1: the pole fits better
+    p_pole = float(stats.f.sf(F, dof_d, dof_p))
+    p_delay = float(stats.f.sf(1.0 / max(F, 1e-300), dof_p, dof_d))
+    f_top = float(part.f.max())
+    drop = float(1.0 - 1.0 / np.sqrt(1.0 + (f_top / fc) ** 2))
+    fig.update({"f_max_hz": f_top, "delay_s": float(d), "delay_gain": a_d, "chi2_delay": c_d, "fc_hz": float(fc),
+                "pole_latency_s": float(d0), "pole_gain": a_p, "chi2_pole": c_p, "F": F, "p_pole": p_pole,
+                "p_delay": p_delay, "pole_drop_at_top": drop})
+    verdict = "amplifier_bandwidth" if p_pole < ALPHA else "delay" if p_delay < ALPHA else None
+    said = (f"on {part.k} bins up to {f_top:.0f} Hz the residual's transfer is fitted by a delay of "
+            f"{1000 * d:.2f} ms (gain {a_d:.2f}) or a pole at {fc:.0f} Hz (gain {a_p:.2f}, its magnitude down "
+            f"{100 * drop:.0f} % at {f_top:.0f} Hz): misfit per degree of freedom {c_d / dof_d:.3g} against "
+            f"{c_p / dof_p:.3g}, F = {F:.2f}, p = {min(p_pole, p_delay):.1e} (level {ALPHA:g})")
+    reason = (f"{said}: the {'pole' if verdict == 'amplifier_bandwidth' else 'delay'} fits better" if verdict else
+              f"{said}: the recordings do not tell a delay's flat magnitude from a pole's falling one")
+    return {"verdict": verdict, "figures": fig, "reason": reason}
 
 
 def check_mode(tr: Transfer, s2: float, f_band: float, freq_hz: float, damping: float) -> dict:

@@ -106,11 +106,6 @@ class Term:
     same_on_every_recording = False  # a property of the sensor, one map of the reading wherever it reads: the
     #                                  refined model may not make any recording worse (round 17; diagnose.select)
 
-    def dynamics_nuisance_above_hz(self, ctx) -> float | None:
-        """[Hz] with ``nested_dynamics``: the band above which the nested test's low-order corrections of G act
-        (``diagnose.select.dynamics_nuisance``); None: at every frequency."""
-        return None
-
     def applicable(self, ctx) -> bool:
         return True
 
@@ -245,10 +240,6 @@ def h_of_setting(ctx, tag: tuple, u, h_now, make_ue) -> np.ndarray:
 # `amplifier_bandwidth` at 988 Hz, a 0.16 ms lag).
 LATENCY_SAMPLES = 2.0
 
-# Round 19 (measured, not kept on): the drive-side terms' nested dynamics corrections act only above the base's
-# dynamics band (``_DriveTerm.dynamics_nuisance_above_hz``).
-DRIVE_CORRECTIONS_ABOVE_BAND = False
-
 
 class _DriveTerm(Term):
     stage = "drive"
@@ -256,17 +247,6 @@ class _DriveTerm(Term):
     nested_dynamics = True
     key = ""          # the model file's parameter
     geometric = False  # the grid is geometric and refined around its best point
-
-    def dynamics_nuisance_above_hz(self, ctx):
-        """Round 19, with ``DRIVE_CORRECTIONS_ABOVE_BAND`` (off): the band the base states its dynamics identified
-        in (``ctx.dynamics_band_hz``). Below it the calibration identified G, and a free ``c1 s + c2 s^2`` there is
-        the first two terms of a delay's (and a pole's) own lag, ``exp(-s d) = 1 - d s + d^2 s^2 / 2 - ...``:
-        nested against it in the whole band, a true delay is credited only with its third-order rest (s121-022,
-        0.5 ms, static base: true delay 0.20/0.20 against the corrections above the band, 0.91/0.93 against them
-        everywhere). On, the pole took the same in-band lag and 3 of 5 delay misses were named
-        `amplifier_bandwidth` first (docs/diagnose.md "Round 19: delay"), so it is off until the pole is told
-        from the delay there."""
-        return getattr(ctx, "dynamics_band_hz", None) if DRIVE_CORRECTIONS_ABOVE_BAND else None
 
     @staticmethod
     def lag_s(setting) -> float:
