@@ -1194,7 +1194,10 @@ class SensorNonlinearity(Term):
         the dynamics at the fast recordings' frequencies is not (two-effect s118-003, curve + delay: the delay's
         0.43 um on the fast recordings beside a 0.07 um curve refused the curve at 0.98/0.97; nested against
         them, 0.65/0.61 with the coefficients of the true curve's projection). Not in the model: the refined
-        model gets the curve alone."""
+        model gets the curve alone. First round only (no term accepted yet): after a term, measured only on the own
+        rate case, where they let a false curve through in round 2 (`rate_dependent_hysteresis,sensor_nonlinearity`)."""
+        if getattr(ctx, "accepted_flex", None) is not None:
+            return None
         from ..diagnose.select import dynamics_nuisance
         return dynamics_nuisance(ctx)
 
