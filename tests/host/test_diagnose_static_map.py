@@ -151,3 +151,5 @@ def test_the_curves_test_nuisance_is_the_dynamics_corrections_and_the_common_rou
     assert np.allclose(N[:480, 0], d1[valid[0]]) and np.allclose(N[:480, 1], d2[valid[0]])
     assert np.array_equal(term_nuisance(ctx, term), N)
     assert term_nuisance(ctx, term, own_test=False) is None
+    ctx.accepted_flex = np.zeros((930, 1))   # after a term: first round only (the own rate case's false curve)
+    assert term.test_nuisance(ctx) is None
