@@ -98,3 +98,58 @@ def test_a_map_common_to_one_recordings_branches_does_not_carry_to_the_others():
     e_one = np.where(rec == 0, 0.15 * (1 - q ** 2), 0.0) + np.random.default_rng(3).normal(0, 0.01, y.size)
     r1 = across_recordings(y, b, rec, e_one, X)
     assert max(r1.values()) > 1.0   # not the same map everywhere: the others predict recording 0 wrongly or it them
+
+
+def test_the_common_parts_coefficients_are_the_maps_where_long_dwells_carry_the_misfit():
+    """Round 20: a recording of long dwells whose misfit follows the level (a history the calibration did not show)
+    pulls the whole residual's least squares towards it, sample by sample; the common part counts each branch's
+    mean once per bin, and its per-fold coefficients stay near the map's (held-out s124-026's steps)."""
+    rng = np.random.default_rng(3)
+    amps = [40, 25, 35, 15, 30, 20, 38, 28]
+    u_t, d_t = _triangle(amps)
+    levels = np.array([12, 24, 36, 48, 60, 72, 84, 72, 60, 48, 36, 24, 12], float)
+    u_s = np.repeat(levels, 1200)                       # a staircase up and down, 1200 samples per dwell
+    u = np.concatenate([u_t, u_s])
+    y = 0.5 * u
+    q = (y - 25.0) / 20.0
+    mis = np.concatenate([d_t * 0.05 * (1 - q[:u_t.size] ** 2),           # odd in the direction on the triangles
+                          0.4 * (q[u_t.size:] ** 2 - 0.3) * (u_s < 50)])   # the dwells: one-sided, by level
+    c2, c3 = 0.15, 0.1
+    e = mis + c2 * q ** 2 + c3 * q ** 3 + rng.normal(0, 0.01, u.size)
+    X = np.column_stack([q ** 2, q ** 3, np.ones(u.size)])
+    fold = (np.arange(u.size) // 1600) % 2
+    r = branch_common_test(y, branches(u), e, X, None, fold)
+    assert r is not None and len(r["coef"]) == 2
+    for f in (0, 1):
+        whole = np.linalg.lstsq(X[fold == f], e[fold == f], rcond=None)[0]
+        common = np.asarray(r["coef"][f])
+        assert abs(common[0] - c2) < 0.5 * abs(whole[0] - c2)
+        assert abs(common[0] - c2) < 0.05
+
+
+def test_the_curves_test_nuisance_is_the_dynamics_corrections_and_the_common_route_leaves_it_out():
+    """Round 20: the curve is fitted beside free ``c1 s + c2 s^2`` corrections of G in its nested test (a map of the
+    reading is the same at every rate); the branch-common route's nuisance leaves them out (their common part is
+    near zero)."""
+    from types import SimpleNamespace
+    from piezoctl.diagnose.select import term_nuisance
+    from piezoctl.ident.terms import TERMS
+    t = np.arange(500) * 1e-3
+    sig = [SimpleNamespace(ydyn=np.sin(2 * np.pi * 7 * t)), SimpleNamespace(ydyn=np.cos(2 * np.pi * 3 * t))]
+    valid = [np.arange(500) >= 20, np.arange(500) >= 50]
+    ctx = SimpleNamespace(signals=sig, valid=valid, dyn_nuisance=None, dyn_nuisance_above=None, accepted_flex=None,
+                          nuisance=None)
+
+    class Unnested(type(TERMS["sensor_nonlinearity"])):
+        nested = False   # the hysteresis groups need a base; the test nuisance alone here
+
+    term = Unnested()
+    N = term.test_nuisance(ctx)
+    assert N.shape == (480 + 450, 2)
+    d1 = np.diff(sig[0].ydyn, prepend=sig[0].ydyn[0])   # the first and second differences of the dynamic output
+    d2 = np.diff(d1, prepend=d1[0])
+    assert np.allclose(N[:480, 0], d1[valid[0]]) and np.allclose(N[:480, 1], d2[valid[0]])
+    assert np.array_equal(term_nuisance(ctx, term), N)
+    assert term_nuisance(ctx, term, own_test=False) is None
+    ctx.accepted_flex = np.zeros((930, 1))   # after a term: first round only (the own rate case's false curve)
+    assert term.test_nuisance(ctx) is None

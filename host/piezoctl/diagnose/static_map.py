@@ -165,7 +165,9 @@ def branch_common_test(y: np.ndarray, branch: np.ndarray, e: np.ndarray, X: np.n
         ``fold_ratios`` (RMS after / before of the held-out fold's common part, weighted by branches per bin;
         index f: fitted on fold f, scored on fold 1 - f, as in ``select._evaluate``), ``p`` (one-sided paired t-test on the bins of both
         held-out folds), ``n_bins``, ``before_um`` / ``after_um`` (the common part's weighted RMS); None when a fold
-        has fewer bins than columns to fit.
+        has fewer bins than columns to fit; ``coef`` (round 20): per fold f, the columns' coefficients fitted on
+        fold f's common part (jointly with the nuisance, whose coefficients are dropped), a model of the map sized
+        where the base's history-dependent misfit averages out.
     """
     yb = _binned(y)
     Nn = np.zeros((e.size, 0)) if N is None else N
@@ -176,7 +178,7 @@ def branch_common_test(y: np.ndarray, branch: np.ndarray, e: np.ndarray, X: np.n
         if w.size <= Nn.shape[1] + X.shape[1]:
             return None
         red[f] = (A @ e[idx], A @ X[idx], A @ Nn[idx], np.sqrt(w))
-    ratios, d, b_all, a_all, w_all = [], [], [], [], []
+    ratios, d, b_all, a_all, w_all, coef = [], [], [], [], [], []
     for f in (0, 1):
         e_tr, x_tr, n_tr, s_tr = red[f]
         e_te, x_te, n_te, s_te = red[1 - f]
@@ -186,6 +188,7 @@ def branch_common_test(y: np.ndarray, branch: np.ndarray, e: np.ndarray, X: np.n
             before = e_te - n_te @ th0
         Z, Zt = np.hstack([n_tr, x_tr]), np.hstack([n_te, x_te])
         th = np.linalg.lstsq(Z * s_tr[:, None], e_tr * s_tr, rcond=None)[0]
+        coef.append([float(x) for x in th[n_tr.shape[1]:]])
         after = e_te - Zt @ th
         sb, sa = float(np.sum(s_te ** 2 * before ** 2)), float(np.sum(s_te ** 2 * after ** 2))
         ratios.append(float(np.sqrt(sa / sb)) if sb > 0 else 1.0)
@@ -195,6 +198,6 @@ def branch_common_test(y: np.ndarray, branch: np.ndarray, e: np.ndarray, X: np.n
     sd = float(np.std(d, ddof=1))
     p = float(stats.t.sf(np.mean(d) / (sd / np.sqrt(d.size)), d.size - 1)) if sd > 0 else 1.0
     w = np.concatenate(w_all)
-    return {"fold_ratios": ratios, "p": p, "n_bins": int(d.size),
+    return {"fold_ratios": ratios, "p": p, "n_bins": int(d.size), "coef": coef,
             "before_um": float(np.sqrt(np.average(np.concatenate(b_all) ** 2, weights=w))),
             "after_um": float(np.sqrt(np.average(np.concatenate(a_all) ** 2, weights=w)))}
