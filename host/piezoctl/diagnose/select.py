@@ -1161,7 +1161,7 @@ def _slow_beyond_gates(evals, log):
     for c in evals:
         if c.significant and not c.veto and c.below_gates and c.name in SIGNATURES:
             sig = c.slow_signature or {}
-            if not sig.get("holds"):
+            if not (sig.get("holds") or sig.get("trend_holds")):   # round 20: the drift's trend, its alone
                 c.significant = False
                 c.veto = ("after the first term it passed only below the first round's size gates (fold ratios "
                           f"{c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f}, credited {c.credited:.2f}), where its slow "

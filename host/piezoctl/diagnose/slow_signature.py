@@ -857,7 +857,8 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
         ``slopes_um_per_s`` (per recording tested), ``slope_um_per_s``, ``se_um_per_s``, ``t``, ``dof``, ``p``,
         ``trends``; ``same_shape`` (the pairs of :func:`same_shape_pairs` pooled); ``levels_um``, ``needed_um_per_s``,
         ``excludes_drift`` and ``against_level`` (the slope significantly opposite in sign to every column's level,
-        round 17) (None when the session clock is unknown); ``pair_level`` (round 18, :func:`pair_level_test`).
+        round 17; round 20: replaced by :func:`against_reached` in :func:`signature_tests`) (None when the session
+        clock is unknown); ``pair_level`` (round 18, :func:`pair_level_test`).
         None when no recording qualifies.
     """
     from scipy import stats as st
@@ -1293,11 +1294,48 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
     spread = level_spread_test(designs, es, fold_all, rec, ctx, rows)
     trend = level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) \
         if any(n in names for n in ("sensor_offset", "thermal_drift")) else None
+    if trend is not None and trend.get("against_level") is not None:
+        off = next((t for t in out if t.name == "sensor_offset"), None)
+        trend["against_level_recordings"] = trend["against_level"]
+        trend.update(against_reached(trend, off.level if off is not None else None))
     for t in out:
         if t.name in ("sensor_offset", "thermal_drift"):
             t.spread = spread
             t.trend = trend
     return out
+
+
+def against_reached(trend, level) -> dict:
+    """Whether the level's trend within the recordings goes back against the level the slow effect reached (round
+    17's ``against_level``), that level read where it is established (round 20).
+
+    Round 17 read the level as the mean of the recordings' own levels, which carries each recording's history
+    misfit (round 15: a reveal walk sits 0.2 to 2 um off the triangles): development s123-016 (drift +0.16 to
+    +0.30 um over the reveal, generalized PI) had the walk at -0.415 um and the mean at -0.072 um against a trend of
+    +2.92 +- 0.33 nm/s, so the drift was refused for going "back towards the calibration's zero" while the
+    offset's candidate took +0.207 um. The level a drift with its level term leaves is the one the offset's
+    candidate takes (:class:`~piezoctl.ident.terms.ThermalDrift` contains the offset; :func:`attribute`, round
+    12), so the trend is judged against the offset's level per sensor-zero column (:func:`offset_level_test`)
+    when that lies beyond the base's level misfit, else against the same-shape pairs' common level when it lies
+    beyond that misfit (:func:`pair_level_test`, round 18); when neither is, no level is established and the
+    trend is not against one. Against: ``slope sign(c) < -q se`` for every such level ``c`` (``q`` as round 17's).
+
+    Returns
+    -------
+    dict
+        ``against_level``, ``reached_um`` (the levels used; empty when none is established) and
+        ``reached_from`` (``"offset"``, ``"pair"`` or None).
+    """
+    slope, se, q = trend["slope_um_per_s"], trend["se_um_per_s"], trend.get("quantile", 0.0)
+    pl = trend.get("pair_level") or {}
+    if level and level.get("offset_um") and not level.get("within_base_misfit"):
+        reached, src = [float(x) for x in level["offset_um"]], "offset"
+    elif pl.get("holds"):
+        reached, src = [float(x) for x in pl["levels_um"]], "pair"
+    else:
+        reached, src = [], None
+    return {"against_level": bool(reached) and all(slope * np.sign(c) < -q * se for c in reached),
+            "reached_um": reached, "reached_from": src}
 
 
 def level_phrase(lv: dict) -> str:
@@ -1347,7 +1385,7 @@ def _level_refused(t) -> bool:
     return not (lv.get("within_base_misfit") and not lv.get("within_drift_misfit") and _pair_level(t))
 
 
-def _unheld_below_gates(c, t) -> bool:
+def _unheld_below_gates(c, t, tests=()) -> bool:
     """A slow candidate that can pass only below the first round's size gates (a later round's candidate,
     ``Candidate.below_gates``) and whose signature does not hold beyond the other two and the base's misfit
     (``t.holds``): below the gates the signature is the evidence (``select._slow_beyond_gates``), so such a
@@ -1355,8 +1393,26 @@ def _unheld_below_gates(c, t) -> bool:
     as a drift's) must not veto a holding one after it. Round 19, development s117-004 (creep + coupling, the
     coupling accepted first): the drift, ordered first by the level's trend within the recordings (t = -3.9) and
     chosen by the offset's size, vetoed creep, whose step-locked tail held (6 dwells 0.09, p 1.1e-7), and was then
-    vetoed itself (unique ratio 0.97, p 0.24): nothing was named."""
-    return bool(getattr(c, "below_gates", False) and not t.holds)
+    vetoed itself (unique ratio 0.97, p 0.24): nothing was named.
+
+    Round 20: for the drift, its signature on the recordings' own scale counts too when it is the drift's alone
+    (:func:`_trend_is_drifts`)."""
+    return bool(getattr(c, "below_gates", False) and not (t.holds or _trend_is_drifts(t, tests)))
+
+
+def _trend_is_drifts(t, tests) -> bool:
+    """The level's trend within the recordings (:func:`level_trend_test`, round 15) is the drift's signature alone
+    (round 20): it trends, not back towards the level reached (``against_level``), and creep's signature does not
+    hold. A creep relaxing after the drive's changes moves the level within a recording too (round 19's s117-004:
+    t = -3.9 beside creep's step-locked tail), so a trend is a drift's only where creep's own signature is absent.
+
+    After a first term (a slew limit) a drift's joint test beyond a level per recording sees little: the drift
+    changes 0.01 to 0.03 um within each recording, against the levels the fast recordings' history misfit sets,
+    while the trend pools each recording's blocks on its own scale. Development s118-001 (drift -0.14 um over the
+    reveal + slew, Coleman-Hodgdon), after the slew: unique ratio 0.99 (p 0.03), the trend -1.39 +- 0.31 nm/s
+    (t = -4.5; the truth moves -1.4 nm/s over the long triangle)."""
+    return bool(t.name == "thermal_drift" and _trends(t) and not t.trend.get("against_level")
+                and not any(x.name == "creep" and x.holds for x in tests))
 
 
 def _precedence(tests, passed, sized=()) -> list:
@@ -1425,7 +1481,7 @@ def attribute(evals, tests) -> str | None:
     order = _precedence(tests, {c.name for c in passed}, sized)
     for n in order:
         c = next((x for x in slow if x.name == n), None)
-        if c is not None and _unheld_below_gates(c, by[n]):
+        if c is not None and _unheld_below_gates(c, by[n], tests):
             continue   # round 19: select._slow_beyond_gates would veto it; the next holding signature is the name
         if c is not None and _level_refused(by[n]):
             refused = level_phrase(by[n].level)   # round 11: an offset the base's misfit could be
@@ -1440,11 +1496,20 @@ def attribute(evals, tests) -> str | None:
         # Round 17: nor when the trend goes back towards the calibration's zero (``against_level``): a warm-up
         # since the calibration moves on in the direction of the level it reached, so a trend the other way is not
         # the drift that left that level (development s118-002, offset -0.78 um: +0.49 +- 0.11 nm/s, t 4.6)
-        if c is not None and n == "thermal_drift" and not c.veto and "sensor_offset" in sized \
+        # Round 20: the drift with its level contains the offset (``ThermalDrift``: the offset's columns are its
+        # nuisance), so the offset's size is the drift's too, and what the drift adds is its change on the clock; a
+        # drift candidate refused only by its credited ratio (its change within the recordings lies in the level
+        # band, where the base's misfit on calibration histories is as large) is not refused by that when the
+        # change is significant on the recordings' own scale (:func:`_trend_is_drifts`: each recording's blocks
+        # about its own line, where that misfit is one history's). Development s123-047 (drift +0.12 to +0.21 um,
+        # Preisach): credited 0.88, the trend +2.81 +- 0.31 nm/s (t = 8.9), the offset's candidate 0.32/0.35
+        if c is not None and n == "thermal_drift" and "sensor_offset" in sized \
+                and (not c.veto or (getattr(c, "credited_only", False) and _trend_is_drifts(by[n], tests))) \
                 and "sensor_offset" in order[order.index(n):] \
                 and not _level_refused(by["sensor_offset"]) \
                 and not (by[n].trend or {}).get("against_level"):
             chosen = c
+            chosen.veto = None
             break
     if chosen is None:
         text = ("no slow signature holds beyond the other two and the base's misfit, so the level is not "
@@ -1475,6 +1540,8 @@ def attribute(evals, tests) -> str | None:
                      f"that level and the drift's own trend beyond it (fold ratios {chosen.fold_ratios[0]:.2f}/"
                      f"{chosen.fold_ratios[1]:.2f}) are the drift's")
         chosen.significant = True
+        if chosen.slow_signature is not None and _trend_is_drifts(by[chosen.name], tests):
+            chosen.slow_signature["trend_holds"] = True   # round 20: select._slow_beyond_gates reads it
         tr = by[chosen.name].trend
         if chosen.name == "sensor_offset" and tr and tr.get("excludes_drift") is False and not tr["trends"]:
             # round 15: one level, but a drift still moving at the rate that would have reached it is not excluded
