@@ -153,3 +153,61 @@ def test_the_curves_test_nuisance_is_the_dynamics_corrections_and_the_common_rou
     assert term_nuisance(ctx, term, own_test=False) is None
     ctx.accepted_flex = np.zeros((930, 1))   # after a term: first round only (the own rate case's false curve)
     assert term.test_nuisance(ctx) is None
+
+def _dense_averager(ybin, branch, n_bins):
+    """The averager as a dense (bins x samples) matrix, cell by cell (round 19's form): the reference."""
+    from piezoctl.diagnose.static_map import MIN_BRANCHES, MIN_CELL
+    rows, w = [], []
+    for k in range(n_bins):
+        cells = [(b, np.flatnonzero((branch == b) & (ybin == k))) for b in np.unique(branch)]
+        cells = [s for _, s in cells if s.size >= MIN_CELL]
+        if len(cells) < MIN_BRANCHES:
+            continue
+        r = np.zeros(ybin.size)
+        for s in cells:
+            r[s] = 1.0 / (s.size * len(cells))
+        rows.append(r)
+        w.append(len(cells))
+    return np.array(rows).reshape(len(rows), ybin.size), np.array(w, float)
+
+
+def test_the_sparse_averager_is_the_dense_one_on_random_cells():
+    from piezoctl.diagnose.static_map import common_averager
+    rng = np.random.default_rng(4)
+    for trial in range(40):
+        n = int(rng.integers(0, 3000))
+        n_bins = int(rng.integers(1, 30))
+        # runs of branches (non-decreasing, as branches() gives, or shuffled) over bins of varied sizes
+        branch = np.sort(rng.integers(0, int(rng.integers(1, 60)), n))
+        if trial % 3 == 0:
+            branch = rng.permutation(branch)
+        ybin = rng.integers(0, n_bins, n)
+        A, w = common_averager(ybin, branch, n_bins)
+        D, wd = _dense_averager(ybin, branch, n_bins)
+        assert A.shape == D.shape and np.array_equal(w, wd)
+        assert np.array_equal(A.toarray(), D)   # the same weights, bit for bit
+        assert np.all(A.getnnz(axis=0) <= 1)     # one entry per sample at most
+        X = rng.normal(size=(n, 3))
+        assert np.allclose(A @ X, D @ X, rtol=1e-12, atol=1e-15)
+        assert (A @ X[:, :0]).shape == (D.shape[0], 0)
+
+
+def test_the_sparse_averager_gives_the_dense_ones_figures_on_the_curve_case():
+    from piezoctl.diagnose import static_map
+    y, b, e, X, fold, _ = _case(curve=True)
+    new = branch_common_test(y, b, e, X, None, fold)
+    rec = np.repeat([0, 1, 2, 3], y.size // 4)
+    new_rec = static_map.across_recordings(y, b, rec, e, X)
+    keep = static_map.common_averager
+    try:
+        static_map.common_averager = lambda yb, br, n_bins=static_map.N_BINS: _dense_averager(yb, br, n_bins)
+        old = branch_common_test(y, b, e, X, None, fold)
+        old_rec = static_map.across_recordings(y, b, rec, e, X)
+    finally:
+        static_map.common_averager = keep
+    assert new["n_bins"] == old["n_bins"] > 0
+    for k in ("p", "before_um", "after_um"):
+        assert np.isclose(new[k], old[k], rtol=1e-10, atol=0)
+    assert np.allclose(new["fold_ratios"], old["fold_ratios"], rtol=1e-10, atol=0)
+    assert new_rec.keys() == old_rec.keys() and np.allclose(list(new_rec.values()), list(old_rec.values()),
+                                                            rtol=1e-10, atol=0)

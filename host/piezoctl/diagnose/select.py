@@ -368,6 +368,14 @@ def _design(ctx, term, st):
     return ctx.design_cache[key]
 
 
+def _keep_designs(ctx, term, settings):
+    """Drops from ``ctx.design_cache`` every design but those of ``term`` at ``settings`` (a dropped one is
+    recomputed, to the same floats, if asked for again)."""
+    keep = {(term.name, repr(st)) for st in settings}
+    for key in [k for k in ctx.design_cache if k not in keep]:
+        del ctx.design_cache[key]
+
+
 def best_setting(ctx, term, e, train, test, rows, nuis=None):
     """(setting, design, sse on train, prediction on test, coefficients) with the least training error over the
     term's grid, then over its finer settings around the best one (``Term.refine``, twice). With ``nuis``
@@ -640,6 +648,10 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         rb = float(np.sqrt(np.mean(e_before[test] ** 2)))
         ra = float(np.sqrt(np.mean((e[test] - best[3]) ** 2)))
         fold_ratios.append(ra / rb if rb > 0 else 1.0)
+        # round 20: after the first round fold 1 has its own context; of fold 0's designs only its chosen settings
+        # are asked for again (_beside_unlimited), the others would stay beside fold 1's until the end
+        if f == 0 and ctxs[1] is not ctx:
+            _keep_designs(ctx, term, (best[0], chosen[-1][0]))
     span = ctxs[0].y_span
     used = fold_all >= 0
     rb_res = e_before[used]

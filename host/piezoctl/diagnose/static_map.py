@@ -23,7 +23,7 @@ recording, or of one kind of history, does not carry over: null s121-041, x1.00 
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import sparse, stats
 
 N_BINS = 24          # bins of the model's output over the settled samples (equal counts)
 MIN_CELL = 5         # samples of one branch in one bin for its mean to count
@@ -77,26 +77,29 @@ def common_averager(ybin: np.ndarray, branch: np.ndarray, n_bins: int = N_BINS):
 
     Returns
     -------
-    (A, w) : (ndarray (m, n), ndarray (m,))
+    (A, w) : (scipy.sparse.csr_matrix (m, n), ndarray (m,))
         Row k of ``A`` averages, over the branches visiting bin k with at least ``MIN_CELL`` samples, each branch's
-        mean there; ``w`` the number of such branches. Only bins with ``MIN_BRANCHES`` or more.
+        mean there; ``w`` the number of such branches. Only bins with ``MIN_BRANCHES`` or more. Sparse: each sample
+        lies in one cell, so ``A`` has at most one entry per column (round 20: the dense form held bins x samples
+        floats, 0.1 GB per fold at full length, and was filled one cell at a time).
     """
-    key = np.asarray(branch) * n_bins + np.asarray(ybin)
+    key = np.asarray(branch, np.int64) * n_bins + np.asarray(ybin, np.int64)
     uk, inv = np.unique(key, return_inverse=True)
+    inv = inv.ravel()
     cnt = np.bincount(inv)
     cell_bin = uk % n_bins
     ok = cnt >= MIN_CELL
-    rows, w = [], []
-    for k in range(n_bins):
-        cells = np.flatnonzero(ok & (cell_bin == k))
-        if cells.size < MIN_BRANCHES:
-            continue
-        r = np.zeros(key.size)
-        for c in cells:
-            r[inv == c] = 1.0 / (cnt[c] * cells.size)
-        rows.append(r)
-        w.append(cells.size)
-    return np.array(rows).reshape(len(rows), key.size), np.array(w, float)
+    per_bin = np.bincount(cell_bin[ok], minlength=n_bins)   # counted cells (branches) per bin
+    kept = np.flatnonzero(per_bin >= MIN_BRANCHES)
+    row_of_bin = np.full(n_bins, -1)
+    row_of_bin[kept] = np.arange(kept.size)
+    cell_row = np.where(ok, row_of_bin[cell_bin], -1)
+    row = cell_row[inv]
+    col = np.flatnonzero(row >= 0)
+    c = inv[col]
+    weight = 1.0 / (cnt[c] * per_bin[cell_bin[c]])   # the sample's share of its cell's mean, of the bin's average
+    A = sparse.csr_matrix((weight, (row[col], col)), shape=(kept.size, key.size))
+    return A, per_bin[kept].astype(float)
 
 
 def _binned(y):
