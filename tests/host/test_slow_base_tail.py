@@ -79,3 +79,31 @@ def test_a_fast_base_has_no_tail_to_take():
     m = dw >= 0
     assert base_tail(ctx, m, dw[m]) is None
     assert _slow_base(ctx) is ctx and base_tail(ctx, m, dw[m]) is not None
+
+
+def _credited_only_cand(veto, credited_only):
+    from test_diagnose_slow import _cand
+    c = _cand("creep", False, 0.72, p=2e-4)
+    c.fold_ratios, c.credited, c.dbic, c.p_max, c.ratio_max = [0.72, 0.74], 0.81, -23.0, 1e-3, 0.8
+    c.veto, c.credited_only = veto, credited_only
+    return c
+
+
+def test_a_creep_refused_by_the_credited_ratio_alone_is_tested_on_the_dwells():
+    """Round 20 (held-out s124-015): the credited ratio concerns the blocks, where the base's level misfit lies; a
+    candidate refused by it alone is tested after the steps, and passes there when its tail is plain. Another
+    veto (here a refusal by the data) still stops it, and nothing passes where the dwells show no tail."""
+    from test_diagnose_slow import NOISE_UM
+    for effect, veto, credited_only, passes in (
+            (lambda s: filt(*LP, _creep(s)), "credited 0.81", True, True),
+            (lambda s: filt(*LP, _creep(s)), "the data cannot credit it", False, False),
+            (lambda s: np.zeros(s.t.size), "credited 0.81", True, False)):
+        rng = np.random.default_rng(9)
+        ctx = _with_dynamics(_ctx(rng))
+        e, fold, block = _measured(ctx, effect, rng)
+        c = _credited_only_cand(veto, credited_only)
+        ss.creep_on_steps([c], [ctx, ctx], [e, e], fold, block, ROWS, lambda *a: None)
+        assert c.significant is passes
+        assert (c.veto is None) is passes
+        if passes:
+            assert not c.credited_only and "after the steps" in c.discrimination
