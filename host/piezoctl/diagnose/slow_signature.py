@@ -203,6 +203,15 @@ def _held(s) -> np.ndarray:
     return still
 
 
+def _noise_rms_um(y, still) -> float:
+    """The sensor's noise [um RMS] from the held samples as the RMS first difference over sqrt(2) (round 20).
+    Unlike :func:`_noise_um`'s median it is not 0 where the noise lies within one ADC step (the median difference
+    of a quantized reading is 0 on most foreign nulls: every tail would count as beyond it); a creep tail or the
+    base's slow tail moves far less than this from one sample to the next."""
+    d = np.diff(np.asarray(y, float))[still[1:] & still[:-1]]
+    return float(np.sqrt(np.mean(d ** 2) / 2.0)) if d.size > 10 else 0.0
+
+
 def dwell_ids(ctx, s) -> np.ndarray:
     """Per sample of recording ``s``: the dwell it belongs to (0, 1, ... within the recording) or -1.
 
@@ -320,9 +329,10 @@ def base_tail(ctx, m, dwm) -> np.ndarray | None:
     for s, v in zip(ctx.signals, ctx.valid):
         h = np.asarray(s.h, float)
         tail.append((G(ctx.base, h) - dc * h)[v])
-        noise.append(_noise_um(s.y, _held(s)))
+        noise.append(_noise_rms_um(s.y, _held(s)))
     col = _centring_per_dwell(dwm)(np.concatenate(tail)[m][:, None])
-    if float(np.sqrt(np.sum(col ** 2))) <= TAIL_Z * float(np.median(noise)):
+    noise = [x for x in noise if x > 0.0]   # recordings that hold the drive (a triangle has no held sample)
+    if not noise or float(np.sqrt(np.sum(col ** 2))) <= TAIL_Z * float(np.median(noise)):
         return None
     return col
 
