@@ -82,7 +82,7 @@ from .misfit import credited_ratio
 from .solve import lstsq_box, train_rows
 
 __all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute",
-           "step_response_test", "creep_on_steps", "creep_model_on_dwells", "creep_coef_on_dwells", "dwell_taus",
+           "step_response_test", "base_tail", "creep_on_steps", "creep_model_on_dwells", "creep_coef_on_dwells", "dwell_taus",
            "drift_on_pair", "pair_level_test", "drift_beyond_plane_test", "refit_plane", "DRIFT_BEYOND_PLANE"]
 
 SIGNATURES = ("creep", "thermal_drift", "sensor_offset")
@@ -178,6 +178,8 @@ def signature_groups(ctx) -> dict:
     return out
 
 
+TAIL_Z = 3.0   # round 20: the base's own slow tail is a nuisance of the step test when its gain's z in the noise
+#               exceeds this (about the two-sided 0.3 % level; :func:`base_tail`)
 STEP_STILL = 1e-6   # the drive is held when a sample changes it by at most this fraction of its span (a float
 #                     written to 9 digits; the steps' ramps change it by far more)
 
@@ -188,6 +190,26 @@ def _noise_um(y, still) -> float:
     than the noise from one sample to the next)."""
     d = np.diff(np.asarray(y, float))[still[1:] & still[:-1]]
     return float(np.median(np.abs(d)) / (0.6745 * np.sqrt(2.0))) if d.size > 10 else 0.0
+
+
+def _held(s) -> np.ndarray:
+    """Per sample of recording ``s``: the command ``s.u`` and the model's drive ``s.v`` both held
+    (``STEP_STILL``); the first sample is not."""
+    u = np.asarray(s.u, float)
+    still = np.abs(np.diff(u, prepend=u[0])) <= STEP_STILL * max(float(np.ptp(u)), 1e-12)
+    v = np.asarray(s.v, float)
+    still &= np.abs(np.diff(v, prepend=v[0])) <= STEP_STILL * max(float(np.ptp(v)), 1e-12)
+    still[0] = False
+    return still
+
+
+def _noise_rms_um(y, still) -> float:
+    """The sensor's noise [um RMS] from the held samples as the RMS first difference over sqrt(2) (round 20).
+    Unlike :func:`_noise_um`'s median it is not 0 where the noise lies within one ADC step (the median difference
+    of a quantized reading is 0 on most foreign nulls: every tail would count as beyond it); a creep tail or the
+    base's slow tail moves far less than this from one sample to the next."""
+    d = np.diff(np.asarray(y, float))[still[1:] & still[:-1]]
+    return float(np.sqrt(np.mean(d ** 2) / 2.0)) if d.size > 10 else 0.0
 
 
 def dwell_ids(ctx, s) -> np.ndarray:
@@ -215,10 +237,7 @@ def dwell_ids(ctx, s) -> np.ndarray:
     ids = np.full(u.size, -1)
     if u.size < 3:
         return ids
-    still = np.abs(np.diff(u, prepend=u[0])) <= STEP_STILL * max(float(np.ptp(u)), 1e-12)
-    v = np.asarray(s.v, float)
-    still &= np.abs(np.diff(v, prepend=v[0])) <= STEP_STILL * max(float(np.ptp(v)), 1e-12)
-    still[0] = False
+    still = _held(s)
     noise = _noise_um(s.y, still)
     b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
     sr = filt(b, a, np.r_[0.0, np.ones(int(round(1.0 / s.dt)))])[1:]   # unit step from rest (filt starts at x[0])
@@ -271,6 +290,53 @@ def _centring_per_dwell(dwm):
     return centred
 
 
+def base_tail(ctx, m, dwm) -> np.ndarray | None:
+    """The base dynamics' own slow tail on the dwell samples (round 20): ``G(h) - G(1) h``, centred per dwell, as
+    one column, or None when it stays within the sensor's noise there.
+
+    In a dwell the hysteresis output ``h`` is constant; the base's output ``G(h)`` is constant too unless G has a
+    pole slower than :func:`dwell_ids`' 1 s settling window sees (its final value taken as the response at 1 s).
+    Then the *model* relaxes after every step, in proportion to the step and with its sign, and the residual
+    ``y - G(h)`` carries the negative of that relaxation: a creep-like tail though the measurement is flat (held
+    out null s123-032, Maxwell slip: a pole at z = 0.9999, tau 0.97 s, 0.9 % of each step at 50 ms; the data
+    moves 0.1 nm over a dwell, the model 16 to 81 nm; creep named x0.58). That tail is the base's error, not the
+    stage's history: it is a nuisance of the step test (a free gain), so creep's columns are credited only with
+    what the base's own dynamics cannot take. A tail the dwells could not show is left out (the usual fast G,
+    settled when the dwell starts): a column is kept when its gain would be determined in the sensor's noise,
+    ``|col| / noise > TAIL_Z`` (the z of a least-squares gain on white noise), so that a column of rounding, scaled
+    to unit RMS by the solver, does not fit noise in the test fold.
+
+    Parameters
+    ----------
+    ctx : Ctx
+        The fold's (or all data's) context.
+    m : ndarray of bool
+        The selected settled samples (all in dwells).
+    dwm : ndarray of int
+        Their dwell labels (:func:`_dwell_samples`).
+
+    Returns
+    -------
+    ndarray or None
+        The column on the selected samples [um], or None.
+    """
+    b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+    sa = float(np.sum(a))
+    if abs(sa) < 1e-12:
+        return None
+    dc = float(np.sum(b)) / sa
+    tail, noise = [], []
+    for s, v in zip(ctx.signals, ctx.valid):
+        h = np.asarray(s.h, float)
+        tail.append((G(ctx.base, h) - dc * h)[v])
+        noise.append(_noise_rms_um(s.y, _held(s)))
+    col = _centring_per_dwell(dwm)(np.concatenate(tail)[m][:, None])
+    noise = [x for x in noise if x > 0.0]   # recordings that hold the drive (a triangle has no held sample)
+    if not noise or float(np.sqrt(np.sum(col ** 2))) <= TAIL_Z * float(np.median(noise)):
+        return None
+    return col
+
+
 def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     """Creep's own signature on the responses to the drive's steps alone (round 13).
 
@@ -306,13 +372,17 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     centred = _centring_per_dwell(dwm)
 
     recs = np.unique(ra)
-    T = centred(np.column_stack([np.where(ra == r, tt[m], 0.0) for r in recs]))
-    nT = T.shape[1]
+    T0 = centred(np.column_stack([np.where(ra == r, tt[m], 0.0) for r in recs]))
     before = np.zeros(m.sum())
     corr = np.zeros(m.sum())
     gains = []
+    tails = []
     for f in (0, 1):
         c = ctxs[f]
+        tail = base_tail(c, m, dwm)   # round 20: the base dynamics' own slow tail, a nuisance when beyond the noise
+        tails.append(tail is not None)
+        T = T0 if tail is None else np.hstack([T0, tail])
+        nT = T.shape[1]
         C = np.vstack([G(c.base, creep.basis(s.h, taus, s.dt))[v] for s, v in zip(c.signals, c.valid)])[m]
         X = np.hstack([T, centred(C)])
         e = centred(es[f][m][:, None])[:, 0]
@@ -331,7 +401,8 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     _, p, n_act = sg.active_block_test(before, after, corr, ba, units)
     return {"dwells": int(ids.size), "ratio": float(np.sqrt(np.sum(after ** 2) / sb)) if sb > 0 else 1.0,
             "fold_ratios": fr, "p": float(p), "n_active": int(n_act),
-            "rms_before_um": float(np.sqrt(sb / max(before.size, 1))), "taus_s": list(taus), "gains": gains}
+            "rms_before_um": float(np.sqrt(sb / max(before.size, 1))), "taus_s": list(taus), "gains": gains,
+            "base_tail": tails}
 
 
 def _step_holds(st, level) -> bool:
@@ -344,7 +415,8 @@ def step_phrase(st) -> str:
     if st is None:
         return "no dwell after a step of the drive, so its tail after the steps cannot be tested"
     return (f"after the steps, on {st['dwells']} dwells: ratio {st['ratio']:.2f}, folds {st['fold_ratios'][0]:.2f}/"
-            f"{st['fold_ratios'][1]:.2f}, p = {st['p']:.1e}")
+            f"{st['fold_ratios'][1]:.2f}, p = {st['p']:.1e}"
+            + (", beyond the base dynamics' own slow tail" if any(st.get("base_tail", ())) else ""))
 
 
 def creep_on_steps(evals, ctxs, es, fold_all, block_all, rows, log) -> None:
@@ -359,10 +431,16 @@ def creep_on_steps(evals, ctxs, es, fold_all, block_all, rows, log) -> None:
     credit). The exact check (d) on all samples still decides. Round 12's finding: a foreign creep's improvement
     is large but uneven over all blocks (development s110-030: fold ratios 0.40/0.51, p = 3.1e-2), or small on
     all blocks beside a base level misfit of 0.24 um (s108-000: 0.96/0.93), while after the steps it is
-    plain (s110-030: 0.21/0.24 on 7 dwells, p = 2.3e-7; s108-000: 0.05/0.06 on 6 dwells, p = 1.8e-9)."""
+    plain (s110-030: 0.21/0.24 on 7 dwells, p = 2.3e-7; s108-000: 0.05/0.06 on 6 dwells, p = 1.8e-9).
+
+    Round 20: a candidate refused by the credited ratio alone (``credited_only``: significant on all blocks, but its
+    improvement there within the base's level misfit on held-out calibration histories) is tested on the dwells
+    too; that credit concerns the blocks, and the dwells carry no level misfit to credit (held-out s124-015, GPI:
+    credited 0.81 on all blocks, the step test 0.17/0.24 on 4 dwells, p = 1.0e-4; it never ran, the veto returned
+    first). Passing, the veto is lifted; the exact check still decides."""
     c = next((x for x in evals if x.name == "creep"), None)
-    if c is None or c.significant or c.veto:
-        return
+    if c is None or c.significant or (c.veto and not getattr(c, "credited_only", False)):
+        return   # round 20: refused by the credited ratio alone, it is tested on the dwells too (no misfit to credit)
     within = (lambda x: x <= c.ratio_max) if c.ratio_max < 1.0 else (lambda x: x < c.ratio_max)
     st = step_response_test(ctxs, es, fold_all, block_all, rows)
     if st is None:
@@ -379,6 +457,7 @@ def creep_on_steps(evals, ctxs, es, fold_all, block_all, rows, log) -> None:
                             + ("" if sized_all else ", sized on the dwells") + ".")
         c.p = p
         c.significant = True
+        c.veto, c.credited_only = None, False
 
 
 def dwell_taus(ctx, taus) -> list:
@@ -439,6 +518,9 @@ def creep_coef_on_dwells(ctx, e, train, rows) -> np.ndarray | None:
 
     k = [taus.index(tau) for tau in use]
     T = centred(np.column_stack([np.where(ra == r, tt[m], 0.0) for r in np.unique(ra)]))
+    tail = base_tail(ctx, m, dwm)   # round 20: as in step_response_test
+    if tail is not None:
+        T = np.hstack([T, tail])
     X = np.hstack([T, centred(C_all[m][:, k])])
     y = centred(np.asarray(e, float)[m][:, None])[:, 0]
     idx = train_rows(np.ones(y.size, bool), rows)
