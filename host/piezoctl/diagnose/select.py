@@ -18,7 +18,7 @@ import numpy as np
 
 from ..dsp import blas_threads, filt
 from ..ident import refined
-from ..ident.terms import Term
+from ..ident.terms import Term, dynamics_corrections
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg, static_map
@@ -433,15 +433,7 @@ def dynamics_nuisance(ctx):
     corrections act in the whole band; only above the base's dynamics band (round 19's variant) they left a true
     delay's in-band lag to the pole as well, and on null s121-005 the stage's own in-band lag was named
     `amplifier_bandwidth` x0.14 (docs/diagnose.md "Round 19: delay", "Round 20: delay and bandwidth")."""
-    if ctx.dyn_nuisance is None:
-        cols = []
-        for s, v in zip(ctx.signals, ctx.valid):
-            yd = np.asarray(s.ydyn, float)
-            d1 = np.diff(yd, prepend=yd[0])
-            d2 = np.diff(d1, prepend=d1[0])
-            cols.append(np.column_stack([d1, d2])[v])
-        ctx.dyn_nuisance = np.vstack(cols)
-    return ctx.dyn_nuisance
+    return dynamics_corrections(ctx)
 
 
 def initial_state_nuisance(ctx):

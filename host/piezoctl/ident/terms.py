@@ -40,7 +40,7 @@ from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_f
 from ..models.hysteresis import (bouc_wen_column, hysteresis_groups, hysteresis_output, hysteresis_output_of,
                                  plane_width_change, play_states, scale_groups)
 
-__all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G"]
+__all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G", "dynamics_corrections"]
 
 
 @dataclasses.dataclass
@@ -239,6 +239,23 @@ def h_of_setting(ctx, tag: tuple, u, h_now, make_ue) -> np.ndarray:
 # whose low-frequency lag is that small is not offered (a null stage's one-sample latency was named
 # `amplifier_bandwidth` at 988 Hz, a 0.16 ms lag).
 LATENCY_SAMPLES = 2.0
+
+
+def dynamics_corrections(ctx) -> np.ndarray:
+    """(n_settled, 2): the first and second differences of the current model's dynamic output (``s.ydyn``) on the
+    settled samples of every recording, i.e. free low-order corrections ``c1 s + c2 s^2`` of its dynamics G, the
+    nested tests' dynamics nuisance (``diagnose.select.dynamics_nuisance`` says why). Reads the diagnosis' context by
+    duck typing (``signals``, ``valid``) and caches the columns on its ``dyn_nuisance``; here, not in ``diagnose/``,
+    so that a term's own test nuisance (:meth:`SensorNonlinearity.test_nuisance`) needs no import from there."""
+    if ctx.dyn_nuisance is None:
+        cols = []
+        for s, v in zip(ctx.signals, ctx.valid):
+            yd = np.asarray(s.ydyn, float)
+            d1 = np.diff(yd, prepend=yd[0])
+            d2 = np.diff(d1, prepend=d1[0])
+            cols.append(np.column_stack([d1, d2])[v])
+        ctx.dyn_nuisance = np.vstack(cols)
+    return ctx.dyn_nuisance
 
 
 class _DriveTerm(Term):
@@ -1169,7 +1186,7 @@ class SensorNonlinearity(Term):
 
     def test_nuisance(self, ctx):
         """(n_settled, 2): free low-order corrections ``c1 s + c2 s^2`` of the model's dynamics G
-        (``diagnose.select.dynamics_nuisance``, the whole band), fitted with the curve in its nested test and its
+        (:func:`dynamics_corrections`, the whole band), fitted with the curve in its nested test and its
         coefficients (round 20). A map of the reading is the same whatever the drive's rate; a lag or a gain of
         the dynamics at the fast recordings' frequencies is not (two-effect s118-003, curve + delay: the delay's
         0.43 um on the fast recordings beside a 0.07 um curve refused the curve at 0.98/0.97; nested against
@@ -1178,8 +1195,7 @@ class SensorNonlinearity(Term):
         rate case, where they let a false curve through in round 2 (`rate_dependent_hysteresis,sensor_nonlinearity`)."""
         if getattr(ctx, "accepted_flex", None) is not None:
             return None
-        from ..diagnose.select import dynamics_nuisance
-        return dynamics_nuisance(ctx)
+        return dynamics_corrections(ctx)
 
     def model_params(self, ctx, setting, coef):
         return {"c2_um": float(coef[0]), "c3_um": float(coef[1]), "mid_um": float(ctx.y_center),
