@@ -63,7 +63,7 @@ def test_the_delay_does_not_depend_on_which_noisy_low_lines_pass():
     run from 40 Hz, coherence 0.8, to 323 Hz, 0.997, and the magnitude is largest at the noisy low end.
     Weighted by magnitude, the residual about a 2-tick line crossed the 10 deg rule in some draws of the
     noise and the delay (the preview) came out 0; weighted by the lines' precision it is 2 in every draw.
-    The model of the lines matches six kept calibrations: magnitude-weighted residual 6.3-12.6 deg there,
+    The model of the lines matches 18 recorded chirps: magnitude-weighted residual 5.5-12.6 deg there,
     8.4-12.7 deg here."""
     from piezoctl.ident.tf import FRF
     f = np.arange(66, 530) * TICK / 16384.0            # the chirp's Welch lines, 40.3 .. 323 Hz

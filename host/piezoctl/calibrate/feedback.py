@@ -60,14 +60,14 @@ def group_delay_ticks(frf, tick_hz: float, f_max: float) -> int:
     (Round 21: until then the lines were weighted by their magnitude. On the
     default stage the magnitude is largest at the chirp's low end, 40-100 Hz,
     where the coherence is 0.8-0.9 and the phase scatters 11-44 deg RMS about
-    the line, so those lines set the residual: 6.3-12.6 deg over six SIL
-    calibrations of the same code, which of them the coherence lets in being a
-    draw of the sensor noise, i.e. of the ticks the host's commands land on.
-    Above 10 deg the delay was 0, the preview 5 ticks instead of 7, and the
-    100 Hz triangle's learned figure 7.4x instead of 20x: CI's failure of
+    the line, so those lines set the residual: 5.5-12.6 deg over 18 SIL
+    chirps, which of them the coherence lets in being a draw of the sensor
+    noise, i.e. of the tick the chirp's command lands on. Above 10 deg (4 of
+    18) the delay was 0, the preview 5 ticks instead of 7, and the 100 Hz
+    triangle's learned figure 7.2-7.4x instead of 20x: CI's failure of
     ``test_calibrate_meets_the_tracking_goals``. Weighted by precision the same
-    six give 3.8-5.2 deg and 1.78-2.03 ticks, the 140 Hz stage's nine points
-    still 32 deg.)"""
+    18 give 3.3-5.2 deg and 1.78-2.09 ticks (2 in all), the 140 Hz stage's nine
+    points still 32 deg.)"""
     sel = frf.f_hz < f_max
     if np.count_nonzero(sel) < 3:
         return 0
