@@ -266,8 +266,8 @@ def test_two_beyond_range_terms_must_add_a_named_effects_size_beyond_each_other(
         assert r["named_beyond"]["p"] < 1e-6 and r["alternative_beyond"]["p"] < 1e-6
         assert 0.8 < max(r["named_beyond"]["fold_ratios"]) < 0.9
         assert 0.8 < max(r["alternative_beyond"]["fold_ratios"]) < 0.9
-    assert other["verdict"] == "both"
-    assert edge["verdict"] == "inseparable"
+    assert other["verdict"] == "both" and "beyond_size_max" not in other
+    assert edge["verdict"] == "inseparable" and edge["beyond_size_max"] == 0.8
     fields, _ = separation_doc("asymmetric_hysteresis", [edge])
     assert [a["name"] for a in fields["alternatives"]] == ["saturation"]
     # distinct shapes, each a large part of the residual: both, with or without the size
@@ -276,16 +276,10 @@ def test_two_beyond_range_terms_must_add_a_named_effects_size_beyond_each_other(
     r2 = _run_beyond_pair(c, xb2, e2, True)
     assert max(r2["named_beyond"]["fold_ratios"]) <= 0.8 and max(r2["alternative_beyond"]["fold_ratios"]) <= 0.8
     assert r2["verdict"] == "both"
+    # one shape the residual holds, the other a part of it: only the first adds beyond the other ("a"); the size is
+    # asked only of "both"
+    xb3 = c + 0.5 * np.sin(2 * np.pi * 3.1 * t)
+    e3 = 0.5 * c + 0.01 * rng.standard_normal(n)
+    r3 = _run_beyond_pair(c, xb3, e3, True)
+    assert r3["verdict"] == "a" and "beyond_size_max" not in r3
 
-
-def test_beyond_test_size_max():
-    """``size_max``: significant only with each fold ratio at most it (round 21)."""
-    fold, block, rec = layout()
-    rng = np.random.default_rng(6)
-    x = np.sin(2 * np.pi * 0.7 * np.arange(fold.size) * DT)
-    e = 0.03 * x + 0.05 * rng.standard_normal(fold.size)
-    small, big = np.zeros_like(e), 0.03 * x
-    r = beyond_test(e, small, big, fold, block, rec, DT)
-    rs = beyond_test(e, small, big, fold, block, rec, DT, size_max=0.8)
-    assert r["significant"] and 0.8 < max(r["fold_ratios"]) < 1.0
-    assert not rs["significant"] and rs["p"] == r["p"] and rs["fold_ratios"] == r["fold_ratios"]

@@ -116,15 +116,14 @@ SEPARATED_BY = {
 }
 
 
-def beyond_test(e, p_small, p_big, fold_all, block_all, rec, dt, size_max: float | None = None) -> dict:
+def beyond_test(e, p_small, p_big, fold_all, block_all, rec, dt) -> dict:
     """Whether a fit with more columns predicts the held-out residual better than a fit with fewer.
 
     ``e``: the held-out residual (used samples), ``p_small``, ``p_big``: the held-out predictions of the two nested
     fits (each sample predicted by the fold that did not see it). The active-block test of
     ``significance.active_block_test`` on ``e - p_small`` against ``e - p_big`` (correction ``p_big - p_small``)
     and the fold ratios sqrt(SSE big / SSE small). *Significant* when p < ``ALPHA_SEPARATE`` and the error
-    falls in each fold; with ``size_max`` (round 21, :func:`separate`) also by a named effect's size: each fold
-    ratio at most ``size_max``.
+    falls in each fold.
     """
     from . import significance as sg
     before, after, corr = e - p_small, e - p_big, p_big - p_small
@@ -133,9 +132,8 @@ def beyond_test(e, p_small, p_big, fold_all, block_all, rec, dt, size_max: float
         return {"p": 1.0, "fold_ratios": fr, "n_active": 0, "significant": False}
     units = sg.test_units(before, block_all, rec, dt, corr)
     _, p, n_act = sg.active_block_test(before, after, corr, block_all, units)
-    limit = 1.0 if size_max is None else size_max
     return {"p": float(p), "fold_ratios": fr, "n_active": int(n_act),
-            "significant": bool(p < ALPHA_SEPARATE and max(fr) < 1.0 and max(fr) <= limit)}
+            "significant": bool(p < ALPHA_SEPARATE and max(fr) < 1.0)}
 
 
 def pair_verdict(a_beyond_b: dict, b_beyond_a: dict, a_alone: dict, b_alone: dict) -> str:
@@ -159,6 +157,23 @@ def pair_verdict(a_beyond_b: dict, b_beyond_a: dict, a_alone: dict, b_alone: dic
 def separation_hint(a: str, b: str) -> str:
     """The recording that would tell ``a`` from ``b`` (``SEPARATED_BY``), in words."""
     return "; ".join(f"for {n}: {SEPARATED_BY[n]}" for n in (a, b) if n in SEPARATED_BY)
+
+
+def _both_by_size(r: dict) -> None:
+    """Round 21: two terms that act only beyond the calibrated drive range (a clip, an asymmetric knee) are both
+    fitted there beside the base's unknown continuation, where neither shape is exactly right. When each improves
+    beyond the other ("both"), that claims two effects: each must then add what a named effect must add (fold ratios
+    at most ``significance.RATIO_MAX``, the size gate); a small gain of each beyond the other tells neither apart
+    (held-out s126-028, a rail: the clip and the knee added 0.95 and 0.89 beyond each other at p 1e-3, "both", and the
+    knee was named alone). Where only one improves beyond the other, that order stands at the pair test's level.
+    Marks ``r`` (``beyond_size_max``) and sets the two beyond tests' ``significant`` by the size."""
+    from . import significance as sg
+    nb, ab = r["named_beyond"], r["alternative_beyond"]
+    if not (nb["significant"] and ab["significant"]):
+        return
+    r["beyond_size_max"] = sg.RATIO_MAX
+    for t in (nb, ab):
+        t["significant"] = bool(max(t["fold_ratios"]) <= sg.RATIO_MAX)
 
 
 def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> list:
@@ -197,7 +212,6 @@ def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> li
         ``n_active``, ``significant``) as ``named_alone``, ``alternative_alone``, ``named_beyond``,
         ``alternative_beyond``.
     """
-    from . import significance as sg
     from .solve import lstsq_box, train_rows
     used = fold_all >= 0
     out = []
@@ -224,17 +238,14 @@ def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> li
                 preds[k][test] = np.hstack([x[test] for x in parts]) @ th
         ev, p = e[used], {k: v[used] for k, v in preds.items()}
         fa, bl, rec_u = fold_all[used], block_all[used], rec[used]
-        # round 21: two terms that act only beyond the calibrated drive range (a clip, an asymmetric knee) are both
-        # fitted there beside the base's unknown continuation; one tells itself from the other only by adding, beyond
-        # it, what a named effect must add (held-out s126-028: a rail, its clip and the knee each added 0.89 and
-        # 0.95 beyond the other at p 1e-3, "both", and the knee was named alone)
-        size = sg.RATIO_MAX if (getattr(named.term, "only_beyond_calibrated_range", False)
-                                and getattr(b.term, "only_beyond_calibrated_range", False)) else None
         r = {"name": b.name,
              "named_alone": beyond_test(ev, p["n"], p["a"], fa, bl, rec_u, dt),
              "alternative_alone": beyond_test(ev, p["n"], p["b"], fa, bl, rec_u, dt),
-             "named_beyond": beyond_test(ev, p["b"], p["ab"], fa, bl, rec_u, dt, size),
-             "alternative_beyond": beyond_test(ev, p["a"], p["ab"], fa, bl, rec_u, dt, size)}
+             "named_beyond": beyond_test(ev, p["b"], p["ab"], fa, bl, rec_u, dt),
+             "alternative_beyond": beyond_test(ev, p["a"], p["ab"], fa, bl, rec_u, dt)}
+        if (getattr(named.term, "only_beyond_calibrated_range", False)
+                and getattr(b.term, "only_beyond_calibrated_range", False)):
+            _both_by_size(r)
         r["verdict"] = pair_verdict(r["named_beyond"], r["alternative_beyond"], r["named_alone"],
                                     r["alternative_alone"])
         out.append(r)
