@@ -229,3 +229,57 @@ def test_slew_shape_check_with_no_bin_below_unity_does_not_fail():
                   segments=20)
     for r in (check_delay(tr, 1.0, 5.0, 1e-4), check_bandwidth(tr, 1.0, 5.0, 1e-4)):
         assert not r["testable"] and r["passed"]
+
+
+def _run_beyond_pair(xa, xb, e, flag):
+    """``separate`` of two terms that act only beyond the calibrated range (``flag``) or of two others."""
+    fold, block, rec = layout()
+
+    def term():
+        return types.SimpleNamespace(group="", only_beyond_calibrated_range=flag)
+
+    a, b = Cand("asymmetric_hysteresis", term=term()), Cand("saturation", term=term())
+    cols = {"asymmetric_hysteresis": xa[:, None], "saturation": xb[:, None]}
+
+    def design(cands, f):
+        return (np.zeros((e.size, 0)), np.zeros(0), np.zeros(0),
+                [(cols[c.name], np.array([-np.inf]), np.array([np.inf])) for c in cands])
+
+    (r,) = separate(a, [a, b], design, e, fold, block, rec, DT, 10_000)
+    return r
+
+
+def test_two_beyond_range_terms_must_add_a_named_effects_size_beyond_each_other():
+    """Round 21: two shapes that share most of the residual, each adding a little (significantly, fold ratios about
+    0.86) beyond the other: "both" for any two terms, a pair when both act only beyond the calibrated range; two
+    shapes that each add a named effect's size beyond the other stay "both" either way."""
+    rng = np.random.default_rng(5)
+    n = N_BLOCKS * BLOCK
+    t = np.arange(n) * DT
+    c = np.sin(2 * np.pi * 0.7 * t) ** 2
+    d1, d2 = np.sign(np.sin(2 * np.pi * 0.23 * t)), np.sin(2 * np.pi * 1.9 * t)
+    xa, xb = c + 0.05 * d1, c + 0.05 * d2
+    e = 0.5 * (xa + xb) + 0.05 * rng.standard_normal(n)
+    other = _run_beyond_pair(xa, xb, e, False)
+    edge = _run_beyond_pair(xa, xb, e, True)
+    for r in (other, edge):
+        assert r["named_beyond"]["p"] < 1e-6 and r["alternative_beyond"]["p"] < 1e-6
+        assert 0.8 < max(r["named_beyond"]["fold_ratios"]) < 0.9
+        assert 0.8 < max(r["alternative_beyond"]["fold_ratios"]) < 0.9
+    assert other["verdict"] == "both" and "beyond_size_max" not in other
+    assert edge["verdict"] == "inseparable" and edge["beyond_size_max"] == 0.8
+    fields, _ = separation_doc("asymmetric_hysteresis", [edge])
+    assert [a["name"] for a in fields["alternatives"]] == ["saturation"]
+    # distinct shapes, each a large part of the residual: both, with or without the size
+    xb2 = np.sign(np.sin(2 * np.pi * 0.23 * t))
+    e2 = 0.5 * c + 0.3 * xb2 + 0.01 * rng.standard_normal(n)
+    r2 = _run_beyond_pair(c, xb2, e2, True)
+    assert max(r2["named_beyond"]["fold_ratios"]) <= 0.8 and max(r2["alternative_beyond"]["fold_ratios"]) <= 0.8
+    assert r2["verdict"] == "both"
+    # one shape the residual holds, the other a part of it: only the first adds beyond the other ("a"); the size is
+    # asked only of "both"
+    xb3 = c + 0.5 * np.sin(2 * np.pi * 3.1 * t)
+    e3 = 0.5 * c + 0.01 * rng.standard_normal(n)
+    r3 = _run_beyond_pair(c, xb3, e3, True)
+    assert r3["verdict"] == "a" and "beyond_size_max" not in r3
+

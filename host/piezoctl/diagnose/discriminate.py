@@ -159,6 +159,23 @@ def separation_hint(a: str, b: str) -> str:
     return "; ".join(f"for {n}: {SEPARATED_BY[n]}" for n in (a, b) if n in SEPARATED_BY)
 
 
+def _both_by_size(r: dict) -> None:
+    """Round 21: two terms that act only beyond the calibrated drive range (a clip, an asymmetric knee) are both
+    fitted there beside the base's unknown continuation, where neither shape is exactly right. When each improves
+    beyond the other ("both"), that claims two effects: each must then add what a named effect must add (fold ratios
+    at most ``significance.RATIO_MAX``, the size gate); a small gain of each beyond the other tells neither apart
+    (held-out s126-028, a rail: the clip and the knee added 0.95 and 0.89 beyond each other at p 1e-3, "both", and the
+    knee was named alone). Where only one improves beyond the other, that order stands at the pair test's level.
+    Marks ``r`` (``beyond_size_max``) and sets the two beyond tests' ``significant`` by the size."""
+    from . import significance as sg
+    nb, ab = r["named_beyond"], r["alternative_beyond"]
+    if not (nb["significant"] and ab["significant"]):
+        return
+    r["beyond_size_max"] = sg.RATIO_MAX
+    for t in (nb, ab):
+        t["significant"] = bool(max(t["fold_ratios"]) <= sg.RATIO_MAX)
+
+
 def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> list:
     """The alternatives the data cannot tell from the named candidate (docs/diagnose.md, "Round 11").
 
@@ -226,6 +243,9 @@ def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> li
              "alternative_alone": beyond_test(ev, p["n"], p["b"], fa, bl, rec_u, dt),
              "named_beyond": beyond_test(ev, p["b"], p["ab"], fa, bl, rec_u, dt),
              "alternative_beyond": beyond_test(ev, p["a"], p["ab"], fa, bl, rec_u, dt)}
+        if (getattr(named.term, "only_beyond_calibrated_range", False)
+                and getattr(b.term, "only_beyond_calibrated_range", False)):
+            _both_by_size(r)
         r["verdict"] = pair_verdict(r["named_beyond"], r["alternative_beyond"], r["named_alone"],
                                     r["alternative_alone"])
         out.append(r)

@@ -105,6 +105,9 @@ class Term:
     #                                  samples (round 17, diagnose.misfit.ratios_where)
     same_on_every_recording = False  # a property of the sensor, one map of the reading wherever it reads: the
     #                                  refined model may not make any recording worse (round 17; diagnose.select)
+    only_beyond_calibrated_range = False  # refused where the recordings stay in the calibrated drive range; two such
+    #                                       terms are told apart only by a named effect's size (round 21,
+    #                                       diagnose.discriminate.separate)
 
     def applicable(self, ctx) -> bool:
         return True
@@ -435,6 +438,7 @@ class Saturation(Term):
     signature = "residual only beyond a drive threshold, growing with the excess"
     COARSE = tuple(0.025 * i for i in range(15))   # threshold below the largest drive, fraction of the span
     STEP = 0.025   # the grid step, fraction of the drive span
+    only_beyond_calibrated_range = True   # a rail inside the range clipped the calibration too (refuses)
 
     def refuses(self, ctx):
         if beyond_calibrated_sides(ctx, self.STEP):
@@ -513,6 +517,7 @@ class AsymmetricHysteresis(Term):
     intercept = False   # round 19: a constant column only where both sides are beyond the edge (``_constant``)
     acts_beyond_calibration = True   # knees at or beyond the calibrated edge (the whole-stroke setting is refused
     #                                  in range, and beside a knee its bend inside the range is the base's)
+    only_beyond_calibrated_range = True
     signature = "even function of the drive (loop not point-symmetric), or an extra beyond a knee on one side"
     KNEES = (0.0, 0.025, 0.05, 0.075, 0.1)   # knee beyond the calibrated edge, fraction of the drive span
     STEP = 0.025
