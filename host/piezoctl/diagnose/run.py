@@ -349,14 +349,6 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             f"above the first round's {sg.RATIO_MAX} but below {a.ratio_max:g}, and its signature holds."
                             if a.below_gates else "")
                          + (_branch_common_text(a.whole) if a.whole and "branch_common" in a.whole else "")
-                         + (f" Round {a.selection_round} named nothing alone; this term passed beside "
-                            f"{a.beside['name']}'s flexibility, which still helps beside it (alone its fold ratios were "
-                            f"{a.beside['alone']['fold_ratios'][0]:.2f}/{a.beside['alone']['fold_ratios'][1]:.2f}, "
-                            f"p = {a.beside['alone']['p']:.1e}) and {a.beside['name']} beside it (fold ratios "
-                            f"{a.beside['other_beside']['fold_ratios'][0]:.2f}/"
-                            f"{a.beside['other_beside']['fold_ratios'][1]:.2f}, p = {a.beside['other_beside']['p']:.1e}; "
-                            f"level {a.beside['level']:.1e}): two effects, each in the other's residual."
-                            if a.beside else "")
                          + (f" Caution: the refined model is worse on {a.worsened[0]} (held-out error x"
                             f"{a.worsened[1]:.2f} there): where it is wrong, this model does not hold."
                             if a.worsened else "") + (f" {sep_text}" if sep_text else "")),
@@ -371,7 +363,6 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                          if a.worsened else None),
                             **({"slow_signature": a.slow_signature} if a.slow_signature else {}),
                             **({"whole_residual": a.whole} if a.whole else {}),
-                            **({"beside": a.beside} if a.beside else {}),
                             **({"exact_above": a.exact_above} if a.exact_above else {})},
             "signature": a.term.signature, "signature_check": a.signature_check, **sep_fields})
     last = rounds[-1] if rounds else []

@@ -190,9 +190,6 @@ class Candidate:
     #                                           steps (slow_signature.creep_model_on_dwells)
     from_dwells: bool = False                 # round 19: that model passed the exact check (the one fitted on all
     #                                           blocks did not); the all-data model is sized on the dwells too
-    beside_other: object = None               # round 21: the other's Candidate beside this one (its model there)
-    beside: dict | None = None                # round 21: passed only beside another candidate's flexibility
-    #                                           (:func:`_beside_pair`): that candidate, and its own figures there
 
     @property
     def below_gates(self) -> bool:
@@ -1197,117 +1194,6 @@ def _coupling_motion(evals, fctx, es, fold_all, block_all, rows, log):
         c.veto = c.signature_check["reason"]
 
 
-# Round 21 (issue 12, two effects): when no candidate passes, the round's best few that each lower the held-out
-# error in both folds are tested in pairs, each beside the other's flexibility (its columns at its chosen setting
-# and their change to the neighbouring settings, as an accepted term's: accepted_flexibility). Two effects present
-# at once each leave their misfit in the residual the other's nested test is scored against; that misfit is a
-# nuisance neither test has (curve + delay: the static map of y sits in every blocks' residual, the delay's lag in
-# the fast ones). A candidate is offered (its exact check as ever) when it passes the round's gates beside the
-# other, at the round's level divided by the partners tried, and the other still lowers the held-out error in each
-# fold beside it (with dBIC < 0); the other is then tested in the next round on the model with the first, at that
-# round's gates (s119-003, studied: beside the delay the curve passes, 0.65/0.79, p 2e-9; beside the curve the delay
-# reaches 0.61/0.75 but its active-block test does not, p 0.6).
-BESIDE_POOL = 3
-
-
-def _beside_flex(ctx, c) -> np.ndarray:
-    """Candidate ``c``'s flexibility on ``ctx`` at the settings of both folds (one context in the first round)."""
-    seen, cols = set(), []
-    for st in c.setting:
-        if repr(st) not in seen:
-            seen.add(repr(st))
-            cols.append(accepted_flexibility(ctx, c.term, st))
-    return np.hstack(cols)
-
-
-def _evaluate_beside(fctx, a, b, es, fold_all, block_all, rows, p_max):
-    """``a``'s evaluation (:func:`_evaluate`) with ``b``'s flexibility added to the accepted terms' (restored)."""
-    saved = [c.accepted_flex for c in fctx]
-    ctxs = [fctx[0]] if fctx[0] is fctx[1] else list(fctx)
-    try:
-        for c, prev in zip(ctxs, saved):
-            x = _beside_flex(c, b)
-            c.accepted_flex = x if prev is None else np.hstack([prev, x])
-        x = _evaluate(fctx, a.term, es, fold_all, block_all, rows, p_max, a.ratio_max)
-        if not x.term.fit_model_alone(fctx[0]):
-            # the model's setting and coefficients sized beside the other's flexibility too: fitted without it, the
-            # curve took part of the delay's lag (s119-003: exact 1.05/1.15) - the refined model leaves the other
-            # effect's misfit to the next round, not to this term's coefficients
-            for f in (0, 1):
-                train, test = fold_all == f, fold_all == 1 - f
-                Nm = _nuis(fctx[f], a.term, train, test, rows, dynamics=False, initial=False)
-                st, _, _, _, th = best_setting(fctx[f], a.term, es[f], train, test, rows, Nm)
-                x.setting[f], x.coef[f] = st, th
-        return x
-    finally:
-        for c, prev in zip(ctxs, saved):
-            c.accepted_flex = prev
-            c.design_cache.clear()
-
-
-def _beside_pair(evals, fctx, es, fold_all, block_all, rows, log):
-    """The pair route above: returns ``a``'s evaluation beside ``b`` (its ``beside`` set) for the first pair
-    (lowest ratio first) where ``a`` passes beside ``b`` and ``b`` still helps beside ``a``, or None. ``evals`` is
-    sorted by ratio."""
-    pool = [c for c in evals if not c.significant and c.name not in SIGNATURES
-            and (c.veto is None or c.credited_only) and c.dbic < 0 and max(c.fold_ratios) < 1.0][:BESIDE_POOL]
-    if len(pool) < 2:
-        return None
-    level = pool[0].p_max / (len(pool) - 1)   # each candidate is tried beside every other of the pool
-    done = {}
-
-    def beside(a, b):
-        if (a.name, b.name) not in done:
-            done[(a.name, b.name)] = _evaluate_beside(fctx, a, b, es, fold_all, block_all, rows, level)
-            x = done[(a.name, b.name)]
-            log(f"    beside {b.name}: {a.name} {x.ratio:.3f} ({x.fold_ratios[0]:.2f}/{x.fold_ratios[1]:.2f} "
-                f"p {x.p:.0e} c{x.credited:.2f})" + (" passes" if x.significant else ""))
-        return done[(a.name, b.name)]
-
-    for a in pool:
-        for b in pool:
-            if a is b or (a.term.group and a.term.group == b.term.group):
-                continue
-            xa = beside(a, b)
-            if not xa.significant:
-                continue
-            xb = beside(b, a)
-            if not (max(xb.fold_ratios) < 1.0 and xb.dbic < 0):   # the other must still help beside it
-                continue
-            xa.beside_other = xb
-            xa.beside = {"name": b.name, "level": level, "alone": {"fold_ratios": list(a.fold_ratios), "p": a.p},
-                         "other_beside": {"fold_ratios": list(xb.fold_ratios), "p": xb.p, "credited_ratio": xb.credited,
-                                          "significant": xb.significant}}
-            xa.selection_round = a.selection_round
-            return xa
-    return None
-
-
-def _exact_beside(c, fctx, fold_all, recs, span, log) -> bool:
-    """The exact check of a candidate offered by :func:`_beside_pair`, on the model with the other effect's term (its
-    setting and coefficients sized beside ``c``): ``c``'s term must lower the held-out error in each fold there.
-    Without the other the held-out error is the other's misfit (s119-003: the delay's fast residual, 0.70 um RMS,
-    against a curve's of tens of nm) and ``c``'s exact change is within its fold-to-fold scatter. Sets
-    ``c.beside["exact"]``."""
-    o = c.beside_other
-    per = []
-    for f in (0, 1):
-        ctx = fctx[f]
-        with_o = model_with(ctx.base, {o.name: o.term.term(ctx, o.setting[f], o.coef[f])})
-        new = model_with(with_o, {c.name: c.term.term(ctx, c.setting[f], c.coef[f])})
-        test = fold_all == 1 - f
-        sse = []
-        for m in (with_o, new):
-            ys = simulate_refined(m, recs, ctx.names)
-            e = np.concatenate([(s.y - y)[v] for s, y, v in zip(ctx.signals, ys, ctx.valid)])
-            sse.append(float(np.sum(e[test] ** 2)))
-        per.append({"sse_before": sse[0], "sse_after": sse[1], "n": int(np.sum(test))})
-    fr, before, after = _exact_figures(per, span)
-    c.beside["exact"] = {"fold_ratios": fr, "nrmse_before": before, "nrmse_after": after}
-    log(f"    exact {c.name} beside {o.name}: {fr} {before:.4f} -> {after:.4f}")
-    return max(fr) < 1.0
-
-
 @blas_threads(1)   # small BLAS calls: a second thread only waits for a busy core (dsp.blas_threads)
 def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f_band=None):
     """Forward selection: per round every remaining term is evaluated (cross-validated, nested), the drive-side
@@ -1363,27 +1249,9 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
                              f"n{c.n_active} c{c.credited:.2f}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"
                              for c in evals[:6]))
-        if best is None:   # round 21: two effects, each a nuisance of the other's test
-            pair = _beside_pair(evals, fctx, es, fold_all, block_all, rows, log)
-            if pair is not None:
-                log(f"  {pair.name} passes beside {pair.beside['name']}, which still helps beside it: offered")
-                _coupling_motion([pair], fctx, es, fold_all, block_all, rows, log)
-                if check is not None and not pair.veto:
-                    pair.signature_check = check(pair) or pair.signature_check
-                    if pair.signature_check is not None and not pair.signature_check["passed"]:
-                        pair.veto = "its signature check fails: " + pair.signature_check["reason"]
-                        log(f"    signature {pair.name}: {pair.veto}")
-                if not pair.veto and _exact_beside(pair, fctx, fold_all, recs, span, log):
-                    pair.exact = [_exact_fold(fctx[f], pair, f, fold_all, recs) for f in (0, 1)]
-                    pair.exact_fold_ratios, pair.exact_before, pair.exact_after = _exact_figures(pair.exact, span)
-                    pair.exact_above = _exact_above(pair.exact, span)
-                    best = pair
-            if best is None:
-                break
-            evals[:] = [best if c.name == best.name else c for c in evals]
-            _separate(best, evals, fctx, es, fold_all, block_all, rows, log)
-        else:
-            best = _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check)
+        if best is None:
+            break
+        best = _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check)
         # setting and coefficients on all selection samples, applied to the all-data model
         allmask = fold_all >= 0
         e_all = residual(ctx_all)
