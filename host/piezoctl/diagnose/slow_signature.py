@@ -1088,7 +1088,7 @@ def trend_phrase(tr: dict) -> str:
                  f"since the calibration would move {', '.join(f'{1e3 * x:+.2f}' for x in tr['needed_um_per_s'])} nm/s, "
                  + ("which the recordings exclude" if tr["excludes_drift"] else "which the recordings do not exclude")
                  + ("; the level moves back towards the calibration's zero" if tr.get("against_level") else ""))
-    if tr.get("settled"):
+    if tr.get("settled") and not tr.get("against_level"):   # against: said above
         text += (f"; a warm-up that reached the level {', '.join(f'{x:+.3f}' for x in tr['reached_um'])} um moving at "
                  f"{', '.join(f'{x:.3f}' for x in tr['settled_fraction'])} of that steady rate is more than "
                  f"{SETTLED_TAUS:g} time constants on: it stopped before the reveal, and the level is a constant")
