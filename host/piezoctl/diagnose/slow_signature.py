@@ -1005,16 +1005,17 @@ def level_trend_test(designs, es, fold_all, block_all, rec, ctx, rows) -> dict |
     if clock:
         ks = sorted({cols[i] for i in tested} | {cols[p["recordings"][0]] for p in pairs})
         q = float(st.t.isf(0.5 * sg.ALPHA / len(ks), dof))
-        lv, need = [], []
+        lv, need, tcs = [], [], []
         for k in ks:
             rs = [i for i in sorted(set(tested) | {i for p in pairs for i in p["recordings"]}) if cols[i] == k]
             c = float(np.mean(L[rs]))
             tc = float(np.mean(B[np.isin(B[:, 0], rs), 1]))
             lv.append(c)
+            tcs.append(tc)
             need.append(c / tc if tc > 0 else np.inf)
         # round 17: a warm-up since the calibration moves away from the calibration's zero, in the direction of the
         # level it reached; a slope significantly the other way is no warm-up that reached this level
-        out.update(levels_um=lv, needed_um_per_s=need, quantile=q,
+        out.update(levels_um=lv, needed_um_per_s=need, quantile=q, t_c_s=tcs,
                    excludes_drift=bool(all(abs(slope - g) > q * se for g in need)),
                    against_level=bool(all(slope * np.sign(c) < -q * se for c in lv)))
     out["pair_level"] = pair_level_test(pairs, ctx.misfit)
@@ -1087,6 +1088,10 @@ def trend_phrase(tr: dict) -> str:
                  f"since the calibration would move {', '.join(f'{1e3 * x:+.2f}' for x in tr['needed_um_per_s'])} nm/s, "
                  + ("which the recordings exclude" if tr["excludes_drift"] else "which the recordings do not exclude")
                  + ("; the level moves back towards the calibration's zero" if tr.get("against_level") else ""))
+    if tr.get("settled") and not tr.get("against_level"):   # against: said above
+        text += (f"; a warm-up that reached the level {', '.join(f'{x:+.3f}' for x in tr['reached_um'])} um moving at "
+                 f"{', '.join(f'{x:.3f}' for x in tr['settled_fraction'])} of that steady rate is more than "
+                 f"{SETTLED_TAUS:g} time constants on: it stopped before the reveal, and the level is a constant")
     return text
 
 
@@ -1402,11 +1407,16 @@ def against_reached(trend, level) -> dict:
     beyond that misfit (:func:`pair_level_test`, round 18); when neither is, no level is established and the
     trend is not against one. Against: ``slope sign(c) < -q se`` for every such level ``c`` (``q`` as round 17's).
 
+    Round 21: how far a warm-up that reached that level has settled (:func:`settled_fraction`): ``settled`` when,
+    for every level ``c`` established, the trend is less than ``SETTLED_FRACTION`` of the steady rate ``c / t_c``
+    (``t_c``: the mean time of the column's blocks since the calibration ended, ``level_trend_test``).
+
     Returns
     -------
     dict
         ``against_level``, ``reached_um`` (the levels used; empty when none is established) and
-        ``reached_from`` (``"offset"``, ``"pair"`` or None).
+        ``reached_from`` (``"offset"``, ``"pair"`` or None); ``settled_fraction`` (per level, the trend over
+        the steady rate, dimensionless) and ``settled``.
     """
     slope, se, q = trend["slope_um_per_s"], trend["se_um_per_s"], trend.get("quantile", 0.0)
     pl = trend.get("pair_level") or {}
@@ -1416,8 +1426,33 @@ def against_reached(trend, level) -> dict:
         reached, src = [float(x) for x in pl["levels_um"]], "pair"
     else:
         reached, src = [], None
+    tcs = trend.get("t_c_s") or []
+    tcs = tcs if len(tcs) == len(reached) else [float(np.mean(tcs))] * len(reached) if tcs else []
+    frac = [settled_fraction(slope, c, tc) for c, tc in zip(reached, tcs)]
     return {"against_level": bool(reached) and all(slope * np.sign(c) < -q * se for c in reached),
-            "reached_um": reached, "reached_from": src}
+            "reached_um": reached, "reached_from": src, "settled_fraction": frac,
+            "settled": bool(frac) and all(f < SETTLED_FRACTION for f in frac)}
+
+
+SETTLED_TAUS = 3.0   # round 21: a warm-up past this many time constants (95 % of its change done) has stopped
+SETTLED_FRACTION = SETTLED_TAUS / np.expm1(SETTLED_TAUS)   # its rate over the steady rate: 0.157
+
+
+def settled_fraction(slope, level, t_c) -> float:
+    """The level's trend within the recordings over the steady rate that would have reached ``level`` [um] in
+    ``t_c`` [s] since the calibration ended (dimensionless; negative when the trend goes back towards zero).
+
+    A warm-up ``a (1 - exp(-t / tau))`` observed ``t_c`` after its start has reached ``c = a (1 - exp(-x))`` and
+    moves at ``b = (a / tau) exp(-x)``, ``x = t_c / tau``, so ``b t_c / c = x / (exp(x) - 1)``: 1 at the start
+    (a steady rate), 0.58 after one time constant, 0.157 after three (95 % of its change done), whatever ``a``
+    and ``tau``. Below ``SETTLED_FRACTION`` the warm-up that left the level has stopped before the reveal: to these
+    data that level is a constant (an offset), and the trend beyond it is a change a twentieth of the level or
+    less, which the drift's own candidate (beyond the level) must carry itself. A warm-up that began after the
+    calibration ended (``t_on > 0``) has run for less than ``t_c``, so this fraction overstates how little it
+    has settled: the rule errs towards the drift."""
+    if not level or not t_c or t_c <= 0:
+        return float("inf")
+    return float(slope * t_c / level)
 
 
 def level_phrase(lv: dict) -> str:
@@ -1585,11 +1620,15 @@ def attribute(evals, tests) -> str | None:
         # change is significant on the recordings' own scale (:func:`_trend_is_drifts`: each recording's blocks
         # about its own line, where that misfit is one history's). Development s123-047 (drift +0.12 to +0.21 um,
         # Preisach): credited 0.88, the trend +2.81 +- 0.31 nm/s (t = 8.9), the offset's candidate 0.32/0.35
+        # Round 21: nor when a warm-up that reached the offset's level at the trend's rate has settled
+        # (``settled``, :func:`settled_fraction`): a level that stopped moving before the reveal is a constant to
+        # these data (development s126-017, offset +0.44 um: +0.13 +- 0.02 nm/s, t 5.6, 0.007 of the steady rate)
         if c is not None and n == "thermal_drift" and "sensor_offset" in sized \
                 and (not c.veto or (getattr(c, "credited_only", False) and _trend_is_drifts(by[n], tests))) \
                 and "sensor_offset" in order[order.index(n):] \
                 and not _level_refused(by["sensor_offset"]) \
-                and not (by[n].trend or {}).get("against_level"):
+                and not (by[n].trend or {}).get("against_level") \
+                and not (by[n].trend or {}).get("settled"):
             chosen = c
             chosen.veto = None
             break
