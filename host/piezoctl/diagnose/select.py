@@ -266,23 +266,43 @@ def make_masks(sigs, settle_s, block_s, beyond=None):
 
 
 class _Design:
-    """Stacked regressors of one term setting over all recordings (settled samples)."""
+    """Stacked regressors of one term setting over all recordings (settled samples).
 
-    def __init__(self, ctx, term, setting):
+    Kept by columns (round 21): a column bit for bit equal to the same column of ``ref`` (the term's first design
+    in the context) is ``ref``'s array, not a copy. The rate term's five columns per setting are four the same for
+    every setting (the constant widenings, the intercept) and one its own; its cached designs held 601 MiB of
+    s0-017's 1960 MiB peak (docs/diagnose.md, "Round 20: speed and memory"). ``X`` stacks the columns on each
+    request, the same C-ordered floats as the stacked design was, and is not kept."""
+
+    def __init__(self, ctx, term, setting, ref=None):
         self.setting = setting
-        # each recording's settled rows copied once, straight into the stacked design (a masked copy per
-        # recording and then np.vstack copied every design of about 1 M rows twice)
+        # each recording's settled rows copied once, straight into the columns (a masked copy per recording and
+        # then np.vstack copied every design of about 1 M rows twice)
         n = sum(int(np.count_nonzero(v)) for v in ctx.valid)
-        X, pos = None, 0
+        cols, pos = None, 0
         for s, v in zip(ctx.signals, ctx.valid):
             R = np.asarray(term.regressors(ctx, s, setting), float)   # (samples, columns)
-            if X is None:
-                X = np.empty((n, R.shape[1]))
+            if cols is None:
+                cols = [np.empty(n) for _ in range(R.shape[1])]
             m = int(np.count_nonzero(v))
-            np.compress(v, R, axis=0, out=X[pos:pos + m])
+            for j, c in enumerate(cols):
+                np.compress(v, R[:, j], out=c[pos:pos + m])
             pos += m
-        self.X = X
-        self.k = self.X.shape[1]
+        if ref is not None and len(ref.cols) == len(cols):
+            # shared only when equal to the bit (the int64 view: -0.0 and 0.0 differ, NaN equals itself)
+            cols = [r if np.array_equal(c.view(np.int64), r.view(np.int64)) else c for c, r in zip(cols, ref.cols)]
+        self.cols = cols
+        self.n = n
+        self.k = len(cols)
+        self.own_nbytes = sum(c.nbytes for j, c in enumerate(cols) if ref is None or c is not ref.cols[j])
+
+    @property
+    def X(self) -> np.ndarray:
+        """The stacked design (n_settled, k), C-ordered, made on each request."""
+        X = np.empty((self.n, self.k))
+        for j, c in enumerate(self.cols):
+            X[:, j] = c
+        return X
 
 
 def _lstsq_bounded(X, y, lb):
@@ -364,7 +384,8 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None):
 def _design(ctx, term, st):
     key = (term.name, repr(st))
     if key not in ctx.design_cache:
-        ctx.design_cache[key] = _Design(ctx, term, st)
+        ref = next((d for k, d in ctx.design_cache.items() if k[0] == term.name), None)
+        ctx.design_cache[key] = _Design(ctx, term, st, ref)
     return ctx.design_cache[key]
 
 
