@@ -98,3 +98,11 @@ def test_a_new_base_recomputes_the_tail():
     ctx.base = dict(ctx.base, dynamics={"b": list(LP[0]), "a": list(LP[1])})   # a new model: a new dict
     after = ss._base_tail_parts(ctx)
     assert after is not before and np.max(np.abs(after[0])) > np.max(np.abs(before[0]))
+
+
+def test_dynamics_changed_in_place_recompute_the_tail():
+    ctx = _ctx(np.random.default_rng(1))
+    before = ss._base_tail_parts(ctx)
+    ctx.base["dynamics"] = {"b": list(LP[0]), "a": list(LP[1])}   # the same model dict, its dynamics replaced
+    after = ss._base_tail_parts(ctx)
+    assert after is not before and np.max(np.abs(after[0])) > np.max(np.abs(before[0]))

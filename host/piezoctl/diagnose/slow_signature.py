@@ -309,13 +309,15 @@ def _base_tail_parts(ctx):
     (``_noise_rms_um`` on its held samples) [um RMS]; None when G has no finite DC gain.
 
     The same for every call on one context (creep's step test asks once per fold, ``creep_coef_on_dwells`` again per
-    fold), so kept in ``ctx.refit_cache`` with the objects it was computed from (a hit needs ``ctx.base`` and
-    ``ctx.signals`` by identity); read-only."""
+    fold), so kept in ``ctx.refit_cache`` with the objects it was computed from (a hit needs ``ctx.base``,
+    ``ctx.signals`` and ``ctx.valid`` by identity and the dynamics' coefficients equal: dynamics changed in place
+    recompute); read-only."""
     key = ("slow: base tail",)
-    hit = ctx.refit_cache.get(key)
-    if hit is not None and hit[0] is ctx.base and hit[1] is ctx.signals:
-        return hit[2]
     b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+    ba = (tuple(np.ravel(b).tolist()), tuple(np.ravel(a).tolist()))
+    hit = ctx.refit_cache.get(key)
+    if hit is not None and hit[0] is ctx.base and hit[1] is ctx.signals and hit[2] is ctx.valid and hit[3] == ba:
+        return hit[4]
     sa = float(np.sum(a))
     parts = None
     if abs(sa) >= 1e-12:
@@ -328,7 +330,7 @@ def _base_tail_parts(ctx):
         tail = np.concatenate(tail)
         tail.setflags(write=False)
         parts = (tail, noise)
-    ctx.refit_cache[key] = (ctx.base, ctx.signals, parts)
+    ctx.refit_cache[key] = (ctx.base, ctx.signals, ctx.valid, ba, parts)
     return parts
 
 
