@@ -268,37 +268,48 @@ def make_masks(sigs, settle_s, block_s, beyond=None):
 class _Design:
     """Stacked regressors of one term setting over all recordings (settled samples).
 
-    Kept by columns (round 21): a column bit for bit equal to the same column of ``ref`` (the term's first design
-    in the context) is ``ref``'s array, not a copy. The rate term's five columns per setting are four the same for
-    every setting (the constant widenings, the intercept) and one its own; its cached designs held 601 MiB of
-    s0-017's 1960 MiB peak (docs/diagnose.md, "Round 20: speed and memory"). ``X`` stacks the columns on each
-    request, the same C-ordered floats as the stacked design was, and is not kept."""
+    Round 21: a design some of whose columns are bit for bit the same columns of ``ref`` (the term's first design
+    in the context) keeps ``ref``'s columns and a copy of its own only. The rate term's five columns per setting
+    are four the same for every setting (the constant widenings, the intercept) and one its own; its cached designs
+    held 601 MiB of s0-017's 1960 MiB peak (docs/diagnose.md, "Round 20: speed and memory"). ``X`` of such a
+    design stacks the columns on each request (the same C-ordered floats, not kept); a design that shares nothing
+    keeps its stacked ``X`` as before (stacking a dozen columns of 1 M rows on every fit costs 0.1 s)."""
 
     def __init__(self, ctx, term, setting, ref=None):
         self.setting = setting
-        # each recording's settled rows copied once, straight into the columns (a masked copy per recording and
-        # then np.vstack copied every design of about 1 M rows twice)
+        # each recording's settled rows copied once, straight into the stacked design (a masked copy per
+        # recording and then np.vstack copied every design of about 1 M rows twice)
         n = sum(int(np.count_nonzero(v)) for v in ctx.valid)
-        cols, pos = None, 0
+        X, pos = None, 0
         for s, v in zip(ctx.signals, ctx.valid):
             R = np.asarray(term.regressors(ctx, s, setting), float)   # (samples, columns)
-            if cols is None:
-                cols = [np.empty(n) for _ in range(R.shape[1])]
+            if X is None:
+                X = np.empty((n, R.shape[1]))
             m = int(np.count_nonzero(v))
-            for j, c in enumerate(cols):
-                np.compress(v, R[:, j], out=c[pos:pos + m])
+            np.compress(v, R, axis=0, out=X[pos:pos + m])
             pos += m
-        if ref is not None and len(ref.cols) == len(cols):
-            # shared only when equal to the bit (the int64 view: -0.0 and 0.0 differ, NaN equals itself)
-            cols = [r if np.array_equal(c.view(np.int64), r.view(np.int64)) else c for c, r in zip(cols, ref.cols)]
-        self.cols = cols
-        self.n = n
-        self.k = len(cols)
-        self.own_nbytes = sum(c.nbytes for j, c in enumerate(cols) if ref is None or c is not ref.cols[j])
+        self.n, self.k = X.shape
+        same = []
+        if ref is not None and ref.k == self.k:
+            # equal to the bit (the int64 view: -0.0 and 0.0 differ, a NaN equals itself)
+            same = [j for j in range(self.k) if np.array_equal(X[:, j].view(np.int64), ref.col(j).view(np.int64))]
+        if same:
+            self._X = None
+            self.cols = [ref.col(j) if j in same else np.ascontiguousarray(X[:, j]) for j in range(self.k)]
+            self.own_nbytes = (self.k - len(same)) * self.n * X.itemsize
+        else:
+            self._X, self.cols = X, None
+            self.own_nbytes = X.nbytes
+
+    def col(self, j) -> np.ndarray:
+        """Column ``j`` (n_settled,) of the design (a view of the stacked design when it is kept)."""
+        return self._X[:, j] if self._X is not None else self.cols[j]
 
     @property
     def X(self) -> np.ndarray:
-        """The stacked design (n_settled, k), C-ordered, made on each request."""
+        """The stacked design (n_settled, k), C-ordered."""
+        if self._X is not None:
+            return self._X
         X = np.empty((self.n, self.k))
         for j, c in enumerate(self.cols):
             X[:, j] = c
