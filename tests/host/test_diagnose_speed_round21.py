@@ -105,3 +105,20 @@ def test_dynamics_changed_in_place_recompute_the_tail():
     ctx.base["dynamics"] = {"b": list(LP[0]), "a": list(LP[1])}   # the same model dict, its dynamics replaced
     after = ss._base_tail_parts(ctx)
     assert after is not before and np.max(np.abs(after[0])) > np.max(np.abs(before[0]))
+
+
+def test_the_nuisance_rows_are_the_rows_of_the_stacked_nuisance():
+    """``_nuis`` takes each block's rows and stacks them: the very bits of the stacked nuisance's rows."""
+    term = TERMS["rate_dependent_hysteresis"]
+    ctx, _ = _two_contexts()
+    fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
+    N = S.term_nuisance(ctx, term)
+    assert N is not None and len(S._nuisance_parts(ctx, term)) >= 2
+    for f in (0, 1):
+        train, test = fold_all == f, fold_all == 1 - f
+        Ntr, Nte, bounds = S._nuis(ctx, term, train, test, 5000)
+        idx = S.train_rows(train, 5000)
+        assert Ntr.flags.c_contiguous and Nte.flags.c_contiguous
+        assert np.array_equal(Ntr.view(np.int64), N[idx].view(np.int64))
+        assert np.array_equal(Nte.view(np.int64), N[test].view(np.int64))
+        assert bounds == S.nuisance_bounds(ctx, term, N)

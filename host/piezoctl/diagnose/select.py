@@ -507,6 +507,12 @@ def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True, accept
     missing from its term); ``accepted=False`` leaves out the accepted terms' flexibility (``ctx.accepted_flex``,
     for the same reason); ``own_test=False`` leaves out the term's own test nuisance (``Term.test_nuisance``). The
     initial-state columns, when taken, come last (bounds: :func:`nuisance_bounds`)."""
+    parts = _nuisance_parts(ctx, term, dynamics, initial, accepted, own_test)
+    return np.hstack(parts) if parts else None
+
+
+def _nuisance_parts(ctx, term, dynamics=True, initial=True, accepted=True, own_test=True) -> list:
+    """The blocks of columns :func:`term_nuisance` stacks, in its order (each cached by its own function)."""
     parts = []
     if term.nested:
         parts.append(hysteresis_nuisance(ctx))
@@ -521,7 +527,7 @@ def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True, accept
             parts.append(x)
     if term.initial_state and initial:
         parts.append(initial_state_nuisance(ctx))
-    return np.hstack(parts) if parts else None
+    return parts
 
 
 def _neighbours(ctx, term, st) -> list:
@@ -573,11 +579,17 @@ def nuisance_bounds(ctx, term, N, initial: bool = True):
 
 
 def _nuis(ctx, term, train, test, rows, dynamics: bool = True, initial: bool = True, accepted: bool = True):
-    """The nuisance as passed to :func:`_fit_predict`: (train rows, test rows, bounds), or None."""
-    N = term_nuisance(ctx, term, dynamics, initial, accepted)
-    if N is None:
+    """The nuisance as passed to :func:`_fit_predict`: (train rows, test rows, bounds), or None.
+
+    Round 21: each block's rows are taken and then stacked (the same floats as the rows of
+    :func:`term_nuisance`'s stacked columns): the whole stacked nuisance (n_settled x tens of columns) was made
+    for every term and fold only to be sliced, and was s0-017's peak once the rate designs shared their columns."""
+    parts = _nuisance_parts(ctx, term, dynamics, initial, accepted)
+    if not parts:
         return None
-    return (N[train_rows(train, rows)], N[test], nuisance_bounds(ctx, term, N, initial))
+    idx = train_rows(train, rows)
+    Ntr = np.hstack([p[idx] for p in parts])
+    return (Ntr, np.hstack([p[test] for p in parts]), nuisance_bounds(ctx, term, Ntr, initial))
 
 
 BEYOND_GUARD_S = 0.1   # [s] after the drive comes back into the calibrated range (run.OUT_GUARD_S)
