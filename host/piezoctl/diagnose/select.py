@@ -266,9 +266,16 @@ def make_masks(sigs, settle_s, block_s, beyond=None):
 
 
 class _Design:
-    """Stacked regressors of one term setting over all recordings (settled samples)."""
+    """Stacked regressors of one term setting over all recordings (settled samples).
 
-    def __init__(self, ctx, term, setting):
+    Round 21: a design some of whose columns are bit for bit the same columns of ``ref`` (the term's first design
+    in the context) keeps ``ref``'s columns and a copy of its own only. The rate term's five columns per setting
+    are four the same for every setting (the constant widenings, the intercept) and one its own; its cached designs
+    held 601 MiB of s0-017's 1960 MiB peak (docs/diagnose.md, "Round 20: speed and memory"). ``X`` of such a
+    design stacks the columns on each request (the same C-ordered floats, not kept); a design that shares nothing
+    keeps its stacked ``X`` as before (stacking a dozen columns of 1 M rows on every fit costs 0.1 s)."""
+
+    def __init__(self, ctx, term, setting, ref=None):
         self.setting = setting
         # each recording's settled rows copied once, straight into the stacked design (a masked copy per
         # recording and then np.vstack copied every design of about 1 M rows twice)
@@ -281,8 +288,32 @@ class _Design:
             m = int(np.count_nonzero(v))
             np.compress(v, R, axis=0, out=X[pos:pos + m])
             pos += m
-        self.X = X
-        self.k = self.X.shape[1]
+        self.n, self.k = X.shape
+        same = []
+        if ref is not None and ref.k == self.k:
+            # equal to the bit (the int64 view: -0.0 and 0.0 differ, a NaN equals itself)
+            same = [j for j in range(self.k) if np.array_equal(X[:, j].view(np.int64), ref.col(j).view(np.int64))]
+        if same:
+            self._X = None
+            self.cols = [ref.col(j) if j in same else np.ascontiguousarray(X[:, j]) for j in range(self.k)]
+            self.own_nbytes = (self.k - len(same)) * self.n * X.itemsize
+        else:
+            self._X, self.cols = X, None
+            self.own_nbytes = X.nbytes
+
+    def col(self, j) -> np.ndarray:
+        """Column ``j`` (n_settled,) of the design (a view of the stacked design when it is kept)."""
+        return self._X[:, j] if self._X is not None else self.cols[j]
+
+    @property
+    def X(self) -> np.ndarray:
+        """The stacked design (n_settled, k), C-ordered."""
+        if self._X is not None:
+            return self._X
+        X = np.empty((self.n, self.k))
+        for j, c in enumerate(self.cols):
+            X[:, j] = c
+        return X
 
 
 def _lstsq_bounded(X, y, lb):
@@ -364,7 +395,8 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None):
 def _design(ctx, term, st):
     key = (term.name, repr(st))
     if key not in ctx.design_cache:
-        ctx.design_cache[key] = _Design(ctx, term, st)
+        ref = next((d for k, d in ctx.design_cache.items() if k[0] == term.name), None)
+        ctx.design_cache[key] = _Design(ctx, term, st, ref)
     return ctx.design_cache[key]
 
 
@@ -475,6 +507,12 @@ def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True, accept
     missing from its term); ``accepted=False`` leaves out the accepted terms' flexibility (``ctx.accepted_flex``,
     for the same reason); ``own_test=False`` leaves out the term's own test nuisance (``Term.test_nuisance``). The
     initial-state columns, when taken, come last (bounds: :func:`nuisance_bounds`)."""
+    parts = _nuisance_parts(ctx, term, dynamics, initial, accepted, own_test)
+    return np.hstack(parts) if parts else None
+
+
+def _nuisance_parts(ctx, term, dynamics=True, initial=True, accepted=True, own_test=True) -> list:
+    """The blocks of columns :func:`term_nuisance` stacks, in its order (each cached by its own function)."""
     parts = []
     if term.nested:
         parts.append(hysteresis_nuisance(ctx))
@@ -489,7 +527,7 @@ def term_nuisance(ctx, term, dynamics: bool = True, initial: bool = True, accept
             parts.append(x)
     if term.initial_state and initial:
         parts.append(initial_state_nuisance(ctx))
-    return np.hstack(parts) if parts else None
+    return parts
 
 
 def _neighbours(ctx, term, st) -> list:
@@ -541,11 +579,17 @@ def nuisance_bounds(ctx, term, N, initial: bool = True):
 
 
 def _nuis(ctx, term, train, test, rows, dynamics: bool = True, initial: bool = True, accepted: bool = True):
-    """The nuisance as passed to :func:`_fit_predict`: (train rows, test rows, bounds), or None."""
-    N = term_nuisance(ctx, term, dynamics, initial, accepted)
-    if N is None:
+    """The nuisance as passed to :func:`_fit_predict`: (train rows, test rows, bounds), or None.
+
+    Round 21: each block's rows are taken and then stacked (the same floats as the rows of
+    :func:`term_nuisance`'s stacked columns): the whole stacked nuisance (n_settled x tens of columns) was made
+    for every term and fold only to be sliced, and was s0-017's peak once the rate designs shared their columns."""
+    parts = _nuisance_parts(ctx, term, dynamics, initial, accepted)
+    if not parts:
         return None
-    return (N[train_rows(train, rows)], N[test], nuisance_bounds(ctx, term, N, initial))
+    idx = train_rows(train, rows)
+    Ntr = np.hstack([p[idx] for p in parts])
+    return (Ntr, np.hstack([p[test] for p in parts]), nuisance_bounds(ctx, term, Ntr, initial))
 
 
 BEYOND_GUARD_S = 0.1   # [s] after the drive comes back into the calibrated range (run.OUT_GUARD_S)

@@ -203,6 +203,19 @@ def _held(s) -> np.ndarray:
     return still
 
 
+def held_samples(ctx, s) -> np.ndarray:
+    """:func:`_held` of recording ``s``, kept in ``ctx.refit_cache`` with ``s`` (a hit needs ``s`` by identity;
+    round 21: asked by :func:`dwell_ids` and :func:`base_tail` on every call, the same array each time). Read-only."""
+    key = ("slow: held", id(s))
+    hit = ctx.refit_cache.get(key)
+    if hit is not None and hit[0] is s:
+        return hit[1]
+    still = _held(s)
+    still.setflags(write=False)
+    ctx.refit_cache[key] = (s, still)
+    return still
+
+
 def _noise_rms_um(y, still) -> float:
     """The sensor's noise [um RMS] from the held samples as the RMS first difference over sqrt(2) (round 20).
     Unlike :func:`_noise_um`'s median it is not 0 where the noise lies within one ADC step (the median difference
@@ -237,7 +250,7 @@ def dwell_ids(ctx, s) -> np.ndarray:
     ids = np.full(u.size, -1)
     if u.size < 3:
         return ids
-    still = _held(s)
+    still = held_samples(ctx, s)
     noise = _noise_um(s.y, still)
     b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
     sr = filt(b, a, np.r_[0.0, np.ones(int(round(1.0 / s.dt)))])[1:]   # unit step from rest (filt starts at x[0])
@@ -290,6 +303,37 @@ def _centring_per_dwell(dwm):
     return centred
 
 
+def _base_tail_parts(ctx):
+    """What :func:`base_tail` reads that does not depend on the samples it selects (round 21): the base dynamics'
+    slow tail ``G(h) - G(1) h`` on every recording's settled samples, concatenated [um], and each recording's noise
+    (``_noise_rms_um`` on its held samples) [um RMS]; None when G has no finite DC gain.
+
+    The same for every call on one context (creep's step test asks once per fold, ``creep_coef_on_dwells`` again per
+    fold), so kept in ``ctx.refit_cache`` with the objects it was computed from (a hit needs ``ctx.base``,
+    ``ctx.signals`` and ``ctx.valid`` by identity and the dynamics' coefficients equal: dynamics changed in place
+    recompute); read-only."""
+    key = ("slow: base tail",)
+    b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
+    ba = (tuple(np.ravel(b).tolist()), tuple(np.ravel(a).tolist()))
+    hit = ctx.refit_cache.get(key)
+    if hit is not None and hit[0] is ctx.base and hit[1] is ctx.signals and hit[2] is ctx.valid and hit[3] == ba:
+        return hit[4]
+    sa = float(np.sum(a))
+    parts = None
+    if abs(sa) >= 1e-12:
+        dc = float(np.sum(b)) / sa
+        tail, noise = [], []
+        for s, v in zip(ctx.signals, ctx.valid):
+            h = np.asarray(s.h, float)
+            tail.append((G(ctx.base, h) - dc * h)[v])
+            noise.append(_noise_rms_um(s.y, held_samples(ctx, s)))
+        tail = np.concatenate(tail)
+        tail.setflags(write=False)
+        parts = (tail, noise)
+    ctx.refit_cache[key] = (ctx.base, ctx.signals, ctx.valid, ba, parts)
+    return parts
+
+
 def base_tail(ctx, m, dwm) -> np.ndarray | None:
     """The base dynamics' own slow tail on the dwell samples (round 20): ``G(h) - G(1) h``, centred per dwell, as
     one column, or None when it stays within the sensor's noise there.
@@ -320,17 +364,11 @@ def base_tail(ctx, m, dwm) -> np.ndarray | None:
     ndarray or None
         The column on the selected samples [um], or None.
     """
-    b, a = ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"]
-    sa = float(np.sum(a))
-    if abs(sa) < 1e-12:
+    parts = _base_tail_parts(ctx)
+    if parts is None:
         return None
-    dc = float(np.sum(b)) / sa
-    tail, noise = [], []
-    for s, v in zip(ctx.signals, ctx.valid):
-        h = np.asarray(s.h, float)
-        tail.append((G(ctx.base, h) - dc * h)[v])
-        noise.append(_noise_rms_um(s.y, _held(s)))
-    col = _centring_per_dwell(dwm)(np.concatenate(tail)[m][:, None])
+    tail, noise = parts
+    col = _centring_per_dwell(dwm)(tail[m][:, None])
     noise = [x for x in noise if x > 0.0]   # recordings that hold the drive (a triangle has no held sample)
     if not noise or float(np.sqrt(np.sum(col ** 2))) <= TAIL_Z * float(np.median(noise)):
         return None
