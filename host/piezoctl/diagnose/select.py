@@ -432,7 +432,9 @@ def dynamics_nuisance(ctx):
     nulls whose fast reveal showed the stage's one-sample latency). Cached on the context. Round 20: the
     corrections act in the whole band; only above the base's dynamics band (round 19's variant) they left a true
     delay's in-band lag to the pole as well, and on null s121-005 the stage's own in-band lag was named
-    `amplifier_bandwidth` x0.14 (docs/diagnose.md "Round 19: delay", "Round 20: delay and bandwidth")."""
+    `amplifier_bandwidth` x0.14 (docs/diagnose.md "Round 19: delay", "Round 20: delay and bandwidth"). Round 21:
+    for the drive-side terms the lag ``c1`` is bounded to the loop's latency (:func:`nuisance_bounds`): free, it took
+    a true delay's first-order lag in the whole band ("Round 21: delay")."""
     return dynamics_corrections(ctx)
 
 
@@ -529,14 +531,25 @@ def accepted_flexibility(ctx, term, st) -> np.ndarray:
     return X[:, np.any(X != 0.0, axis=0)]
 
 
-def nuisance_bounds(ctx, term, N, initial: bool = True):
+def nuisance_bounds(ctx, term, N, initial: bool = True, dynamics: bool = True):
     """(lo, hi) of the nuisance columns ``N`` of ``term`` (None: all free): the initial state's gains within
-    [-1, 1], the other columns free."""
-    if N is None or not (term.initial_state and initial):
+    [-1, 1]; round 21: the dynamics corrections' lag ``c1`` (the first column of :func:`dynamics_nuisance`, in
+    samples) within the term's ``dynamics_lag_bound`` when it states one (the drive-side terms: the loop's own
+    latency, ``ident.terms._DriveTerm``); the other columns free. ``dynamics``: the dynamics corrections are among
+    the columns (:func:`term_nuisance`)."""
+    if N is None:
+        return None
+    lag = getattr(term, "dynamics_lag_bound", None) if (term.nested_dynamics and dynamics) else None
+    box = term.initial_state and initial
+    if lag is None and not box:
         return None
     m = N.shape[1]
     lo, hi = np.full(m, -np.inf), np.full(m, np.inf)
-    lo[m - ctx.n_rec:], hi[m - ctx.n_rec:] = -1.0, 1.0
+    if lag is not None:   # the columns' order is term_nuisance's: the hysteresis channels, then c1, c2
+        j = hysteresis_nuisance(ctx).shape[1] if term.nested else 0
+        lo[j], hi[j] = -float(lag), float(lag)
+    if box:
+        lo[m - ctx.n_rec:], hi[m - ctx.n_rec:] = -1.0, 1.0
     return lo, hi
 
 
@@ -545,7 +558,7 @@ def _nuis(ctx, term, train, test, rows, dynamics: bool = True, initial: bool = T
     N = term_nuisance(ctx, term, dynamics, initial, accepted)
     if N is None:
         return None
-    return (N[train_rows(train, rows)], N[test], nuisance_bounds(ctx, term, N, initial))
+    return (N[train_rows(train, rows)], N[test], nuisance_bounds(ctx, term, N, initial, dynamics))
 
 
 BEYOND_GUARD_S = 0.1   # [s] after the drive comes back into the calibrated range (run.OUT_GUARD_S)
