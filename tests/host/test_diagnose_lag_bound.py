@@ -1,7 +1,7 @@
-"""Round 21: the drive-side terms' nested test bounds the dynamics corrections' lag ``c1`` to the loop's latency
-(``select.nuisance_bounds``, ``ident.terms._DriveTerm.dynamics_lag_bound``). Synthetic model outputs x: a delay
-of d samples beyond the loop's latency is credited with what lies beyond that latency, a lag within it is still
-the nuisance's."""
+"""Round 21: when no drive-side term passes against the free dynamics corrections, they are tested again with the
+corrections' lag ``c1`` bounded to the loop's latency (``select._lag_beyond_latency``, ``select.nuisance_bounds``,
+``ident.terms._DriveTerm.dynamics_lag_bound``). Synthetic model outputs x: a delay of d samples beyond the loop's
+latency is credited with what lies beyond that latency, a lag within it is still the nuisance's."""
 
 import types
 
@@ -51,12 +51,12 @@ def _ratio(e, X, Nn, bounds):
 
 
 def _bounds(n_cols=2):
-    ctx = types.SimpleNamespace(nuisance=np.zeros((N, 0)), n_rec=1)
+    ctx = types.SimpleNamespace(nuisance=np.zeros((N, 0)), n_rec=1, bound_lag=True)
     return S.nuisance_bounds(ctx, _term("delay"), np.zeros((N, n_cols)))
 
 
 def test_the_drive_terms_bound_the_lag_correction_to_the_loop_s_latency_only():
-    ctx = types.SimpleNamespace(nuisance=np.zeros((N, 3)), n_rec=2)
+    ctx = types.SimpleNamespace(nuisance=np.zeros((N, 3)), n_rec=2, bound_lag=True)
     Nn = np.zeros((N, 5))            # 3 hysteresis channels, then c1, c2
     for name in ("delay", "amplifier_bandwidth", "amplifier_slew_limit"):
         lo, hi = S.nuisance_bounds(ctx, _term(name), Nn)
@@ -64,6 +64,46 @@ def test_the_drive_terms_bound_the_lag_correction_to_the_loop_s_latency_only():
         assert np.all(np.isinf(np.delete(lo, 3))) and np.all(np.isinf(np.delete(hi, 3))), name
         assert S.nuisance_bounds(ctx, _term(name), np.zeros((N, 3)), dynamics=False) is None, name
     assert S.nuisance_bounds(ctx, _term("unmodeled_resonance"), Nn) is None   # the mode's corrections stay free
+    ctx.bound_lag = False            # the first test: free corrections
+    assert S.nuisance_bounds(ctx, _term("delay"), Nn) is None
+
+
+def _cand(name, significant, ratio=0.9, veto=None):
+    return types.SimpleNamespace(name=name, term=_term(name), significant=significant, veto=veto, ratio=ratio,
+                                 selection_round=1, fold_ratios=[ratio, ratio], p=1e-3, credited=ratio)
+
+
+def _again(monkeypatch, fctx):
+    calls = []
+
+    def fake(ctxs, term, *a, **k):
+        calls.append((term.name, [c.bound_lag for c in ctxs]))
+        return _cand(term.name, True, ratio=0.3)
+    monkeypatch.setattr(S, "_evaluate", fake)
+    return calls
+
+
+def test_no_drive_term_passed_they_are_tested_again_with_the_lag_bounded(monkeypatch):
+    fctx = [types.SimpleNamespace(bound_lag=False), types.SimpleNamespace(bound_lag=False)]
+    calls = _again(monkeypatch, fctx)
+    evals = [_cand("creep", True, 0.5), _cand("delay", False, 0.85), _cand("amplifier_bandwidth", False, 0.95),
+             _cand("amplifier_slew_limit", True, 0.7, veto="its signature check fails")]
+    out = S._lag_beyond_latency(evals, fctx, None, None, None, 0, 1e-3, [], lambda *a: None)
+    assert sorted(n for n, _ in calls) == ["amplifier_bandwidth", "amplifier_slew_limit", "delay"]
+    assert all(b == [True, True] for _, b in calls)                 # bounded while re-evaluated
+    assert [c.bound_lag for c in fctx] == [False, False]            # and free again after
+    by = {c.name: c for c in out}
+    assert by["delay"].ratio == 0.3 and by["delay"].lag_bounded
+    assert by["creep"] is evals[0]                                   # the others' evaluations kept
+    assert [c.ratio for c in out] == sorted(c.ratio for c in out)
+
+
+def test_a_drive_term_that_passed_against_the_free_corrections_keeps_every_evaluation(monkeypatch):
+    fctx = [types.SimpleNamespace(bound_lag=False)] * 2
+    calls = _again(monkeypatch, fctx)
+    evals = [_cand("delay", True, 0.4), _cand("amplifier_bandwidth", False, 0.9)]
+    assert S._lag_beyond_latency(evals, fctx, None, None, None, 0, 1e-3, [], lambda *a: None) is evals
+    assert calls == []
 
 
 def test_a_delay_beyond_the_latency_is_credited_against_the_bounded_corrections():
