@@ -436,8 +436,9 @@ def dynamics_nuisance(ctx):
     corrections act in the whole band; only above the base's dynamics band (round 19's variant) they left a true
     delay's in-band lag to the pole as well, and on null s121-005 the stage's own in-band lag was named
     `amplifier_bandwidth` x0.14 (docs/diagnose.md "Round 19: delay", "Round 20: delay and bandwidth"). Round 21:
-    for the drive-side terms the lag ``c1`` is bounded to the loop's latency (:func:`nuisance_bounds`): free, it took
-    a true delay's first-order lag in the whole band ("Round 21: delay")."""
+    when no drive-side term passes against them, those terms are tested again with the lag ``c1`` bounded to the
+    loop's latency (:func:`_lag_beyond_latency`): free, it took a true delay's first-order lag in the whole band
+    ("Round 21: delay")."""
     return dynamics_corrections(ctx)
 
 
