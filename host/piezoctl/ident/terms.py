@@ -267,6 +267,13 @@ class _DriveTerm(Term):
     nested_dynamics = True
     key = ""          # the model file's parameter
     geometric = False  # the grid is geometric and refined around its best point
+    # Round 21: [samples] the bound on the lag |c1| of the nested test's dynamics corrections c1 s + c2 s^2
+    # (dynamics_corrections; diagnose.select.nuisance_bounds). A delay's phase is -w d at every frequency, and a free
+    # c1 took its first-order part, w d, inside the band too (round 19: the true delay 0.91/0.93 against them,
+    # 0.15/0.15 without); what the base's G, fitted on the calibration, can lack in lag is the loop's own latency
+    # (round 5's nulls), so c1 may take that much and no more. c2, the real part (a gain change ~ w^2), stays free.
+    # A second test only: used when no drive term passed against the free corrections (select._lag_beyond_latency).
+    dynamics_lag_bound = LATENCY_SAMPLES
 
     @staticmethod
     def lag_s(setting) -> float:
