@@ -965,8 +965,6 @@ class UnmodeledResonance(Term):
 
     # round 21: at least this share of the held-out correction's energy above the mode's edge (acts_below_edge)
     SHARE_ABOVE_MIN = 0.5
-    # round 21: a concealed mode's static share at most this (implausible): beyond it, it is the stage's main mode
-    RESIDUE_MAX = 0.5
 
     def acts_below_edge(self, share_above, edge_hz):
         """Round 21: a mode is named only where a recording excites it. Below its edge the branch ``M(w) - w`` is
@@ -981,19 +979,6 @@ class UnmodeledResonance(Term):
         return (f"{100 * share_above:.0f} % of its held-out correction lies above {edge_hz:.0f} Hz, where a mode "
                 f"rings (at least {100 * self.SHARE_ABOVE_MIN:.0f} %): no recording excites the mode's frequency; "
                 f"below it the branch is a mass line, the base's own dynamics in the band it identified")
-
-    def implausible(self, ctx, setting, coef):
-        """Round 21: a mode beside the identified ones takes a share of the static gain and the identified
-        dynamics hold the rest; a stage's higher modes hold a few to 15 % (the foreign stage's +-2..15 %, its
-        concealed one 2..10 %), its first mode the rest. A fitted share ``coef[0] + coef[1]`` of at least
-        ``RESIDUE_MAX`` is the stage's main mode, above the band the calibration identified the dynamics in (the
-        null s123-050 under variant A of the base: its own 867 Hz mode, residue 1.14, fitted at 0.64 on a base of
-        order 0 identified below 39 Hz): the base's dynamics there are not identified, no mode was left out."""
-        r = float(coef[0] + coef[1])
-        if abs(r) < self.RESIDUE_MAX:
-            return None
-        return (f"a mode with {100 * r:.0f} % of the static gain is the stage's main mode, not one beside the "
-                f"identified ones: the base's dynamics were not identified at {setting[0]:.0f} Hz")
 
     def columns(self, ctx, s, setting):
         # G's input (the H output, um): the mode is a branch beside G, not a filter on its output
