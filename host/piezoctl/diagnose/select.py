@@ -727,6 +727,9 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         if fr_above is not None:
             whole = {"above_hz": float(edge), "fold_ratios": list(fold_ratios), "credited_ratio": cr}
             fold_ratios, cr = fr_above, cr_above
+            # round 21: where its correction lies (the mode's veto acts_below_edge) and, recorded only, the block
+            # test above the edge (s125-037: whole band p 4.8e-3, above its edge 3.8e-6; not a gate, not counted)
+            whole.update(_above_edge_evidence(rb_res, pred_after[used], block_all[used], rec, ctxs[0].dt, edge))
     if term.acts_beyond_calibration and whole is None and all(st is not None for st in best_st):
         # round 17: a knee setting in both folds acts only beyond the edge: sized on the samples where it can act
         w = beyond_calibrated_mask(ctxs[0])[used]
@@ -745,6 +748,9 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         significant, veto = False, refusal
     if significant:   # round 15: a fit whose size is not the term's physics (the rate term's widening)
         veto = next((w for w in (term.implausible(ctxs[0], c[0], c[4]) for c in chosen) if w), None)
+        significant = veto is None
+    if significant and whole is not None and "share_above" in whole:   # round 21: where it acts, not below
+        veto = term.acts_below_edge(whole["share_above"], whole["above_hz"])
         significant = veto is None
     credited_only = bool(significant and not within(cr))
     if significant and not within(cr):
@@ -781,6 +787,39 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
                      veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held, whole=whole,
                      credited_only=credited_only)
+
+
+def _above_edge_evidence(e_before, correction, blocks, rec, dt: float, edge_hz: float) -> dict:
+    """The block test and the correction's energy share above ``edge_hz`` (round 21).
+
+    Parameters
+    ----------
+    e_before, correction : ndarray
+        The held-out residual before the term (nested) and the term's held-out predicted correction [um], used
+        samples.
+    blocks, rec : ndarray of int
+        Block and recording label of each sample.
+    dt : float
+        Sample period [s].
+    edge_hz : float
+        The edge the term is sized above [Hz].
+
+    Returns
+    -------
+    dict
+        ``p_above``: :func:`significance.active_block_test` on the residual before and after the term, both
+        high-passed at the edge per recording as :func:`misfit.ratios_above` does; ``share_above``: the share of
+        the correction's energy above the edge (of the recordings long enough to filter).
+    """
+    hb, done = above_per_recording(e_before, rec, dt, edge_hz)
+    hc, _ = above_per_recording(correction, rec, dt, edge_hz)
+    ha = hb - hc
+    c = np.asarray(correction, float)
+    tot = float(np.sum(c[done] ** 2))
+    share = float(np.sum(hc[done] ** 2) / tot) if tot > 0 else 0.0
+    units = sg.test_units(hb[done], np.asarray(blocks)[done], np.asarray(rec)[done], dt, hc[done])
+    _, p, _ = sg.active_block_test(hb[done], ha[done], hc[done], np.asarray(blocks)[done], units)
+    return {"p_above": float(p), "share_above": share}
 
 
 def _common_passes(bc, within, p_max) -> bool:

@@ -132,6 +132,12 @@ class Term:
         not the physics it names (the candidate is vetoed with this reason); None: it may be."""
         return None
 
+    def acts_below_edge(self, share_above: float, edge_hz: float) -> str | None:
+        """For a term sized above an edge (:meth:`acts_above_hz`): why its held-out correction, of which
+        ``share_above`` of the energy lies above ``edge_hz`` [Hz], is not the physics it names (vetoed with this
+        reason); None: it may be."""
+        return None
+
     def settings(self, ctx) -> list:
         return [None]
 
@@ -968,6 +974,23 @@ class UnmodeledResonance(Term):
         edge = getattr(ctx, "cal_band_hz", None)
         f = min(float(st[0]) for st in settings) / np.sqrt(2.0) if settings else 0.0
         return max(edge or 0.0, f) or None
+
+    # round 21: at least this share of the held-out correction's energy above the mode's edge (acts_below_edge)
+    SHARE_ABOVE_MIN = 0.5
+
+    def acts_below_edge(self, share_above, edge_hz):
+        """Round 21: a mode is named only where a recording excites it. Below its edge the branch ``M(w) - w`` is
+        about ``-(f'/f)^2 w`` (a mass line, the second derivative of the drive's response), above it the ring at the
+        mode, ``|M - 1| >= 1``. Where no recording drives the stage near the mode (smooth drives far below it),
+        what the fitted branch takes is its mass line below the edge, the base's in-band dynamics, and the ring
+        is a small part of the correction. A concealed mode rung by steps, corners and a chirp through it puts
+        most of its correction above the edge (0.75 to 0.92 of the energy on the development cases of
+        docs/diagnose.md, "Round 21: resonance")."""
+        if share_above >= self.SHARE_ABOVE_MIN:
+            return None
+        return (f"{100 * share_above:.0f} % of its held-out correction lies above {edge_hz:.0f} Hz, where a mode "
+                f"rings (at least {100 * self.SHARE_ABOVE_MIN:.0f} %): no recording excites the mode's frequency; "
+                f"below it the branch is a mass line, the base's own dynamics in the band it identified")
 
     def columns(self, ctx, s, setting):
         # G's input (the H output, um): the mode is a branch beside G, not a filter on its output
