@@ -28,7 +28,8 @@ def _two_contexts():
     return ctx, other
 
 
-def test_fold_zero_keeps_only_its_chosen_designs_and_the_candidate_is_unchanged(monkeypatch):
+def _rate_evaluation():
+    """The rate term, two fold contexts, and a function that evaluates the term on them (its candidate)."""
     term = TERMS["rate_dependent_hysteresis"]
     ctx, other = _two_contexts()
     fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
@@ -37,6 +38,11 @@ def test_fold_zero_keeps_only_its_chosen_designs_and_the_candidate_is_unchanged(
 
     def run():
         return S._evaluate([ctx, other], term, [e, e], fold_all, block_all, 10 ** 6, sg.ALPHA / 12)
+    return term, ctx, run
+
+
+def test_fold_zero_keeps_only_its_chosen_designs_and_the_candidate_is_unchanged(monkeypatch):
+    term, ctx, run = _rate_evaluation()
 
     kept, keep0 = [], S._keep_designs
 

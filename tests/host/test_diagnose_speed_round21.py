@@ -5,11 +5,10 @@ slow tail and the held samples are computed once per context. Neither changes a 
 import numpy as np
 
 from piezoctl.diagnose import select as S
-from piezoctl.diagnose import significance as sg
 from piezoctl.diagnose import slow_signature as ss
 from piezoctl.ident.terms import TERMS
 from test_diagnose_slow import _ctx, _measured
-from test_diagnose_speed_round20 import _two_contexts
+from test_diagnose_speed_round20 import _rate_evaluation, _two_contexts
 from test_slow_base_tail import ROWS, _slow_base
 from test_slow_signature_steps import LP
 
@@ -51,15 +50,7 @@ def test_a_column_that_differs_in_one_bit_or_a_zero_sign_is_not_shared():
 
 
 def test_the_rate_candidate_is_the_same_with_shared_columns(monkeypatch):
-    term = TERMS["rate_dependent_hysteresis"]
-    ctx, other = _two_contexts()
-    fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
-    block_all = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
-    e = S.residual(ctx)
-
-    def run():
-        return S._evaluate([ctx, other], term, [e, e], fold_all, block_all, 10 ** 6, sg.ALPHA / 12)
-
+    _, _, run = _rate_evaluation()
     shared = run()
     made = S._Design.__init__
     monkeypatch.setattr(S._Design, "__init__", lambda self, c, t, st, ref=None: made(self, c, t, st, None))
