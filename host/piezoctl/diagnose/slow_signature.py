@@ -1159,7 +1159,7 @@ def offset_after_drift_test(ctx, level) -> dict | None:
     drift = TERMS["thermal_drift"]
     tau = float(p["tau_s"])
     tau = np.inf if tau >= 1e30 else tau
-    grid = sorted({float(st[0]) for st in drift.settings(ctx)})
+    grid = sorted({float(t) for t, _ in drift.settings(ctx)})
     if not grid:
         return None
     i = int(np.argmin([abs(np.log(g) - np.log(tau)) if np.isfinite(g) and np.isfinite(tau)

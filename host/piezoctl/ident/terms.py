@@ -1115,76 +1115,21 @@ class ThermalDrift(Term):
             starts = [s.t_session for s in ctx.signals if s.t_session is not None]
             a = max(min(starts) - float(ctx.drift_t0), 0.0) if starts else 0.0
         taus = [t for t in self.TAUS if t <= 0.5 * span and np.exp(-a / t) - np.exp(-span / t) >= self.MIN_MOVE]
-        out = [(tau, sgn) for tau in taus + [np.inf] for sgn in (1.0, -1.0)]
-        # round 22: a warm-up that began after the calibration ended, at an unknown time t_on before the first
-        # recording, is over the recordings a constant plus an exponential of the same time constant started at the
-        # first recording: a (1 - exp(-(t - t_on)/tau)) = a (1 - e) + a e (1 - exp(-(t - t_1)/tau)), e =
-        # exp(-(t_1 - t_on)/tau), whatever t_on (the constant is the level's, the offsets' columns). Referenced at
-        # the calibration's end the same exponential has moved exp(-a/tau) of its amplitude before the recordings
-        # and is refused above; referenced at the first recording it moves 1 - exp(-span'/tau) over them
-        # (development s128-001: a -0.68 um warm-up, tau 84 s, begun 25 s after the calibration: only the line was
-        # offered, and it took the levels between the recordings the wrong way, +0.4 nm/s against -11 nm/s within
-        # the repeated triangle). Offered beside the grid above, for the time constants it refused.
-        if a > 0.0:
-            span1 = span - a
-            late = [t for t in self.TAUS if t not in taus and t <= 0.5 * span1
-                    and -np.expm1(-span1 / t) >= self.MIN_MOVE]
-            out += [(tau, sgn, "first") for tau in late for sgn in (1.0, -1.0)]
-        return out
-
-    @staticmethod
-    def _reference(ctx, setting) -> float | None:
-        """The session time [s] the setting's drift is referenced at: the calibration's end (``ctx.drift_t0``), or
-        the first recording's start for the settings marked ``"first"`` (round 22); None without a session clock."""
-        if ctx.drift_t0 is None:
-            return None
-        if len(setting) > 2 and setting[2] == "first":
-            return float(min(s.t_session for s in ctx.signals if s.t_session is not None))
-        return float(ctx.drift_t0)
+        return [(tau, sgn) for tau in taus + [np.inf] for sgn in (1.0, -1.0)]
 
     def lower(self, ctx):   # the offsets free, the drift's amplitude and trend >= 0 along the setting's sign
         return [-np.inf] * ctx.n_offset() + [0.0, 0.0]
-
-    def test_nuisance(self, ctx):
-        """(n_settled, m) or None: a free level for each recording but the first of its sensor-zero column
-        (round 22), a nuisance of the nested test and of the coefficients, not of the model. The levels between the
-        recordings carry each history's misfit of the base (round 15: a reveal walk 0.2 to 2 um off the triangles),
-        and with one level per session the drift's curve was fitted to them: development s128-001 (a -0.68 um
-        warm-up, -0.27 um within the repeated long triangle), the drift's slope came out +0.4 to +1.8 nm/s against
-        the truth's -11 nm/s within the triangle. A drift is what moves while the drive repeats itself: beyond a
-        level per recording it is credited only with its change on the clock within the recordings."""
-        key = ("drift: level per recording",)
-        hit = ctx.refit_cache.get(key)
-        if hit is not None and hit[1] is ctx.signals:
-            return hit[2]
-        seen, free = set(), []
-        for i in range(ctx.n_rec):
-            col = ctx.offset_of(i)
-            if col in seen:
-                free.append(i)
-            seen.add(col)
-        x = None
-        if free:
-            blocks = []
-            for s, v in zip(ctx.signals, ctx.valid):
-                d = np.zeros((int(np.sum(v)), len(free)))
-                if s.index in free:
-                    d[:, free.index(s.index)] = 1.0
-                blocks.append(d)
-            x = np.vstack(blocks)
-        ctx.refit_cache[key] = (None, ctx.signals, x)
-        return x
 
     def n_nuisance(self, ctx):
         return ctx.n_offset()
 
     def columns(self, ctx, s, setting):
-        tau, sgn = setting[:2]
+        tau, sgn = setting
         return np.column_stack([ctx.offset_columns(s),
-                                sgn * self.basis(s.t, tau, self._t_from(self._reference(ctx, setting), s.t_session))])
+                                sgn * self.basis(s.t, tau, self._t_from(ctx.drift_t0, s.t_session))])
 
     def model_params(self, ctx, setting, coef):
-        tau, sgn = setting[:2]
+        tau, sgn = setting
         c = sgn * np.asarray(coef, float)[self.n_nuisance(ctx):]
         lin = float(tau) >= 1e30
         # round 12: the level the drift had reached when the recordings began (its constant per sensor-zero column,
@@ -1196,7 +1141,7 @@ class ThermalDrift(Term):
         out = {"amplitude_um": 0.0 if lin else float(c[0]), "tau_s": 1e300 if lin else float(tau),
                "slope_um_per_s": float(c[1]), "level_um": float(np.mean(per)) if per else 0.0}
         if ctx.drift_t0 is not None:
-            out["t0_session_s"] = self._reference(ctx, setting)
+            out["t0_session_s"] = float(ctx.drift_t0)
         return out
 
     def apply(self, p, st):
@@ -1207,13 +1152,10 @@ class ThermalDrift(Term):
             st.y = st.y + float(p.get("level_um", 0.0))
 
     def describe_own(self, ctx, setting, coef):
-        tau, sgn = setting[:2]
+        tau, sgn = setting
         c = sgn * np.asarray(coef, float)[self.n_nuisance(ctx):]
-        ref = self._reference(ctx, setting)
-        clock = ("with time since the start of each recording" if ref is None else
-                 f"with session time since the end of the calibration (t = {ref:.1f} s)" if ref == ctx.drift_t0 else
-                 f"with session time since the first recording began (t = {ref:.1f} s; a warm-up begun after the "
-                 f"calibration, its earlier part in the level)")
+        clock = (f"with session time since the end of the calibration (t = {ctx.drift_t0:.1f} s)"
+                 if ctx.drift_t0 is not None else "with time since the start of each recording")
         if float(tau) >= 1e30:
             return ({"slope_um_per_s": float(c[1])},
                     f"beyond a constant per recording, the residual drifts linearly {clock} "
