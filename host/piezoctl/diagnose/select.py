@@ -1329,6 +1329,56 @@ def _coupling_motion(evals, fctx, es, fold_all, block_all, rows, log):
         c.veto = c.signature_check["reason"]
 
 
+def _explained_beyond(best, evals) -> dict:
+    """Round 22: the beyond-range terms the accepted ``best`` explains beyond the calibrated edge, by its pair tests.
+
+    Two terms that act only beyond the calibrated drive range (``Term.only_beyond_calibrated_range``: the clip, the
+    asymmetric knee) are fitted on the same samples beyond the edge. When ``best`` is one of them and its pair test
+    with the other gave ``"a"`` (``best`` improves beyond the other, the other does not beyond ``best`` by a named
+    effect's size, ``discriminate._both_by_size``), the question a later round would ask of the other - does it add
+    beyond ``best`` there? - has been answered, on the same samples, beside ``best`` and the same nuisance. Asked
+    again on ``best``'s residual, the other is credited only with what ``best`` left beyond the edge, i.e. with the
+    base's unknown continuation there (held-out s128-028, a rail at 19.3 V: the knee passed round 2 at credited
+    0.79 on the 3 % of the residual the clip left, after its pair test had found it adding 0.79/0.86 beyond the clip,
+    and was named second).
+
+    Parameters
+    ----------
+    best : Candidate
+        The accepted candidate, its pair tests in ``separation``.
+    evals : list of Candidate
+        The round's candidates (the other's term is read from them).
+
+    Returns
+    -------
+    dict
+        Name -> the reason it is not offered again (empty when ``best`` is not such a term).
+    """
+    if not getattr(best.term, "only_beyond_calibrated_range", False):
+        return {}
+    beyond = {c.name for c in evals if getattr(c.term, "only_beyond_calibrated_range", False)}
+    out = {}
+    for r in best.separation or []:
+        if r.get("verdict") != "a" or "alternative_beyond" not in r or r["name"] not in beyond:
+            continue
+        fr = r["alternative_beyond"]["fold_ratios"]
+        out[r["name"]] = (f"beyond the calibrated range its pair test with {best.name} (round {best.selection_round}) "
+                          f"found it not improving beyond {best.name} at its level and a named effect's size (fold ratios {fr[0]:.2f}/"
+                          f"{fr[1]:.2f}, p = {r['alternative_beyond']['p']:.1e}); after {best.name} it would be "
+                          f"credited with what {best.name} left there, the base's continuation")
+    return out
+
+
+def _veto_explained(evals, explained: dict, log) -> None:
+    """Vetoes the candidates ``explained`` names (:func:`_explained_beyond`) in place; evaluated and counted in
+    the round's level as before, only not accepted."""
+    for c in evals:
+        if c.name in explained and c.significant and not c.veto:
+            c.significant = False
+            c.veto = explained[c.name]
+            log(f"    {c.name}: {c.veto}")
+
+
 @blas_threads(1)   # small BLAS calls: a second thread only waits for a busy core (dsp.blas_threads)
 def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f_band=None):
     """Forward selection: per round every remaining term is evaluated (cross-validated, nested), the drive-side
@@ -1341,7 +1391,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         Accepted candidates in order, the evaluations of every round, the refined model's context on all data
         and per fold (the terms fitted on fold f only: the model whose held-out error on fold 1 - f is scored).
     """
-    accepted, rounds = [], []
+    accepted, rounds, explained = [], [], {}
     candidates = [t for t in terms if t.applicable(ctx)]
     ctx_all, fctx = ctx, [ctx, ctx]
     span = ctx.y_span
@@ -1374,6 +1424,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
                         f"{t.level['fold_ratios'][1]:.3f}" + (" (depends on the level)" if t.level["depends_on_level"] else ""))
             _slow_beyond_gates(evals, log)
         _coupling_motion(evals, fctx, es, fold_all, block_all, rows, log)   # round 14: it follows u2's motion
+        _veto_explained(evals, explained, log)   # round 22: a beyond-range pair already answered
         rounds.append(evals)
         check = None
         if f_band is not None:   # the drive-side terms' frequency-domain shape on the current model (signature.py)
@@ -1388,6 +1439,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         if best is None:
             break
         best = _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check)
+        explained.update(_explained_beyond(best, evals))
         # setting and coefficients on all selection samples, applied to the all-data model
         allmask = fold_all >= 0
         e_all = residual(ctx_all)
