@@ -1,54 +1,14 @@
-"""Round 22 (docs/diagnose.md, "Round 22: speed and memory"): the bounded solve runs on the design's triangular
-factor instead of its rows, a term's grid predicts the held-out rows with its best setting only, and the discrete
-mode filter is computed once per (frequency, damping, period). The first changes results by round-off only, the
-other two by nothing."""
+"""Round 22 (docs/diagnose.md, "Round 22: speed and memory"): a term's grid predicts the held-out rows with its best
+setting only, and the discrete mode filter is computed once per (frequency, damping, period). Neither changes a
+result."""
 
 import numpy as np
 from scipy import signal
-from scipy.optimize import lsq_linear
 
 from piezoctl import dsp
 from piezoctl.diagnose import select as S
-from piezoctl.diagnose import solve
 from piezoctl.ident.terms import TERMS
 from test_diagnose_speed_round20 import _two_contexts
-
-
-def _whole(X, y, lo, hi):
-    """Round 21's bounded solve: lsq_linear's BVLS on every row of the unit-RMS design."""
-    sc = np.sqrt(np.mean(X ** 2, axis=0))
-    sc[sc == 0] = 1.0
-    return lsq_linear(X / sc, y, bounds=(np.asarray(lo, float) * sc, np.asarray(hi, float) * sc), method="bvls",
-                      lsq_solver="exact").x / sc
-
-
-def _problem(rng, n, k, collinear=False):
-    X = rng.normal(size=(n, k)) * rng.uniform(0.1, 10.0, k)
-    if collinear:   # an exactly dependent column (a nuisance's offset beside a term's intercept)
-        X[:, -1] = 2.0 * X[:, 0] + X[:, 1]
-    y = X @ rng.normal(size=k) + rng.normal(size=n)
-    lo = np.where(rng.random(k) < 0.5, 0.0, -np.inf)
-    return X, y, lo
-
-
-def test_the_reduced_bounded_solve_equals_the_solve_on_every_row_to_round_off():
-    rng = np.random.default_rng(7)
-    bound = 0
-    for i in range(12):
-        X, y, lo = _problem(rng, 20_000, int(rng.integers(3, 25)), collinear=i % 3 == 0)
-        ref = _whole(X, y, lo, np.inf)
-        new = solve.lstsq_box(X, y, lo, np.inf)
-        assert np.max(np.abs(new - ref)) <= 1e-11 * np.max(np.abs(ref))
-        assert np.array_equal(new == lo, ref == lo)   # the same coefficients on their bounds
-        bound += int(np.sum(ref == lo))
-    assert bound > 10   # the bounds acted (BVLS ran, not only the unbounded start)
-
-
-def test_a_design_too_short_to_reduce_is_solved_as_before():
-    rng = np.random.default_rng(8)
-    X, y, lo = _problem(rng, 30, 8)
-    assert 30 <= solve.REDUCE_ROWS_PER_COLUMN * 9
-    assert np.array_equal(solve.lstsq_box(X, y, lo, np.inf), _whole(X, y, lo, np.inf))
 
 
 def test_the_mode_filter_is_the_zero_order_hold_mode_and_a_fresh_copy_per_call():
