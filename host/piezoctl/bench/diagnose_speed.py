@@ -335,7 +335,8 @@ def main(argv=None) -> int:
             print("\n".join(lines[:-1]))
         res = json.loads(lines[-1])
         print(f"diagnose: {res['wall_s']:.1f} s wall ({100 * res['wall_s'] / max(n / 1e4, 1e-9):.1f} s per 100 s of "
-              f"data{', the other core busy' if a.busy else ''}), {res['cpu_s']:.1f} s CPU, peak resident "
+              f"data{', the other core busy' if a.busy else ''}), {res['cpu_s']:.1f} s CPU "
+              f"({100 * res['cpu_s'] / max(n / 1e4, 1e-9):.1f} s per 100 s of data), peak resident "
               f"{res['peak_rss_mib']:.0f} MiB (goal 60 s per 100 s of data, 2048 MiB); named "
               f"{','.join(res['named'] or ['none'])}, held-out NRMSE {res['base_nrmse']:.5f} -> "
               f"{res['refined_nrmse']:.5f}", flush=True)
