@@ -381,7 +381,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                         # not added: the model (and its error) is unchanged; the candidate's own figures follow
                         "improvement": {"nrmse_before": c.nrmse_before, "nrmse_after": c.nrmse_before,
                                         "candidate": {"nrmse_after": c.nrmse_after,
-                                                      "exact_fold_ratios": c.exact_fold_ratios},
+                                                      "exact_fold_ratios": c.exact_fold_ratios,
+                                                      **({"exact_above": c.exact_above} if c.exact_above else {})},
                                         "credited_ratio": c.credited, "credited_bands": c.credited_bands,
                                         "selection_round": c.selection_round, "ratio_max": c.ratio_max,
                                         "fold_ratios": c.fold_ratios, "p_value": c.p, "delta_bic": c.dbic,
@@ -414,7 +415,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                   "decreases; and its improvement, less per band (level, slow, fast) the base's "
                                   "misfit on held-out calibration histories (base_info.misfit), still gives a ratio "
                                   f"of at most {sg.RATIO_MAX}; and the refined model, simulated exactly with the term fitted on one "
-                                  "fold, lowers the error on the other fold in each. After the first term, a term with a "
+                                  "fold, lowers the error on the other fold in each (a term sized above an edge, a mode: also above that "
+                                  "edge). After the first term, a term with a "
                                   "signature test of its own (" + ", ".join(CHECKED_TERMS) + ") is tested with both ratios "
                                   f"below {FURTHER_RATIO_MAX:g} instead of {sg.RATIO_MAX} (at the round's level: Holm's "
                                   "step-down over the remaining candidates); when it passes only so, its signature must "

@@ -1203,6 +1203,19 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
                       f"makes {worse[0]} worse (held-out error x{worse[1]:.2f} > {sg.WORSEN_MAX:g})")
             log(f"    {c.name}: {c.veto}")
             continue
+        if max(c.exact_fold_ratios) < 1.0 and c.exact_above and max(c.exact_above["fold_ratios"]) >= 1.0:
+            # round 22: a term sized above an edge (a mode: above f / sqrt(2)) passed its linearized gates there;
+            # its exact model must lower the error there too. Where it lowers the whole band's error but raises the
+            # error above its edge, what it takes is below the edge: its static share standing in for the base's
+            # gain or a first term's residual (null s128-054: whole 0.30, above 1.55; beside slew limits s126-024,
+            # s127-024, s128-055: above 1.7 to 4.9; the true modes named: above 0.18 to 0.80)
+            fa = c.exact_above["fold_ratios"]
+            c.veto = (f"its exact refined model lowers the held-out error in each fold (ratios "
+                      f"{c.exact_fold_ratios[0]:.2f}, {c.exact_fold_ratios[1]:.2f}) but not above "
+                      f"{c.exact_above['above_hz']:.0f} Hz, where it was sized and acts (ratios {fa[0]:.2f}, "
+                      f"{fa[1]:.2f}): what it takes lies below its edge")
+            log(f"    {c.name}: {c.veto}")
+            continue
         if max(c.exact_fold_ratios) < 1.0:
             c.exact = ex
             c.worsened = worse
