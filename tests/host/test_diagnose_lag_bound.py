@@ -127,3 +127,52 @@ def test_a_lag_within_the_loop_s_latency_stays_the_corrections():
     X = (_delayed(x, 6) - x)[:, None]
     Nn = _corrections(x)
     assert _ratio(e, X, Nn, _bounds()) > 0.9   # the 6-sample delay gains nothing the bounded c1 does not take
+
+
+# Round 22: the bound widened by the spread of the lag the base lacks over the blocks (select.lag_spread).
+BLOCKS = np.repeat(np.arange(8), N // 8)
+
+
+def _spread_ctx(x):
+    return types.SimpleNamespace(nuisance=np.zeros((N, 0)), dyn_nuisance=_corrections(x), n_rec=1, bound_lag=True)
+
+
+def _lag_per_block(x, lags):
+    """The residual of lags [samples] that change from block to block (a phase of G's that is not a delay's)."""
+    e = np.empty(N)
+    for b, d in enumerate(lags):
+        rows = BLOCKS == b
+        e[rows] = (_delayed(x, d) - x)[rows]
+    return e
+
+
+def test_a_delay_s_lag_is_the_same_in_every_block():
+    x = _x(3)
+    rng = np.random.default_rng(9)
+    col = _delayed(x, 4) - x
+    e = col + 0.2 * np.sqrt(np.mean(col ** 2)) * rng.standard_normal(N)
+    assert S.lag_spread(_spread_ctx(x), e, BLOCKS) < 0.3
+
+
+def test_a_lag_that_changes_from_block_to_block_widens_the_bound():
+    x = _x(4)
+    e = _lag_per_block(x, [2, 7, 3, 6, 2, 7, 3, 6])
+    ctx = _spread_ctx(x)
+    s = S.lag_spread(ctx, e, BLOCKS)
+    assert 1.5 < s < 3.0, s                                  # the lags 2..7 about their mean 4.5
+    ctx.lag_spread = s
+    lo, hi = S.nuisance_bounds(ctx, _term("delay"), np.zeros((N, 2)))
+    assert hi[0] == -lo[0] == LATENCY_SAMPLES + S.LAG_SPREAD_SIGMAS * s
+
+
+def test_a_lag_within_the_base_s_own_spread_stays_the_corrections():
+    x = _x(5)
+    e = _lag_per_block(x, [2, 7, 3, 6, 2, 7, 3, 6])           # the base lacks 4.5 samples on average, uncertain by 2
+    X = (_delayed(x, 5) - x)[:, None]                         # a delay of that mean lag
+    Nn = _corrections(x)
+    ctx = _spread_ctx(x)
+    fixed = _ratio(e, X, Nn, S.nuisance_bounds(ctx, _term("delay"), Nn))
+    ctx.lag_spread = S.lag_spread(ctx, e, BLOCKS)
+    widened = _ratio(e, X, Nn, S.nuisance_bounds(ctx, _term("delay"), Nn))
+    assert fixed < 0.8, fixed        # against the latency alone the delay would be credited
+    assert widened > 0.9, widened    # against the widened bound the corrections take it

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..dsp import blas_threads, filt
 from ..ident import refined
-from ..ident.terms import Term, dynamics_corrections
+from ..ident.terms import LATENCY_SAMPLES, Term, dynamics_corrections
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg, static_map
@@ -108,6 +108,7 @@ class Ctx:
     dyn_nuisance: np.ndarray | None = None   # dynamics_nuisance() of this model, computed on first use
     init_nuisance: np.ndarray | None = None  # initial_state_nuisance() of this model, computed on first use
     bound_lag: bool = False   # round 21: the drive terms' dynamics corrections' lag bounded (_lag_beyond_latency)
+    lag_spread: float = 0.0   # round 22: [samples] the spread of the lag the base lacks over the blocks (lag_spread)
     cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
     cal_u_hi: float = 0.0
     drift_t0: float | None = None   # the session clock's reference for drift [s] (end of the calibration), when
@@ -577,12 +578,15 @@ def nuisance_bounds(ctx, term, N, initial: bool = True, dynamics: bool = True):
     """(lo, hi) of the nuisance columns ``N`` of ``term`` (None: all free): the initial state's gains within
     [-1, 1]; round 21: while ``ctx.bound_lag`` is set (:func:`_lag_beyond_latency`), the dynamics corrections' lag
     ``c1`` (the first column of :func:`dynamics_nuisance`, in samples) within the term's ``dynamics_lag_bound`` when
-    it states one (the drive-side terms: the loop's own latency, ``ident.terms._DriveTerm``); the other columns free.
+    it states one (the drive-side terms: the loop's own latency, ``ident.terms._DriveTerm``), round 22: plus
+    ``LAG_SPREAD_SIGMAS`` times ``ctx.lag_spread`` (:func:`lag_spread`); the other columns free.
     ``dynamics``: the dynamics corrections are among the columns (:func:`term_nuisance`)."""
     if N is None:
         return None
     lag = (getattr(term, "dynamics_lag_bound", None) if (term.nested_dynamics and dynamics and
                                                           getattr(ctx, "bound_lag", False)) else None)
+    if lag is not None:   # round 22: widened by the uncertainty of the base's own lag (lag_spread)
+        lag = float(lag) + LAG_SPREAD_SIGMAS * float(getattr(ctx, "lag_spread", 0.0))
     box = term.initial_state and initial
     if lag is None and not box:
         return None
@@ -1082,6 +1086,45 @@ def _delay_or_pole(evals, ctx, f_band, log):
     lose.delay_or_pole = None
 
 
+# Round 22: the lag bound of the second test is the loop's latency plus this many times the spread of the lag the
+# base lacks over the blocks (lag_spread): a two-sigma band of the base's own lag error.
+LAG_SPREAD_SIGMAS = 2.0
+
+
+def lag_spread(ctx, e, block_all) -> float:
+    """Round 22: [samples] how uncertain the lag the base's G lacks is: the weighted standard deviation over the
+    time blocks of the lag ``c1`` fitted to the residual ``e`` per block (the first difference of the model's
+    dynamic output, one free gain per block; the hysteresis channels and ``c2`` common to all blocks), weights the
+    inverse variance of each block's ``c1``.
+
+    The physics: a delay, or the loop's latency, is a phase ``-w d`` at every frequency, so each block, whatever band
+    its drive excites, sees the same lag ``d``; what G lacks beyond it - a pole or a mode above the calibration's band,
+    the hysteresis misfit which looks like a phase at a slow block's frequency - is a phase that is not ``w d``, and the
+    lag it mimics changes with the block's band. The spread of the blocks' lags is therefore how far G's phase at the
+    drives' band is known as a lag: a lag beyond the latency within that spread is G's own error, not a drive-side
+    term's (development, studied: the null s127-036, G of order 0, the blocks' lags 2.4 to 10 samples, spread 1.1; the
+    true 2-sample delay s127-022, the same mean lag 4.1, spread 0.15). 0 where it cannot be computed."""
+    if e is None or block_all is None:
+        return 0.0
+    D = dynamics_nuisance(ctx)
+    ids = np.unique(block_all)
+    if ids.size < 2:
+        return 0.0
+    C1 = np.column_stack([D[:, 0] * (block_all == b) for b in ids])
+    X = np.hstack([hysteresis_nuisance(ctx), D[:, 1:2], C1])
+    th, *_ = np.linalg.lstsq(X, e, rcond=None)
+    r = e - X @ th
+    s2 = float(r @ r) / max(e.size - X.shape[1], 1)
+    var = s2 * np.diag(np.linalg.pinv(X.T @ X))[-ids.size:]
+    c = th[-ids.size:]
+    ok = var > 0
+    if ok.sum() < 2:
+        return 0.0
+    w = 1.0 / var[ok]
+    m = float(np.sum(w * c[ok]) / np.sum(w))
+    return float(np.sqrt(np.sum(w * (c[ok] - m) ** 2) / np.sum(w)))
+
+
 def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accepted, log):
     """Round 21: when no drive-side term passed against the free dynamics corrections, the drive-side terms are
     evaluated again with the corrections' lag ``c1`` bounded to the loop's latency (``_DriveTerm.dynamics_lag_bound``,
@@ -1098,7 +1141,13 @@ def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accep
     drive = [c for c in evals if getattr(c.term, "dynamics_lag_bound", None) is not None]
     if not drive or any(c.significant and not c.veto for c in drive):
         return evals
-    for c in fctx:
+    spread = {}
+    for i, c in enumerate(fctx):   # round 22: the bound widened by the base's own lag uncertainty, per fold's model
+        if id(c) not in spread:
+            spread[id(c)] = lag_spread(c, None if es is None else es[i], block_all)
+            log(f"    the lag the base lacks spreads by {spread[id(c)]:.2f} samples over the blocks: the corrections' "
+                f"lag bounded to {float(LATENCY_SAMPLES) + LAG_SPREAD_SIGMAS * spread[id(c)]:.2f} samples")
+        c.lag_spread = spread[id(c)]
         c.bound_lag = True
     try:
         again = {c.name: _evaluate(fctx, c.term, es, fold_all, block_all, rows, p_max, _ratio_max(c.term, accepted))
@@ -1106,6 +1155,7 @@ def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accep
     finally:
         for c in fctx:
             c.bound_lag = False
+            c.lag_spread = 0.0
     for c in drive:
         a = again[c.name]
         a.selection_round = c.selection_round
