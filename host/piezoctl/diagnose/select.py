@@ -1086,43 +1086,61 @@ def _delay_or_pole(evals, ctx, f_band, log):
     lose.delay_or_pole = None
 
 
-# Round 22: the lag bound of the second test is the loop's latency plus this many times the spread of the lag the
-# base lacks over the blocks (lag_spread): a two-sigma band of the base's own lag error.
+# Round 22: the lag bound of the second test is the loop's latency plus this many times the departure of the lag the
+# base lacks over the blocks from a pure delay's (lag_spread): a two-sigma band of the base's own lag error.
 LAG_SPREAD_SIGMAS = 2.0
 
 
-def lag_spread(ctx, e, block_all) -> float:
-    """Round 22: [samples] how uncertain the lag the base's G lacks is: the weighted standard deviation over the
-    time blocks of the lag ``c1`` fitted to the residual ``e`` per block (the first difference of the model's
-    dynamic output, one free gain per block; the hysteresis channels and ``c2`` common to all blocks), weights the
-    inverse variance of each block's ``c1``.
+LAG_SPREAD_DELAYS = np.arange(0, 31)   # [samples] the pure delays a block-wise lag profile is compared with
 
-    The physics: a delay, or the loop's latency, is a phase ``-w d`` at every frequency, so each block, whatever band
-    its drive excites, sees the same lag ``d``; what G lacks beyond it - a pole or a mode above the calibration's band,
-    the hysteresis misfit which looks like a phase at a slow block's frequency - is a phase that is not ``w d``, and the
-    lag it mimics changes with the block's band. The spread of the blocks' lags is therefore how far G's phase at the
-    drives' band is known as a lag: a lag beyond the latency within that spread is G's own error, not a drive-side
-    term's (development, studied: the null s127-036, G of order 0, the blocks' lags 2.4 to 10 samples, spread 1.1; the
-    true 2-sample delay s127-022, the same mean lag 4.1, spread 0.15). 0 where it cannot be computed."""
-    if e is None or block_all is None:
-        return 0.0
-    D = dynamics_nuisance(ctx)
-    ids = np.unique(block_all)
-    if ids.size < 2:
-        return 0.0
-    C1 = np.column_stack([D[:, 0] * (block_all == b) for b in ids])
-    X = np.hstack([hysteresis_nuisance(ctx), D[:, 1:2], C1])
+
+def _block_lags(X_lag, ids, e, Nh=None):
+    """(c1 per block, its variance): ``e`` regressed on ``X_lag`` = [c2 column, c1 column of each block] (and the
+    common columns ``Nh`` first, when given)."""
+    X = X_lag if Nh is None else np.hstack([Nh, X_lag])
     th, *_ = np.linalg.lstsq(X, e, rcond=None)
     r = e - X @ th
     s2 = float(r @ r) / max(e.size - X.shape[1], 1)
-    var = s2 * np.diag(np.linalg.pinv(X.T @ X))[-ids.size:]
-    c = th[-ids.size:]
+    return th[-ids.size:], s2 * np.diag(np.linalg.pinv(X.T @ X))[-ids.size:]
+
+
+def lag_spread(ctx, e, block_all) -> float:
+    """Round 22: [samples] how far the lag the base's G lacks is *not* a delay: the weighted RMS over the time
+    blocks of the lag ``c1`` fitted to the residual ``e`` per block (the first difference of the model's dynamic
+    output, a free gain per block; the hysteresis channels and ``c2`` common to all blocks) about the best profile
+    of a pure delay (the same fit of ``y(t - D) - y(t)`` for ``D`` in ``LAG_SPREAD_DELAYS``), weights the inverse
+    variance of each block's ``c1``.
+
+    The physics: a delay, or the loop's latency, is a phase ``-w d`` at every frequency; its first-order part
+    ``c1`` seen by a block depends on the band the block's drive excites only as a delay's does (``sin(w d) / w``:
+    a long delay looks shorter to a fast block), and the profile of a pure delay follows that. What G lacks beyond
+    it - a pole or a mode above the calibration's band, the hysteresis misfit that looks like a phase at a slow
+    block's frequency - is a phase that is not ``w d``, and the lags the blocks see leave any delay's profile. So
+    the departure is how well G's phase at the drives' band is known as a lag: a lag beyond the latency within it
+    is G's own error, not a drive-side term's (development, studied: the null s127-036, G of order 0, the blocks'
+    lags 2.4 to 10 samples; the true 2-sample delay s127-022, the same mean lag 4.1 and lags 3.9 to 5.3; the
+    1.0 ms delay s125-053, whose blocks' first-order lags spread by 2.1 samples about their mean as a delay's
+    do). 0 where it cannot be computed."""
+    if e is None or block_all is None:
+        return 0.0
+    ids = np.unique(block_all)
+    if ids.size < 2:
+        return 0.0
+    D = dynamics_nuisance(ctx)
+    X_lag = np.hstack([D[:, 1:2], np.column_stack([D[:, 0] * (block_all == b) for b in ids])])
+    c, var = _block_lags(X_lag, ids, e, hysteresis_nuisance(ctx))
     ok = var > 0
     if ok.sum() < 2:
         return 0.0
     w = 1.0 / var[ok]
-    m = float(np.sum(w * c[ok]) / np.sum(w))
-    return float(np.sqrt(np.sum(w * (c[ok] - m) ** 2) / np.sum(w)))
+    P = np.linalg.pinv(X_lag)   # a pure delay's block lags: the same fit of y(t - d) - y(t), without the channels
+    best = np.inf
+    for d in LAG_SPREAD_DELAYS:
+        z = np.concatenate([np.concatenate([np.full(d, s.ydyn[0]), np.asarray(s.ydyn, float)[:s.ydyn.size - d]])[v]
+                            - np.asarray(s.ydyn, float)[v] for s, v in zip(ctx.signals, ctx.valid)])
+        k = (P @ z)[-ids.size:]
+        best = min(best, float(np.sum(w * (c[ok] - k[ok]) ** 2) / np.sum(w)))
+    return float(np.sqrt(best))
 
 
 def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accepted, log):
