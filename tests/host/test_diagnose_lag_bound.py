@@ -129,12 +129,13 @@ def test_a_lag_within_the_loop_s_latency_stays_the_corrections():
     assert _ratio(e, X, Nn, _bounds()) > 0.9   # the 6-sample delay gains nothing the bounded c1 does not take
 
 
-# Round 22: the bound widened by the spread of the lag the base lacks over the blocks (select.lag_spread).
+# Round 22: the second test only where the lag the base lacks is beyond the latency by more than its departure from a
+# pure delay's over the blocks (select.base_lag).
 BLOCKS = np.repeat(np.arange(8), N // 8)
 
 
 def _spread_ctx(x):
-    return types.SimpleNamespace(nuisance=np.zeros((N, 0)), dyn_nuisance=_corrections(x), n_rec=1, bound_lag=True,
+    return types.SimpleNamespace(nuisance=np.zeros((N, 0)), dyn_nuisance=_corrections(x), n_rec=1, bound_lag=False,
                                  signals=[types.SimpleNamespace(ydyn=x)], valid=[np.ones(N, bool)])
 
 
@@ -163,34 +164,37 @@ def test_a_delay_s_lags_follow_a_delay_s_profile_in_every_band():
     rng = np.random.default_rng(9)
     col = _delayed(x, 12) - x                 # 1.2 ms: 0.6 rad at 80 Hz, 3 rad at 400 Hz
     e = col + 0.2 * np.sqrt(np.mean(col ** 2)) * rng.standard_normal(N)
-    ctx = _spread_ctx(x)
     ids = np.unique(BLOCKS)
     D = _corrections(x)
     X_lag = np.hstack([D[:, 1:2], np.column_stack([D[:, 0] * (BLOCKS == b) for b in ids])])
     c, _ = S._block_lags(X_lag, ids, e)
     assert np.ptp(c) > 2.0, c                        # the blocks' first-order lags differ by more than 2 samples
-    assert S.lag_spread(ctx, e, BLOCKS) < 0.5        # and yet follow a delay's profile
+    lag, spread = S.base_lag(_spread_ctx(x), e, BLOCKS)
+    assert lag == 12 and spread < 0.5                # and yet follow a delay's profile: a lag well beyond the latency
 
 
-def test_a_lag_that_changes_from_block_to_block_widens_the_bound():
+def test_a_lag_that_changes_from_block_to_block_is_the_base_s_own_error():
     x = _x(4)
     e = _lag_per_block(x, [2, 7, 3, 6, 2, 7, 3, 6])
-    ctx = _spread_ctx(x)
-    s = S.lag_spread(ctx, e, BLOCKS)
-    assert 1.5 < s < 3.0, s                                  # the lags 2..7 about their mean 4.5
-    ctx.lag_spread = s
-    lo, hi = S.nuisance_bounds(ctx, _term("delay"), np.zeros((N, 2)))
-    assert hi[0] == -lo[0] == LATENCY_SAMPLES + S.LAG_SPREAD_SIGMAS * s
+    lag, spread = S.base_lag(_spread_ctx(x), e, BLOCKS)
+    assert 3 <= lag <= 6 and 1.5 < spread < 3.0, (lag, spread)   # 4.5 on average, departing by about 2
+    assert lag <= LATENCY_SAMPLES + S.LAG_SPREAD_SIGMAS * spread
 
 
-def test_a_lag_within_the_base_s_own_spread_stays_the_corrections():
-    x = _x(5)
-    e = _lag_per_block(x, [2, 7, 3, 6, 2, 7, 3, 6])           # the base lacks 4.5 samples on average, uncertain by 2
-    X = (_delayed(x, 5) - x)[:, None]                         # a delay of that mean lag
-    Nn = _corrections(x)
-    ctx = _spread_ctx(x)
-    fixed = _ratio(e, X, Nn, S.nuisance_bounds(ctx, _term("delay"), Nn))
-    ctx.lag_spread = S.lag_spread(ctx, e, BLOCKS)
-    widened = _ratio(e, X, Nn, S.nuisance_bounds(ctx, _term("delay"), Nn))
-    assert fixed < 0.8, fixed        # against the latency alone the delay would be credited
-    assert widened > 0.9, widened    # against the widened bound the corrections take it
+def test_no_second_test_where_the_lag_lies_within_the_base_s_own_error(monkeypatch):
+    calls = []
+
+    def evaluate(ctxs, term, *a, **k):
+        calls.append(term.name)
+        return types.SimpleNamespace(name=term.name, ratio=0.5, fold_ratios=[0.5, 0.5], p=1e-6, credited=0.5,
+                                     significant=True, veto=None)
+    monkeypatch.setattr(S, "_evaluate", evaluate)
+    for lag, spread, tested in ((4.0, 1.1, False), (4.0, 0.2, True)):
+        monkeypatch.setattr(S, "base_lag", lambda *a, r=(lag, spread): r)
+        calls.clear()
+        evals = [types.SimpleNamespace(name=n, term=_term(n), significant=False, veto=None, ratio=0.9,
+                                       selection_round=1)
+                 for n in ("delay", "amplifier_bandwidth", "amplifier_slew_limit")]
+        fctx = [types.SimpleNamespace(bound_lag=False)] * 2
+        S._lag_beyond_latency(evals, fctx, [np.zeros(3)] * 2, None, BLOCKS, 0, 1e-3, [], lambda *a: None)
+        assert bool(calls) == tested, (lag, spread, calls)

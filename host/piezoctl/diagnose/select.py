@@ -108,7 +108,6 @@ class Ctx:
     dyn_nuisance: np.ndarray | None = None   # dynamics_nuisance() of this model, computed on first use
     init_nuisance: np.ndarray | None = None  # initial_state_nuisance() of this model, computed on first use
     bound_lag: bool = False   # round 21: the drive terms' dynamics corrections' lag bounded (_lag_beyond_latency)
-    lag_spread: float = 0.0   # round 22: [samples] the spread of the lag the base lacks over the blocks (lag_spread)
     cal_u_lo: float = 0.0     # calibrated drive range [V] (settled calibration samples)
     cal_u_hi: float = 0.0
     drift_t0: float | None = None   # the session clock's reference for drift [s] (end of the calibration), when
@@ -578,15 +577,12 @@ def nuisance_bounds(ctx, term, N, initial: bool = True, dynamics: bool = True):
     """(lo, hi) of the nuisance columns ``N`` of ``term`` (None: all free): the initial state's gains within
     [-1, 1]; round 21: while ``ctx.bound_lag`` is set (:func:`_lag_beyond_latency`), the dynamics corrections' lag
     ``c1`` (the first column of :func:`dynamics_nuisance`, in samples) within the term's ``dynamics_lag_bound`` when
-    it states one (the drive-side terms: the loop's own latency, ``ident.terms._DriveTerm``), round 22: plus
-    ``LAG_SPREAD_SIGMAS`` times ``ctx.lag_spread`` (:func:`lag_spread`); the other columns free.
+    it states one (the drive-side terms: the loop's own latency, ``ident.terms._DriveTerm``); the other columns free.
     ``dynamics``: the dynamics corrections are among the columns (:func:`term_nuisance`)."""
     if N is None:
         return None
     lag = (getattr(term, "dynamics_lag_bound", None) if (term.nested_dynamics and dynamics and
                                                           getattr(ctx, "bound_lag", False)) else None)
-    if lag is not None:   # round 22: widened by the uncertainty of the base's own lag (lag_spread)
-        lag = float(lag) + LAG_SPREAD_SIGMAS * float(getattr(ctx, "lag_spread", 0.0))
     box = term.initial_state and initial
     if lag is None and not box:
         return None
@@ -1086,8 +1082,8 @@ def _delay_or_pole(evals, ctx, f_band, log):
     lose.delay_or_pole = None
 
 
-# Round 22: the lag bound of the second test is the loop's latency plus this many times the departure of the lag the
-# base lacks over the blocks from a pure delay's (lag_spread): a two-sigma band of the base's own lag error.
+# Round 22: the second test is run only where the lag the base lacks exceeds the loop's latency by more than this many
+# times its departure over the blocks from a pure delay's (base_lag): a two-sigma band of the base's own lag error.
 LAG_SPREAD_SIGMAS = 2.0
 
 
@@ -1104,8 +1100,9 @@ def _block_lags(X_lag, ids, e, Nh=None):
     return th[-ids.size:], s2 * np.diag(np.linalg.pinv(X.T @ X))[-ids.size:]
 
 
-def lag_spread(ctx, e, block_all) -> float:
-    """Round 22: [samples] how far the lag the base's G lacks is *not* a delay: the weighted RMS over the time
+def base_lag(ctx, e, block_all) -> tuple | None:
+    """Round 22: (lag, spread) [samples]: the pure delay whose profile over the time blocks best fits the lags the
+    base's G lacks, and how far those lags are *not* a delay's: the weighted RMS over the time
     blocks of the lag ``c1`` fitted to the residual ``e`` per block (the first difference of the model's dynamic
     output, a free gain per block; the hysteresis channels and ``c2`` common to all blocks) about the best profile
     of a pure delay (the same fit of ``y(t - D) - y(t)`` for ``D`` in ``LAG_SPREAD_DELAYS``), weights the inverse
@@ -1119,28 +1116,30 @@ def lag_spread(ctx, e, block_all) -> float:
     the departure is how well G's phase at the drives' band is known as a lag: a lag beyond the latency within it
     is G's own error, not a drive-side term's (development, studied: the null s127-036, G of order 0, the blocks'
     lags 2.4 to 10 samples; the true 2-sample delay s127-022, the same mean lag 4.1 and lags 3.9 to 5.3; the
-    1.0 ms delay s125-053, whose blocks' first-order lags spread by 2.1 samples about their mean as a delay's
-    do). 0 where it cannot be computed."""
+    1.0 ms delay s125-053, 11 samples, whose blocks' lags depart from a delay's by 2.4). None where it cannot be
+    computed."""
     if e is None or block_all is None:
-        return 0.0
+        return None
     ids = np.unique(block_all)
     if ids.size < 2:
-        return 0.0
+        return None
     D = dynamics_nuisance(ctx)
     X_lag = np.hstack([D[:, 1:2], np.column_stack([D[:, 0] * (block_all == b) for b in ids])])
     c, var = _block_lags(X_lag, ids, e, hysteresis_nuisance(ctx))
     ok = var > 0
     if ok.sum() < 2:
-        return 0.0
+        return None
     w = 1.0 / var[ok]
     P = np.linalg.pinv(X_lag)   # a pure delay's block lags: the same fit of y(t - d) - y(t), without the channels
-    best = np.inf
+    best, lag = np.inf, 0
     for d in LAG_SPREAD_DELAYS:
         z = np.concatenate([np.concatenate([np.full(d, s.ydyn[0]), np.asarray(s.ydyn, float)[:s.ydyn.size - d]])[v]
                             - np.asarray(s.ydyn, float)[v] for s, v in zip(ctx.signals, ctx.valid)])
         k = (P @ z)[-ids.size:]
-        best = min(best, float(np.sum(w * (c[ok] - k[ok]) ** 2) / np.sum(w)))
-    return float(np.sqrt(best))
+        r = float(np.sum(w * (c[ok] - k[ok]) ** 2) / np.sum(w))
+        if r < best:
+            best, lag = r, int(d)
+    return float(lag), float(np.sqrt(best))
 
 
 def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accepted, log):
@@ -1159,13 +1158,17 @@ def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accep
     drive = [c for c in evals if getattr(c.term, "dynamics_lag_bound", None) is not None]
     if not drive or any(c.significant and not c.veto for c in drive):
         return evals
-    spread = {}
-    for i, c in enumerate(fctx):   # round 22: the bound widened by the base's own lag uncertainty, per fold's model
-        if id(c) not in spread:
-            spread[id(c)] = lag_spread(c, None if es is None else es[i], block_all)
-            log(f"    the lag the base lacks spreads by {spread[id(c)]:.2f} samples over the blocks: the corrections' "
-                f"lag bounded to {float(LATENCY_SAMPLES) + LAG_SPREAD_SIGMAS * spread[id(c)]:.2f} samples")
-        c.lag_spread = spread[id(c)]
+    seen = {}
+    for i, c in enumerate(fctx):   # round 22: the lag the base lacks, and how far it is a delay's, per fold's model
+        if id(c) not in seen:
+            seen[id(c)] = base_lag(c, None if es is None else es[i], block_all)
+            if seen[id(c)] is not None:
+                log("    the lag the base lacks: {:.0f} samples, departing from a delay's over the blocks by {:.2f}"
+                    .format(*seen[id(c)]))
+    if any(x is not None and x[0] <= float(LATENCY_SAMPLES) + LAG_SPREAD_SIGMAS * x[1] for x in seen.values()):
+        log("    the lag beyond the loop's latency lies within the base's own lag error: no second test")
+        return evals
+    for c in fctx:
         c.bound_lag = True
     try:
         again = {c.name: _evaluate(fctx, c.term, es, fold_all, block_all, rows, p_max, _ratio_max(c.term, accepted))
@@ -1173,7 +1176,6 @@ def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accep
     finally:
         for c in fctx:
             c.bound_lag = False
-            c.lag_spread = 0.0
     for c in drive:
         a = again[c.name]
         a.selection_round = c.selection_round
