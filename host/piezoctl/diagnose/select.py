@@ -1154,7 +1154,9 @@ def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accep
     gives a null's own lag to the corrections. Only as a second test: where a drive term passes against the free
     corrections its lag is plain without the bound, and the bound would hand the other shape the same first-order
     lag (development s113-022: a 0.6 ms delay named alone before, the pole passed beside it with the bound and the
-    two were not told apart on 14 bins to 140 Hz)."""
+    two were not told apart on 14 bins to 140 Hz). Round 22: only where the lag the base lacks lies beyond the latency
+    by more than twice its departure from a pure delay's over the blocks (:func:`base_lag`): within it, the lag is
+    G's own error (the null s127-036 had been named `amplifier_bandwidth` x0.75 by this test)."""
     drive = [c for c in evals if getattr(c.term, "dynamics_lag_bound", None) is not None]
     if not drive or any(c.significant and not c.veto for c in drive):
         return evals
