@@ -127,3 +127,74 @@ def test_a_lag_within_the_loop_s_latency_stays_the_corrections():
     X = (_delayed(x, 6) - x)[:, None]
     Nn = _corrections(x)
     assert _ratio(e, X, Nn, _bounds()) > 0.9   # the 6-sample delay gains nothing the bounded c1 does not take
+
+
+# Round 22: the second test only where the lag the base lacks is beyond the latency by more than its departure from a
+# pure delay's over the blocks (select.base_lag).
+BLOCKS = np.repeat(np.arange(8), N // 8)
+
+
+def _spread_ctx(x):
+    return types.SimpleNamespace(nuisance=np.zeros((N, 0)), dyn_nuisance=_corrections(x), n_rec=1, bound_lag=False,
+                                 signals=[types.SimpleNamespace(ydyn=x)], valid=[np.ones(N, bool)])
+
+
+def _lag_per_block(x, lags):
+    """The residual of lags [samples] that change from block to block (a phase of G's that is not a delay's)."""
+    e = np.empty(N)
+    for b, d in enumerate(lags):
+        rows = BLOCKS == b
+        e[rows] = (_delayed(x, d) - x)[rows]
+    return e
+
+
+def _x_bands(seed):
+    """A model output whose band changes from block to block (low-passed at 20 to 400 Hz): a long delay's
+    first-order lag is smaller in the fast blocks (sin(w d) / w)."""
+    rng = np.random.default_rng(seed)
+    x = np.empty(N)
+    for b, fc in enumerate(np.geomspace(20.0, 400.0, 8)):
+        bb, aa = sps.butter(2, fc, fs=1.0 / DT)
+        x[BLOCKS == b] = 3.0 * sps.lfilter(bb, aa, rng.standard_normal(N))[BLOCKS == b]
+    return x
+
+
+def test_a_delay_s_lags_follow_a_delay_s_profile_in_every_band():
+    x = _x_bands(3)
+    rng = np.random.default_rng(9)
+    col = _delayed(x, 12) - x                 # 1.2 ms: 0.6 rad at 80 Hz, 3 rad at 400 Hz
+    e = col + 0.2 * np.sqrt(np.mean(col ** 2)) * rng.standard_normal(N)
+    ids = np.unique(BLOCKS)
+    D = _corrections(x)
+    X_lag = np.hstack([D[:, 1:2], np.column_stack([D[:, 0] * (BLOCKS == b) for b in ids])])
+    c, _ = S._block_lags(X_lag, ids, e)
+    assert np.ptp(c) > 2.0, c                        # the blocks' first-order lags differ by more than 2 samples
+    lag, spread = S.base_lag(_spread_ctx(x), e, BLOCKS)
+    assert lag == 12 and spread < 0.5                # and yet follow a delay's profile: a lag well beyond the latency
+
+
+def test_a_lag_that_changes_from_block_to_block_is_the_base_s_own_error():
+    x = _x(4)
+    e = _lag_per_block(x, [2, 7, 3, 6, 2, 7, 3, 6])
+    lag, spread = S.base_lag(_spread_ctx(x), e, BLOCKS)
+    assert 3 <= lag <= 6 and 1.5 < spread < 3.0, (lag, spread)   # 4.5 on average, departing by about 2
+    assert lag <= LATENCY_SAMPLES + S.LAG_SPREAD_SIGMAS * spread
+
+
+def test_no_second_test_where_the_lag_lies_within_the_base_s_own_error(monkeypatch):
+    calls = []
+
+    def evaluate(ctxs, term, *a, **k):
+        calls.append(term.name)
+        return types.SimpleNamespace(name=term.name, ratio=0.5, fold_ratios=[0.5, 0.5], p=1e-6, credited=0.5,
+                                     significant=True, veto=None)
+    monkeypatch.setattr(S, "_evaluate", evaluate)
+    for lag, spread, tested in ((4.0, 1.1, False), (4.0, 0.2, True)):
+        monkeypatch.setattr(S, "base_lag", lambda *a, r=(lag, spread): r)
+        calls.clear()
+        evals = [types.SimpleNamespace(name=n, term=_term(n), significant=False, veto=None, ratio=0.9,
+                                       selection_round=1)
+                 for n in ("delay", "amplifier_bandwidth", "amplifier_slew_limit")]
+        fctx = [types.SimpleNamespace(bound_lag=False)] * 2
+        S._lag_beyond_latency(evals, fctx, [np.zeros(3)] * 2, None, BLOCKS, 0, 1e-3, [], lambda *a: None)
+        assert bool(calls) == tested, (lag, spread, calls)

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..dsp import blas_threads, filt
 from ..ident import refined
-from ..ident.terms import Term, dynamics_corrections
+from ..ident.terms import LATENCY_SAMPLES, Term, dynamics_corrections
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg, static_map
@@ -1094,6 +1094,66 @@ def _delay_or_pole(evals, ctx, f_band, log):
     lose.delay_or_pole = None
 
 
+# Round 22: the second test is run only where the lag the base lacks exceeds the loop's latency by more than this many
+# times its departure over the blocks from a pure delay's (base_lag): a two-sigma band of the base's own lag error.
+LAG_SPREAD_SIGMAS = 2.0
+
+
+LAG_SPREAD_DELAYS = np.arange(0, 31)   # [samples] the pure delays a block-wise lag profile is compared with
+
+
+def _block_lags(X_lag, ids, e, Nh=None):
+    """(c1 per block, its variance): ``e`` regressed on ``X_lag`` = [c2 column, c1 column of each block] (and the
+    common columns ``Nh`` first, when given)."""
+    X = X_lag if Nh is None else np.hstack([Nh, X_lag])
+    th, *_ = np.linalg.lstsq(X, e, rcond=None)
+    r = e - X @ th
+    s2 = float(r @ r) / max(e.size - X.shape[1], 1)
+    return th[-ids.size:], s2 * np.diag(np.linalg.pinv(X.T @ X))[-ids.size:]
+
+
+def base_lag(ctx, e, block_all) -> tuple | None:
+    """Round 22: (lag, spread) [samples]: the pure delay whose profile over the time blocks best fits the lags the
+    base's G lacks, and how far those lags are *not* a delay's: the weighted RMS over the time
+    blocks of the lag ``c1`` fitted to the residual ``e`` per block (the first difference of the model's dynamic
+    output, a free gain per block; the hysteresis channels and ``c2`` common to all blocks) about the best profile
+    of a pure delay (the same fit of ``y(t - D) - y(t)`` for ``D`` in ``LAG_SPREAD_DELAYS``), weights the inverse
+    variance of each block's ``c1``.
+
+    The physics: a delay, or the loop's latency, is a phase ``-w d`` at every frequency; its first-order part
+    ``c1`` seen by a block depends on the band the block's drive excites only as a delay's does (``sin(w d) / w``:
+    a long delay looks shorter to a fast block), and the profile of a pure delay follows that. What G lacks beyond
+    it - a pole or a mode above the calibration's band, the hysteresis misfit that looks like a phase at a slow
+    block's frequency - is a phase that is not ``w d``, and the lags the blocks see leave any delay's profile. So
+    the departure is how well G's phase at the drives' band is known as a lag: a lag beyond the latency within it
+    is G's own error, not a drive-side term's (development, studied: the null s127-036, G of order 0, the blocks'
+    lags 2.4 to 10 samples; the true 2-sample delay s127-022, the same mean lag 4.1 and lags 3.9 to 5.3; the
+    1.0 ms delay s125-053, 11 samples, whose blocks' lags depart from a delay's by 2.4). None where it cannot be
+    computed."""
+    if e is None or block_all is None:
+        return None
+    ids = np.unique(block_all)
+    if ids.size < 2:
+        return None
+    D = dynamics_nuisance(ctx)
+    X_lag = np.hstack([D[:, 1:2], np.column_stack([D[:, 0] * (block_all == b) for b in ids])])
+    c, var = _block_lags(X_lag, ids, e, hysteresis_nuisance(ctx))
+    ok = var > 0
+    if ok.sum() < 2:
+        return None
+    w = 1.0 / var[ok]
+    P = np.linalg.pinv(X_lag)   # a pure delay's block lags: the same fit of y(t - d) - y(t), without the channels
+    best, lag = np.inf, 0
+    for d in LAG_SPREAD_DELAYS:
+        z = np.concatenate([np.concatenate([np.full(d, s.ydyn[0]), np.asarray(s.ydyn, float)[:s.ydyn.size - d]])[v]
+                            - np.asarray(s.ydyn, float)[v] for s, v in zip(ctx.signals, ctx.valid)])
+        k = (P @ z)[-ids.size:]
+        r = float(np.sum(w * (c[ok] - k[ok]) ** 2) / np.sum(w))
+        if r < best:
+            best, lag = r, int(d)
+    return float(lag), float(np.sqrt(best))
+
+
 def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accepted, log):
     """Round 21: when no drive-side term passed against the free dynamics corrections, the drive-side terms are
     evaluated again with the corrections' lag ``c1`` bounded to the loop's latency (``_DriveTerm.dynamics_lag_bound``,
@@ -1106,9 +1166,21 @@ def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accep
     gives a null's own lag to the corrections. Only as a second test: where a drive term passes against the free
     corrections its lag is plain without the bound, and the bound would hand the other shape the same first-order
     lag (development s113-022: a 0.6 ms delay named alone before, the pole passed beside it with the bound and the
-    two were not told apart on 14 bins to 140 Hz)."""
+    two were not told apart on 14 bins to 140 Hz). Round 22: only where the lag the base lacks lies beyond the latency
+    by more than twice its departure from a pure delay's over the blocks (:func:`base_lag`): within it, the lag is
+    G's own error (the null s127-036 had been named `amplifier_bandwidth` x0.75 by this test)."""
     drive = [c for c in evals if getattr(c.term, "dynamics_lag_bound", None) is not None]
     if not drive or any(c.significant and not c.veto for c in drive):
+        return evals
+    seen = {}
+    for i, c in enumerate(fctx):   # round 22: the lag the base lacks, and how far it is a delay's, per fold's model
+        if id(c) not in seen:
+            seen[id(c)] = base_lag(c, None if es is None else es[i], block_all)
+            if seen[id(c)] is not None:
+                log("    the lag the base lacks: {:.0f} samples, departing from a delay's over the blocks by {:.2f}"
+                    .format(*seen[id(c)]))
+    if any(x is not None and x[0] <= float(LATENCY_SAMPLES) + LAG_SPREAD_SIGMAS * x[1] for x in seen.values()):
+        log("    the lag beyond the loop's latency lies within the base's own lag error: no second test")
         return evals
     for c in fctx:
         c.bound_lag = True
