@@ -30,7 +30,8 @@ def run_diagnose(calibration: list, recordings: list, out_dir: str) -> dict:
         NRMSE of the refined model over the base's), ``base_nrmse``, ``refined_nrmse``,
         ``effect_ratios`` (name -> held-out ratio of each significant effect, where given),
         ``effect_ratios_acting`` (the same, above the edge a term acts above where the diagnosis gives it:
-        ``improvement.exact_above``, round 19; else the same ratio), ``pair`` (the first
+        ``improvement.exact_above``, round 19; beyond each recording's level where it gives that:
+        ``improvement.exact_beyond_level``, round 22; else the same ratio), ``pair`` (the first
         named effect with the alternatives the data cannot tell it from, round 11; ``[]`` when none).
     """
     from ..diagnose.run import diagnose
@@ -42,7 +43,8 @@ def run_diagnose(calibration: list, recordings: list, out_dir: str) -> dict:
         imp = e.get("improvement") or {}
         if e.get("significant") and imp.get("nrmse_before"):
             ratios[e["name"]] = float(imp["nrmse_after"]) / float(imp["nrmse_before"])
-            ab = imp.get("exact_above") or {}   # round 19: a mode's, above the edge it acts above
+            ab = (imp.get("exact_above")   # round 19: a mode's, above the edge it acts above
+                  or imp.get("exact_beyond_level") or {})   # round 22: a coupling's, beyond each recording's level
             acting[e["name"]] = (float(ab["nrmse_after"]) / float(ab["nrmse_before"]) if ab.get("nrmse_before")
                                  else ratios[e["name"]])
     first = (doc.get("named") or ["none"])[0]
@@ -108,7 +110,8 @@ def _print_summary(rows: list, multi: bool) -> None:
               f"{sum(1 for x in er if x <= 0.7)}/{len(er)}")
     ea = [x for r in rows for x in r.get("effect_ratios_acting", {}).values()]
     if ea:
-        print(f"held-out ratio of every named effect where it acts (a mode: above its edge): max {max(ea):.2f}, "
+        print(f"held-out ratio of every named effect where it acts (a mode: above its edge; a coupling: "
+              f"beyond each recording's level): max {max(ea):.2f}, "
               f"<= 0.7 in {sum(1 for x in ea if x <= 0.7)}/{len(ea)}")
     ds = [r["diag_s"] for r in rows]
     gs = [r["gen_s"] for r in rows]

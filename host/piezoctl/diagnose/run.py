@@ -342,7 +342,10 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                          f"from {a.exact_before:.4f} to {a.exact_after:.4f}"
                          + (f", above {a.exact_above['above_hz']:.0f} Hz, where it acts, from "
                             f"{a.exact_above['nrmse_before']:.4f} to {a.exact_above['nrmse_after']:.4f}"
-                            if a.exact_above else "") + " (active-block t and signed-rank tests on "
+                            if a.exact_above else "")
+                         + (f", beyond each recording's level (the state the history before it left), from "
+                            f"{a.exact_beyond_level['nrmse_before']:.4f} to {a.exact_beyond_level['nrmse_after']:.4f}"
+                            if a.exact_beyond_level else "") + " (active-block t and signed-rank tests on "
                          f"the linearized term, nested against a refit of the base's hysteresis, p = {a.p:.1e}, "
                          f"threshold {a.p_max:.1e})." + (f" {a.discrimination}" if a.discrimination else "")
                          + (f" Named in round {a.selection_round}, beside the terms before it: its fold ratios "
@@ -364,7 +367,8 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                                          if a.worsened else None),
                             **({"slow_signature": a.slow_signature} if a.slow_signature else {}),
                             **({"whole_residual": a.whole} if a.whole else {}),
-                            **({"exact_above": a.exact_above} if a.exact_above else {})},
+                            **({"exact_above": a.exact_above} if a.exact_above else {}),
+                            **({"exact_beyond_level": a.exact_beyond_level} if a.exact_beyond_level else {})},
             "signature": a.term.signature, "signature_check": a.signature_check, **sep_fields})
     last = rounds[-1] if rounds else []
     named = {x["name"] for x in effects}

@@ -108,6 +108,10 @@ class Term:
     only_beyond_calibrated_range = False  # refused where the recordings stay in the calibrated drive range; two such
     #                                       terms are told apart only by a named effect's size (round 21,
     #                                       diagnose.discriminate.separate)
+    ratio_beyond_level = False  # round 22: its exact held-out ratio is also reported beyond each recording's level
+    #                             (diagnose.select.beyond_level_sse): for a term that is not itself a level, whose
+    #                             recordings hold the drive while it acts (the base's level there is the hysteresis
+    #                             state the unknown history left, not the term's)
 
     def applicable(self, ctx) -> bool:
         return True
@@ -1021,6 +1025,7 @@ class CrossCoupling(Term):
 
     name = "cross_coupling"
     signature = "residual explained by the other axis' drive/motion, growing with its frequency"
+    ratio_beyond_level = True   # round 22: the hold recording's level is the base's (s127-019: -843 nm, std 36)
 
     @staticmethod
     def basis(params, u2, y, dt, u2_ref, y_center, mode=None) -> np.ndarray:
