@@ -232,7 +232,7 @@ def test_base_oracle_static_output_is_the_noise_free_output_before_the_modes():
 def test_plays_offered_only_up_to_the_calibration_reversal_levels_and_one_to_a_periodic_calibration():
     # R is offered only with 2 R distinct reversal levels (round 11); round 20 ran the cap lifted (every R of
     # PLANE_PLAYS once the calibration reversed at more than two levels) through the diagnosis and removed it
-    # (docs/diagnose.md, "Round 20: the base's plane size")
+    # (docs/diagnose-rounds/round-20.md, "Round 20: the base's plane size")
     from piezoctl.ident import base as base_mod
     fo = np.concatenate([np.linspace(3, 147, 3000)] + [np.concatenate([np.linspace(147, lv, 1500),
                                                                          np.linspace(lv, 147, 1500)])

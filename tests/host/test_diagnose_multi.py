@@ -1,4 +1,4 @@
-"""The second effect (docs/diagnose.md, "Round 11: the second effect"): after the first term, a term with a
+"""The second effect (docs/diagnose-rounds/round-11.md, "Round 11: the second effect"): after the first term, a term with a
 signature test of its own is tested with the size gates at FURTHER_RATIO_MAX and must then hold its signature."""
 
 import numpy as np

@@ -1,5 +1,5 @@
 """Round 15: the rate term is a rate-dependent loop *width* (the base plane's plays with thresholds that grow with
-the rate they move at), not a rate-dependent gain on the hysteretic part (docs/diagnose.md, "Round 15: rate
+the rate they move at), not a rate-dependent gain on the hysteretic part (docs/diagnose-rounds/round-15.md, "Round 15: rate
 dependence")."""
 
 import numpy as np
@@ -248,7 +248,7 @@ def test_a_loop_of_its_own_size_in_each_recording_is_not_credited_to_the_rate():
     """Round 17: the term nested per recording against the hysteresis groups (``test_nuisance``). A rate-independent
     stage whose loop (the plays' part) is 0.85, 1 and 1.2 times the base's in three recordings, each a triangle at
     its own rate, is not credited (on this synthetic stage round 16's nesting does not take it either, 0.96/1.04:
-    the evidence that it matters is null s115-009, docs/diagnose.md "Round 17"); the rate's own law is still found
+    the evidence that it matters is null s115-009, docs/diagnose-rounds/round-17.md "Round 17"); the rate's own law is still found
     beyond a loop size of its own in each recording when one recording holds sines at three rates, as the foreign
     reveal does."""
     from piezoctl.models.hysteresis import scale_groups

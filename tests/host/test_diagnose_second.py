@@ -1,4 +1,4 @@
-"""Round 13 (docs/diagnose.md, "Round 13: the second effect, asymmetry and rate"): a later candidate is nested
+"""Round 13 (docs/diagnose-rounds/round-13.md, "Round 13: the second effect, asymmetry and rate"): a later candidate is nested
 against the accepted term's own flexibility, and the asymmetric term's one-sided form beyond the calibrated range.
 Round 15 ("Round 15: asymmetry and the sensor curve"): saturation is refused inside the calibrated range too."""
 
@@ -202,7 +202,7 @@ def test_an_end_that_follows_the_drives_history_is_fitted_with_its_backlash():
 
 
 def test_beyond_one_edge_only_the_knees_of_that_side_are_offered_without_a_constant():
-    """Round 19 (docs/diagnose.md, "Round 19: asymmetric hysteresis"): the recordings leave the calibrated range
+    """Round 19 (docs/diagnose-rounds/round-19.md, "Round 19: asymmetric hysteresis"): the recordings leave the calibrated range
     below it only: no whole-stroke polynomial, only knees below the low edge, and no constant column (the extra is
     zero on the calibrated side of the knee, so the model's offset is not moved). Beyond both edges the
     whole-stroke form and its constant stay."""

@@ -1,4 +1,4 @@
-"""Round 11: what the data cannot separate (docs/diagnose.md, "Round 11: what the data cannot separate").
+"""Round 11: what the data cannot separate (docs/diagnose-rounds/round-11.md, "Round 11: what the data cannot separate").
 
 Synthetic residuals with known structure: two collinear regressors are reported as a pair, an orthogonal one is
 not; an offset no larger than the base's own level misfit is refused, a large one kept; a slew candidate whose

@@ -1,4 +1,4 @@
-"""Round 20 (docs/diagnose.md, "Round 20: speed and memory"): of fold 0's designs only its chosen settings are kept
+"""Round 20 (docs/diagnose-rounds/round-20.md, "Round 20: speed and memory"): of fold 0's designs only its chosen settings are kept
 while fold 1 (its own context, after the first round) is evaluated; the candidate is the same as with every design
 kept."""
 

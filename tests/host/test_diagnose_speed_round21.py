@@ -1,4 +1,4 @@
-"""Round 21 (docs/diagnose.md, "Round 21: speed and memory"): a term's designs share the columns that are equal for
+"""Round 21 (docs/diagnose-rounds/round-21.md, "Round 21: speed and memory"): a term's designs share the columns that are equal for
 every setting (the rate term's constant widenings and intercept) instead of a copy per setting; the base dynamics'
 slow tail and the held samples are computed once per context. Neither changes a result."""
 

@@ -1,4 +1,4 @@
-"""Round 22 (docs/diagnose.md, "Round 22: speed and memory"): a term's grid predicts the held-out rows with its best
+"""Round 22 (docs/diagnose-rounds/round-22.md, "Round 22: speed and memory"): a term's grid predicts the held-out rows with its best
 setting only, and the discrete mode filter is computed once per (frequency, damping, period). Neither changes a
 result."""
 

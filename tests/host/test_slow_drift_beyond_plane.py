@@ -1,5 +1,5 @@
 """The drift's trend within the recordings is credited only beyond the base's plane refitted on them
-(diagnose/slow_signature.py, ``drift_beyond_plane_test``; docs/diagnose.md "Round 14: the base").
+(diagnose/slow_signature.py, ``drift_beyond_plane_test``; docs/diagnose-rounds/round-14.md "Round 14: the base").
 
 Three reveal recordings of 12 s whose drive's envelope moves over each (triangles about a centre that moves
 towards one end of the range). A base misfit that is a function of the drive (the reversible curve bent, which the

@@ -1,6 +1,6 @@
 """Round 20: a drift against an offset, and after a first term (slow_signature.against_reached, _trend_is_drifts).
 
-The figures are development cases' (docs/diagnose.md, "Round 20: drift"): s123-016 (the drift refused for a trend
+The figures are development cases' (docs/diagnose-rounds/round-20.md, "Round 20: drift"): s123-016 (the drift refused for a trend
 "back towards zero" against a level the walk's history misfit set), s123-047 (the drift's candidate refused by its
 credited ratio alone while the level trends within the recordings), s118-001 (after the slew, the drift's joint
 test sees nothing, the trend does)."""

@@ -1,7 +1,7 @@
 """Round 21: a level that stopped moving before the reveal is the offset's, not a drift's
 (slow_signature.settled_fraction; the round-12 rule in attribute).
 
-The figures are development case s126-017's (docs/diagnose.md, "Round 21: drift"): a sensor offset of +0.44 um
+The figures are development case s126-017's (docs/diagnose-rounds/round-21.md, "Round 21: drift"): a sensor offset of +0.44 um
 (Maxwell slip) named ``thermal_drift`` by round 12's rule, the level trending +0.13 +- 0.02 nm/s within the
 recordings (t = 5.6), 0.007 of the steady rate that would have reached it."""
 

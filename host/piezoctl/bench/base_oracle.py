@@ -1,4 +1,4 @@
-"""Where the base's held-out error on a null comes from (docs/diagnose.md, "Round 19: the base on nulls").
+"""Where the base's held-out error on a null comes from (docs/diagnose-rounds/round-19.md, "Round 19: the base on nulls").
 
 For each null case of a foreign seed (drawn and written as ``tools/bench-base --nulls`` does, scale 1), the base
 is fitted on the case's calibration as ``diagnose`` fits it and each reveal recording's error (settled samples

@@ -1,4 +1,4 @@
-"""What the true effect would reach on a kept creep or coupling case (docs/diagnose.md, "Round 22: held-out ratios
+"""What the true effect would reach on a kept creep or coupling case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios
 above 0.7").
 
 A kept case directory of ``tools/bench-diagnose --foreign --keep DIR`` (``sSSS-III-EFFECT`` with the recordings and

@@ -177,7 +177,7 @@ def _both_by_size(r: dict) -> None:
 
 
 def separate(named, others, design, e, fold_all, block_all, rec, dt, rows) -> list:
-    """The alternatives the data cannot tell from the named candidate (docs/diagnose.md, "Round 11").
+    """The alternatives the data cannot tell from the named candidate (docs/diagnose-rounds/round-11.md, "Round 11").
 
     For each other candidate ``b`` (pre-filter: its own test's held-out error lower in each fold at p <
     ``ALPHA_SEPARATE``, not vetoed by a check, and not of the named one's group when that group's discrimination,

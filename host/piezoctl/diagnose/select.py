@@ -34,7 +34,7 @@ __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", 
            "train_rows"]
 
 
-# Rounds after the first (docs/diagnose.md, "Round 11: the second effect"). The first round's size gates (fold
+# Rounds after the first (docs/diagnose-rounds/round-11.md, "Round 11: the second effect"). The first round's size gates (fold
 # ratios and credited ratio <= significance.RATIO_MAX) keep a base misfit the misfit estimate underrates from being
 # named; once an effect is in the model, a second one changes the held-out error by 1 to 30 % and cannot meet them.
 # A term whose physics has its own test (its slow signature, beyond the other two and the base's misfit, at the
@@ -276,7 +276,7 @@ class _Design:
     Round 21: a design some of whose columns are bit for bit the same columns of ``ref`` (the term's first design
     in the context) keeps ``ref``'s columns and a copy of its own only. The rate term's five columns per setting
     are four the same for every setting (the constant widenings, the intercept) and one its own; its cached designs
-    held 601 MiB of s0-017's 1960 MiB peak (docs/diagnose.md, "Round 20: speed and memory"). ``X`` of such a
+    held 601 MiB of s0-017's 1960 MiB peak (docs/diagnose-rounds/round-20.md, "Round 20: speed and memory"). ``X`` of such a
     design stacks the columns on each request (the same C-ordered floats, not kept); a design that shares nothing
     keeps its stacked ``X`` as before (stacking a dozen columns of 1 M rows on every fit costs 0.1 s)."""
 
@@ -481,7 +481,7 @@ def dynamics_nuisance(ctx):
     nulls whose fast reveal showed the stage's one-sample latency). Cached on the context. Round 20: the
     corrections act in the whole band; only above the base's dynamics band (round 19's variant) they left a true
     delay's in-band lag to the pole as well, and on null s121-005 the stage's own in-band lag was named
-    `amplifier_bandwidth` x0.14 (docs/diagnose.md "Round 19: delay", "Round 20: delay and bandwidth"). Round 21:
+    `amplifier_bandwidth` x0.14 (docs/diagnose-rounds/round-19.md "Round 19: delay", "Round 20: delay and bandwidth"). Round 21:
     when no drive-side term passes against them, those terms are tested again with the lag ``c1`` bounded to the
     loop's latency (:func:`_lag_beyond_latency`): free, it took a true delay's first-order lag in the whole band
     ("Round 21: delay")."""
@@ -1088,7 +1088,7 @@ LAG_PAIR = ("delay", "amplifier_bandwidth")
 
 def _delay_or_pole(evals, ctx, f_band, log):
     """Round 20: when the delay and the amplifier's pole both pass their nested tests, they took the same lag (both
-    lag by about ``w tau`` in band; docs/diagnose.md "Round 20: delay and bandwidth"). Their magnitudes tell them
+    lag by about ``w tau`` in band; docs/diagnose-rounds/round-20.md "Round 20: delay and bandwidth"). Their magnitudes tell them
     apart where the drives excite frequencies at which the pole's has fallen (:func:`signature.delay_or_pole` on the
     current model's residual transfer, up to the drives' band): the shape that fits worse at level ``ALPHA`` is
     refused (its shape is the other's); the order of the candidates is kept, so a third one the group's

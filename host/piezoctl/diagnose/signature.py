@@ -1,4 +1,4 @@
-"""Frequency-domain signature checks of the drive-side terms (docs/diagnose.md, "Round 10").
+"""Frequency-domain signature checks of the drive-side terms (docs/diagnose-rounds/round-10.md, "Round 10").
 
 The selection (``select.py``) says whether a term lowers the held-out error; it does not say whether the
 residual it takes has the term's *shape*. Above the band the calibration identified the dynamics in, the data
@@ -235,7 +235,7 @@ def mode_frequencies(tr: Transfer | None, f_min: float = 80.0, notches=()) -> li
     the reveal's wide chirp drives the residual over the whole band, so a mode's excess there is no narrow peak:
     on the resonance cases of development seeds 105-110 and the two-effect s109-002, s110-002 it offered no
     frequency near the concealed mode (or none at all) in 8 of 9, while the transfer peaks within 2.5 % of it in
-    8 of 9 (docs/diagnose.md, "Round 12").
+    8 of 9 (docs/diagnose-rounds/round-12.md, "Round 12").
     On s106-006 the best of the residual spectrum's settings (302 Hz) won the grid and was then refused by the
     check (the transfer peaks at 930 Hz); offering only where the check can pass keeps the two consistent."""
     if tr is None:

@@ -37,32 +37,32 @@ also leaves a level; otherwise the smallest unique ratio first), provided its ow
 criteria (fold ratios and credited ratio at most ``RATIO_MAX``, BIC lower). Slow candidates whose signature does
 not hold are not accepted, and when none holds the verdict is ``none`` with that reason.
 
-Round 12 (docs/diagnose.md, "Round 12: slow effects"): a foreign drift is almost all levels *between* the
+Round 12 (docs/diagnose-rounds/round-12.md, "Round 12: slow effects"): a foreign drift is almost all levels *between* the
 recordings. :func:`level_spread_test` compares the levels of a session's recordings with the base's level misfit
 (an F test); when they vary and the drift's own candidate has the size, the drift's signature holds between the
 recordings; and a drift whose signature holds takes the level the offset's candidate took (the drift's model term
 carries that level, ``ThermalDrift``'s ``level_um``).
 
-Round 13 (docs/diagnose.md, "Round 13: slow effects"): creep is plain in the dwells after the drive's steps and
+Round 13 (docs/diagnose-rounds/round-13.md, "Round 13: slow effects"): creep is plain in the dwells after the drive's steps and
 hidden everywhere else (the base's own misfit dominates the blocks between the steps). :func:`step_response_test`
 tests creep's columns on the dwells alone, with a level per dwell and a slope per recording as nuisance; it *is*
 creep's signature (no dwell: creep's signature does not hold, and a creep candidate is vetoed), and
 :func:`creep_on_steps` lets a creep candidate that failed its test on all blocks pass on it (Bonferroni over
 the two tests; the exact check still decides).
 
-Round 14 (docs/diagnose.md, "Round 14: the base"): :func:`drift_beyond_plane_test` tests the drift's trend within
+Round 14 (docs/diagnose-rounds/round-14.md, "Round 14: the base"): :func:`drift_beyond_plane_test` tests the drift's trend within
 the recordings beyond a plane of the base's family refitted on them (:func:`refit_plane`): a trend a function of
 the drive's history removes is the base's. Measured, not the default (``DRIFT_BEYOND_PLANE``): with every weight of
 that plane free a steps recording's per-dwell levels are the plane's, and a synthetic warm-up under random steps
 is refused.
 
-Round 15 (docs/diagnose.md, "Round 15: drift, offset and creep"): the levels between the recordings carry each
+Round 15 (docs/diagnose-rounds/round-15.md, "Round 15: drift, offset and creep"): the levels between the recordings carry each
 history's misfit (a reveal walk sits 0.2 to 2 um off the triangles), so round 12's spread is reported only; the
 drift's signature holds between the blocks when the level *trends* within the recordings on the scale each
 recording's own ~1 s block levels show (:func:`level_trend_test`), and an offset whose recordings cannot exclude a
 drift at the rate that would have reached its level is reported with ``thermal_drift`` as the pair.
 
-Round 18 (docs/diagnose.md, "Round 18: offset, drift and the rate null"): the recordings that sweep between the same
+Round 18 (docs/diagnose-rounds/round-18.md, "Round 18: offset, drift and the rate null"): the recordings that sweep between the same
 extremes (round 16's pair) carry the base's misfit on one loop, which the calibration bounds; their *common* level
 is the offset's signature when it lies beyond that misfit and beyond what differs between them
 (:func:`pair_level_test`; the walk's history level no longer hides the offset), and their *difference* lets a drift
@@ -1188,7 +1188,7 @@ def offset_after_drift_test(ctx, level) -> dict | None:
 
 
 DRIFT_BEYOND_PLANE = False   # round 14: :func:`drift_beyond_plane_test` decides the drift's signature (off: measured,
-#                              not the default; docs/diagnose.md "Round 14: the base")
+#                              not the default; docs/diagnose-rounds/round-14.md "Round 14: the base")
 PLANE_TEST_SAMPLES = 60_000   # the settled samples :func:`drift_beyond_plane_test` uses at most (every k-th one):
 #                               the plane's whole basis (up to about a hundred columns) at 10 kHz over a minute
 #                               would take a few hundred MB; a trend over seconds needs no more than ~1 kHz

@@ -5,7 +5,7 @@ the drive's history or rate. The same displacement reached rising and falling, o
 carries the same curve error; the base's misfit on histories the calibration did not show (minor-loop memory, the
 unknown initial state) differs between those visits. The whole-residual test of :func:`select._evaluate` sizes a
 curve against both, and the held-out sensor-curve misses of rounds 17 and 18 were refused there with the base's
-in-range misfit beside the curve as large as the curve (0.5 to 2.5 times its RMS: docs/diagnose.md, "Round 18: the
+in-range misfit beside the curve as large as the curve (0.5 to 2.5 times its RMS: docs/diagnose-rounds/round-18.md, "Round 18: the
 sensor curve" and "Round 19: the sensor curve").
 
 Here the residual is reduced to its *branch-common part* before anything is fitted or sized: the settled samples

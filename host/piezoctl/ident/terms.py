@@ -654,7 +654,7 @@ class RateDependentHysteresis(Term):
     *gain*, which changes the loop at the rate of the moment also where the plays are held (after a reversal) and
     keeps no memory of the rate they moved at. On the development rate misses s114-035 and s114-051 the true extra
     leaves 0.30/0.31 and 0.35/0.39 of the residual (oracle through the selection's test), the gain law
-    0.72/0.67 and 0.72/0.75, this law 0.44/0.46 and 0.49/0.54 (docs/diagnose.md, "Round 15: rate dependence").
+    0.72/0.67 and 0.72/0.75, this law 0.44/0.46 and 0.49/0.54 (docs/diagnose-rounds/round-15.md, "Round 15: rate dependence").
     Round 15 widened the plays of the base only; since round 16 a Bouc-Wen column of the plane is scaled by the same
     width factor (``widened``). A base without plays (the own-stage
     cases': the reversible curve and a Bouc-Wen column) keeps the old law (``has_plays``). Model files with ``gain``
@@ -931,7 +931,7 @@ class UnmodeledResonance(Term):
     ``r (M(w) - w)``. Rounds 12 to 16 filtered G's *output* instead (``r (M(y) - y)``, a mode in series): above the
     stage's main mode G has rolled off, so that form drives the mode with the mass line and gives it the wrong
     skirts (development s117-006, the true mode at its true setting: held-out ratios above the calibration's band
-    0.89/0.84 in series, 0.58/0.56 in parallel; docs/diagnose.md, "Round 17: resonance"). A model written before
+    0.89/0.84 in series, 0.58/0.56 in parallel; docs/diagnose-rounds/round-17.md, "Round 17: resonance"). A model written before
     round 17 (no ``"input"`` in its parameters) is simulated in series, as it was fitted."""
 
     name = "unmodeled_resonance"
@@ -989,7 +989,7 @@ class UnmodeledResonance(Term):
         what the fitted branch takes is its mass line below the edge, the base's in-band dynamics, and the ring
         is a small part of the correction. A concealed mode rung by steps, corners and a chirp through it puts
         most of its correction above the edge (0.66 to 0.92 of the energy on every case measured, 0.79 to 0.92 at
-        the true modes: docs/diagnose.md, "Round 21: resonance")."""
+        the true modes: docs/diagnose-rounds/round-21.md, "Round 21: resonance")."""
         if share_above >= self.SHARE_ABOVE_MIN:
             return None
         return (f"{100 * share_above:.0f} % of its held-out correction lies above {edge_hz:.0f} Hz, where a mode "
