@@ -20,8 +20,8 @@ def _triangle(n_cycles, period=PERIOD):
     return t, 1.0 - 2.0 * np.abs(ph - 0.5)   # a maximum at every period's start, 0 .. 1
 
 
-def _ctx(t, u, t_session=100.0):
-    s = types.SimpleNamespace(t=t, u=u, index=0, t_session=t_session)
+def _ctx(t, u, y, t_session=100.0):
+    s = types.SimpleNamespace(t=t, u=u, y=y, index=0, t_session=t_session)
     return types.SimpleNamespace(signals=[s], valid=[t >= 0.5], offset_of=lambda i: 0, drift_t0=0.0)
 
 
@@ -29,7 +29,7 @@ def _test(e_of_t, n_cycles=16, noise=0.002, seed=0):
     t, u = _triangle(n_cycles)
     rng = np.random.default_rng(seed)
     y = 0.05 * np.sin(2 * np.pi * u) + e_of_t(t) + noise * rng.standard_normal(t.size)   # a misfit repeating per cycle
-    ctx = _ctx(t, u)
+    ctx = _ctx(t, u, y)
     e = y[ctx.valid[0]]
     fold = (np.floor(t[ctx.valid[0]]) % 2).astype(int)   # ~1 s blocks, alternate folds
     return ss.cycle_mean_test([ctx, ctx], [e, e], fold)
@@ -71,6 +71,15 @@ def test_a_converging_orbit_dies_out_and_is_refused():
     assert abs(cy["t"]) > 3 and not cy["persists"] and not ss.cycles_hold(cy, ss.ALPHA_SIGNATURE)
 
 
+def test_a_change_within_the_noise_is_refused():
+    """Null s121-045: -0.18 nm over 9 cycles at t = -6 against 2 nm of sensor noise; the same trend beyond it holds."""
+    cy = _test(lambda t: -0.0004 * t / t[-1], noise=0.002, n_cycles=40)
+    assert cy["p"] < ss.ALPHA_SIGNATURE and cy["persists"] and not cy["beyond_noise"]
+    assert not ss.cycles_hold(cy, ss.ALPHA_SIGNATURE)
+    cy = _test(lambda t: -0.004 * t / t[-1], noise=0.002, n_cycles=40)
+    assert cy["beyond_noise"] and ss.cycles_hold(cy, ss.ALPHA_SIGNATURE)
+
+
 def test_too_few_cycles_give_no_test():
     assert _test(lambda t: -0.1 * t, n_cycles=ss.CYCLE_MIN) is None
 
@@ -83,7 +92,7 @@ def _cand(folds, p, significant=False, veto=None, credited_only=False, dbic=-12.
 
 def test_drift_on_cycles_lets_a_drift_that_lowers_each_fold_pass(monkeypatch):
     held = {"recordings": [0], "cycles": [18], "slopes_um_per_s": [-0.00884], "changes_um": [-0.170],
-            "second_half_um_per_s": [-0.0085], "persists": True, "slope_um_per_s": -0.00884,
+            "second_half_um_per_s": [-0.0085], "persists": True, "noise_um": [0.0074], "beyond_noise": True, "slope_um_per_s": -0.00884,
             "se_um_per_s": 0.00008, "t": -109.0, "dof": 16, "p": 2.1e-24}
     monkeypatch.setattr(ss, "cycle_mean_test", lambda *a: held)
     c = _cand([0.90, 0.87], 5.4e-3)   # s130-001's candidate
@@ -98,7 +107,7 @@ def test_drift_on_cycles_lets_a_drift_that_lowers_each_fold_pass(monkeypatch):
     ss.drift_on_cycles([c], None, None, None, lambda *a: None)
     assert not c.significant and c.veto == "implausible"
     # dying out, or above the candidate's level: not
-    for change in ({"persists": False}, {"p": 5e-3}):
+    for change in ({"persists": False}, {"p": 5e-3}, {"beyond_noise": False}):
         monkeypatch.setattr(ss, "cycle_mean_test", lambda *a, _c=change: {**held, **_c})
         c = _cand([0.90, 0.87], 5.4e-3)
         ss.drift_on_cycles([c], None, None, None, lambda *a: None)

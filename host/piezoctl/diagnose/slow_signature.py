@@ -698,7 +698,11 @@ def cycle_mean_test(ctxs, es, fold_all) -> dict | None:
     converging on its orbit, or a creep relaxing after the drive moved into the stretch. A warm-up whose rate
     halves within the stretch has a time constant under a third of it; a stage's thermal one is minutes. So the
     change must **persist**: on the second half of each recording's cycles, the slope is not below half the
-    recording's whole slope by more than the one-sided ``ALPHA`` quantile of its own error. Round 22's oracle on the
+    recording's whole slope by more than the one-sided ``ALPHA`` quantile of its own error. And it must lie
+    **beyond the noise**: the line's change over the stretch exceeds one sample's sensor noise (the RMS second
+    difference of the measured output over sqrt(6), which a triangle's slope does not enter): the cycle means of
+    thousands of samples resolve a change of a fraction of a nanometre (development null s121-045: -0.18 nm over 9
+    cycles, t = -6.1, against 2.1 nm of noise), which no term taking it could lower the error by. Round 22's oracle on the
     stored runs of seeds 115-128 (the measured output's cycle means, "Round 22: drift and offset"): |t| >= 4 on
     53/54 drifts, 0/43 offsets, 0/16 nulls.
 
@@ -706,8 +710,9 @@ def cycle_mean_test(ctxs, es, fold_all) -> dict | None:
     -------
     dict or None
         Per recording tested (``recordings``, ``cycles``, ``slopes_um_per_s``, ``changes_um`` (the line's change
-        over the stretch), ``second_half_um_per_s``, ``persists``); pooled ``slope_um_per_s``, ``se_um_per_s``,
-        ``t``, ``dof``, ``p``, ``persists`` (every recording). None when no reveal recording repeats its drive.
+        over the stretch), ``second_half_um_per_s``, ``persists``, ``noise_um``); pooled ``slope_um_per_s``,
+        ``se_um_per_s``, ``t``, ``dof``, ``p``, ``persists`` and ``beyond_noise`` (every recording). None when no
+        reveal recording repeats its drive.
     """
     from scipy import stats as st
     ctx = ctxs[0]
@@ -743,7 +748,9 @@ def cycle_mean_test(ctxs, es, fold_all) -> dict | None:
         q2 = float(st.t.isf(sg.ALPHA, max(dof2, 1)))
         persists = bool(np.sign(b2) == np.sign(b) and abs(b2) >= 0.5 * abs(b) - q2 * se2) if np.isfinite(se2) \
             else True
-        rows.append((int(s.index), m.size, b, se, dof, float(b * np.ptp(tm)), b2, persists))
+        y = np.asarray(s.y, float)[np.asarray(v, bool)]
+        noise = float(np.sqrt(np.mean(np.diff(y, 2) ** 2) / 6.0)) if y.size > 10 else 0.0
+        rows.append((int(s.index), m.size, b, se, dof, float(b * np.ptp(tm)), b2, persists, noise))
     rows = [r for r in rows if np.isfinite(r[3]) and r[3] > 0 and r[4] > 0]
     if not rows:
         return None
@@ -755,13 +762,15 @@ def cycle_mean_test(ctxs, es, fold_all) -> dict | None:
     return {"recordings": [r[0] for r in rows], "cycles": [r[1] for r in rows],
             "slopes_um_per_s": [r[2] for r in rows], "changes_um": [r[5] for r in rows],
             "second_half_um_per_s": [r[6] for r in rows], "persists": bool(all(r[7] for r in rows)),
+            "noise_um": [r[8] for r in rows], "beyond_noise": bool(all(abs(r[5]) > r[8] for r in rows)),
             "slope_um_per_s": slope, "se_um_per_s": se, "t": float(t), "dof": dof,
             "p": float(2 * st.t.sf(abs(t), dof))}
 
 
 def cycles_hold(cy, level: float) -> bool:
-    """The cycle means move on the clock (:func:`cycle_mean_test`) at two-sided ``level`` and persist."""
-    return bool(cy and cy["p"] < level and cy["persists"])
+    """The cycle means move on the clock (:func:`cycle_mean_test`) at two-sided ``level``, persist, and change by
+    more than the sensor's noise."""
+    return bool(cy and cy["p"] < level and cy["persists"] and cy.get("beyond_noise", False))
 
 
 def cycle_phrase(cy: dict) -> str:
@@ -770,7 +779,9 @@ def cycle_phrase(cy: dict) -> str:
             f"(+- {1e3 * cy['se_um_per_s']:.2f} on their own scatter; t = {cy['t']:.1f}, {cy['dof']} dof, "
             f"p = {cy['p']:.1e}; {', '.join(f'{x:+.3f}' for x in cy['changes_um'])} um over "
             f"{', '.join(str(n) for n in cy['cycles'])} cycles), "
-            + ("still moving in the second half" if cy["persists"] else "dying out within the stretch"))
+            + ("still moving in the second half" if cy["persists"] else "dying out within the stretch")
+            + (f", against {', '.join(f'{1e3 * x:.1f}' for x in cy['noise_um'])} nm of sensor noise"
+               if cy.get("noise_um") else ""))
 
 
 def drift_on_cycles(evals, ctxs, es, fold_all, log) -> None:
