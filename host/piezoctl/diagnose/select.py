@@ -25,7 +25,7 @@ from . import significance as sg, static_map
 from .misfit import _one_band_credited, above_per_recording, credited_ratio, ratios_above, ratios_where
 from .discriminate import discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
-                             drift_on_pair, signature_tests)
+                             drift_on_cycles, drift_on_pair, signature_tests)
 from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",
@@ -1541,6 +1541,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         creep_on_steps(evals, fctx, es, fold_all, block_all, rows, log)   # round 13: creep's test after the steps
         creep_model_on_dwells(evals, fctx, es, fold_all, block_all, rows, log)   # round 19: its model on the dwells
         drift_on_pair(evals, fctx, es, [slow_nuisance(c) for c in fctx], fold_all, block_all, rows, log)   # round 18
+        drift_on_cycles(evals, fctx, es, fold_all, log)   # round 23: the cycle means on a repeated drive
         _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log)
         _delay_or_pole(evals, ctx_all, f_band, log)   # round 20: the pair told apart by the magnitude
         _supersede(evals)
