@@ -1,12 +1,10 @@
 """Round 23 (docs/diagnose-rounds/round-23.md, "Round 23: speed and memory"): the rate term's widened plays are
-kept for a recurring operator, drive and width (``plane_width_change_cached``), and a design that keeps its columns
-apart gives its training rows without being stacked first (``_Design.rows``). Neither changes a float."""
+kept for a recurring operator, drive and width (``plane_width_change_cached``). It changes no float."""
 
 import copy
 
 import numpy as np
 
-from piezoctl.diagnose import select as S
 from piezoctl.ident import terms as T
 from piezoctl.ident.terms import TERMS
 from piezoctl.models import hysteresis as hy
@@ -81,27 +79,3 @@ def test_the_rate_candidate_is_the_same_with_the_width_cache_and_without(monkeyp
     assert all(np.array_equal(_bits(a), _bits(b)) for a, b in zip(cached.coef, plain.coef))
     assert cached.significant == plain.significant and cached.veto == plain.veto
     hy.clear_output_cache()
-
-
-def test_design_rows_are_the_stacked_rows_and_the_fits_are_the_same_bits():
-    term = TERMS["rate_dependent_hysteresis"]
-    ctx, _ = _two_contexts()
-    settings = term.settings(ctx)
-    ds = [S._design(ctx, term, st) for st in settings[:3]]
-    assert ds[0]._X is not None and ds[1]._X is None                      # one stacked, one with shared columns
-    rng = np.random.default_rng(5)
-    e = rng.normal(size=ds[0].n)
-    train = rng.random(ds[0].n) < 0.5
-    test = ~train
-    idx = S.train_rows(train, train.sum() // 7)                            # strided, as the selection's rows
-    N = rng.normal(size=(ds[0].n, 4))
-    nuis = (N[idx], N[test])
-    for d in ds:
-        Xi = d.rows(idx)
-        assert Xi.flags.c_contiguous and np.array_equal(_bits(Xi), _bits(d.X[idx]))
-        lb = [-np.inf] * (d.k - 1) + [0.0]
-        for kw in ({}, {"lb": lb}, {"nuis": nuis}, {"lb": lb, "nuis": nuis}):
-            a = S._fit_predict(d, e, train, test, train.sum() // 7, **kw)
-            b = S._fit_predict(d.X, e, train, test, train.sum() // 7, **kw)
-            assert np.array_equal(_bits(a[0]), _bits(b[0])) and np.array_equal(_bits(a[1]), _bits(b[1]))
-            assert a[2] == b[2]

@@ -314,22 +314,6 @@ class _Design:
         """Column ``j`` (n_settled,) of the design (a view of the stacked design when it is kept)."""
         return self._X[:, j] if self._X is not None else self.cols[j]
 
-    def rows(self, idx) -> np.ndarray:
-        """``self.X[idx]`` (len(idx), k), C-ordered: the same floats. A design that keeps its columns apart
-        gathers the rows from them instead of stacking all n_settled rows first (round 23: the rate term's
-        designs were stacked on every fit of every setting, 2038 stackings, 2.2 s of held-out s125-023's 68 s CPU,
-        to take about a tenth of their rows)."""
-        if self._X is not None:
-            return self._X[idx]
-        Xi = np.empty((len(idx), self.k))
-        for j, c in enumerate(self.cols):
-            Xi[:, j] = c[idx]
-        return Xi
-
-    @property
-    def shape(self) -> tuple:
-        return self.n, self.k
-
     @property
     def X(self) -> np.ndarray:
         """The stacked design (n_settled, k), C-ordered."""
@@ -384,8 +368,7 @@ def _predict(X, th, test, nuis=None):
 
 
 def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True):
-    """Least squares of e on X (an array, or a :class:`_Design`: its training rows gathered by
-    :meth:`_Design.rows`, the same floats) over train rows (strided), coefficients >= ``lb`` when given; prediction on
+    """Least squares of e on X over train rows (strided), coefficients >= ``lb`` when given; prediction on
     test rows (None without ``predict``: :func:`best_setting` predicts with its best setting only). ``nuis``: the
     nested test's nuisance as (train rows, test rows) of its columns, prepended (its coefficients first,
     unbounded), sliced once per fold by the caller.
@@ -396,7 +379,7 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True):
     idx = train_rows(train, rows)
     box = nuis is not None and len(nuis) > 2 and nuis[2] is not None
     y = e[idx]
-    Xi = X.rows(idx) if isinstance(X, _Design) else X[idx]
+    Xi = X[idx]
     if box:   # bounded nuisance columns (the initial state's gains): a box solve over all columns
         Xtr = np.hstack([nuis[0], Xi])
         lo = np.concatenate([nuis[2][0], np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)])
@@ -421,7 +404,7 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True):
         m = N.shape[1]
         fit = N @ th[:m] + Xi @ th[m:]
     sse_tr = float(np.sum((y - fit) ** 2)) * (np.sum(train) / max(idx.size, 1))
-    return th, (_predict(X.X if isinstance(X, _Design) else X, th, test, nuis) if predict else None), sse_tr
+    return th, (_predict(X, th, test, nuis) if predict else None), sse_tr
 
 
 def _design(ctx, term, st):
@@ -457,7 +440,7 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
             d = _design(ctx, term, st)
             # round 22: the test rows are predicted with the best setting only (below), not with every setting
             # (the whole design times the coefficients and the nuisance's test rows: about half of each fit)
-            th, _, sse = _fit_predict(d, e, train, test, rows, lb, nuis, predict=False)
+            th, _, sse = _fit_predict(d.X, e, train, test, rows, lb, nuis, predict=False)
             if best is None or sse < best[2]:
                 best = (st, d, sse, th)
         new_level = level[repr(best[0])] + 1
