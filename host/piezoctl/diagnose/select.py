@@ -1134,6 +1134,34 @@ def _block_lags(X_lag, ids, e, Nh=None):
     return th[-ids.size:], s2 * np.diag(np.linalg.pinv(X.T @ X))[-ids.size:]
 
 
+def _block_factors(C, b, order, bounds, rhs=()):
+    """The least-squares problems of :func:`base_lag` by blocks: ``X = [C, b x (block == j) for each block j]``
+    (n, m + nb), never formed. Each block's rows ``[C_j, b_j]`` are factored ``Q_j R_j`` (reduced QR); the stacked
+    ``R_j``, with ``b``'s column moved to column ``m + j``, form ``S`` (sum of the blocks' ranks, m + nb), and
+    ``X = diag(Q_j) S`` up to the rows' order, ``diag(Q_j)`` with orthonormal columns. So ``S`` has ``X``'s singular
+    values and right vectors: ``S' S = X' X``, ``pinv(X) z = pinv(S) diag(Q_j)' z``, and the least-squares fit of
+    ``z`` on ``X`` is that of ``diag(Q_j)' z`` on ``S``, equal in exact arithmetic. Returns ``S``, the stacked
+    ``Q_j' z`` for each array in ``rhs`` (n,), and the ``Q_j`` when ``rhs`` is empty (for later right-hand sides).
+
+    Round 23: ``X`` had a column per time block (about 110 on s0-017, 1.1 M rows: 1 GB), and its SVDs
+    (``np.linalg.pinv``, ``lstsq``) took 57 of that case's 146 s CPU and its resident peak to 3.5 GB."""
+    m = C.shape[1]
+    nb = bounds.size - 1
+    S, Qz, Qs = [], [[] for _ in rhs], []
+    for j in range(nb):
+        r = order[bounds[j]:bounds[j + 1]]
+        Q, R = np.linalg.qr(np.column_stack([C[r], b[r]]))
+        row = np.zeros((R.shape[0], m + nb))
+        row[:, :m] = R[:, :m]
+        row[:, m + j] = R[:, m]
+        S.append(row)
+        for i, z in enumerate(rhs):
+            Qz[i].append(Q.T @ z[r])
+        if not rhs:
+            Qs.append(Q)
+    return np.vstack(S), [np.concatenate(q) for q in Qz], Qs
+
+
 def base_lag(ctx, e, block_all) -> tuple | None:
     """Round 22: (lag, spread) [samples]: the pure delay whose profile over the time blocks best fits the lags the
     base's G lacks, and how far those lags are *not* a delay's: the weighted RMS over the time
@@ -1158,18 +1186,32 @@ def base_lag(ctx, e, block_all) -> tuple | None:
     if ids.size < 2:
         return None
     D = dynamics_nuisance(ctx)
-    X_lag = np.hstack([D[:, 1:2], np.column_stack([D[:, 0] * (block_all == b) for b in ids])])
-    c, var = _block_lags(X_lag, ids, e, hysteresis_nuisance(ctx))
+    # round 23: the fits of _block_lags (X = [Nh, c2 column, c1 column of each block]) and the pure delay's
+    # (pinv of [c2 column, c1 column of each block]) from the blocks' QR factors (_block_factors), the same
+    # problems as the stacked columns', without them
+    _, inv = np.unique(block_all, return_inverse=True)
+    order = np.argsort(inv, kind="stable")
+    bounds = np.searchsorted(inv[order], np.arange(ids.size + 1))
+    Nh = hysteresis_nuisance(ctx)
+    C = np.hstack([Nh, D[:, 1:2]])
+    S, (Qe,), _ = _block_factors(C, D[:, 0], order, bounds, (e,))
+    n, p = e.size, S.shape[1]
+    th, *_ = np.linalg.lstsq(S, Qe, rcond=np.finfo(float).eps * max(n, p))   # lstsq's default cutoff on X
+    r = e - C @ th[:C.shape[1]] - D[:, 0] * th[C.shape[1]:][inv]
+    s2 = float(r @ r) / max(n - p, 1)
+    c, var = th[-ids.size:], s2 * np.diag(np.linalg.pinv(S.T @ S))[-ids.size:]
     ok = var > 0
     if ok.sum() < 2:
         return None
     w = 1.0 / var[ok]
-    P = np.linalg.pinv(X_lag)   # a pure delay's block lags: the same fit of y(t - d) - y(t), without the channels
+    # a pure delay's block lags: the same fit of y(t - d) - y(t), without the channels
+    S_lag, _, Qs = _block_factors(D[:, 1:2], D[:, 0], order, bounds)
+    P = np.linalg.pinv(S_lag)
     best, lag = np.inf, 0
     for d in LAG_SPREAD_DELAYS:
         z = np.concatenate([np.concatenate([np.full(d, s.ydyn[0]), np.asarray(s.ydyn, float)[:s.ydyn.size - d]])[v]
                             - np.asarray(s.ydyn, float)[v] for s, v in zip(ctx.signals, ctx.valid)])
-        k = (P @ z)[-ids.size:]
+        k = (P @ np.concatenate([Q.T @ z[order[bounds[j]:bounds[j + 1]]] for j, Q in enumerate(Qs)]))[-ids.size:]
         r = float(np.sum(w * (c[ok] - k[ok]) ** 2) / np.sum(w))
         if r < best:
             best, lag = r, int(d)

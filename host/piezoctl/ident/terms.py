@@ -38,7 +38,7 @@ import numpy as np
 
 from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
 from ..models.hysteresis import (bouc_wen_column, hysteresis_groups, hysteresis_output, hysteresis_output_of,
-                                 plane_width_change, play_states, scale_groups)
+                                 plane_width_change, plane_width_change_cached, play_states, scale_groups)
 
 __all__ = ["Term", "SimState", "TERMS", "TERM_ORDER", "VOCABULARY", "G", "dynamics_corrections"]
 
@@ -704,26 +704,28 @@ class RateDependentHysteresis(Term):
         r = drive_rate(v, dt, cutoff)
         return r / (r + ref) * hyst
 
-    def widened(self, hp, v, dt, ref, k, cutoff=RATE_CUTOFF_HZ, bw=True) -> np.ndarray:
+    def widened(self, hp, v, dt, ref, k, cutoff=RATE_CUTOFF_HZ, bw=True, cached=False) -> np.ndarray:
         """H with the widened plays minus H [um] (``plane_width_change``); with ``bw`` (round 16) plus the plane's
         Bouc-Wen column scaled by the same width factor less one, ``(w - 1) c_h h(v)``.
 
         The Bouc-Wen column has no thresholds: its loop's width is its size, so the width factor of the moment
         scales it (the law up to round 14, for that column alone). Round 15's law widened the plays only and lost
         s112-035 and s112-051 (generalized PI), whose bases carry most of the loop in the column (c_h -12 and
-        -29 um)."""
+        -29 um). ``cached``: the change of the plays from :func:`plane_width_change_cached` (the selection's
+        designs; the same floats)."""
         w = self.width(v, dt, ref, k, cutoff)
-        out = plane_width_change(hp, v, w)
+        out = (plane_width_change_cached if cached else plane_width_change)(hp, v, w)
         if bw and hp.get("bw") and hp.get("type", "pi") == "plane":
             out = out + (w - 1.0) * bouc_wen_column(hp, v)
         return out
 
-    def constant_widening(self, hp, v, ks=None) -> np.ndarray:
+    def constant_widening(self, hp, v, ks=None, cached=False) -> np.ndarray:
         """(T, len(ks)) [um]: H with every play's threshold x (1 + k) minus H, for each k (default ``CONSTANT_K``):
         the rate-independent part of the width law, the nuisance the term is nested against."""
         ks = self.CONSTANT_K if ks is None else ks
         v = np.asarray(v, float)
-        return np.column_stack([plane_width_change(hp, v, np.full(v.size, 1.0 + float(k))) for k in ks]) \
+        change = plane_width_change_cached if cached else plane_width_change   # cached: the selection's designs
+        return np.column_stack([change(hp, v, np.full(v.size, 1.0 + float(k))) for k in ks]) \
             if len(ks) else np.zeros((v.size, 0))
 
     def _constant_columns(self, ctx, s) -> np.ndarray:
@@ -734,7 +736,7 @@ class RateDependentHysteresis(Term):
         hit = ctx.refit_cache.get(key)
         if hit is not None and hit[0] is s and hit[1] is ctx.base:
             return hit[2]
-        g = G(ctx.base, self.constant_widening(ctx.base["hysteresis"], s.v))
+        g = G(ctx.base, self.constant_widening(ctx.base["hysteresis"], s.v, cached=True))
         g.setflags(write=False)
         ctx.refit_cache[key] = (s, ctx.base, g)
         return g
@@ -826,7 +828,7 @@ class RateDependentHysteresis(Term):
             return G(ctx.base, self.basis(s.v, s.hyst, s.dt, setting))
         ref, k = setting
         return np.column_stack([self._constant_columns(ctx, s),
-                                G(ctx.base, self.widened(ctx.base["hysteresis"], s.v, s.dt, ref, k))])
+                                G(ctx.base, self.widened(ctx.base["hysteresis"], s.v, s.dt, ref, k, cached=True))])
 
     def model_params(self, ctx, setting, coef):
         if not isinstance(setting, tuple):

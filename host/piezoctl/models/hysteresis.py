@@ -483,10 +483,40 @@ def hysteresis_output_of(hp: dict, tag: tuple, anchor, make_v):
 
 
 def clear_output_cache() -> None:
-    """Empty the cache of :func:`hysteresis_output` (the diagnosis does when its selection is done) and the tags
-    of :func:`hysteresis_output_of`."""
+    """Empty the cache of :func:`hysteresis_output` (the diagnosis does when its selection is done), the tags
+    of :func:`hysteresis_output_of` and the cache of :func:`plane_width_change_cached`."""
     _OUTPUT_CACHE.clear()
     _OUTPUT_ALIAS.clear()
+    _WIDTH_CACHE.clear()
+
+
+_WIDTH_CACHE: dict = {}
+_WIDTH_CACHE_MAX_SAMPLES = 16_000_000   # widened-play changes kept: at most about 128 MB of float64
+
+
+def plane_width_change_cached(hp: dict, v, width) -> np.ndarray:
+    """:func:`plane_width_change` (the same floats, a read-only array), kept for a recurring operator, drive and
+    width.
+
+    The diagnosis' rate term widens the base's plays on every recording for each of its settings, in each fold's
+    context and each selection round; the folds' and rounds' models share the base's operator unless an accepted
+    term refitted it, so the same change was computed again (round 23: held-out null s125-023, 453 calls of which
+    227 repeated an earlier call's operator, drive and width exactly, 4.1 of its 70 s CPU). Key: the operator
+    without its offset (``plane_width_change`` does not read it) as exact JSON text, the sizes and the SHA-256
+    digests of the drive and of the width. At most ``_WIDTH_CACHE_MAX_SAMPLES`` samples are kept; when full a new
+    change is computed and not stored. Emptied by :func:`clear_output_cache` (the end of the selection)."""
+    v = np.ascontiguousarray(v, dtype=float)
+    w = np.ascontiguousarray(np.asarray(width, float).reshape(-1))
+    key = (_op_text(hp), v.size, hashlib.sha256(v.view(np.uint8)).digest(), w.size,
+           hashlib.sha256(w.view(np.uint8)).digest())
+    hit = _WIDTH_CACHE.get(key)
+    if hit is not None:
+        return hit
+    out = plane_width_change(hp, v, w)
+    out.setflags(write=False)
+    if sum(x.size for x in _WIDTH_CACHE.values()) + out.size <= _WIDTH_CACHE_MAX_SAMPLES:
+        _WIDTH_CACHE[key] = out
+    return out
 
 
 def hysteresis_features(hp: dict, v) -> tuple[np.ndarray, np.ndarray]:
