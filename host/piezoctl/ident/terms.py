@@ -808,9 +808,9 @@ class RateDependentHysteresis(Term):
     # wide at speed as at rest is beyond what the rate dependence of a piezo loop does.
     # Round 23: 2.0 (a loop three times as wide). A lag (a delay, a pole the calibration's band did not reach) opens
     # the fast sines' loop into an ellipse of width ~ sin(w d) x the stroke, many times the hysteresis loop, and the
-    # widening's gain grows to match: the delay s129-007 (Maxwell slip, 0.2 ms) was named rate at 2.91 (gain 10.7);
-    # the 41 rate cases named in the kept runs of seeds 115-130 fit 0.28 to 1.29 (docs/diagnose-rounds/round-23.md,
-    # "Round 23: rate")
+    # widening's gain grows to match: the delay s129-007 (Maxwell slip, 2.0 ms) was named rate at 2.39 in the folds'
+    # fits (2.91 all-data; gain 10.7); the 40 rate cases named in the kept runs of seeds 115-130 fit 0.28 to 1.29
+    # all-data (docs/diagnose-rounds/round-23.md, "Round 23: rate")
     MAX_WIDENING = 2.0
 
     def implausible(self, ctx, setting, coef):
