@@ -207,6 +207,12 @@ def test_the_widening_bound():
     assert term.implausible(ctx, (3000.0, 1.0), lead + [100.0, 0.1]) is None    # 100 x 50 / 3050 = 1.6
     assert "wide" in term.implausible(ctx, (30.0, 1.0), lead + [273.0, 0.0])     # two-effect s113-001's gain
     assert "wide" in term.implausible(ctx, (3.0, 1.0), lead + [3.5, 0.0])
+    # round 23: the delay s129-007's all-data fit, 10.7 x 0.5 x c at a reference just above the fastest rate
+    # (c 0.55: 2.9), is a lag's ellipse, not a wider loop; the largest widening of a rate case named in seeds
+    # 115-130 (1.29) is not
+    r = 50.0 * 16466.0 / 19775.0      # its reference, scaled to this drive's fastest rate
+    assert "wide" in term.implausible(ctx, (r, 0.5), lead + [10.66, 0.0])
+    assert term.implausible(ctx, (r, 1.0), lead + [1.29 / (50.0 / (50.0 + r)), 0.0]) is None
 
 
 def test_old_model_files_keep_the_gain_law():
