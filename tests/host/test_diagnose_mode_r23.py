@@ -1,0 +1,72 @@
+"""Round 23, the concealed mode: the block test and BIC read where the mode is sized (above its edge) as well as on
+the whole band; the smaller p counts twice (two looks at one test), BIC passes in either view."""
+
+import numpy as np
+
+from piezoctl.diagnose import select, significance as sg
+from piezoctl.ident.terms import TERMS
+
+DT = 1e-4
+F = 1200.0   # the mode [Hz]
+EDGE = F / np.sqrt(2.0)
+P_MAX = sg.ALPHA / 12
+
+
+def _within(x):
+    return x <= sg.RATIO_MAX
+
+
+def _whole(p_above, dbic_above):
+    return {"above_hz": EDGE, "fold_ratios": [0.97, 0.98], "credited_ratio": 0.97, "p_above": p_above,
+            "dbic_above": dbic_above, "share_above": 0.8}
+
+
+def test_a_ring_beside_a_slow_misfit_passes_above_its_edge_where_the_whole_band_refuses():
+    """Steps ring the mode beside a slow misfit 30 times the ring that the term does not touch: on the whole band
+    the ring is too small a share for BIC (and the block test), above the edge both find it."""
+    rng = np.random.default_rng(3)
+    n = 120_000
+    t = np.arange(n) * DT
+    h = np.repeat(rng.uniform(-5, 5, n // 2500), 2500)
+    ring = 0.05 * TERMS["unmodeled_resonance"].basis(h, F, 0.02, DT)[:, 0]
+    slow = 30 * np.std(ring) * np.sin(2 * np.pi * 0.7 * t + 1.0) * (1 + 0.5 * np.sin(0.3 * t))
+    e_before = slow + ring + 0.002 * rng.standard_normal(n)
+    corr = 0.9 * ring
+    blocks, rec = (np.arange(n) * DT // 1.0).astype(int), np.zeros(n, int)
+    k = 6
+    ev = select._above_edge_evidence(e_before, corr, blocks, rec, DT, EDGE, k)
+    assert ev["dbic_above"] < 0 and ev["p_above"] < P_MAX / 2
+    dbic_whole = sg.bic_delta(float(np.sum(e_before ** 2)), float(np.sum((e_before - corr) ** 2)),
+                              sg.effective_n(e_before), k)
+    assert dbic_whole > 0
+    units = sg.test_units(e_before, blocks, rec, DT, corr)
+    _, p_whole, _ = sg.active_block_test(e_before, e_before - corr, corr, blocks, units)
+    whole = {"above_hz": EDGE, "fold_ratios": [0.99, 0.99], "credited_ratio": 0.99, **ev}
+    assert select._linearized_gates([0.5, 0.5], p_whole, dbic_whole, whole, P_MAX, _within)
+    assert whole["whole_band_gates"] is False   # the whole band's gates alone refuse it
+
+
+def test_two_looks_count_twice():
+    """The smaller of the two p counts twice: above the edge just under the level is not enough, under half is."""
+    assert not select._linearized_gates([0.7, 0.7], 0.5, -10.0, _whole(0.9 * P_MAX, -10.0), P_MAX, _within)
+    assert select._linearized_gates([0.7, 0.7], 0.5, -10.0, _whole(0.4 * P_MAX, -10.0), P_MAX, _within)
+    # the whole band's p alone, as small, passes too; just under the level it no longer does (it counts twice)
+    assert select._linearized_gates([0.7, 0.7], 0.4 * P_MAX, -10.0, _whole(0.5, -10.0), P_MAX, _within)
+    assert not select._linearized_gates([0.7, 0.7], 0.9 * P_MAX, -10.0, _whole(0.5, -10.0), P_MAX, _within)
+
+
+def test_bic_in_either_view_and_size_still_gates():
+    assert select._linearized_gates([0.7, 0.7], 1e-6, +8.0, _whole(1e-6, -50.0), P_MAX, _within)
+    assert select._linearized_gates([0.7, 0.7], 1e-6, -8.0, _whole(1e-6, +50.0), P_MAX, _within)
+    assert not select._linearized_gates([0.7, 0.7], 1e-6, +8.0, _whole(1e-6, +5.0), P_MAX, _within)
+    assert not select._linearized_gates([0.85, 0.7], 1e-9, -1e4, _whole(1e-9, -1e4), P_MAX, _within)
+
+
+def test_a_term_without_an_edge_keeps_the_whole_band_gates():
+    """Only a term sized above an edge has a second view; the others' gates are the whole band's, unchanged."""
+    assert not select._linearized_gates([0.7, 0.7], 1.05 * P_MAX, -10.0, None, P_MAX, _within)
+    assert select._linearized_gates([0.7, 0.7], 0.9 * P_MAX, -10.0, None, P_MAX, _within)
+    assert not select._linearized_gates([0.7, 0.7], 1e-9, +1.0, None, P_MAX, _within)
+    drift_like = {"beyond_calibrated_range": True, "fold_ratios": [0.9, 0.9], "credited_ratio": 0.9}
+    assert select._linearized_gates([0.7, 0.7], 0.9 * P_MAX, -10.0, drift_like, P_MAX, _within)
+    assert "p_gate" not in drift_like
