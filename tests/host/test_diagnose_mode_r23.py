@@ -1,5 +1,6 @@
 """Round 23, the concealed mode: the block test reads where the mode is sized (above its edge) as well as on the whole
-band; the smaller p counts twice (two looks at one test). BIC stays the whole band's (above the edge recorded)."""
+band, the smaller p counting twice (two looks at one test); BIC passes in either view under the first round's size
+gate, and stays the whole band's once the size gate is loosened after a first term."""
 
 import numpy as np
 
@@ -53,14 +54,16 @@ def test_two_looks_count_twice():
     assert not select._linearized_gates([0.7, 0.7], 0.9 * P_MAX, -10.0, _whole(0.5, -10.0), P_MAX, _within)
 
 
-def test_bic_stays_the_whole_bands_and_size_still_gates():
-    """After the first term the size gate is 1.0; the whole band's BIC is what refuses a mode beside a slew limit
-    whose ring above the edge a small BIC there would pass: BIC above the edge is recorded, not a gate."""
+def test_bic_in_either_view_under_the_first_size_gate_only():
+    """Under the first round's size gate (0.8 above the edge) BIC passes in either view; after the first term the
+    size gate is 1.0 and the whole band's BIC is the size guard left: the view above the edge does not count."""
+    assert select._linearized_gates([0.7, 0.7], 1e-6, +8.0, _whole(1e-6, -50.0), P_MAX, _within, True)
+    assert select._linearized_gates([0.7, 0.7], 1e-6, -8.0, _whole(1e-6, +50.0), P_MAX, _within, True)
+    assert not select._linearized_gates([0.7, 0.7], 1e-6, +8.0, _whole(1e-6, +5.0), P_MAX, _within, True)
     further = lambda x: x < 1.0   # noqa: E731 (the size gate after the first term)
-    assert not select._linearized_gates([0.9, 0.9], 1e-6, +8.0, _whole(1e-6, -50.0), P_MAX, further)
-    assert select._linearized_gates([0.9, 0.9], 1e-6, -8.0, _whole(1e-6, -50.0), P_MAX, further)
-    assert select._linearized_gates([0.7, 0.7], 1e-6, -8.0, _whole(1e-6, +50.0), P_MAX, _within)
-    assert not select._linearized_gates([0.85, 0.7], 1e-9, -1e4, _whole(1e-9, -1e4), P_MAX, _within)
+    assert not select._linearized_gates([0.9, 0.9], 1e-6, +8.0, _whole(1e-6, -50.0), P_MAX, further, False)
+    assert select._linearized_gates([0.9, 0.9], 1e-6, -8.0, _whole(1e-6, -50.0), P_MAX, further, False)
+    assert not select._linearized_gates([0.85, 0.7], 1e-9, -1e4, _whole(1e-9, -1e4), P_MAX, _within, True)
 
 
 def test_a_term_without_an_edge_keeps_the_whole_band_gates():

@@ -741,8 +741,8 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         if fr_above is not None:
             whole = {"above_hz": float(edge), "fold_ratios": list(fold_ratios), "credited_ratio": cr}
             fold_ratios, cr = fr_above, cr_above
-            # round 21: where its correction lies (the mode's veto acts_below_edge); round 23: the block test above
-            # the edge, read by _linearized_gates beside the whole band's (BIC above it recorded only)
+            # round 21: where its correction lies (the mode's veto acts_below_edge); round 23: the block test and
+            # BIC above the edge, read by _linearized_gates beside the whole band's
             whole.update(_above_edge_evidence(rb_res, pred_after[used], block_all[used], rec, ctxs[0].dt, edge, k))
     if term.acts_beyond_calibration and whole is None and all(st is not None for st in best_st):
         # round 17: a knee setting in both folds acts only beyond the edge: sized on the samples where it can act
@@ -752,7 +752,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         if fr_w is not None:
             whole = {"beyond_calibrated_range": True, "fold_ratios": list(fold_ratios), "credited_ratio": cr}
             fold_ratios, cr = fr_w, cr_w
-    significant = _linearized_gates(fold_ratios, p, dbic, whole, p_max, within)
+    significant = _linearized_gates(fold_ratios, p, dbic, whole, p_max, within, ratio_max < FURTHER_RATIO_MAX)
     veto = None
     # round 13: data that cannot credit it; round 15: vetoed whether or not it passed, so that it is no pair's
     # alternative either (held-out s114-026: an in-range clip below the round's level, reported as the sensor
@@ -803,16 +803,19 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                      credited_only=credited_only)
 
 
-def _linearized_gates(fold_ratios, p: float, dbic: float, whole: dict | None, p_max: float, within) -> bool:
+def _linearized_gates(fold_ratios, p: float, dbic: float, whole: dict | None, p_max: float, within,
+                      first_size_gate: bool = True) -> bool:
     """The linearized gates: size (``within`` on the larger fold ratio), the block test (``p_max``) and BIC.
 
-    Round 23: a term sized above an edge (``whole`` holds ``p_above``, the mode's) is also block-tested there, where
-    it acts and is sized, not only on the whole band, where a ring is a small share of the residual beside the
-    base's slow misfit (s129-052: the whole band's p 1.3e-3, above the edge 9.1e-6). Two looks at one test: the
-    smaller p counts twice (Bonferroni). BIC stays the whole band's: after the first term the size gate is 1.0, and
-    the whole band's BIC is what refuses a mode beside a slew limit or a rate term there (kept runs of seeds 127 to
-    130: dBIC +7 to +18 on eight such candidates whose p above the edge passes). The figures go to ``whole``
-    (``p_gate``; ``whole_band_gates``: what the whole band's test alone said).
+    Round 23: a term sized above an edge (``whole`` holds ``p_above`` and ``dbic_above``: the mode's) is also
+    tested there, where it acts and is sized, not only on the whole band, where a ring is a small share of the
+    residual beside the base's slow misfit, which no mode models (s129-052: the whole band's p 1.3e-3, above the
+    edge 9.1e-6; s129-021: the whole band's dBIC +8 at whole-band ratios 0.97/0.98, 0.77/0.77 above the edge).
+    Two looks at one test: the smaller p counts twice (Bonferroni). BIC passes in either view only under the first
+    round's size gate (``first_size_gate``: 0.8 above the edge); once a term is in the model the size gate is 1.0
+    and the whole band's BIC is the size guard left (kept runs of seeds 127 to 130: eight mode candidates beside a
+    slew limit, a rate term or a delay with dBIC +7 to +18 on the whole band and p above the edge passing). The
+    figures go to ``whole`` (``p_gate``, ``dbic_gate``; ``whole_band_gates``: what the whole band alone said).
 
     Returns
     -------
@@ -823,8 +826,9 @@ def _linearized_gates(fold_ratios, p: float, dbic: float, whole: dict | None, p_
     if whole is None or "p_above" not in whole:
         return bool(size and p < p_max and dbic < 0)
     p_gate = min(1.0, 2.0 * min(p, whole["p_above"]))
-    whole.update(p_gate=p_gate, whole_band_gates=bool(size and p < p_max and dbic < 0))
-    return bool(size and p_gate < p_max and dbic < 0)
+    dbic_gate = min(dbic, whole["dbic_above"]) if first_size_gate else dbic
+    whole.update(p_gate=p_gate, dbic_gate=dbic_gate, whole_band_gates=bool(size and p < p_max and dbic < 0))
+    return bool(size and p_gate < p_max and dbic_gate < 0)
 
 
 def _above_edge_evidence(e_before, correction, blocks, rec, dt: float, edge_hz: float, k: int = 1) -> dict:
