@@ -1358,8 +1358,8 @@ def _exact_per_recording(c, ex, names, log) -> bool:
         return False
     pooled = list(c.exact_fold_ratios)
     c.exact, c.veto, c.worsened = ex, None, None
-    note = (f"Its exact check pooled over the recordings gave ratios {pooled[0]:.2f}, {pooled[1]:.2f} (the base's "
-            f"misfit on one history outweighs the rest); with the recordings weighted alike it lowers the held-out "
+    note = (f"Its exact check pooled over the recordings gave ratios {pooled[0]:.2f}, {pooled[1]:.2f} (each recording "
+            f"weighted by the base's error on it); with the recordings weighted alike it lowers the held-out "
             f"error in each fold (geometric mean of the recordings' ratios {gm[0]:.2f}, {gm[1]:.2f}) and makes none "
             f"worse than x{sg.WORSEN_MAX:g}.")
     c.discrimination = (c.discrimination + " " + note) if c.discrimination else note
