@@ -1423,6 +1423,11 @@ def per_recording_ratios(ex) -> list:
     return out
 
 
+def _add_note(c, note: str) -> None:
+    """Append a sentence on how an exact check was passed to the candidate's discrimination text."""
+    c.discrimination = (c.discrimination + " " + note) if c.discrimination else note
+
+
 def _exact_per_recording(c, ex, names, log) -> bool:
     """Round 23: a map of the reading (``Term.same_on_every_recording``) refused by the pooled exact check, first
     round only, read per recording. The pooled ratio weighs each recording by the base's error on it; a static map
@@ -1446,7 +1451,7 @@ def _exact_per_recording(c, ex, names, log) -> bool:
             f"weighted by the base's error on it); with the recordings weighted alike it lowers the held-out "
             f"error in each fold (geometric mean of the recordings' ratios {gm[0]:.2f}, {gm[1]:.2f}) and makes none "
             f"worse than x{sg.WORSEN_MAX:g}.")
-    c.discrimination = (c.discrimination + " " + note) if c.discrimination else note
+    _add_note(c, note)
     return True
 
 
@@ -1483,7 +1488,7 @@ def _exact_on_common(c, fctx, fold_all, recs, span, log) -> bool:
     note = (f"Its model fitted on the whole residual was refused by the exact check (ratios {refused[0]:.2f}, "
             f"{refused[1]:.2f}: the base's misfit on some histories takes the curve's columns); sized on what every "
             f"branch shares at equal y it lowers the held-out error in each fold (ratios {fr[0]:.2f}, {fr[1]:.2f}).")
-    c.discrimination = (c.discrimination + " " + note) if c.discrimination else note
+    _add_note(c, note)
     return True
 
 
@@ -1506,7 +1511,7 @@ def _exact_on_dwells(c, fctx, fold_all, recs, span, log) -> bool:
             f"{refused[1]:.2f}: the base's misfit there takes creep's columns); sized on the dwells after the steps "
             f"(the time constants up to the longest dwell, the base's loop kept) it lowers the held-out error in "
             f"each fold (ratios {fr[0]:.2f}, {fr[1]:.2f}).")
-    c.discrimination = (c.discrimination + " " + note) if c.discrimination else note
+    _add_note(c, note)
     return True
 
 
