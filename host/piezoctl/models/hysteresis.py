@@ -507,8 +507,7 @@ def plane_width_change_cached(hp: dict, v, width) -> np.ndarray:
     change is computed and not stored. Emptied by :func:`clear_output_cache` (the end of the selection)."""
     v = np.ascontiguousarray(v, dtype=float)
     w = np.ascontiguousarray(np.asarray(width, float).reshape(-1))
-    key = (_op_text(hp), v.size, hashlib.sha256(v.view(np.uint8)).digest(), w.size,
-           hashlib.sha256(w.view(np.uint8)).digest())
+    key = _output_key(hp, v) + (w.size, hashlib.sha256(w.view(np.uint8)).digest())
     hit = _WIDTH_CACHE.get(key)
     if hit is not None:
         return hit
