@@ -26,7 +26,7 @@ from .misfit import _one_band_credited, above_per_recording, credited_ratio, rat
 from .discriminate import ALPHA_DISC, discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
                              drift_on_cycles, drift_on_pair, signature_tests)
-from .solve import SSE_MARGIN, lstsq_box as _lstsq_box, lstsq_box_below, train_rows
+from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",
            "residual", "select", "model_with", "simulate_refined", "hysteresis_nuisance", "slow_nuisance",
@@ -325,6 +325,11 @@ class _Design:
         return X
 
 
+def _lstsq_bounded(X, y, lb):
+    """Least squares with lower bounds ``lb`` (-inf: free) on unit-RMS columns."""
+    return _lstsq_box(X, y, lb, np.inf)
+
+
 _NUIS_GRAM: dict = {}   # the last nuisance's training products: {"last": (N, e, idx, N'N, N'e[idx])}
 
 
@@ -362,7 +367,7 @@ def _predict(X, th, test, nuis=None):
     return nuis[1] @ th[:m] + (X @ th[m:])[test]
 
 
-def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True, sse_below=None):
+def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True):
     """Least squares of e on X over train rows (strided), coefficients >= ``lb`` when given; prediction on
     test rows (None without ``predict``: :func:`best_setting` predicts with its best setting only). ``nuis``: the
     nested test's nuisance as (train rows, test rows) of its columns, prepended (its coefficients first,
@@ -370,32 +375,22 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True, sse_
 
     Unbounded fits are solved from their Gram matrix assembled by blocks: the nuisance's own block ``N'N`` is
     shared by all the settings of a term (:func:`_nuis_gram`), and no stacked copy ``[N, X]`` of the training
-    rows is made.
-
-    ``sse_below`` (round 24): the training error to beat (:func:`best_setting`'s best so far); a bounded fit whose
-    unbounded solution is already above it is not iterated (:func:`solve.lstsq_box_below`) and returns
-    ``(None, None, inf)``: its bounded error could not be below either."""
+    rows is made."""
     idx = train_rows(train, rows)
     box = nuis is not None and len(nuis) > 2 and nuis[2] is not None
     y = e[idx]
     Xi = X[idx]
-    w = np.sum(train) / max(idx.size, 1)   # the training error's weight of a strided row
-    if box or lb is not None:
-        if box:   # bounded nuisance columns (the initial state's gains): a box solve over all columns
-            Xtr = np.hstack([nuis[0], Xi])
-            lo = np.concatenate([nuis[2][0], np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)])
-            hi = np.concatenate([nuis[2][1], np.full(X.shape[1], np.inf)])
-        else:
-            Xtr = Xi if nuis is None else np.hstack([nuis[0], Xi])
-            lo = np.asarray(lb, float) if nuis is None else np.concatenate(
-                [np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
-            hi = np.inf
-        if sse_below is None:
-            th = _lstsq_box(Xtr, y, lo, hi)
-        else:
-            th = lstsq_box_below(Xtr, y, lo, hi, sse_below / w / (1.0 - SSE_MARGIN))
-            if th is None:
-                return None, None, np.inf
+    if box:   # bounded nuisance columns (the initial state's gains): a box solve over all columns
+        Xtr = np.hstack([nuis[0], Xi])
+        lo = np.concatenate([nuis[2][0], np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)])
+        hi = np.concatenate([nuis[2][1], np.full(X.shape[1], np.inf)])
+        th = _lstsq_box(Xtr, y, lo, hi)
+        fit = Xtr @ th
+    elif lb is not None:
+        Xtr = Xi if nuis is None else np.hstack([nuis[0], Xi])
+        if nuis is not None:
+            lb = np.concatenate([np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
+        th = _lstsq_bounded(Xtr, y, lb)
         fit = Xtr @ th
     elif nuis is None:
         th = _lstsq_gram(Xi.T @ Xi, Xi.T @ y, idx.size)
@@ -408,7 +403,7 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True, sse_
         th = _lstsq_gram(G, np.concatenate([Ny, Xi.T @ y]), idx.size)
         m = N.shape[1]
         fit = N @ th[:m] + Xi @ th[m:]
-    sse_tr = float(np.sum((y - fit) ** 2)) * w
+    sse_tr = float(np.sum((y - fit) ** 2)) * (np.sum(train) / max(idx.size, 1))
     return th, (_predict(X, th, test, nuis) if predict else None), sse_tr
 
 
@@ -445,8 +440,7 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
             d = _design(ctx, term, st)
             # round 22: the test rows are predicted with the best setting only (below), not with every setting
             # (the whole design times the coefficients and the nuisance's test rows: about half of each fit)
-            th, _, sse = _fit_predict(d.X, e, train, test, rows, lb, nuis, predict=False,
-                                      sse_below=None if best is None else best[2])
+            th, _, sse = _fit_predict(d.X, e, train, test, rows, lb, nuis, predict=False)
             if best is None or sse < best[2]:
                 best = (st, d, sse, th)
         new_level = level[repr(best[0])] + 1
