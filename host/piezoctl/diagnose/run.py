@@ -327,16 +327,6 @@ def _branch_common_text(whole) -> str:
             f"{whole['credited_ratio']:.2f}.")
 
 
-def _quasi_static_text(whole) -> str:
-    """The evidence's sentence for a sensor curve judged on the quasi-static samples after a drive-side term (round
-    24, ``select._quasi_static_reading``)."""
-    q = whole["quasi_static"]
-    return (f" Its fold ratios, credited ratio and p are those of the samples where the drive is quasi-static "
-            f"({q['fraction']:.0%} of them), where the drive-side term before it, which acts through the drive's "
-            f"rate, leaves nothing to fit: on every sample they were {whole['fold_ratios'][0]:.2f}/"
-            f"{whole['fold_ratios'][1]:.2f}, p = {whole['p']:.1e}, credited ratio {whole['credited_ratio']:.2f}.")
-
-
 def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibration, recordings):
     """The diagnosis document (diagnosis.json's content)."""
     effects = []
@@ -364,7 +354,6 @@ def document(ctx, accepted, rounds, fit, located, outside_doc, base_info, calibr
                             f"above the first round's {sg.RATIO_MAX} but below {a.ratio_max:g}, and its signature holds."
                             if a.below_gates else "")
                          + (_branch_common_text(a.whole) if a.whole and "branch_common" in a.whole else "")
-                         + (_quasi_static_text(a.whole) if a.whole and "quasi_static" in a.whole else "")
                          + (f" Caution: the refined model is worse on {a.worsened[0]} (held-out error x"
                             f"{a.worsened[1]:.2f} there): where it is wrong, this model does not hold."
                             if a.worsened else "") + (f" {sep_text}" if sep_text else "")),

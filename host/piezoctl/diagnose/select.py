@@ -18,8 +18,7 @@ import numpy as np
 
 from ..dsp import blas_threads, filt
 from ..ident import refined
-from ..ident.base import _quasi_static
-from ..ident.terms import LATENCY_SAMPLES, TERMS, Term, dynamics_corrections
+from ..ident.terms import LATENCY_SAMPLES, Term, dynamics_corrections
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg, static_map
@@ -196,8 +195,6 @@ class Candidate:
     #                                           blocks did not); the all-data model is sized on the dwells too
     lag_bounded: bool = False                 # round 21: evaluated with the corrections' lag bounded to the loop's
     #                                           latency (select._lag_beyond_latency)
-    quasi_static: dict | None = None          # round 24: a map of the reading after a drive-side term, read on the
-    #                                           quasi-static samples (select._quasi_static_reading)
 
     @property
     def below_gates(self) -> bool:
@@ -788,17 +785,6 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
             fold_ratios, p, cr = list(bc["fold_ratios"]), bc["p"], bc["credited_ratio"]
             significant, veto, credited_only = True, None, False
-    qs_read = None
-    if (term.same_on_every_recording and not significant and not refusal and (veto is None or credited_only)
-            and ctxs[0] is not ctxs[1] and drive_side_accepted(ctxs[0])):
-        # round 24: after a drive-side term, a static map of y read where the drive is quasi-static
-        qs_read = _quasi_static_reading(ctxs, term, es, fold_all, block_all, rows, k, p_max, within)
-        models = qs_read.pop("models") if qs_read is not None else None
-        if qs_read is not None and qs_read["passes"]:   # its model sized where it was tested
-            chosen = [(st, None, None, None, th) for st, th in models]
-            whole = {"quasi_static": qs_read, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
-            fold_ratios, p, cr = list(qs_read["fold_ratios"]), qs_read["p"], qs_read["credited_ratio"]
-            significant, veto, credited_only = True, None, False
     for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
         c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
     from .signature import HELDOUT_CHECKED
@@ -814,118 +800,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                      nrmse_after=na, t=t, p=p, n_active=n_act, p_max=p_max, dbic=dbic, n_eff=neff,
                      significant=significant, setting=[c[0] for c in chosen], coef=[c[4] for c in chosen],
                      veto=veto, credited=cr, credited_bands=bands, ratio_max=ratio_max, heldout=held, whole=whole,
-                     credited_only=credited_only, quasi_static=qs_read)
-
-
-def drive_side_accepted(ctx) -> bool:
-    """Whether the model of ``ctx`` holds a drive-side term (group ``drive_dynamics``: delay, amplifier bandwidth or
-    slew limit)."""
-    return any(getattr(TERMS.get(n), "group", "") == "drive_dynamics" for n in (ctx.base.get("terms") or {}))
-
-
-def quasi_static_mask(ctx) -> np.ndarray:
-    """Settled samples (stacked as the residual) where the drive is quasi-static: within ``base.QS_TOL`` of its
-    low-pass at ``base.QS_LP_HZ`` and has been for ``base.QS_GUARD_S`` (the base's own definition, with which it
-    sizes its plane on the calibration; ``ident.base._quasi_static``), on the drive before any drive-side term."""
-    mid, half = float(ctx.base["u_mid"]), float(ctx.base["u_half"])
-    return np.concatenate([_quasi_static((np.asarray(s.u, float) - mid) / half, s.dt, 0)[v]
-                           for s, v in zip(ctx.signals, ctx.valid)])
-
-
-def _with_levels(ctx, term, train, test, rows, **kw):
-    """:func:`_nuis` of ``term`` (its keywords ``kw``) with a free level per recording that has training rows
-    appended (round 24, :func:`_quasi_static_reading`)."""
-    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])
-    idx = train_rows(train, rows)
-    have = np.unique(rec[idx])
-    Ltr, Lte = (rec[idx][:, None] == have).astype(float), (rec[test][:, None] == have).astype(float)
-    N = _nuis(ctx, term, train, test, rows, **kw)
-    if N is None:
-        return Ltr, Lte, None
-    b = None if N[2] is None else (np.r_[N[2][0], np.full(have.size, -np.inf)], np.r_[N[2][1], np.full(have.size,
-                                                                                                       np.inf)])
-    return np.hstack([N[0], Ltr]), np.hstack([N[1], Lte]), b
-
-
-def fit_on_quasi_static(ctx, term, e, train, rows) -> tuple:
-    """(setting, coefficients) of ``term`` fitted on the quasi-static samples among ``train`` (round 24), nested as
-    the model's coefficients are in :func:`_evaluate` (without the dynamics corrections, the initial state and the
-    accepted terms' flexibility) and with a level per recording, whose coefficients are dropped."""
-    tr = train & quasi_static_mask(ctx)
-    nuis = _with_levels(ctx, term, tr, np.zeros(tr.size, bool), rows, dynamics=False, initial=False, accepted=False)
-    st, _, _, _, th = best_setting(ctx, term, e, tr, np.zeros(tr.size, bool), rows, nuis)
-    return st, th
-
-
-def _quasi_static_reading(ctxs, term, es, fold_all, block_all, rows, k, p_max, within) -> dict | None:
-    """Round 24: a map of the reading after a drive-side term, fitted and tested on the quasi-static samples alone.
-
-    A sensor curve is a static map of the measured position, the same at any rate; a drive-side term (a delay, a
-    pole, a slew limit) acts through the drive's rate, and so does what it leaves once accepted (a delay's error
-    ~ d du/dt; its refitted dynamics' error at the fast recordings' frequencies). Pooled, the second round fits and
-    sizes the curve where that leftover dominates (two-effect s121-003: after the delay the fast recordings keep 5
-    to 20 times the slow ones' error; the curve was refused at 0.87/0.89, and its pooled fit, scored on the
-    quasi-static samples, raised their error). Here it is fitted on one fold's quasi-static samples
-    (:func:`quasi_static_mask`), where the leftover does not act and the curve does, and scored on the other fold's,
-    nested as in :func:`_evaluate` and with a level per recording beside it in both fits: the drive-side term's
-    refitted dynamics move the slow recordings' levels (s121-003: +0.07 to +0.90 um, spread 0.33 um against the
-    base's own level misfit 0.09 um), which no map of y takes. Credited beyond the base's misfit within a history
-    (its slow and fast bands; the level band is what the levels take). The first round's gates apply.
-
-    Parameters
-    ----------
-    ctxs, es : list
-        Per fold: the model (the terms accepted so far, fitted on that fold) and its residual.
-    term : Term
-        The map (``same_on_every_recording``).
-    fold_all, block_all : ndarray of int
-        Fold (0/1, -1: not used) and block of each settled sample.
-    rows : int
-        Training rows at most (strided).
-    k : int
-        The term's parameter count (BIC).
-    p_max : float
-        The round's level.
-    within : callable
-        The size gate (``ratio -> bool``).
-
-    Returns
-    -------
-    dict or None
-        ``fold_ratios``, ``credited_ratio`` (:func:`misfit.ratios_where`), ``p``, ``n_active`` (the active-unit test
-        on those samples), ``dbic``, ``before_um``, ``after_um`` (held-out RMS), ``fraction`` (of the used samples),
-        ``passes`` (every gate), ``models`` (per fold: :func:`fit_on_quasi_static`'s setting and coefficients, the
-        model the exact check then simulates); None when a fold has no quasi-static sample.
-    """
-    ctx0 = ctxs[0]
-    w_all = quasi_static_mask(ctx0) & (fold_all >= 0)
-    rec_all = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx0.valid)])
-    e_before, corr, models = np.zeros(fold_all.size), np.zeros(fold_all.size), []
-    for f in (0, 1):
-        ctx, e = ctxs[f], es[f]
-        train, test = w_all & (fold_all == f), w_all & (fold_all == 1 - f)
-        if not np.any(train) or not np.any(test):
-            return None
-        nuis = _with_levels(ctx, term, train, test, rows)
-        _, pn, _ = _fit_predict(np.zeros((e.size, 0)), e, train, test, rows, nuis=nuis)
-        e_before[test] = e[test] - pn
-        corr[test] = best_setting(ctx, term, e, train, test, rows, nuis)[3] - pn
-        models.append(fit_on_quasi_static(ctx, term, e, fold_all == f, rows))   # the model's, as _evaluate's
-    w = w_all
-    fold, rec = fold_all[w], rec_all[w]
-    eb, c = e_before[w], corr[w]
-    mis = None if not ctx0.misfit else {"mse_um2": {b: x for b, x in ctx0.misfit["mse_um2"].items() if b != "level"}}
-    fr, cr = ratios_where(eb, c, fold, np.ones(eb.size, bool), mis)
-    if fr is None:
-        return None
-    units = sg.test_units(eb, block_all[w], rec, ctx0.dt, c)
-    _, p, n_act = sg.active_block_test(eb, eb - c, c, block_all[w], units)
-    dbic = sg.bic_delta(float(np.sum(eb ** 2)), float(np.sum((eb - c) ** 2)), sg.effective_n(eb), k)
-    passes = bool(within(max(fr)) and within(cr) and p < p_max and dbic < 0)
-    return {"fold_ratios": [float(x) for x in fr], "credited_ratio": float(cr), "p": float(p), "n_active": int(n_act),
-            "before_um": float(np.sqrt(np.mean(eb ** 2))), "after_um": float(np.sqrt(np.mean((eb - c) ** 2))),
-            "dbic": float(dbic), "fraction": float(np.mean(w[fold_all >= 0])), "passes": passes,
-            "models": models}
+                     credited_only=credited_only)
 
 
 def _linearized_gates(fold_ratios, p: float, dbic: float, whole: dict | None, p_max: float, within,
@@ -1821,13 +1696,6 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
                              f"n{c.n_active} c{c.credited:.2f}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"
                              for c in evals[:6]))
-        for c in evals:
-            if c.quasi_static is not None:
-                q = c.quasi_static
-                log(f"    {c.name} on the quasi-static samples ({q['fraction']:.0%}, beyond each recording's level: "
-                    f"{q['before_um']:.4f} -> {q['after_um']:.4f} um): folds {q['fold_ratios'][0]:.2f}/"
-                    f"{q['fold_ratios'][1]:.2f}, credited {q['credited_ratio']:.2f}, p {q['p']:.1e}, dBIC "
-                    f"{q['dbic']:+.0f}: " + ("passes" if q["passes"] else "does not pass"))
         if best is None:
             break
         best = _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, span, log, check)
@@ -1843,8 +1711,6 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         N = None if term.fit_model_alone(ctx_all) else _nuis(ctx_all, term, allmask, np.zeros(e_all.size, bool), rows,
                                                               dynamics=False, initial=False, accepted=False)
         st, _, _, _, th = best_setting(ctx_all, term, e_all, allmask, np.zeros(e_all.size, bool), rows, N)
-        if best.whole and "quasi_static" in best.whole:   # round 24: sized on the quasi-static samples, as tested
-            st, th = fit_on_quasi_static(ctx_all, term, e_all, allmask, rows)
         if best.from_dwells:   # round 19: the model the exact check passed, sized on every dwell
             th_d = creep_coef_on_dwells(ctx_all, e_all, allmask, rows)
             th = th if th_d is None else th_d
