@@ -1,4 +1,4 @@
-"""What the true effect would reach on a kept creep or coupling case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios
+"""What the true effect would reach on a kept creep, coupling or concealed-mode case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios
 above 0.7").
 
 A kept case directory of ``tools/bench-diagnose --foreign --keep DIR`` (``sSSS-III-EFFECT`` with the recordings and
@@ -36,7 +36,9 @@ import numpy as np
 SETTLE_S = 0.5
 ACTING_NOISE = 2.0       # a sample is acted on where the effect changes it by more than this many noise RMS
 
-__all__ = ["oracle_case", "main"]
+ORACLE_EFFECTS = ("creep", "cross_coupling", "unmodeled_resonance")
+
+__all__ = ["ORACLE_EFFECTS", "switch_off", "oracle_case", "main"]
 
 
 def _noise_free(stage, rec) -> np.ndarray:
@@ -56,6 +58,21 @@ def _less_level(parts) -> np.ndarray:
     return np.concatenate([p - p.mean() for p in parts])
 
 
+def switch_off(stage, effect: str) -> None:
+    """Switch the concealed ``effect`` off in ``stage`` (in place), as ``Case.without_effects`` does for it alone:
+    creep and coupling dropped; a concealed mode (the last of ``stage.modes``, round 24) removed and its residue
+    given back to the first mode, so the static gain is the same."""
+    if effect == "creep":
+        stage.creep = None
+    elif effect == "cross_coupling":
+        stage.coupling = None
+    elif effect == "unmodeled_resonance":
+        res = stage.modes.pop()
+        stage.modes[0].r += res.r
+    else:
+        raise ValueError(f"no oracle for {effect}")
+
+
 def oracle_case(d: str) -> dict:
     """The oracle figures of one kept case directory ``d`` (module doc); errors in um."""
     from ..foreign.cases import draw_case, write_case
@@ -64,14 +81,11 @@ def oracle_case(d: str) -> dict:
     from ..io.recording import load_recording
     name = os.path.basename(os.path.normpath(d))
     seed, index, effect = int(name[1:4]), int(name[5:8]), name[9:]
-    if effect not in ("creep", "cross_coupling"):
-        raise ValueError(f"{name}: only creep and cross_coupling cases")
+    if effect not in ORACLE_EFFECTS:
+        raise ValueError(f"{name}: only {', '.join(ORACLE_EFFECTS)} cases")
     case = draw_case(seed, index, (effect,), scale=0.5)
     off = copy.deepcopy(case)
-    if effect == "creep":
-        off.stage.creep = None
-    else:
-        off.stage.coupling = None
+    switch_off(off.stage, effect)
     with tempfile.TemporaryDirectory(prefix="effect-oracle-") as tmp:
         files = write_case(off, tmp)
         cal_off = [load_recording(p) for p in files["calibration"]]
@@ -111,7 +125,7 @@ def oracle_case(d: str) -> dict:
            "refined_acting": _ratio(Fc[act], Rc[act]) if act.any() else None,
            "truth_beyond_level": _ratio(_less_level(T), _less_level(R)),
            "refined_beyond_level": _ratio(_less_level(F), _less_level(R)),
-           "noise_um": noise, "effect": case.info.get("creep" if effect == "creep" else "coupling"), "rows": rows}
+           "noise_um": noise, "effect": case.info.get({"creep": "creep", "cross_coupling": "coupling"}.get(effect, "modes")), "rows": rows}
     return out
 
 

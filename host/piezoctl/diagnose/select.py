@@ -672,13 +672,16 @@ def _unidentified(e, e_before, pred) -> str | None:
             f"against a residual of {scale:.3g} um RMS (more than {UNIDENTIFIED_GAIN:g}x)")
 
 
-def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RATIO_MAX) -> Candidate:
+def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RATIO_MAX,
+              beside_drive: bool = False) -> Candidate:
     """Cross-validated evaluation of ``term`` on top of the current model.
 
     ``ctxs[f]``, ``es[f]``: the model (terms accepted so far, fitted on fold f only) and its residual; the
     candidate is fitted on fold f of that residual and predicts fold 1 - f. ``ratio_max``: the size gate of the
     fold ratios and the credited ratio (``significance.RATIO_MAX``; ``FURTHER_RATIO_MAX`` after the first term for
-    a term in ``CHECKED_TERMS``, strictly below it then).
+    a term in ``CHECKED_TERMS``, strictly below it then). ``beside_drive``: a drive-side term (group
+    ``drive_dynamics``) is in the model; a term sized above an edge is then block-tested on the whole band only
+    (:func:`_linearized_gates`, round 24).
     """
     e_before = np.zeros(fold_all.size)
     pred_after = np.zeros(fold_all.size)
@@ -752,7 +755,8 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         if fr_w is not None:
             whole = {"beyond_calibrated_range": True, "fold_ratios": list(fold_ratios), "credited_ratio": cr}
             fold_ratios, cr = fr_w, cr_w
-    significant = _linearized_gates(fold_ratios, p, dbic, whole, p_max, within, ratio_max < FURTHER_RATIO_MAX)
+    significant = _linearized_gates(fold_ratios, p, dbic, whole, p_max, within, ratio_max < FURTHER_RATIO_MAX,
+                                    above_p=not beside_drive)
     veto = None
     # round 13: data that cannot credit it; round 15: vetoed whether or not it passed, so that it is no pair's
     # alternative either (held-out s114-026: an in-range clip below the round's level, reported as the sensor
@@ -804,7 +808,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
 
 
 def _linearized_gates(fold_ratios, p: float, dbic: float, whole: dict | None, p_max: float, within,
-                      first_size_gate: bool = True) -> bool:
+                      first_size_gate: bool = True, above_p: bool = True) -> bool:
     """The linearized gates: size (``within`` on the larger fold ratio), the block test (``p_max``) and BIC.
 
     Round 23: a term sized above an edge (``whole`` holds ``p_above`` and ``dbic_above``: the mode's) is also
@@ -817,6 +821,15 @@ def _linearized_gates(fold_ratios, p: float, dbic: float, whole: dict | None, p_
     slew limit, a rate term or a delay with dBIC +7 to +18 on the whole band and p above the edge passing). The
     figures go to ``whole`` (``p_gate``, ``dbic_gate``; ``whole_band_gates``: what the whole band alone said).
 
+    Round 24: ``above_p`` False (a drive-side term - delay, bandwidth, slew limit - is in the model) drops the
+    block test's view above the edge: the whole band's p alone, as before round 23. That term acts in the same
+    band as the mode, above the calibration's; high-passed at the edge, the residual is mostly what its model
+    leaves there (its grid setting, the base's unidentified continuation now driven through it, the stage's own
+    first mode on a slow design) with the slow misfit that would dilute it filtered out, so any such leftover tests
+    as a ring (s131-007, a 2 ms delay on a 28 Hz calibration: the stage's first mode 1181 Hz named second at 1205
+    Hz, p above the edge 1.2e-9, the whole band's 2.9e-2). On the whole band the mode must lower what the model
+    with that term leaves, everywhere. ``p_gate_above``: what the two looks would have given (recorded).
+
     Returns
     -------
     bool
@@ -825,9 +838,11 @@ def _linearized_gates(fold_ratios, p: float, dbic: float, whole: dict | None, p_
     size = bool(within(max(fold_ratios)))
     if whole is None or "p_above" not in whole:
         return bool(size and p < p_max and dbic < 0)
-    p_gate = min(1.0, 2.0 * min(p, whole["p_above"]))
+    both = min(1.0, 2.0 * min(p, whole["p_above"]))
+    p_gate = both if above_p else p
     dbic_gate = min(dbic, whole["dbic_above"]) if first_size_gate else dbic
-    whole.update(p_gate=p_gate, dbic_gate=dbic_gate, whole_band_gates=bool(size and p < p_max and dbic < 0))
+    whole.update(p_gate=p_gate, dbic_gate=dbic_gate, whole_band_gates=bool(size and p < p_max and dbic < 0),
+                 p_gate_above=both, p_above_counted=bool(above_p))
     return bool(size and p_gate < p_max and dbic_gate < 0)
 
 
@@ -1291,7 +1306,8 @@ def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accep
     for c in fctx:
         c.bound_lag = True
     try:
-        again = {c.name: _evaluate(fctx, c.term, es, fold_all, block_all, rows, p_max, _ratio_max(c.term, accepted))
+        again = {c.name: _evaluate(fctx, c.term, es, fold_all, block_all, rows, p_max, _ratio_max(c.term, accepted),
+                                   _beside_drive(accepted))
                  for c in drive}
     finally:
         for c in fctx:
@@ -1552,6 +1568,12 @@ def _ratio_max(term, accepted) -> float:
     return FURTHER_RATIO_MAX if accepted and term.name in CHECKED_TERMS else sg.RATIO_MAX
 
 
+def _beside_drive(accepted) -> bool:
+    """Whether a drive-side term (group ``drive_dynamics``: delay, amplifier bandwidth, slew limit) is among the
+    ``accepted`` candidates: it acts above the calibration's band, where a mode is sized (round 24)."""
+    return any(a.term.group == "drive_dynamics" for a in accepted)
+
+
 def _slow_beyond_gates(evals, log):
     """A slow candidate significant only below the first round's size gates is kept when its signature *holds*
     (beyond the other two and the base's misfit at the search level ``ALPHA / 3``, slow_signature.py), not merely
@@ -1663,7 +1685,8 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         p_max = sg.ALPHA / max(len(todo), 1)
         es = [residual(fctx[0])]
         es.append(es[0] if fctx[1] is fctx[0] else residual(fctx[1]))
-        evals = sorted((_evaluate(fctx, t, es, fold_all, block_all, rows, p_max, _ratio_max(t, accepted))
+        evals = sorted((_evaluate(fctx, t, es, fold_all, block_all, rows, p_max, _ratio_max(t, accepted),
+                                  _beside_drive(accepted))
                         for t in todo), key=lambda c: c.ratio)
         for c in evals:
             c.selection_round = len(accepted) + 1

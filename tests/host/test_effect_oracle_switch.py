@@ -1,0 +1,32 @@
+"""bench.effect_oracle.switch_off (round 24: a concealed mode too): the stage with the effect off is the case's own
+reference, ``Case.without_effects``, for a single-effect case."""
+
+import copy
+
+import pytest
+
+from piezoctl.bench.effect_oracle import switch_off
+from piezoctl.foreign.cases import draw_case
+
+
+def test_a_concealed_mode_is_removed_and_its_residue_given_back():
+    case = draw_case(131, 6, ("unmodeled_resonance",), scale=0.5)
+    st = copy.deepcopy(case.stage)
+    n, total = len(st.modes), sum(m.r for m in st.modes)
+    switch_off(st, "unmodeled_resonance")
+    assert len(st.modes) == n - 1
+    assert sum(m.r for m in st.modes) == pytest.approx(total)   # the static gain is kept
+    ref = case.without_effects()
+    assert [x for m in st.modes for x in (m.f_hz, m.zeta, m.r)] == pytest.approx(
+        [x for m in ref.modes for x in (m.f_hz, m.zeta, m.r)])
+    assert len(case.stage.modes) == n   # the case's own stage is untouched
+
+
+def test_creep_and_coupling_still_switch_off_and_others_are_refused():
+    case = draw_case(131, 0, ("creep",), scale=0.5)
+    st = copy.deepcopy(case.stage)
+    assert st.creep is not None
+    switch_off(st, "creep")
+    assert st.creep is None
+    with pytest.raises(ValueError):
+        switch_off(copy.deepcopy(case.stage), "delay")
