@@ -326,15 +326,16 @@ def below_unity(tr: Transfer) -> Transfer:
     return dataclasses.replace(tr, f=tr.f[keep], T=tr.T[keep], g2=tr.g2[keep], var=tr.var[keep])
 
 
-def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label, f_alt=None):
+def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label, f_alt=None, every_bin=False):
     """Fit ``a shape_of(theta)`` over ``grid`` and test it against the loop's latency (:func:`latency_fit`, the
     same free gain): F = chi2_latency / chi2_shape on (2 K - 2, 2 K - 2) degrees of freedom, level ``ALPHA``.
     Both chi-squares carry the same misfit of the unidentified dynamics; only a shape that explains the
     residual's transfer clearly better than a latency passes. ``s2`` (dispersion) cancels in F; it scales the
     reported chi-squares. ``f_alt`` [Hz]: the alternative's stage mode lies above it and ``f_band`` (round 18, the
-    delay: the band the base states its dynamics identified in)."""
+    delay: the band the base states its dynamics identified in). ``every_bin`` (round 24): on every informative bin,
+    the ones where ``|T|`` exceeds 1 too (:func:`check_delay` in the drive's band), else on :func:`below_unity`'s."""
     full = tr
-    tr = below_unity(tr)
+    tr = tr if every_bin else below_unity(tr)
     if tr.k < 2:
         return {"term": name, "testable": False, "passed": True, "figures": {"bins": 0, "identified_band_hz": f_band},
                 "reason": f"no informative bin of the residual's transfer where |T| is not above 1 ({full.k} bins)"}
@@ -411,15 +412,15 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
     r = None
     if f_drive is not None and f_drive > f_band:
         part = within_band(tr, f_drive)
-        k = below_unity(part).k
+        k = part.k   # round 24: every informative bin up to the drive's band, |T| above 1 too
         if k >= SHAPE_MIN_BINS:
             r = _shape_test(part, s2, f_band, dt, "delay", grid, shape, label + f" up to the drive's {f_drive:.0f} Hz",
-                            f_dynamics)
+                            f_dynamics, every_bin=True)
         elif k >= 2:
             r = {"term": "delay", "testable": False, "passed": True,
                  "figures": {"bins": k, "bins_informative": part.k, "identified_band_hz": float(f_band)},
-                 "reason": f"{k} informative bins where |T| is not above 1 up to the drive's {f_drive:.0f} Hz: too "
-                           f"few for the shape test (at least {SHAPE_MIN_BINS})"}
+                 "reason": f"{k} informative bins up to the drive's {f_drive:.0f} Hz: too few for the shape test (at "
+                           f"least {SHAPE_MIN_BINS})"}
     if r is None:
         r = _shape_test(tr, s2, f_band, dt, "delay", grid, shape, label, f_dynamics)
     r["figures"]["delay_s"] = r["figures"].pop("setting", None)
