@@ -9,7 +9,6 @@ import numpy as np
 from scipy import signal as sps
 
 from piezoctl.diagnose import select as S
-from piezoctl.dsp import lowpass_tau
 from piezoctl.ident.terms import LATENCY_SAMPLES, TERMS
 
 DT = 1e-4          # 10 kHz
@@ -136,7 +135,7 @@ BLOCKS = np.repeat(np.arange(8), N // 8)
 
 
 def _spread_ctx(x):
-    return types.SimpleNamespace(nuisance=np.zeros((N, 0)), dyn_nuisance=_corrections(x), n_rec=1, bound_lag=False, dt=DT,
+    return types.SimpleNamespace(nuisance=np.zeros((N, 0)), dyn_nuisance=_corrections(x), n_rec=1, bound_lag=False,
                                  signals=[types.SimpleNamespace(ydyn=x)], valid=[np.ones(N, bool)])
 
 
@@ -191,7 +190,7 @@ def test_no_second_test_where_the_lag_lies_within_the_base_s_own_error(monkeypat
                                      significant=True, veto=None)
     monkeypatch.setattr(S, "_evaluate", evaluate)
     for lag, spread, tested in ((4.0, 1.1, False), (4.0, 0.2, True)):
-        monkeypatch.setattr(S, "lag_profiles", lambda *a, r=(lag, spread): {"delay": r, "pole": (0.0, 0.0), "blocks": 8})
+        monkeypatch.setattr(S, "base_lag", lambda *a, r=(lag, spread): r)
         calls.clear()
         evals = [types.SimpleNamespace(name=n, term=_term(n), significant=False, veto=None, ratio=0.9,
                                        selection_round=1)
@@ -199,55 +198,3 @@ def test_no_second_test_where_the_lag_lies_within_the_base_s_own_error(monkeypat
         fctx = [types.SimpleNamespace(bound_lag=False)] * 2
         S._lag_beyond_latency(evals, fctx, [np.zeros(3)] * 2, None, BLOCKS, 0, 1e-3, [], lambda *a: None)
         assert bool(calls) == tested, (lag, spread, calls)
-
-
-# Round 24: the lag the base lacks against a first-order pole's profile too (select.lag_profiles, select.pole_not_delay)
-def test_a_pole_s_lags_follow_a_pole_s_profile_and_leave_every_delay_s():
-    """A 10-sample pole (159 Hz) over blocks low-passed at 20 to 400 Hz: its first-order lag falls in the fast
-    blocks as atan(w tau) / w, faster than any delay's, so the best delay's profile says 2 samples (within the
-    loop's latency: the round-22 gate withheld the second test); the pole's profile finds 10 samples, departing
-    by far less, and the blocks follow it rather than a delay's at the test's level."""
-    x = _x_bands(3)
-    rng = np.random.default_rng(9)
-    col = lowpass_tau(x, 10 * DT, DT) - x
-    e = col + 0.2 * np.sqrt(np.mean(col ** 2)) * rng.standard_normal(N)
-    r = S.lag_profiles(_spread_ctx(x), e, BLOCKS)
-    lag, spread = r["delay"]
-    assert lag <= LATENCY_SAMPLES + S.LAG_SPREAD_SIGMAS * spread          # as a delay's: within the base's error
-    tau, spread_p = r["pole"]
-    assert tau == 10 and spread_p < 0.1 * spread, r
-    assert tau > LATENCY_SAMPLES + S.LAG_SPREAD_SIGMAS * spread_p
-    assert S.pole_not_delay(r) < 1e-6
-    assert S.base_lag(_spread_ctx(x), e, BLOCKS) == r["delay"]            # base_lag is the delay's part
-
-
-def test_a_lag_that_changes_from_block_to_block_is_no_pole_s_either():
-    """The base's own error (lags 2, 7, 3, 6 block by block): the pole's profile fits it no better than a delay's,
-    so the pole's lag (inflated by its profile's fall in fast blocks) does not open the second test."""
-    x = _x(4)
-    r = S.lag_profiles(_spread_ctx(x), _lag_per_block(x, [2, 7, 3, 6, 2, 7, 3, 6]), BLOCKS)
-    assert r["pole"][1] > 0.9 * r["delay"][1], r
-    assert S.pole_not_delay(r) > 0.1
-
-
-def test_the_pole_alone_is_tested_again_where_only_its_profile_lies_beyond_the_latency(monkeypatch):
-    calls = []
-
-    def evaluate(ctxs, term, *a, **k):
-        calls.append(term.name)
-        return types.SimpleNamespace(name=term.name, ratio=0.5, fold_ratios=[0.5, 0.5], p=1e-6, credited=0.5,
-                                     significant=True, veto=None)
-    monkeypatch.setattr(S, "_evaluate", evaluate)
-    cases = (((4.0, 1.1), (10.0, 0.1), ["amplifier_bandwidth"]),   # a pole's profile, beyond the latency
-             ((4.0, 1.1), (10.0, 1.0), []),                        # no closer to a pole's than to a delay's
-             ((4.0, 1.1), (2.0, 0.1), []),                         # a pole's, within the latency
-             ((4.0, 0.2), (10.0, 0.1), ["delay", "amplifier_bandwidth", "amplifier_slew_limit"]))   # round 22's
-    for delay, pole, tested in cases:
-        monkeypatch.setattr(S, "lag_profiles", lambda *a, r={"delay": delay, "pole": pole, "blocks": 20}: r)
-        calls.clear()
-        evals = [types.SimpleNamespace(name=n, term=_term(n), significant=False, veto=None, ratio=0.9,
-                                       selection_round=1)
-                 for n in ("delay", "amplifier_bandwidth", "amplifier_slew_limit")]
-        fctx = [types.SimpleNamespace(bound_lag=False)] * 2
-        S._lag_beyond_latency(evals, fctx, [np.zeros(3)] * 2, None, BLOCKS, 0, 1e-3, [], lambda *a: None)
-        assert calls == tested, (delay, pole, calls)

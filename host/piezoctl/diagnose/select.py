@@ -15,9 +15,8 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy import stats
 
-from ..dsp import blas_threads, filt, lowpass_tau
+from ..dsp import blas_threads, filt
 from ..ident import refined
 from ..ident.terms import LATENCY_SAMPLES, Term, dynamics_corrections
 from ..io.recording import session_start
@@ -1222,28 +1221,7 @@ def base_lag(ctx, e, block_all) -> tuple | None:
     is G's own error, not a drive-side term's (development, studied: the null s127-036, G of order 0, the blocks'
     lags 2.4 to 10 samples; the true 2-sample delay s127-022, the same mean lag 4.1 and lags 3.9 to 5.3; the
     1.0 ms delay s125-053, 11 samples, whose blocks' lags depart from a delay's by 2.4). None where it cannot be
-    computed. :func:`lag_profiles` gives the same for a first-order pole's profile."""
-    r = lag_profiles(ctx, e, block_all)
-    return None if r is None else r["delay"]
-
-
-LAG_SPREAD_TAUS = np.arange(0, 31)   # [samples] the first-order poles' time constants a block-wise lag profile is
-                                     # compared with (round 24; 0: no pole)
-
-
-def lag_profiles(ctx, e, block_all) -> dict | None:
-    """The lag the base's G lacks over the time blocks against two profiles (rounds 22, 24): ``delay``, the
-    ``(lag, spread)`` of :func:`base_lag` (a pure delay ``y(t - D) - y(t)``), and ``pole``, the same for a
-    first-order pole in front of G (``lowpass(y, tau) - y``, time constant ``tau`` [samples] in
-    ``LAG_SPREAD_TAUS``): its lag is ``tau`` and its spread the weighted RMS departure of the blocks' ``c1`` from
-    the pole's profile.
-
-    Round 24: a pole's phase is ``-atan(w tau)``, not ``-w d``. Its first-order part falls in a fast block as
-    ``atan(w tau) / w``, faster than a delay's ``sin(w d) / w`` for the same low-frequency lag, so a true pole's
-    block lags depart from every delay's profile by G's error *and* by the pole's curvature: held-out s131-056
-    (a 174 Hz pole, 9 samples' lag) departed from a delay's by 2.37 samples, s132-056 (114 Hz, 14 samples) by 4.23,
-    and the second test was withheld on both. Measured against the pole's own profile, the departure is G's error
-    alone. None where it cannot be computed."""
+    computed."""
     if e is None or block_all is None:
         return None
     ids = np.unique(block_all)
@@ -1268,35 +1246,18 @@ def lag_profiles(ctx, e, block_all) -> dict | None:
     if ok.sum() < 2:
         return None
     w = 1.0 / var[ok]
-    # a pure delay's (a pole's) block lags: the same fit of y(t - d) - y(t) (lowpass(y, tau) - y), without the
-    # channels
+    # a pure delay's block lags: the same fit of y(t - d) - y(t), without the channels
     S_lag, _, Qs = _block_factors(D[:, 1:2], D[:, 0], order, bounds)
     P = np.linalg.pinv(S_lag)
-
-    def best_of(grid, shifted):
-        best, lag = np.inf, 0
-        for d in grid:
-            z = np.concatenate([shifted(np.asarray(s.ydyn, float), d)[v] - np.asarray(s.ydyn, float)[v]
-                                for s, v in zip(ctx.signals, ctx.valid)])
-            k = (P @ np.concatenate([Q.T @ z[order[bounds[j]:bounds[j + 1]]] for j, Q in enumerate(Qs)]))[-ids.size:]
-            rr = float(np.sum(w * (c[ok] - k[ok]) ** 2) / np.sum(w))
-            if rr < best:
-                best, lag = rr, int(d)
-        return float(lag), float(np.sqrt(best))
-
-    delayed = lambda y, d: np.concatenate([np.full(d, y[0]), y[:y.size - d]])   # noqa: E731
-    lowpassed = lambda y, tau: y if tau <= 0 else lowpass_tau(y, tau * ctx.dt, ctx.dt)   # noqa: E731
-    return {"delay": best_of(LAG_SPREAD_DELAYS, delayed), "pole": best_of(LAG_SPREAD_TAUS, lowpassed),
-            "blocks": int(ok.sum())}
-
-
-def pole_not_delay(x: dict) -> float:
-    """Round 24: the p value of the blocks' lags following the pole's profile (:func:`lag_profiles`) more closely
-    than any delay's: F = the delay's weighted mean square departure over the pole's, both one-parameter fits of
-    the same block lags with the same weights, on (blocks - 1, blocks - 1) degrees of freedom."""
-    n = max(int(x["blocks"]) - 1, 1)
-    F = x["delay"][1] ** 2 / max(x["pole"][1] ** 2, 1e-300)
-    return float(stats.f.sf(F, n, n))
+    best, lag = np.inf, 0
+    for d in LAG_SPREAD_DELAYS:
+        z = np.concatenate([np.concatenate([np.full(d, s.ydyn[0]), np.asarray(s.ydyn, float)[:s.ydyn.size - d]])[v]
+                            - np.asarray(s.ydyn, float)[v] for s, v in zip(ctx.signals, ctx.valid)])
+        k = (P @ np.concatenate([Q.T @ z[order[bounds[j]:bounds[j + 1]]] for j, Q in enumerate(Qs)]))[-ids.size:]
+        r = float(np.sum(w * (c[ok] - k[ok]) ** 2) / np.sum(w))
+        if r < best:
+            best, lag = r, int(d)
+    return float(lag), float(np.sqrt(best))
 
 
 def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accepted, log):
@@ -1320,31 +1281,13 @@ def _lag_beyond_latency(evals, fctx, es, fold_all, block_all, rows, p_max, accep
     seen = {}
     for i, c in enumerate(fctx):   # round 22: the lag the base lacks, and how far it is a delay's, per fold's model
         if id(c) not in seen:
-            seen[id(c)] = lag_profiles(c, None if es is None else es[i], block_all)
-            x = seen[id(c)]
-            if x is not None:
+            seen[id(c)] = base_lag(c, None if es is None else es[i], block_all)
+            if seen[id(c)] is not None:
                 log("    the lag the base lacks: {:.0f} samples, departing from a delay's over the blocks by {:.2f}"
-                    .format(*x["delay"]) + "; as a first-order pole's: {:.0f} samples, departing by {:.2f}"
-                    .format(*x["pole"]))
-
-    def beyond(shape):
-        return not any(x is not None and x[shape][0] <= float(LATENCY_SAMPLES) + LAG_SPREAD_SIGMAS * x[shape][1]
-                       for x in seen.values())
-    if not beyond("delay"):
-        # round 24: a pole's lag is judged against a pole's profile. Where the blocks' lags follow it more closely
-        # than any delay's (at the level ALPHA) and lie beyond the latency there, the pole alone is tested again
-        # (held-out s131-056, s132-056: true poles whose block lags left every delay's profile)
-        ps = [pole_not_delay(x) for x in seen.values() if x is not None]
-        if not (ps and beyond("pole") and max(ps) < sg.ALPHA):
-            log("    the lag beyond the loop's latency lies within the base's own lag error"
-                + (f" (as a pole's: p {max(ps):.1e} against a delay's profile)" if ps else "") + ": no second test")
-            return evals
-        drive = [c for c in drive if c.name == "amplifier_bandwidth"]
-        log(f"    the lag beyond the loop's latency lies within the base's own lag error as a delay's, beyond it as a "
-            f"first-order pole's, whose profile the blocks follow more closely (p {max(ps):.1e}): the pole alone is "
-            f"tested again")
-        if not drive:
-            return evals
+                    .format(*seen[id(c)]))
+    if any(x is not None and x[0] <= float(LATENCY_SAMPLES) + LAG_SPREAD_SIGMAS * x[1] for x in seen.values()):
+        log("    the lag beyond the loop's latency lies within the base's own lag error: no second test")
+        return evals
     for c in fctx:
         c.bound_lag = True
     try:
