@@ -709,7 +709,9 @@ class RateDependentHysteresis(Term):
         Bouc-Wen column scaled by the same width factor less one, ``(w - 1) c_h h(v)``.
 
         The Bouc-Wen column has no thresholds: its loop's width is its size, so the width factor of the moment
-        scales it (the law up to round 14, for that column alone). Round 15's law widened the plays only and lost
+        scales it (the law up to round 14, for that column alone). The column with return-point memory (round 22)
+        is scaled the same way, not widened play by play (its 48 plays through ``plays_varying`` on every drive: not
+        measured, left). Round 15's law widened the plays only and lost
         s112-035 and s112-051 (generalized PI), whose bases carry most of the loop in the column (c_h -12 and
         -29 um). ``cached``: the change of the plays from :func:`plane_width_change_cached` (the selection's
         designs; the same floats)."""
