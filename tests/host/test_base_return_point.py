@@ -82,3 +82,41 @@ def test_the_size_rule_picks_the_column_the_law_has(law_name, column):
     assert best[column] < best[other]
     assert (pl["return_point"] is not None) == (column == "return_point")
     assert (pl["bouc_wen"] is not None) == (column == "bouc_wen")
+
+
+def test_the_rate_law_widens_the_return_point_columns_plays_one_by_one():
+    """``return_point_width_change`` is ``plays_varying`` on the column's 48 plays reduced by their weights (the
+    same floats in chunks of whole runs), zero at width 1, ``c_h`` times it enters ``plane_width_change``, and a
+    constant widening of the column is not a gain of it (round 23: the rate term's columns and the nested test's
+    free gain on the column were nearly collinear when the column was scaled as a whole)."""
+    from piezoctl.models import hysteresis as hm
+    from piezoctl.models.hysteresis import (RPM_THRESHOLDS, plane_width_change, plays_varying,
+                                            return_point_width_change)
+    rng = np.random.default_rng(3)
+    v = np.clip(np.cumsum(rng.normal(0.0, 0.02, 3000)), -1.0, 1.0)
+    v[100:140] = v[100]                                 # a dwell inside a run
+    w = 1.0 + 0.6 * rng.random(v.size)
+    beta, v_rest = 3.0, -0.2
+    wk = np.exp(-beta * RPM_THRESHOLDS)
+    wk /= wk.sum()
+    full = plays_varying(v, w[:, None] * RPM_THRESHOLDS[None, :], np.full(48, v_rest)) @ wk
+    old = hm._RPM_BLOCK
+    try:
+        hm._RPM_BLOCK = 97                              # many chunks: each must start at a run's start
+        chunked = return_point_width_change(v, beta, w, v_rest)
+    finally:
+        hm._RPM_BLOCK = old
+    assert np.max(np.abs(chunked - (full - return_point_h(v, beta, v_rest)))) < 1e-12
+    assert np.max(np.abs(return_point_width_change(v, beta, w, v_rest) - chunked)) < 1e-12
+    assert np.max(np.abs(return_point_width_change(v, beta, np.ones(v.size), v_rest))) < 1e-12
+    assert np.ptp(chunked) > 1e-3
+    # in the plane's change: c_h times it, beside the plays' own change (here none: the reversible curve alone)
+    hp = {"type": "plane", "r": [0.0], "knots": [[-1.0, 1.0]], "values": [[-1.0, 1.0]], "v_rest": v_rest,
+          "bw": {"kind": "return_point", "beta": beta, "c_h": 2.5}}
+    assert np.max(np.abs(plane_width_change(hp, v, w) - 2.5 * chunked)) < 1e-12
+    # a constant widening of the column's plays is not proportional to the column's state
+    h = return_point_h(v, beta, v_rest)
+    d = return_point_width_change(v, beta, np.full(v.size, 1.5), v_rest)
+    hc = h - h.mean()
+    resid = d - d.mean() - hc * (hc @ (d - d.mean())) / (hc @ hc)
+    assert np.std(resid) > 0.05 * np.std(d)

@@ -43,7 +43,7 @@ from .play import play_outputs
 __all__ = ["bouc_wen_h", "return_point_h", "column_state", "RPM_THRESHOLDS", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
            "hysteresis_output", "hysteresis_output_of", "clear_output_cache",
            "poly_clamped", "hysteresis_features", "plane_feature_blocks", "add_to_features", "hysteresis_channels",
-           "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span", "plays_varying",
+           "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span", "plays_varying", "return_point_width_change",
            "plane_width_change"]
 
 _STATE_CACHE: "collections.OrderedDict" = collections.OrderedDict()
@@ -755,14 +755,68 @@ def plays_varying(v, R, y0) -> np.ndarray:
     return out
 
 
+def _chunk_starts(v) -> np.ndarray:
+    """0, the samples where :func:`plays_varying` may split ``v`` without changing a float, then ``v.size``.
+
+    A monotone run starting at s (as :func:`plays_varying` splits it) whose next step ``v[s+1] - v[s]`` is
+    nonzero and in the run's direction: a call on ``v[s:]`` then finds the same runs (a run that starts with a
+    dwell would be joined to the next one, whose first step is its only sign)."""
+    d = np.sign(np.diff(v))
+    nz = np.flatnonzero(d != 0)
+    starts = np.zeros(0, dtype=np.intp)
+    if nz.size:
+        s_nz = d[nz]
+        starts = nz[np.flatnonzero(s_nz[1:] != s_nz[:-1]) + 1] + 1
+        starts = starts[starts < v.size - 1]
+        starts = starts[d[starts] == d[starts - 1]]
+    return np.concatenate([[0], starts, [v.size]]).astype(np.intp)
+
+
+def return_point_width_change(v, beta: float, width, v_rest: float = 0.0) -> np.ndarray:
+    """Change [normalized drive] of the return-point column's state (:func:`return_point_h`) when each of its
+    plays' thresholds is multiplied by ``width`` (T,) [1] at each sample: ``sum_k w_k (P_{r_k width}(v) -
+    P_{r_k}(v))`` (:func:`plays_varying`: a play keeps the threshold it last moved with).
+
+    The column is a Preisach density of one sign on 48 fine thresholds, so a law that widens every play's threshold
+    with the rate widens these as it does the plane's (round 23: scaled as a whole, its constant widening is only
+    a gain of the column, nearly collinear with the nested test's free gain on it). Run in chunks of whole monotone
+    runs (the same floats as one call; the (T, 48) states are never held)."""
+    v = np.ascontiguousarray(v, dtype=float)
+    w = np.asarray(width, float).reshape(-1)
+    out = np.zeros(v.size)
+    if v.size == 0:
+        return out
+    wk = np.exp(-float(beta) * RPM_THRESHOLDS)
+    wk /= wk.sum()
+    h0 = return_point_h(v, beta, v_rest)
+    starts = _chunk_starts(v)
+    y = np.full(RPM_THRESHOLDS.size, float(v_rest))
+    i = 0
+    while i < starts.size - 1:   # chunks of whole runs of about _RPM_BLOCK samples (a longer one alone)
+        j = int(np.searchsorted(starts, starts[i] + _RPM_BLOCK, side="right")) - 1
+        j = max(j, i + 1)
+        a, b = int(starts[i]), int(starts[j])
+        P = plays_varying(v[a:b], w[a:b, None] * RPM_THRESHOLDS[None, :], y)
+        y = P[-1].copy()
+        out[a:b] = P @ wk
+        i = j
+    return out - h0
+
+
 def plane_width_change(hp: dict, v, width) -> np.ndarray:
     """Change [um] of a ``plane`` operator's output when every play's threshold is multiplied by ``width`` (T,)
-    [1] at each sample: ``sum_{r_j > 0} F_j(P_{r_j width}(v)) - F_j(P_{r_j}(v))`` (:func:`plays_varying`). The
-    reversible curve (threshold 0) and the extra column (Bouc-Wen or return-point) are unchanged. Zero for other operator types."""
+    [1] at each sample: ``sum_{r_j > 0} F_j(P_{r_j width}(v)) - F_j(P_{r_j}(v))`` (:func:`plays_varying`), plus
+    ``c_h`` times the return-point column's change (:func:`return_point_width_change`, round 23: its plays are
+    widened one by one as the plane's). The reversible curve (threshold 0) and a Bouc-Wen column (no thresholds)
+    are unchanged. Zero for other operator types."""
     v = np.ascontiguousarray(v, dtype=float)
     out = np.zeros(v.size)
     if hp.get("type", "pi") != "plane" or v.size == 0:
         return out
+    bw = hp.get("bw")
+    if bw and bw.get("kind") == "return_point":
+        out += float(bw["c_h"]) * return_point_width_change(v, float(bw["beta"]), width,
+                                                            float(hp.get("v_rest", 0.0)))
     r = np.asarray(hp["r"], float)
     hyst = np.flatnonzero(r > 0)
     if hyst.size == 0:
