@@ -71,8 +71,7 @@ def fit_base_model(cal, calibration, settle_s, out, log, t_start, block_s=DEFAUL
     pl = base_info["plane"]
     mf = base_info["misfit"]
     log(f"base model: plane {pl['plays']} plays x {pl['knots']} knots"
-        f"{' + Bouc-Wen column' if pl.get('bouc_wen') else ''}"
-        f"{' + return-point column' if pl.get('return_point') else ''}, dynamics order {base_info['dynamics_order']} "
+        f"{' + Bouc-Wen' if pl.get('bouc_wen') else ''}, dynamics order {base_info['dynamics_order']} "
         f"({time.perf_counter() - t_start:.1f} s)" + (
             f"; on held-out calibration histories {mf['rms_um']:.4f} um RMS (level "
             f"{np.sqrt(mf['mse_um2']['level']):.4f}, slow {np.sqrt(mf['mse_um2']['slow']):.4f}, fast "

@@ -33,21 +33,10 @@ Fit (``fit_base``):
    two folds, the
    plane's size ``(R, K)`` and the weight of a roughness penalty (squared
    second differences of each play's function) are chosen from ``PLANE_PLAYS`` x
-   ``PLANE_KNOTS`` x ``RIDGES`` (and without an extra column, with a Bouc-Wen
-   column or with a column with return-point memory, each one's shape searched
-   on the reversible curve alone) by the held-out error (the smallest size
-   within one standard error of the best on the paired per-block differences,
-   :func:`_within_one_se`, round 24; of the two columns at one size, the lower
-   error).
-   The Bouc-Wen column (``dh = dv - |h| (beta sign(h dv) + gamma) |dv|``) is
-   the base's only state a Preisach plane lacks (laws without return-point
-   memory), but its minor loops do not close: on a law with return-point
-   memory it gives the smooth start of each branch and ratchets on small
-   cycles. The return-point column (``models.hysteresis.return_point_h``:
-   48 fine plays, weights ``exp(-beta r)``) gives the smooth start and closes
-   its minor loops (docs/diagnose.md, "Round 22: the base"). The choice is
-   recorded in ``base_info.plane`` (``column``, ``bouc_wen``, ``return_point``)
-   and in the model (``hysteresis.bw.kind``). Only play counts R the calibration
+   ``PLANE_KNOTS`` x ``RIDGES`` (and with or without one Bouc-Wen column, its
+   shape searched on the reversible curve alone) by the held-out error (the
+   smallest size within one standard error of the best on the paired per-block
+   differences, :func:`_within_one_se`, round 24). Only play counts R the calibration
    can resolve are offered: at least 2 R distinct reversal levels
    (:func:`reversal_levels`); a periodic calibration (two levels) gets R = 1,
    the reversible curve with the Bouc-Wen column. No parametric family: the grid of a Preisach
@@ -124,10 +113,9 @@ class PlaneLayout:
         The thresholds ``spans`` refers to.
     """
 
-    def __init__(self, n_plays: int, n_knots: int, spans, r_all, bw=None, column: str = "bouc_wen"):
+    def __init__(self, n_plays: int, n_knots: int, spans, r_all, bw=None):
         self.n_plays, self.n_knots = n_plays, n_knots
-        self.bw = bw     # (beta, gamma) of the optional extra column, or None
-        self.column = column if bw else None   # its kind: "bouc_wen" or "return_point" (gamma unused)
+        self.bw = bw     # (beta, gamma) of the optional Bouc-Wen column, or None
         self.r, self.knots, self.index = [], [], []
         for j in range(n_plays):
             r = j / n_plays
@@ -151,17 +139,9 @@ class PlaneLayout:
         return out
 
 
-def _column_dict(layout: PlaneLayout) -> dict:
-    """The extra column's parameters as the model file holds them (``hysteresis.bw`` without ``c_h``)."""
-    if layout.column == "return_point":
-        return {"kind": "return_point", "beta": float(layout.bw[0])}
-    return {"beta": float(layout.bw[0]), "gamma": float(layout.bw[1])}
-
-
-def _bw_state(v, layout: PlaneLayout, v_rest):
-    """The state of ``layout``'s extra column (Bouc-Wen or with return-point memory) for normalized drive v."""
-    from ..models.hysteresis import column_state
-    return column_state(_column_dict(layout), v, v_rest)
+def _bw_state(v, bw, v_rest):
+    from ..models.hysteresis import bouc_wen_h
+    return bouc_wen_h(v, bw[0], bw[1], v_rest)
 
 
 def plane_columns(P, layout: PlaneLayout, rows=None, v=None, v_rest=0.0) -> np.ndarray:
@@ -172,7 +152,7 @@ def plane_columns(P, layout: PlaneLayout, rows=None, v=None, v_rest=0.0) -> np.n
         x = P[:, i] if rows is None else P[rows, i]
         cols.append(hat_basis(x, kn)[:, 1:])
     if layout.bw:
-        hb = _bw_state(v, layout, v_rest)
+        hb = _bw_state(v, layout.bw, v_rest)
         cols.append((hb if rows is None else hb[rows])[:, None])
     return np.hstack(cols) if cols else np.zeros((P.shape[0] if rows is None else len(rows), 0))
 
@@ -658,46 +638,24 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
                                      "initial_simplex": [z0, z0 + [0.25, 0.0], z0 + [0.0, 0.15]]})
     z = sol.x if sol.fun < sc0 else z0
     best_bw = (None, (float(np.exp(z[0])), float(np.clip(z[1], -0.95, 0.95)) * float(np.exp(z[0]))))
-
-    # the column with return-point memory (round 22): its one shape parameter beta on the same grid, then a
-    # bounded 1-D search on log beta, with the reversible curve alone as the Bouc-Wen column's
-    def rp_score(zb):
-        lay = PlaneLayout(1, PLANE_KNOTS[0], spans, r_all, bw=(float(np.exp(zb)), 0.0), column="return_point")
-        return min(_cv_score(design(lay), yr, folds, lay, RIDGES[:2], sign))
-    grid = [(rp_score(np.log(b)), np.log(b)) for b in BW_BETAS]
-    i0 = int(np.argmin([g[0] for g in grid]))
-    zl, zh = grid[max(i0 - 1, 0)][1], grid[min(i0 + 1, len(grid) - 1)][1]
-    zr, sr = grid[i0][1], grid[i0][0]
-    if zh > zl:
-        sol = optimize.minimize_scalar(rp_score, bounds=(zl, zh), method="bounded", options={"maxiter": 12, "xatol": 0.02})
-        if sol.fun < sr:
-            zr = float(sol.x)
-    best_rp = (float(np.exp(zr)), 0.0)
     # thresholds the calibration's reversals can resolve: at least two reversal levels per play threshold
     n_rev = reversal_levels(vs, k0s)
     plays = [R for R in PLANE_PLAYS if R == 1 or 2 * R <= n_rev]
     table, per_block = [], []
-    for column, bw in ((None, None), ("bouc_wen", best_bw[1]), ("return_point", best_rp)):
+    for bw in (None, best_bw[1]):
         for R in plays:
             for K in PLANE_KNOTS:
-                lay = PlaneLayout(R, K, spans, r_all, bw=bw, column=column)
+                lay = PlaneLayout(R, K, spans, r_all, bw=bw)
                 for ridge, score, pb in zip(RIDGES, *_cv_score(design(lay), yr, folds, lay, RIDGES, sign, blk)):
-                    table.append({"plays": R, "knots": K, "ridge": ridge, "column": column,
-                                  "bouc_wen": bw if column == "bouc_wen" else None,
-                                  "return_point": bw[0] if column == "return_point" else None,
-                                  "columns": lay.n_cols, "cv_rmse_um": score})
+                    table.append({"plays": R, "knots": K, "ridge": ridge, "bouc_wen": bw, "columns": lay.n_cols,
+                                  "cv_rmse_um": score})
                     per_block.append(pb)
     i_best = int(np.argmin([t["cv_rmse_um"] for t in table]))
     # the smallest plane (fewest columns, then the largest ridge) within one standard error of the best on the
-    # paired per-block differences (_within_one_se); of the two columns at one size and ridge (the same count)
-    # the one of lower CV error
-    twin = {(t["plays"], t["knots"], t["ridge"], t["column"]): t["cv_rmse_um"] for t in table}
-    other = {"bouc_wen": "return_point", "return_point": "bouc_wen"}
-    ok = [t for t, pb in zip(table, per_block) if _within_one_se(pb, per_block[i_best]) and not (
-        t["column"] and twin[(t["plays"], t["knots"], t["ridge"], other[t["column"]])] < t["cv_rmse_um"])]
+    # paired per-block differences (_within_one_se)
+    ok = [t for t, pb in zip(table, per_block) if _within_one_se(pb, per_block[i_best])]
     pick = min(ok, key=lambda t: (t["columns"], -t["ridge"]))
-    bw = None if pick["column"] is None else (pick["bouc_wen"] or (pick["return_point"], 0.0))
-    return (PlaneLayout(pick["plays"], pick["knots"], spans, r_all, bw=bw, column=pick["column"]), pick["ridge"],
+    return (PlaneLayout(pick["plays"], pick["knots"], spans, r_all, bw=pick["bouc_wen"]), pick["ridge"],
             {"reversal_levels": n_rev, "plays_allowed": plays, "table": table})
 
 
@@ -715,7 +673,7 @@ def _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba=None, max_rows=MAX_RO
         else:  # filter each play's columns over the whole recording, keep the strided rows
             C = [filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:])[rows] for i, kn in zip(layout.index, layout.knots)]
             if layout.bw:
-                C.append(filt(Gba[0], Gba[1], _bw_state(v, layout, v_rest))[rows][:, None])
+                C.append(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest))[rows][:, None])
             C = np.hstack(C)
         blocks.append((np.column_stack([C, T[rows], np.ones(rows.size)]), y[rows]))
     A, b, _, _ = _gram(blocks)
@@ -732,7 +690,7 @@ def _plane_output(Ps, vs, v_rest, layout, th):
         for i, kn, vv in zip(layout.index, layout.knots, vals):
             h += hat_basis(P[:, i], kn) @ vv
         if layout.bw:
-            h += th[layout.n_plane] * _bw_state(v, layout, v_rest)
+            h += th[layout.n_plane] * _bw_state(v, layout.bw, v_rest)
         out.append(h)
     return out
 
@@ -758,7 +716,7 @@ def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX
     for P, v in zip(Ps, vs):
         C = [filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:]) for i, kn in zip(layout.index, layout.knots)]
         if layout.bw:
-            C.append(filt(Gba[0], Gba[1], _bw_state(v, layout, v_rest))[:, None])
+            C.append(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest))[:, None])
         cols.append(np.hstack(C))
     per = max(1000, max_rows // n_rec)
     edges = [np.linspace(k0, y.size, HOLDOUT_SEGMENTS + 1).astype(int) for y, k0 in zip(ys, k0s)]
@@ -878,11 +836,9 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
             "values": [v.tolist() for v in vals], "offset": float(th[-1]), "v_rest": float(v_rest),
             "v_lo": -1.0, "v_hi": 1.0}
     if layout.bw:
-        hyst["bw"] = dict(_column_dict(layout), c_h=float(th[layout.n_plane]))
+        hyst["bw"] = {"beta": float(layout.bw[0]), "gamma": float(layout.bw[1]), "c_h": float(th[layout.n_plane])}
     info = {"plane": {"plays": layout.n_plays, "knots": layout.n_knots, "ridge": ridge, "columns": layout.n_cols,
-                      "column": layout.column,
-                      "bouc_wen": layout.bw if layout.column == "bouc_wen" else None,
-                      "return_point": layout.bw[0] if layout.column == "return_point" else None,
+                      "bouc_wen": layout.bw,
                       "cv_table": table["table"], "reversal_levels": table["reversal_levels"],
                       "plays_allowed": table["plays_allowed"],
                       "quasi_static_fraction": float(sum(int(q.sum()) for q in qs) /

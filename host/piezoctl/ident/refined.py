@@ -61,9 +61,7 @@ Parameters (JSON, physical units where they have one)
       by ``sum constant_gain_i`` times the change of every play's threshold
       x (1 + constant_k_i) (the constant widening the term was nested
       against, refitted with it); with ``widen_bw`` true a Bouc-Wen column of
-      the plane is scaled by the same width factor, ``(w - 1) c_h h(v)``; a
-      column with return-point memory has its 48 plays widened as the
-      plane's (round 23).
+      the plane is scaled by the same width factor, ``(w - 1) c_h h(v)``.
     - ``creep``: ``tau_s`` (list), ``gain`` (list, [1]), ``static_gain`` [1]
       and ``h_ref_um``: ``w + sum g_i (lowpass_tau_i(w) - w) + g_s (w - h_ref)``
       (g_s: the static gain the calibration, faster than the slow terms, did

@@ -709,15 +709,13 @@ class RateDependentHysteresis(Term):
         Bouc-Wen column scaled by the same width factor less one, ``(w - 1) c_h h(v)``.
 
         The Bouc-Wen column has no thresholds: its loop's width is its size, so the width factor of the moment
-        scales it (the law up to round 14, for that column alone). The column with return-point memory (round 22) has
-        thresholds: ``plane_width_change`` widens its 48 plays one by one as the plane's (round 23), so it is not
-        scaled here. Round 15's law widened the plays only and lost
+        scales it (the law up to round 14, for that column alone). Round 15's law widened the plays only and lost
         s112-035 and s112-051 (generalized PI), whose bases carry most of the loop in the column (c_h -12 and
         -29 um). ``cached``: the change of the plays from :func:`plane_width_change_cached` (the selection's
         designs; the same floats)."""
         w = self.width(v, dt, ref, k, cutoff)
         out = (plane_width_change_cached if cached else plane_width_change)(hp, v, w)
-        if bw and hp.get("bw") and hp.get("type", "pi") == "plane" and hp["bw"].get("kind") != "return_point":
+        if bw and hp.get("bw") and hp.get("type", "pi") == "plane":
             out = out + (w - 1.0) * bouc_wen_column(hp, v)
         return out
 
@@ -785,10 +783,9 @@ class RateDependentHysteresis(Term):
         """The base's loop has plays to widen (a plane with a threshold > 0). Without them (a plane of the reversible
         curve and a Bouc-Wen column, as the own-stage cases' bases are) the term keeps the law before round 15: the
         hysteretic part - then the Bouc-Wen column, whose loop has no thresholds - scaled at the rate of the moment
-        (settings: the references alone). A column with return-point memory counts: its 48 plays are widened."""
+        (settings: the references alone)."""
         hp = ctx.base["hysteresis"]
-        return hp.get("type", "pi") == "plane" and (any(float(r) > 0 for r in hp["r"])
-                                                    or (hp.get("bw") or {}).get("kind") == "return_point")
+        return hp.get("type", "pi") == "plane" and any(float(r) > 0 for r in hp["r"])
 
     def settings(self, ctx):
         if not self.has_plays(ctx):

@@ -40,10 +40,10 @@ import numpy as np
 
 from .play import play_outputs
 
-__all__ = ["bouc_wen_h", "return_point_h", "column_state", "RPM_THRESHOLDS", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
+__all__ = ["bouc_wen_h", "play_states", "hat_basis", "interp_linear_ext", "plane_parts", "hysteresis_parts",
            "hysteresis_output", "hysteresis_output_of", "clear_output_cache",
            "poly_clamped", "hysteresis_features", "plane_feature_blocks", "add_to_features", "hysteresis_channels",
-           "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span", "plays_varying", "return_point_width_change",
+           "scale_channels", "hysteresis_groups", "scale_groups", "initial_state_span", "plays_varying",
            "plane_width_change"]
 
 _STATE_CACHE: "collections.OrderedDict" = collections.OrderedDict()
@@ -94,46 +94,6 @@ def bouc_wen_h(v, beta: float, gamma: float, v_rest: float = 0.0, n: float = 1.0
                              lambda x: _bouc_wen_h(x, float(beta), float(gamma), float(v_rest), float(h0)))
     return _cached_state("bwn", (float(beta), float(gamma), float(v_rest), float(n), float(h0)), v,
                          lambda x: _bouc_wen_h_n(x, float(beta), float(gamma), float(v_rest), float(n), float(h0)))
-
-
-RPM_THRESHOLDS = (np.arange(48) + 0.5) / 48   # [normalized drive] the return-point column's fine play thresholds
-_RPM_BLOCK = 65536                             # samples per block of the column's plays (48 plays: 25 MB)
-
-
-def return_point_h(v, beta: float, v_rest: float = 0.0) -> np.ndarray:
-    """State of the plane's column with return-point memory: ``sum_k w_k P_rk(v)``, plays of the fine thresholds
-    ``RPM_THRESHOLDS`` started relaxed at ``v_rest``, weights ``w_k`` proportional to ``exp(-beta r_k)`` and
-    summing to 1 (``beta`` [1/normalized drive]: how close to the diagonal the column's loop lies).
-
-    A Preisach density of one sign that is smooth near ``r = 0``: the smooth start of every branch after a
-    reversal (the part a plane of R plays bends only at ``j / R``), with the wiping-out property, so its minor
-    loops close. A Bouc-Wen element gives the same smooth start but its state ratchets on small cycles
-    (by about ``-2 gamma h delta`` per cycle of amplitude delta: docs/diagnose.md, "Round 21: the base").
-    The plays are run block by block and reduced at once (the (T, 48) states are never held); cached: read-only
-    result."""
-    beta, v_rest = float(beta), float(v_rest)
-
-    def compute(x):
-        w = np.exp(-beta * RPM_THRESHOLDS)
-        w /= w.sum()
-        out = np.empty(x.size)
-        f = np.full(RPM_THRESHOLDS.size, v_rest)
-        for k0 in range(0, x.size, _RPM_BLOCK):
-            P = play_outputs(x[k0:k0 + _RPM_BLOCK], RPM_THRESHOLDS, y0=f)
-            f = P[-1].copy()
-            out[k0:k0 + _RPM_BLOCK] = P @ w
-        return out
-    return _cached_state("rpm", (beta, v_rest), v, compute)
-
-
-def column_state(bw: dict, v, v_rest: float = 0.0) -> np.ndarray:
-    """The state of a ``plane`` operator's extra column ``bw`` (before its weight ``c_h``): ``bw["kind"]``
-    ``"return_point"`` (:func:`return_point_h`, shape ``beta``) or ``"bouc_wen"`` (the default, model files up to
-    round 21: :func:`bouc_wen_h` with ``beta``, ``gamma``, ``n``, ``h0``)."""
-    if bw.get("kind", "bouc_wen") == "return_point":
-        return return_point_h(v, float(bw["beta"]), v_rest)
-    return bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), v_rest, float(bw.get("n", 1.0)),
-                      float(bw.get("h0", 0.0)))
 
 
 BW_TABLE_POINTS = 16001  # points of the tabulated run solution of a Bouc-Wen element with n != 1
@@ -390,7 +350,8 @@ def plane_parts(hp: dict, v, hysteretic: bool = True) -> tuple[np.ndarray, np.nd
                 hyst -= interp_linear_ext(v, knots[j], values[j])
     bw = hp.get("bw")
     if bw:
-        hb = float(bw["c_h"]) * column_state(bw, v, v_rest)
+        hb = float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), v_rest, float(bw.get("n", 1.0)),
+                                           float(bw.get("h0", 0.0)))
         h += hb
         if hyst is not None:
             hyst += hb
@@ -592,7 +553,8 @@ def plane_feature_blocks(hp: dict, v):
         yield hat_basis(P[:, j], kn)[:, 1:]
     bw = hp.get("bw")
     if bw:
-        yield column_state(bw, v, float(hp.get("v_rest", 0.0)))[:, None]
+        yield bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
+                         float(bw.get("n", 1.0)), float(bw.get("h0", 0.0)))[:, None]
 
 
 def add_to_features(hp: dict, dtheta) -> dict:
@@ -632,7 +594,9 @@ def hysteresis_channels(hp: dict, v) -> np.ndarray:
     cols = [interp_linear_ext(P[:, j], kn, vals) for j, (kn, vals) in enumerate(zip(hp["knots"], hp["values"]))]
     bw = hp.get("bw")
     if bw:
-        cols.append(float(bw["c_h"]) * column_state(bw, v, float(hp.get("v_rest", 0.0))))
+        cols.append(float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]),
+                                                  float(hp.get("v_rest", 0.0)), float(bw.get("n", 1.0)),
+                                                  float(bw.get("h0", 0.0))))
     return np.column_stack(cols)
 
 
@@ -690,13 +654,13 @@ def hysteresis_groups(hp: dict, v) -> np.ndarray:
 
 
 def bouc_wen_column(hp: dict, v) -> np.ndarray:
-    """A ``plane`` operator's extra column ``c_h h(v)`` [um], Bouc-Wen or with return-point memory
-    (:func:`column_state`; zeros without one or for other types)."""
+    """A ``plane`` operator's Bouc-Wen column ``c_h h(v)`` [um] (zeros without one or for other types)."""
     v = np.asarray(v, float)
     bw = hp.get("bw") if hp.get("type", "pi") == "plane" else None
     if not bw:
         return np.zeros(v.size)
-    return float(bw["c_h"]) * column_state(bw, v, float(hp.get("v_rest", 0.0)))
+    return float(bw["c_h"]) * bouc_wen_h(v, float(bw["beta"]), float(bw["gamma"]), float(hp.get("v_rest", 0.0)),
+                                         float(bw.get("n", 1.0)), float(bw.get("h0", 0.0)))
 
 
 def scale_groups(hp: dict, gains) -> dict:
@@ -755,68 +719,14 @@ def plays_varying(v, R, y0) -> np.ndarray:
     return out
 
 
-def _chunk_starts(v) -> np.ndarray:
-    """0, the samples where :func:`plays_varying` may split ``v`` without changing a float, then ``v.size``.
-
-    A monotone run starting at s (as :func:`plays_varying` splits it) whose next step ``v[s+1] - v[s]`` is
-    nonzero and in the run's direction: a call on ``v[s:]`` then finds the same runs (a run that starts with a
-    dwell would be joined to the next one, whose first step is its only sign)."""
-    d = np.sign(np.diff(v))
-    nz = np.flatnonzero(d != 0)
-    starts = np.zeros(0, dtype=np.intp)
-    if nz.size:
-        s_nz = d[nz]
-        starts = nz[np.flatnonzero(s_nz[1:] != s_nz[:-1]) + 1] + 1
-        starts = starts[starts < v.size - 1]
-        starts = starts[d[starts] == d[starts - 1]]
-    return np.concatenate([[0], starts, [v.size]]).astype(np.intp)
-
-
-def return_point_width_change(v, beta: float, width, v_rest: float = 0.0) -> np.ndarray:
-    """Change [normalized drive] of the return-point column's state (:func:`return_point_h`) when each of its
-    plays' thresholds is multiplied by ``width`` (T,) [1] at each sample: ``sum_k w_k (P_{r_k width}(v) -
-    P_{r_k}(v))`` (:func:`plays_varying`: a play keeps the threshold it last moved with).
-
-    The column is a Preisach density of one sign on 48 fine thresholds, so a law that widens every play's threshold
-    with the rate widens these as it does the plane's (round 23: scaled as a whole, its constant widening is only
-    a gain of the column, nearly collinear with the nested test's free gain on it). Run in chunks of whole monotone
-    runs (the same floats as one call; the (T, 48) states are never held)."""
-    v = np.ascontiguousarray(v, dtype=float)
-    w = np.asarray(width, float).reshape(-1)
-    out = np.zeros(v.size)
-    if v.size == 0:
-        return out
-    wk = np.exp(-float(beta) * RPM_THRESHOLDS)
-    wk /= wk.sum()
-    h0 = return_point_h(v, beta, v_rest)
-    starts = _chunk_starts(v)
-    y = np.full(RPM_THRESHOLDS.size, float(v_rest))
-    i = 0
-    while i < starts.size - 1:   # chunks of whole runs of about _RPM_BLOCK samples (a longer one alone)
-        j = int(np.searchsorted(starts, starts[i] + _RPM_BLOCK, side="right")) - 1
-        j = max(j, i + 1)
-        a, b = int(starts[i]), int(starts[j])
-        P = plays_varying(v[a:b], w[a:b, None] * RPM_THRESHOLDS[None, :], y)
-        y = P[-1].copy()
-        out[a:b] = P @ wk
-        i = j
-    return out - h0
-
-
 def plane_width_change(hp: dict, v, width) -> np.ndarray:
     """Change [um] of a ``plane`` operator's output when every play's threshold is multiplied by ``width`` (T,)
-    [1] at each sample: ``sum_{r_j > 0} F_j(P_{r_j width}(v)) - F_j(P_{r_j}(v))`` (:func:`plays_varying`), plus
-    ``c_h`` times the return-point column's change (:func:`return_point_width_change`, round 23: its plays are
-    widened one by one as the plane's). The reversible curve (threshold 0) and a Bouc-Wen column (no thresholds)
-    are unchanged. Zero for other operator types."""
+    [1] at each sample: ``sum_{r_j > 0} F_j(P_{r_j width}(v)) - F_j(P_{r_j}(v))`` (:func:`plays_varying`). The
+    reversible curve (threshold 0) and a Bouc-Wen column are unchanged. Zero for other operator types."""
     v = np.ascontiguousarray(v, dtype=float)
     out = np.zeros(v.size)
     if hp.get("type", "pi") != "plane" or v.size == 0:
         return out
-    bw = hp.get("bw")
-    if bw and bw.get("kind") == "return_point":
-        out += float(bw["c_h"]) * return_point_width_change(v, float(bw["beta"]), width,
-                                                            float(hp.get("v_rest", 0.0)))
     r = np.asarray(hp["r"], float)
     hyst = np.flatnonzero(r > 0)
     if hyst.size == 0:
