@@ -248,29 +248,3 @@ def test_plays_offered_only_up_to_the_calibration_reversal_levels_and_one_to_a_p
     assert forc["plays_allowed"] == [R for R in base_mod.PLANE_PLAYS if R == 1 or 2 * R <= forc["reversal_levels"]]
     assert forc["plays"] in forc["plays_allowed"]
     assert fit_base([_rec(periodic, stage(periodic))])["base_info"]["plane"]["plays_allowed"] == [1]
-
-
-def test_the_size_rule_compares_rows_on_paired_blocks_and_ignores_an_error_every_row_shares():
-    """``_within_one_se`` (round 24): a row is kept within one standard error of the best on the paired per-block
-    differences. An error floor common to both rows (a vibration in the whole calibration) leaves the decision
-    unchanged, where a tolerance relative to the best's error would admit the worse row once the floor is large;
-    a row worse on every block is refused however small its excess relative to the floor; a row that differs by
-    scatter only is kept."""
-    from piezoctl.ident.base import _within_one_se
-    rng = np.random.default_rng(5)
-    n = 64
-    best = 1.0 + 0.1 * rng.random(n)             # [um^2] per block
-    worse = best + 0.02 + 0.005 * rng.normal(size=n)   # worse on (nearly) every block: t about 30
-    d = 0.01 * rng.normal(size=n)
-    d += 0.2 * d.std(ddof=1) / np.sqrt(n) - d.mean()   # mean excess 0.2 standard errors: the data cannot tell
-    alike = best + d
-    assert not _within_one_se(worse, best)
-    assert _within_one_se(alike, best)
-    assert _within_one_se(best, best)
-    floor = 50.0 + rng.random(n)                 # shared by every row on the same samples
-    assert not _within_one_se(worse + floor, best + floor)
-    assert _within_one_se(alike + floor, best + floor)
-    # the relative tolerance it replaces (RMS within 2 %: the MSE within 4.04 %) takes the worse row on the floor
-    assert np.sum(worse + floor) <= 1.02 ** 2 * np.sum(best + floor)
-    # blocks without held-out rows (zero in both) do not count
-    assert _within_one_se(np.concatenate([alike, np.zeros(10)]), np.concatenate([best, np.zeros(10)]))

@@ -34,9 +34,8 @@ Fit (``fit_base``):
    plane's size ``(R, K)`` and the weight of a roughness penalty (squared
    second differences of each play's function) are chosen from ``PLANE_PLAYS`` x
    ``PLANE_KNOTS`` x ``RIDGES`` (and with or without one Bouc-Wen column, its
-   shape searched on the reversible curve alone) by the held-out error (the
-   smallest size within one standard error of the best on the paired per-block
-   differences, :func:`_within_one_se`, round 24). Only play counts R the calibration
+   shape searched on the reversible curve alone) by the held-out RMS error (the
+   smallest size within 2 % of the best). Only play counts R the calibration
    can resolve are offered: at least 2 R distinct reversal levels
    (:func:`reversal_levels`); a periodic calibration (two levels) gets R = 1,
    the reversible curve with the Bouc-Wen column. No parametric family: the grid of a Preisach
@@ -82,6 +81,7 @@ RIDGES = (1e-6, 1e-4, 1e-2, 1e-1, 1.0)   # weights of the roughness penalty (rel
 BW_BETAS = tuple(float(x) for x in np.geomspace(0.5, 40.0, 7))   # Bouc-Wen column shapes [1/normalized drive]
 BW_GAMMA_RATIOS = (-0.6, -0.3, 0.0, 0.3, 0.6)                    # gamma / beta; Nelder-Mead refines
 CV_BLOCKS = 32           # interleaved blocks per calibration recording in the size cross-validation
+SIZE_TOLERANCE = 1.02    # the smallest size within 2 % of the best cross-validated error is chosen
 ORDERS = (0, 2, 4, 6)
 QS_LP_HZ = 20.0          # quasi-static: drive within QS_TOL of its zero-phase low-pass at this frequency
 QS_TOL = 0.005           # of the calibrated drive span
@@ -519,52 +519,22 @@ def _gram(blocks):
     return A, b, sum(float(y @ y) for _, y in blocks), sum(y.size for _, y in blocks)
 
 
-def _cv_score(Xs, yr, folds, layout, ridge_list, sign=0.0, blocks=None):
-    """Held-out RMS [um] of the 2-fold fit for each ridge in ``ridge_list`` (plays monotone in ``sign``).
-
-    With ``blocks`` (each recording's rows' block index, 0..CV_BLOCKS-1; the fold is the index mod 2) also the
-    held-out squared error [um^2] summed per block, one (n_rec * CV_BLOCKS,) array per ridge (the paired
-    comparison of :func:`_within_one_se`): returns (rms list, per-block list)."""
+def _cv_score(Xs, yr, folds, layout, ridge_list, sign=0.0):
+    """Held-out RMS [um] of the 2-fold fit for each ridge in ``ridge_list`` (plays monotone in ``sign``)."""
     grams = [_gram([(X[f == k], y[f == k]) for X, y, f in zip(Xs, yr, folds)]) for k in (0, 1)]
     Om = smoothness_penalty(layout, Xs[0].shape[1] - layout.n_cols)
-    out, per_block = [], []
+    out = []
     for ridge in ridge_list:
         sse, n = 0.0, 0
-        pb = np.zeros(len(Xs) * CV_BLOCKS)
         for k in (0, 1):
             A, b, _, _ = grams[k]
             th = _plane_solve(A, b, ridge, Om, layout, sign)
-            for i, (X, y, f) in enumerate(zip(Xs, yr, folds)):
+            for X, y, f in zip(Xs, yr, folds):
                 t = f != k
-                e2 = (X[t] @ th - y[t]) ** 2
-                sse += float(np.sum(e2))
+                sse += float(np.sum((X[t] @ th - y[t]) ** 2))
                 n += int(np.sum(t))
-                if blocks is not None:
-                    pb[i * CV_BLOCKS:(i + 1) * CV_BLOCKS] += np.bincount(blocks[i][t], weights=e2,
-                                                                         minlength=CV_BLOCKS)
         out.append(float(np.sqrt(sse / max(n, 1))))
-        per_block.append(pb)
-    return (out, per_block) if blocks is not None else out
-
-
-def _within_one_se(sse_blocks, best_blocks) -> bool:
-    """True when a row's held-out error is not distinguishable from the best row's: the sum over blocks of the
-    paired excess ``d_b = sse_b - sse_best_b`` [um^2] is at most one standard error of that sum
-    (``sqrt(n) std(d)``, n the blocks that hold rows).
-
-    The size rule's tolerance (round 24). Every row is scored on the same held-out samples, so whatever all rows
-    leave alike - the noise, an effect the whole calibration contains (a vibration, a delay), the part of the law
-    no plane of this family fits - is in both terms of ``d_b`` and cancels; what is left is the part of the error
-    the size changes, and its scatter over the blocks says how far the data can tell two sizes apart (the
-    one-standard-error rule of cross-validation, on paired differences). Round 23's relative tolerance (2 % of
-    the best RMS) grew with that common floor: a 0.1 um vibration in a test calibration raised every row's error
-    to 0.08 um and admitted a coarser plane whose own misfit on unseen histories was larger."""
-    d = np.asarray(sse_blocks, float) - np.asarray(best_blocks, float)
-    held = (np.asarray(sse_blocks) > 0) | (np.asarray(best_blocks) > 0)
-    d = d[held]
-    if d.size < 2:
-        return bool(np.sum(d) <= 0.0)
-    return bool(np.sum(d) <= np.sqrt(d.size) * np.std(d, ddof=1))
+    return out
 
 
 def reversal_levels(vs, k0s, deadband: float = 0.02, resolution: float = 1.0 / 32) -> int:
@@ -605,8 +575,7 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
     ns = [y.size for y in ys]
     Ts = _trends(ns, k0s)
     rows = [_strided(q, max(1000, CV_ROWS // len(ys))) for q in qs]
-    blk = [block_masks(n, CV_BLOCKS)[r] for n, r in zip(ns, rows)]
-    folds = [b % 2 for b in blk]
+    folds = [block_masks(n, CV_BLOCKS)[r] % 2 for n, r in zip(ns, rows)]
     m = TREND_ORDER
     for i, (n, k0, r) in enumerate(zip(ns, k0s, rows)):
         # a recording whose quasi-static rows fall in fewer than half of its blocks (a chirp: only its slow
@@ -641,19 +610,18 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
     # thresholds the calibration's reversals can resolve: at least two reversal levels per play threshold
     n_rev = reversal_levels(vs, k0s)
     plays = [R for R in PLANE_PLAYS if R == 1 or 2 * R <= n_rev]
-    table, per_block = [], []
+    table, best = [], None
     for bw in (None, best_bw[1]):
         for R in plays:
             for K in PLANE_KNOTS:
                 lay = PlaneLayout(R, K, spans, r_all, bw=bw)
-                for ridge, score, pb in zip(RIDGES, *_cv_score(design(lay), yr, folds, lay, RIDGES, sign, blk)):
+                for ridge, score in zip(RIDGES, _cv_score(design(lay), yr, folds, lay, RIDGES, sign)):
                     table.append({"plays": R, "knots": K, "ridge": ridge, "bouc_wen": bw, "columns": lay.n_cols,
                                   "cv_rmse_um": score})
-                    per_block.append(pb)
-    i_best = int(np.argmin([t["cv_rmse_um"] for t in table]))
-    # the smallest plane (fewest columns, then the largest ridge) within one standard error of the best on the
-    # paired per-block differences (_within_one_se)
-    ok = [t for t, pb in zip(table, per_block) if _within_one_se(pb, per_block[i_best])]
+                    if best is None or score < best:
+                        best = score
+    # the smallest plane (fewest columns, then the largest ridge) within SIZE_TOLERANCE of the best
+    ok = [t for t in table if t["cv_rmse_um"] <= SIZE_TOLERANCE * best]
     pick = min(ok, key=lambda t: (t["columns"], -t["ridge"]))
     return (PlaneLayout(pick["plays"], pick["knots"], spans, r_all, bw=pick["bouc_wen"]), pick["ridge"],
             {"reversal_levels": n_rev, "plays_allowed": plays, "table": table})
