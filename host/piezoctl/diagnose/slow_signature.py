@@ -685,6 +685,14 @@ def _line(x, y):
     return b, float(np.sqrt(max(s2, 0.0) / sxx)), x.size - 2
 
 
+def sample_noise(y) -> float:
+    """One sample's sensor noise [um] in ``y``: the RMS second difference over sqrt(6), which a drive's slope
+    (linear over three samples) does not enter; 0 for fewer than 11 samples (:func:`cycle_mean_test`,
+    :func:`calibration_orbit_test`)."""
+    y = np.asarray(y, float)
+    return float(np.sqrt(np.mean(np.diff(y, 2) ** 2) / 6.0)) if y.size > 10 else 0.0
+
+
 def cycle_mean_test(ctxs, es, fold_all) -> dict | None:
     """Whether the residual's mean over each cycle of a repeated drive moves on the clock (round 23).
 
@@ -753,7 +761,7 @@ def cycle_mean_test(ctxs, es, fold_all) -> dict | None:
         persists = bool(np.sign(b2) == np.sign(b) and abs(b2) >= 0.5 * abs(b) - q2 * se2) if np.isfinite(se2) \
             else True
         y = np.asarray(s.y, float)[np.asarray(v, bool)]
-        noise = float(np.sqrt(np.mean(np.diff(y, 2) ** 2) / 6.0)) if y.size > 10 else 0.0
+        noise = sample_noise(y)
         rows.append((int(s.index), m.size, b, se, dof, float(b * np.ptp(tm)), b2, persists, noise))
     rows = [r for r in rows if np.isfinite(r[3]) and r[3] > 0 and r[4] > 0]
     if not rows:
@@ -1377,7 +1385,7 @@ def calibration_orbit_test(ctx) -> dict | None:
             se = float(0.5 * np.sqrt(sum(x.var(ddof=1) / x.size for x in per)))
             moving = float(max(np.ptp(a[1]), np.ptp(b[1])))
             yv = np.asarray(s.y, float)[np.asarray(v, bool)]
-            noise = float(np.sqrt(np.mean(np.diff(yv, 2) ** 2) / 6.0)) if yv.size > 10 else 0.0
+            noise = sample_noise(yv)
             rows.append({"recording": int(s.index), "calibration": int(j), "column": int(col), "shift_um": shift,
                          "se_um": se, "moving_um": moving, "noise_um": noise,
                          "cycles": [int(a[1].size), int(b[1].size)], "dof": int(sum(x.size for x in per) - 2)})
