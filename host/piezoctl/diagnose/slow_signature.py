@@ -1304,14 +1304,13 @@ ORBIT_SKIP = 2   # round 24: cycles of a repeated drive left out at its start (a
 ORBIT_MIN = 3    # settled cycles each recording needs after them (their means' spread says what still moves)
 
 
-def _orbit(u, y, lo, hi) -> tuple | None:
-    """The output on the settled orbit of a drive that repeats one cycle between ``lo`` and ``hi`` [V]: per
-    drive bin and direction the mean of ``y`` over the cycles after the first ``ORBIT_SKIP`` (NaN where a bin has
-    fewer than ``SWEEP_MIN_SAMPLES``), those cycles' means and their number; None when fewer than ``ORBIT_MIN``
-    are left (:func:`repeated_cycles`)."""
+def _orbit(u, y, k, lo, hi) -> tuple | None:
+    """The output on the settled orbit of a drive that repeats one cycle between ``lo`` and ``hi`` [V] (``k``: its
+    cycles' bounds, :func:`repeated_cycles`): per drive bin and direction the mean of ``y`` over the cycles after
+    the first ``ORBIT_SKIP`` (NaN where a bin has fewer than ``SWEEP_MIN_SAMPLES``), those cycles' means and their
+    number; None when fewer than ``ORBIT_MIN`` are left."""
     u, y = np.asarray(u, float), np.asarray(y, float)
-    k = repeated_cycles(u)
-    if k is None or k.size - 1 - ORBIT_SKIP < ORBIT_MIN:
+    if k.size - 1 - ORBIT_SKIP < ORBIT_MIN:
         return None
     a, b = int(k[ORBIT_SKIP]), int(k[-1])
     uu, yy = u[a:b], y[a:b]
@@ -1359,22 +1358,24 @@ def calibration_orbit_test(ctx) -> dict | None:
         between the same extremes.
     """
     from scipy import stats as st
-    cal = [(j, c) for j, c in enumerate(getattr(ctx, "cal", None) or []) if repeated_cycles(c.u) is not None]
+    cal = [(j, c, k) for j, c in enumerate(getattr(ctx, "cal", None) or [])
+           if (k := repeated_cycles(c.u)) is not None]
     if not cal:
         return None
     rows = []
     for s, v in zip(ctx.signals, ctx.valid):
         col = ctx.offset_of(s.index)
-        if col < 0 or repeated_cycles(s.u) is None:
+        ks = repeated_cycles(s.u) if col >= 0 else None
+        if ks is None:
             continue
         u = np.asarray(s.u, float)
         lo, hi = float(u.min()), float(u.max())
         span = hi - lo
-        for j, c in cal:
+        for j, c, kc in cal:
             uc = np.asarray(c.u, float)
             if abs(float(uc.min()) - lo) > SWEEP_TOL * span or abs(float(uc.max()) - hi) > SWEEP_TOL * span:
                 continue
-            a, b = _orbit(u, s.y, lo, hi), _orbit(uc, c.y, lo, hi)
+            a, b = _orbit(u, s.y, ks, lo, hi), _orbit(uc, c.y, kc, lo, hi)
             if a is None or b is None:
                 continue
             diff = (a[0] - b[0]).reshape(2, SWEEP_BINS)
