@@ -684,7 +684,8 @@ def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX
     cols = []
     for P, v in zip(Ps, vs):
         # without the filters' subnormal tails: they made every refit's Gram matrix 10 to 50 times slower
-        C = [flush_subnormal(filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:])) for i, kn in zip(layout.index, layout.knots)]
+        C = [flush_subnormal(filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:]))
+             for i, kn in zip(layout.index, layout.knots)]
         if layout.bw:
             C.append(flush_subnormal(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest)))[:, None])
         cols.append(np.hstack(C))
