@@ -54,6 +54,18 @@ def filt(b, a, x) -> np.ndarray:
     return signal.lfilter(b, a, x, axis=0, zi=zi[:, None] * x[0][None, :])[0]
 
 
+def flush_subnormal(x: np.ndarray) -> np.ndarray:
+    """Set the subnormal entries of the float array ``x`` (``0 < |x| < 2.2e-308``) to 0, in place; returns ``x``.
+
+    A filter's response to a column that is zero outside a short range (a play's hat function) decays into
+    the subnormal range and, for a slow pole, stays there (``a * x`` rounds back to ``x``): products with a
+    subnormal operand take the processor's slow path, and a Gram matrix of such columns took 10 to 50 times
+    longer (docs/diagnose-rounds/round-25.md, "Round 25: speed"). A subnormal product changes no sum that holds
+    a normal term, so only the tiniest sums move, by less than 2.2e-308."""
+    x[np.abs(x) < np.finfo(x.dtype).tiny] = 0.0
+    return x
+
+
 def lowpass(x, hz: float, dt: float) -> np.ndarray:
     """First-order low-pass (pole ``hz`` [Hz], exact for a held input), from equilibrium."""
     c = 1.0 - np.exp(-2.0 * np.pi * float(hz) * dt)

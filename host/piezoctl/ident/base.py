@@ -65,7 +65,7 @@ import numpy as np
 from scipy import optimize
 from scipy import signal as sig
 
-from ..dsp import blas_threads, filt, turning_points
+from ..dsp import blas_threads, filt, flush_subnormal, turning_points
 from ..models.hysteresis import hat_basis, play_states
 from .common import IdentError
 
@@ -638,10 +638,11 @@ def _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba=None, max_rows=MAX_RO
         rows = _strided(np.arange(y.size) >= k0, per)
         if Gba is None:
             C = plane_columns(P, layout, rows, v, v_rest)
-        else:  # filter each play's columns over the whole recording, keep the strided rows
-            C = [filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:])[rows] for i, kn in zip(layout.index, layout.knots)]
+        else:  # filter each play's columns over the whole recording, keep the strided rows (no subnormal tails)
+            C = [flush_subnormal(filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:])[rows])
+                 for i, kn in zip(layout.index, layout.knots)]
             if layout.bw:
-                C.append(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest))[rows][:, None])
+                C.append(flush_subnormal(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest))[rows])[:, None])
             C = np.hstack(C)
         blocks.append((np.column_stack([C, T[rows], np.ones(rows.size)]), y[rows]))
     A, b, _, _ = _gram(blocks)
@@ -682,9 +683,11 @@ def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX
     # every play's columns through G once per recording (the refits only change which rows enter)
     cols = []
     for P, v in zip(Ps, vs):
-        C = [filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:]) for i, kn in zip(layout.index, layout.knots)]
+        # without the filters' subnormal tails: they made every refit's Gram matrix 10 to 50 times slower
+        C = [flush_subnormal(filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:]))
+             for i, kn in zip(layout.index, layout.knots)]
         if layout.bw:
-            C.append(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest))[:, None])
+            C.append(flush_subnormal(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest)))[:, None])
         cols.append(np.hstack(C))
     per = max(1000, max_rows // n_rec)
     edges = [np.linspace(k0, y.size, HOLDOUT_SEGMENTS + 1).astype(int) for y, k0 in zip(ys, k0s)]
