@@ -60,11 +60,13 @@ def test_the_rate_is_sized_on_the_cycles_whatever_the_walk_does():
             rate = setting[1] * coef[-1]
             assert abs(rate - RATE) < 0.1 * abs(RATE), (rise, f, rate)
             assert coef[-2] == 0.0 and coef.size == 3
-    # the level is the drift's at the clock's origin (t' = 0: the end of the calibration) plus the walk's mean
-    # misfit share: the column's mean of the residual less the line, on the training rows
-    ctx, e, fold = _case(walk_rise=0.0)
-    _, coef = ss.drift_coef_on_cycles(ctx, e, fold >= 0)
-    assert abs(coef[0] - (LEVEL - 70.0 * RATE)) < 0.02
+    # the level is the drift's at the clock's origin (t' = 0: the end of the calibration), measured on the cycles:
+    # a walk whose misfit sits 1 um off does not move it
+    for shift in (0.0, 1.0):
+        ctx, e, fold = _case(walk_rise=0.0)
+        e = e + shift * np.concatenate([np.full(int(np.sum(v)), float(i == 1)) for i, v in enumerate(ctx.valid)])
+        _, coef = ss.drift_coef_on_cycles(ctx, e, fold >= 0)
+        assert abs(coef[0] - (LEVEL - 70.0 * RATE)) < 0.02, (shift, coef[0])
 
 
 def test_a_line_fitted_on_every_sample_is_pulled_by_the_walk():

@@ -809,8 +809,11 @@ def drift_coef_on_cycles(ctx, e, train) -> tuple | None:
     of the residual on those cycles, beside one free level per phase bin (``CYCLE_PHASE_BINS`` per recording): a
     partial cycle counts (the folds' blocks cut the cycles), and no other recording's level enters it. The level per
     sensor-zero column (the drift's ``level_um``, what it left since the calibration) is then the mean of the
-    residual less that line over the column's training rows, every recording of it. A line (``tau`` inf): the
-    cycles of one recording cannot size a time constant beside a slope.
+    residual less that line over the same cycles: another recording's level is the base's misfit of its history as
+    much as the drift's (development s121-016: the walk's +1.0 um against the triangle's -0.07 um; a column mean over
+    every recording took +0.4 um of it and made the triangle 5.6x worse). A column without a repeated drive takes
+    its training rows' mean less the line. A line (``tau`` inf): the cycles of one recording cannot size a time
+    constant beside a slope.
 
     Parameters
     ----------
@@ -851,12 +854,12 @@ def drift_coef_on_cycles(ctx, e, train) -> tuple | None:
         m = inside & train[sl]
         if np.sum(m) < CYCLE_MIN * CYCLE_PHASE_BINS:
             continue
-        parts.append((ph[m], _session_time(ctx, s)[v][m], e[sl][m]))
+        parts.append((ph[m], _session_time(ctx, s)[v][m], e[sl][m], ctx.offset_of(s.index)))
     if not parts or sum(np.unique(p[1]).size for p in parts) < CYCLE_MIN:
         return None
     # the slope beside a level per phase bin and recording: each bin centred on its own mean
     num = den = 0.0
-    for ph, tt, y in parts:
+    for ph, tt, y, _ in parts:
         for b in np.unique(ph):
             w = ph == b
             x = tt[w] - tt[w].mean()
@@ -868,13 +871,19 @@ def drift_coef_on_cycles(ctx, e, train) -> tuple | None:
     drift = TERMS["thermal_drift"]
     sgn = 1.0 if slope >= 0 else -1.0
     setting = (np.inf, sgn)
-    X = np.vstack([drift.columns(ctx, s, setting)[np.asarray(v, bool)] for s, v in zip(ctx.signals, ctx.valid)])
     no = ctx.n_offset()
-    r = e - X[:, no + 1] * abs(slope)
     lv = np.zeros(no)
-    for c in range(no):
-        w = train & (X[:, c] > 0)
-        lv[c] = float(np.mean(r[w])) if np.any(w) else 0.0
+    on_cycles = np.zeros(no, bool)
+    for c in range(no):   # the level where the rate was measured: a walk's level is its history's misfit too
+        r = [y - slope * tt for _, tt, y, col in parts if col == c]
+        if r:
+            lv[c], on_cycles[c] = float(np.mean(np.concatenate(r))), True
+    if not np.all(on_cycles):   # a column without a repeated drive: its training rows' mean less the line
+        X = np.vstack([drift.columns(ctx, s, setting)[np.asarray(v, bool)] for s, v in zip(ctx.signals, ctx.valid)])
+        r = e - X[:, no + 1] * abs(slope)
+        for c in np.flatnonzero(~on_cycles):
+            w = train & (X[:, c] > 0)
+            lv[c] = float(np.mean(r[w])) if np.any(w) else 0.0
     return setting, np.concatenate([lv, [0.0, abs(slope)]])
 
 
