@@ -897,7 +897,10 @@ def drift_on_cycles(evals, ctxs, es, fold_all, log) -> None:
     the base, no offset and no orbit's convergence makes. The candidate must still improve each fold (fold ratios
     < 1, BIC lower), the exact check on all samples decides, and the slow signatures name the slow effect.
     Development s130-001 (drift -0.17 um over the long triangle, generalized PI): the drift's candidate 0.90/0.87,
-    p 5.4e-3, the base's residual on the recordings 0.72 um RMS: no slow candidate passed and nothing was named."""
+    p 5.4e-3, the base's residual on the recordings 0.72 um RMS: no slow candidate passed and nothing was named.
+
+    Round 25: a candidate whose line does not lower each fold (or raises the BIC) while the cycles hold is sized on
+    them instead (:func:`drift_coef_on_cycles`, ``from_cycles``), and the exact check decides (s133-001, s118-016)."""
     c = next((x for x in evals if x.name == "thermal_drift"), None)
     if c is None or c.significant:
         return
