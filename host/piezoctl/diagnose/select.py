@@ -25,7 +25,7 @@ from . import significance as sg, static_map
 from .misfit import _one_band_credited, above_per_recording, credited_ratio, ratios_above, ratios_where
 from .discriminate import ALPHA_DISC, discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
-                             drift_on_cycles, drift_on_pair, signature_tests)
+                             drift_coef_on_cycles, drift_on_cycles, drift_on_pair, signature_tests)
 from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",
@@ -193,6 +193,8 @@ class Candidate:
     #                                           steps (slow_signature.creep_model_on_dwells)
     from_dwells: bool = False                 # round 19: that model passed the exact check (the one fitted on all
     #                                           blocks did not); the all-data model is sized on the dwells too
+    from_cycles: bool = False                 # round 25, drift: its model sized on a repeated drive's cycles
+    #                                           (slow_signature.drift_coef_on_cycles); so is the all-data model
     lag_bounded: bool = False                 # round 21: evaluated with the corrections' lag bounded to the loop's
     #                                           latency (select._lag_beyond_latency)
 
@@ -1737,6 +1739,9 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         if best.from_dwells:   # round 19: the model the exact check passed, sized on every dwell
             th_d = creep_coef_on_dwells(ctx_all, e_all, allmask, rows)
             th = th if th_d is None else th_d
+        if best.from_cycles:   # round 25: the drift sized on the repeated drive's cycles, on every training row
+            sized = drift_coef_on_cycles(ctx_all, e_all, allmask)
+            st, th = (st, th) if sized is None else sized
         best.setting_all, best.coef_all = st, th
         best.described = term.describe(ctx_all, st, th)
         c_term = np.array(th, float)

@@ -796,6 +796,97 @@ def cycle_phrase(cy: dict) -> str:
                if cy.get("noise_um") else ""))
 
 
+CYCLE_PHASE_BINS = 32   # round 25: phase bins of one cycle in :func:`drift_coef_on_cycles` (the repeated misfit's
+#                          shape within a cycle, a nuisance; 32 bins of a 1 s triangle are 31 ms each)
+
+
+def drift_coef_on_cycles(ctx, e, train) -> tuple | None:
+    """The drift's model (``ThermalDrift``'s setting and coefficients) sized on the repeated drive's cycles (round 25).
+
+    On a recording whose drive repeats one cycle (:func:`repeated_cycles`) the model's misfit is the same at the
+    same phase of every cycle after the first, whatever its size; a drift moves every phase alike on the session
+    clock. So the drift's rate is the slope on the drift's clock (:func:`_session_time`, the term's own time column)
+    of the residual on those cycles, beside one free level per phase bin (``CYCLE_PHASE_BINS`` per recording): a
+    partial cycle counts (the folds' blocks cut the cycles), and no other recording's level enters it. The level per
+    sensor-zero column (the drift's ``level_um``, what it left since the calibration) is then the mean of the
+    residual less that line over the same cycles: another recording's level is the base's misfit of its history as
+    much as the drift's (development s121-016: the walk's +1.0 um against the triangle's -0.07 um; a column mean over
+    every recording took +0.4 um of it and made the triangle 5.6x worse). A column without a repeated drive takes
+    its training rows' mean less the line. A line (``tau`` inf): the cycles of one recording cannot size a time
+    constant beside a slope.
+
+    Parameters
+    ----------
+    ctx : Ctx
+        The fold's (or all data's) context.
+    e : ndarray
+        Its residual on the settled samples [um].
+    train : ndarray of bool
+        The training rows (settled samples).
+
+    Returns
+    -------
+    (setting, coef) or None
+        ``(inf, sign)`` and the coefficients in ``ThermalDrift.columns``' order (the levels, 0, the rate along the
+        sign) [um, um/s]; None without a repeated drive in a sensor-zero column other than the calibration's, or
+        fewer than ``CYCLE_MIN`` cycles' worth of training rows on it.
+    """
+    e = np.asarray(e, float)
+    train = np.asarray(train, bool)
+    parts, start = [], 0
+    for s, v in zip(ctx.signals, ctx.valid):
+        v = np.asarray(v, bool)
+        n = int(np.sum(v))
+        sl = slice(start, start + n)
+        start += n
+        if ctx.offset_of(s.index) < 0:
+            continue
+        k = repeated_cycles(s.u)
+        if k is None or k.size - 2 < CYCLE_MIN:
+            continue
+        idx = np.flatnonzero(v)                         # settled sample -> index in the recording
+        j = np.searchsorted(k, idx, side="right") - 1   # the cycle a sample lies in
+        inside = (j >= 1) & (j < k.size - 1)            # after the first cycle, before the last maximum
+        ph = np.zeros(idx.size, int)
+        jj = j[inside]
+        ph[inside] = np.minimum(((idx[inside] - k[jj]) * CYCLE_PHASE_BINS) // (k[jj + 1] - k[jj]),
+                                CYCLE_PHASE_BINS - 1)
+        m = inside & train[sl]
+        if np.sum(m) < CYCLE_MIN * CYCLE_PHASE_BINS:
+            continue
+        parts.append((ph[m], _session_time(ctx, s)[v][m], e[sl][m], ctx.offset_of(s.index)))
+    if not parts or sum(np.unique(p[1]).size for p in parts) < CYCLE_MIN:
+        return None
+    # the slope beside a level per phase bin and recording: each bin centred on its own mean
+    num = den = 0.0
+    for ph, tt, y, _ in parts:
+        for b in np.unique(ph):
+            w = ph == b
+            x = tt[w] - tt[w].mean()
+            num += float(np.sum(x * (y[w] - y[w].mean())))
+            den += float(np.sum(x * x))
+    if den <= 0:
+        return None
+    slope = num / den
+    drift = TERMS["thermal_drift"]
+    sgn = 1.0 if slope >= 0 else -1.0
+    setting = (np.inf, sgn)
+    no = ctx.n_offset()
+    lv = np.zeros(no)
+    on_cycles = np.zeros(no, bool)
+    for c in range(no):   # the level where the rate was measured: a walk's level is its history's misfit too
+        r = [y - slope * tt for _, tt, y, col in parts if col == c]
+        if r:
+            lv[c], on_cycles[c] = float(np.mean(np.concatenate(r))), True
+    if not np.all(on_cycles):   # a column without a repeated drive: its training rows' mean less the line
+        X = np.vstack([drift.columns(ctx, s, setting)[np.asarray(v, bool)] for s, v in zip(ctx.signals, ctx.valid)])
+        r = e - X[:, no + 1] * abs(slope)
+        for c in np.flatnonzero(~on_cycles):
+            w = train & (X[:, c] > 0)
+            lv[c] = float(np.mean(r[w])) if np.any(w) else 0.0
+    return setting, np.concatenate([lv, [0.0, abs(slope)]])
+
+
 def drift_on_cycles(evals, ctxs, es, fold_all, log) -> None:
     """A drift candidate that lowers the held-out error in each fold passes when the residual's cycle means on a
     repeated drive move on the clock (round 23, :func:`cycle_mean_test`).
@@ -806,25 +897,49 @@ def drift_on_cycles(evals, ctxs, es, fold_all, log) -> None:
     the base, no offset and no orbit's convergence makes. The candidate must still improve each fold (fold ratios
     < 1, BIC lower), the exact check on all samples decides, and the slow signatures name the slow effect.
     Development s130-001 (drift -0.17 um over the long triangle, generalized PI): the drift's candidate 0.90/0.87,
-    p 5.4e-3, the base's residual on the recordings 0.72 um RMS: no slow candidate passed and nothing was named."""
+    p 5.4e-3, the base's residual on the recordings 0.72 um RMS: no slow candidate passed and nothing was named.
+
+    Round 25: a candidate whose line does not lower each fold (or raises the BIC) while the cycles hold is sized on
+    them instead (:func:`drift_coef_on_cycles`, ``from_cycles``), and the exact check decides (s133-001, s118-016)."""
     c = next((x for x in evals if x.name == "thermal_drift"), None)
     if c is None or c.significant:
         return
     if c.veto and not getattr(c, "credited_only", False):
         return
-    if not (max(c.fold_ratios) < 1.0 and c.dbic < 0):
-        return
     cy = cycle_mean_test(ctxs, es, fold_all)
     if cy is None:
         return
     log(f"    drift on the repeated drive's cycles: {cycle_phrase(cy)} (level {c.p_max:.1e})")
-    if cycles_hold(cy, c.p_max):
+    if not cycles_hold(cy, c.p_max):
+        return
+    if max(c.fold_ratios) < 1.0 and c.dbic < 0:
         c.discrimination = (f"Its improvement (fold ratios {c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f}, credited "
                             f"{c.credited:.2f}, p = {c.p:.1e}) lies where the base's misfit could be as large; "
                             f"{cycle_phrase(cy)}, where that misfit is the same on every cycle.")
         c.veto = None
         c.significant = True
         c.cycles = cy
+        return
+    # round 25: its line, fitted on every block, did not lower the error: the levels of the other recordings carry
+    # the base's misfit of their histories and pull it (development s133-001: the walk's residual rises +0.17 um
+    # while the drift moves -0.09 um through it). Sized on the cycles, where that misfit is the same on every
+    # cycle, with the level it left per sensor-zero column; the exact check on all samples decides.
+    sized = [drift_coef_on_cycles(ctxs[f], es[f], fold_all == f) for f in (0, 1)]
+    if any(x is None for x in sized) or any(x[0][1] != np.sign(cy["slope_um_per_s"]) for x in sized):
+        return
+    rates = [x[0][1] * x[1][-1] for x in sized]
+    log(f"    drift sized on the cycles: {', '.join(f'{1e3 * r:+.2f}' for r in rates)} nm/s, levels "
+        + " / ".join(str(np.round(x[1][:-2], 4).tolist()) for x in sized))
+    c.discrimination = (f"Its line fitted on every block did not lower the held-out error (fold ratios "
+                        f"{c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f}, dBIC {c.dbic:+.0f}): the other recordings' "
+                        f"levels carry the base's misfit of their histories; {cycle_phrase(cy)}, where that misfit "
+                        f"is the same on every cycle. Sized there (a rate of "
+                        f"{', '.join(f'{1e3 * r:+.2f}' for r in rates)} nm/s per fold, with the level it left).")
+    c.setting, c.coef = [x[0] for x in sized], [x[1] for x in sized]
+    c.from_cycles = True
+    c.veto = None
+    c.significant = True
+    c.cycles = cy
 
 
 def level_columns(ctx) -> np.ndarray:
