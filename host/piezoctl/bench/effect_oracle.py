@@ -152,7 +152,8 @@ def oracle_case(d: str) -> dict:
            "noise_um": noise, "effect": case.info.get({"creep": "creep", "cross_coupling": "coupling"}.get(effect, "modes")), "rows": rows}
     if mode:
         b, a = (np.asarray(base["dynamics"][k], float) for k in ("b", "a"))
-        out["branch_fixed"], out["branch_fit"] = branch_ratios(Rc, np.concatenate(C), mode["residue"] * b.sum() / a.sum())
+        gain = mode["residue"] * b.sum() / a.sum()   # the residue of the static gain, in G's units
+        out["branch_fixed"], out["branch_fit"] = branch_ratios(Rc, np.concatenate(C), gain)
     return out
 
 
@@ -167,7 +168,8 @@ def main(argv=None) -> int:
               f"beyond a level per recording {f(c['truth_beyond_level'])}/{f(c['refined_beyond_level'])} "
               f"({time.time() - t0:.0f} s)", flush=True)
         print(f"    kept base + exact effect {f(c['kept'])} (acting {f(c['kept_acting'])})"
-              + (f"; kept base + the true branch r (M(w) - w): {f(c['branch_fixed'])}, its gains fitted {f(c['branch_fit'])}"
+              + (f"; kept base + the true branch r (M(w) - w): {f(c['branch_fixed'])}, "
+                 f"its gains fitted {f(c['branch_fit'])}"
                  if "branch_fit" in c else ""), flush=True)
         for r in c["rows"]:
             print(f"    {r['recording']:40s} base {1000 * r['base_um']:5.0f} nm (level {1000 * r['base_level_um']:+5.0f}), "
