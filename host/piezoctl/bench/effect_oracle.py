@@ -14,7 +14,15 @@ recordings exactly by ``y_off - base_off(u)``, so
 - ``*_acting``: the same on the samples the effect changes (the noise-free reading with the effect minus without
   it, less its mean per recording, beyond 2 noise);
 - ``*_beyond_level``: the same with each model's error less its mean per recording (the level a recording starts
-  at: the hysteresis state the unknown history before it left).
+  at: the hysteresis state the unknown history before it left);
+- ``kept`` (round 25) = RMS(y - base - e) / RMS(y - base), ``e`` the effect on the stage (the noise-free reading
+  with it minus without): the *kept* base (the one the diagnosis tested against) plus the exact effect. ``truth``
+  refits the base without the effect, which for a mode changes the base too (s132-037's 1.14, round 24); ``kept``
+  does not;
+- for a mode (round 25), ``branch_fixed`` and ``branch_fit``: the kept base plus the term's own branch
+  ``r (M(w) - w)`` (``UnmodeledResonance.basis`` at the true frequency and damping, on the kept base's ``w``), its
+  gain the true residue times G's static gain, or its two gains least-squared on these samples (in-sample: a
+  floor for what the term at the true setting can reach, not a held-out figure).
 
 ``truth`` near ``refined``: the term's model is not the limit; ``truth`` above 0.7: the base's misfit is.
 
@@ -38,7 +46,7 @@ ACTING_NOISE = 2.0       # a sample is acted on where the effect changes it by m
 
 ORACLE_EFFECTS = ("creep", "cross_coupling", "unmodeled_resonance")
 
-__all__ = ["ORACLE_EFFECTS", "switch_off", "oracle_case", "main"]
+__all__ = ["ORACLE_EFFECTS", "switch_off", "branch_ratios", "oracle_case", "main"]
 
 
 def _noise_free(stage, rec) -> np.ndarray:
@@ -73,11 +81,22 @@ def switch_off(stage, effect: str) -> None:
         raise ValueError(f"no oracle for {effect}")
 
 
+def branch_ratios(resid, cols, true_gain: float) -> tuple[float, float]:
+    """(fixed, fit): RMS of the kept base's error ``resid`` [um] after the mode branch ``cols`` (samples x 2, the
+    term's two columns, :meth:`UnmodeledResonance.basis`) with the first column's gain ``true_gain`` [-], and after
+    both columns with least-squares gains, each over RMS(resid). In-sample; ``nan`` for a zero error."""
+    resid = np.asarray(resid, float)
+    cols = np.asarray(cols, float)
+    fit = resid - cols @ np.linalg.lstsq(cols, resid, rcond=None)[0]
+    return _ratio(resid - true_gain * cols[:, 0], resid), _ratio(fit, resid)
+
+
 def oracle_case(d: str) -> dict:
     """The oracle figures of one kept case directory ``d`` (module doc); errors in um."""
     from ..foreign.cases import draw_case, write_case
     from ..ident import refined
     from ..ident.base import fit_base
+    from ..ident.terms import UnmodeledResonance
     from ..io.recording import load_recording
     name = os.path.basename(os.path.normpath(d))
     seed, index, effect = int(name[1:4]), int(name[5:8]), name[9:]
@@ -99,7 +118,8 @@ def oracle_case(d: str) -> dict:
     hit = [e for e in diag["effects"] if e["name"] == effect and e.get("significant")]
     heldout = (hit[0]["improvement"]["nrmse_after"] / hit[0]["improvement"]["nrmse_before"]) if hit else None
     noise = case.stage.sensor.noise_um
-    R, T, F, A, rows, check = [], [], [], [], [], []
+    R, T, F, A, E, C, rows, check = [], [], [], [], [], [], [], []
+    mode = case.info.get("resonance") if effect == "unmodeled_resonance" else None
     for spec, path, ro in zip(case.reveal, sorted(glob.glob(os.path.join(d, "rev*.csv"))), rev_off):
         rec = load_recording(path)
         m = rec.t >= SETTLE_S
@@ -114,18 +134,26 @@ def oracle_case(d: str) -> dict:
                      "base_level_um": float(r.mean()), "truth_um": float(np.sqrt(np.mean(t ** 2))),
                      "refined_um": float(np.sqrt(np.mean(f ** 2))), "refined_level_um": float(f.mean()),
                      "effect_um": float(np.std(e)), "acting": float(a.mean())})
-        R.append(r), T.append(t), F.append(f), A.append(a)
+        R.append(r), T.append(t), F.append(f), A.append(a), E.append(e)
+        if mode:
+            w = refined.simulate_parts(base, rec.t, rec.u, rec.u2)["w"]
+            C.append(UnmodeledResonance.basis(w, mode["f_hz"], mode["zeta"], rec.dt)[m])
     if max(check) > 1.2:
         raise ValueError(f"{name}: the drawn case does not reproduce the kept recordings (noise x{max(check):.2f})")
     act = np.concatenate(A)
-    Rc, Tc, Fc = (np.concatenate(x) for x in (R, T, F))
+    Rc, Tc, Fc, Ec = (np.concatenate(x) for x in (R, T, F, E))
     out = {"case": name, "law": case.stage.law.name, "heldout": heldout, "truth": _ratio(Tc, Rc),
            "refined": _ratio(Fc, Rc), "acting": float(act.mean()),
            "truth_acting": _ratio(Tc[act], Rc[act]) if act.any() else None,
            "refined_acting": _ratio(Fc[act], Rc[act]) if act.any() else None,
            "truth_beyond_level": _ratio(_less_level(T), _less_level(R)),
            "refined_beyond_level": _ratio(_less_level(F), _less_level(R)),
+           "kept": _ratio(Rc - Ec, Rc), "kept_acting": _ratio((Rc - Ec)[act], Rc[act]) if act.any() else None,
            "noise_um": noise, "effect": case.info.get({"creep": "creep", "cross_coupling": "coupling"}.get(effect, "modes")), "rows": rows}
+    if mode:
+        b, a = (np.asarray(base["dynamics"][k], float) for k in ("b", "a"))
+        gain = mode["residue"] * b.sum() / a.sum()   # the residue of the static gain, in G's units
+        out["branch_fixed"], out["branch_fit"] = branch_ratios(Rc, np.concatenate(C), gain)
     return out
 
 
@@ -139,6 +167,10 @@ def main(argv=None) -> int:
               f"{f(c['refined'])}; acting ({c['acting']:.2f}) {f(c['truth_acting'])}/{f(c['refined_acting'])}; "
               f"beyond a level per recording {f(c['truth_beyond_level'])}/{f(c['refined_beyond_level'])} "
               f"({time.time() - t0:.0f} s)", flush=True)
+        print(f"    kept base + exact effect {f(c['kept'])} (acting {f(c['kept_acting'])})"
+              + (f"; kept base + the true branch r (M(w) - w): {f(c['branch_fixed'])}, "
+                 f"its gains fitted {f(c['branch_fit'])}"
+                 if "branch_fit" in c else ""), flush=True)
         for r in c["rows"]:
             print(f"    {r['recording']:40s} base {1000 * r['base_um']:5.0f} nm (level {1000 * r['base_level_um']:+5.0f}), "
                   f"truth {1000 * r['truth_um']:5.0f}, refined {1000 * r['refined_um']:5.0f} (level "
