@@ -779,13 +779,12 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
                 + ", ".join(f"{b} {np.sqrt(max(x['improvement_um2'], 0)):.4f} um against "
                             f"{np.sqrt(x['misfit_um2']):.4f} um" for b, x in bands.items()) + ")")
     if (term.same_on_every_recording and not significant and not refusal and (veto is None or credited_only)
-            and (ctxs[0] is ctxs[1] or beside_drive)):
+            and ctxs[0] is ctxs[1]):
         # round 19: a static map of y, refused beside the base's history-dependent misfit: judged on what every
         # branch shares at equal y (static_map.py), where that misfit averages out and the map does not
         # credited as the whole residual is: its gain there less the base's whole misfit energy per sample on
-        # held-out calibration histories (an upper bound of what that misfit leaves in the common part).
-        # Round 25: also after a drive-side term, whose leftover (a lag ~ d du/dt) changes sign with the direction
-        bc = _branch_common_folds(ctxs, term, es, fold_all, best_st)
+        # held-out calibration histories (an upper bound of what that misfit leaves in the common part)
+        bc = _branch_common(ctxs[0], term, es[0], fold_all, best_st[0])
         if bc is not None and dbic < 0 and _common_passes(bc, within, p_max):
             whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
             fold_ratios, p, cr = list(bc["fold_ratios"]), bc["p"], bc["credited_ratio"]
@@ -891,39 +890,6 @@ def _common_passes(bc, within, p_max) -> bool:
     common part."""
     return bool(within(max(bc["fold_ratios"])) and bc["p"] < p_max and within(bc["credited_ratio"])
                 and bc["per_recording"] and max(bc["per_recording"].values()) < 1.0)
-
-
-def _branch_common_folds(ctxs, term, es, fold_all, settings):
-    """:func:`_branch_common` in any round: the first round's one model for both folds, or, after a term, fold f's
-    figures from fold f's model (``ctxs[f]``, its residual ``es[f]``, its setting ``settings[f]``): the map fitted
-    on fold f's common part of that model's residual predicts fold 1 - f's, as :func:`_evaluate` scores it.
-
-    Round 25: after a drive-side term (delay, amplifier bandwidth, slew limit) what that term leaves is of the
-    drive's rate: a lag of the model behind the stage, ``~ d du/dt``, of opposite sign on the rising and falling
-    branches at equal y, so it averages out of the common part while a map of the reading passes it unchanged
-    (two-effect s121-003, s122-003: the curve refused in round 2 by the pooled size gate beside the delay's leftover
-    on the fast recordings, "Round 23: sensor curve"). Combined conservatively: the larger p, the larger credited
-    ratio, per recording the larger ratio of the two models.
-
-    Returns
-    -------
-    dict or None
-        As :func:`_branch_common` (``fold_ratios``, ``p``, ``coef``, ``per_recording``, ``credited_ratio``,
-        ``before_um``, ``after_um``, ``n_bins``); None when either fold's test cannot be computed.
-    """
-    if ctxs[0] is ctxs[1]:
-        return _branch_common(ctxs[0], term, es[0], fold_all, settings[0])
-    bcs = [_branch_common(ctxs[f], term, es[f], fold_all, settings[f]) for f in (0, 1)]
-    if any(b is None for b in bcs):
-        return None
-    per = {n: max(r, bcs[1]["per_recording"][n]) for n, r in bcs[0]["per_recording"].items()
-           if n in bcs[1]["per_recording"]}
-    return {"fold_ratios": [bcs[0]["fold_ratios"][0], bcs[1]["fold_ratios"][1]],
-            "p": max(b["p"] for b in bcs), "coef": [bcs[0]["coef"][0], bcs[1]["coef"][1]],
-            "n_bins": min(b["n_bins"] for b in bcs), "per_recording": per,
-            "credited_ratio": max(b["credited_ratio"] for b in bcs),
-            "before_um": float(np.sqrt(np.mean([b["before_um"] ** 2 for b in bcs]))),
-            "after_um": float(np.sqrt(np.mean([b["after_um"] ** 2 for b in bcs])))}
 
 
 def _branch_common(ctx, term, e, fold_all, setting):
@@ -1456,10 +1422,8 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
         if c.term.same_on_every_recording and fctx[0] is fctx[1] and _exact_per_recording(c, ex, fctx[0].names,
                                                                                           log):
             return c
-        # round 25: after a term, only a curve that passed its linearized gates on the branch-common part (offered
-        # after a drive-side term, _evaluate) is sized there
-        if (c.term.same_on_every_recording and (fctx[0] is fctx[1] or "branch_common" in (c.whole or {}))
-                and _exact_on_common(c, fctx, fold_all, recs, span, log)):
+        if c.term.same_on_every_recording and fctx[0] is fctx[1] and _exact_on_common(c, fctx, fold_all, recs,
+                                                                                       span, log):
             return c
     return None
 
