@@ -162,3 +162,41 @@ def test_after_a_first_term_a_small_coupling_is_named_by_its_motion_and_a_null_i
             assert later.significant and later.below_gates, (later.fold_ratios, later.credited, later.p)
         S._coupling_motion([later], [ctx, ctx], [e, e], fold, block, 200000, lambda *a: None)
         assert (later.significant and later.veto is None) is kept, (later.fold_ratios, later.p, later.veto)
+
+
+def test_later_round_coupling_not_significant_on_the_whole_residual_is_judged_on_its_motion():
+    """Round 25, select._coupling_motion with ``later``: after a first term, a coupling candidate that lowered each
+    fold (credited below 1) but failed the whole residual's block test is made significant when its motion test
+    holds at the round's level ``p_max``; with no coupling (the other axis swept in one recording) it stays not
+    significant; in the first round, or when a fold got worse, the motion test is not asked."""
+    from piezoctl.diagnose.select import Candidate, _coupling_motion
+
+    def cand(fold_ratios=(0.98, 0.97)):
+        return Candidate(term=TERMS["cross_coupling"], ratio=0.975, fold_ratios=list(fold_ratios),
+                         nrmse_before=0.01, nrmse_after=0.00975, t=1.5, p=6e-2, n_active=13, p_max=1e-3, dbic=11.0,
+                         n_eff=100.0, significant=False, setting=[None, None], coef=[None, None], credited=0.99,
+                         ratio_max=1.0, selection_round=2)
+
+    cases = (([_sine, _sine, _held], lambda s: 0.03 * (s.u2 - U2_HOLD), True),
+             ([_held, _sine, _held], lambda s: np.zeros(s.t.size), False))
+    for u2s, effect, coupled in cases:
+        rng = np.random.default_rng(7)
+        ctx = _ctx(rng, u2s)
+        _, e, fold = _run(ctx, effect, rng)
+        block = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+        logged = []
+        c = cand()
+        _coupling_motion([c], [ctx, ctx], [e, e], fold, block, 200000, logged.append, later=True)
+        assert c.significant is coupled and c.veto is None, (c.significant, logged)
+        assert any("on its motion" in x for x in logged), logged
+        if coupled:
+            assert c.signature_check["passed"] and c.signature_check["motion"]["p"] < c.p_max
+            assert "not significant" in c.discrimination
+        else:
+            assert c.signature_check is None
+        first = cand()   # the first round: no motion test, nothing changes
+        _coupling_motion([first], [ctx, ctx], [e, e], fold, block, 200000, logged.append, later=False)
+        worse = cand((0.98, 1.01))   # a fold got worse: not offered to the motion test
+        _coupling_motion([worse], [ctx, ctx], [e, e], fold, block, 200000, logged.append, later=True)
+        for x in (first, worse):
+            assert not x.significant and x.signature_check is None and x.veto is None
