@@ -108,6 +108,9 @@ class Term:
     only_beyond_calibrated_range = False  # refused where the recordings stay in the calibrated drive range; two such
     #                                       terms are told apart only by a named effect's size (round 21,
     #                                       diagnose.discriminate.separate)
+    sized_inside_calibration = False  # round 25: a map of the reading; where the recordings leave the calibrated
+    #                                    range it must pass its size gate inside it too (diagnose.select.
+    #                                    inside_calibrated_veto): beyond the edge it is the base's continuation's
     ratio_beyond_level = False  # round 22: its exact held-out ratio is also reported beyond each recording's level
     #                             (diagnose.select.beyond_level_sse): for a term that is not itself a level, whose
     #                             recordings hold the drive while it acts (the base's level there is the hysteresis
@@ -1222,6 +1225,7 @@ class SensorNonlinearity(Term):
     name = "sensor_nonlinearity"
     intercept = True
     same_on_every_recording = True
+    sized_inside_calibration = True
     signature = "static function of the measured displacement"
 
     @staticmethod
