@@ -61,3 +61,12 @@ def test_recordings_inside_the_range_are_not_read():
 
 def test_only_the_sensor_curve_is_sized_inside():
     assert [n for n, t in TERMS.items() if t.sized_inside_calibration] == ["sensor_nonlinearity"]
+
+
+def test_the_clip_gain_is_not_negative():
+    # round 25: a rail takes displacement away; its linearized gain is bounded at zero (the other terms' bounds as
+    # they were: the asymmetry's polynomial and the curve free)
+    ctx = types.SimpleNamespace()
+    assert TERMS["saturation"].lower(ctx) == [0.0]
+    assert TERMS["asymmetric_hysteresis"].lower(ctx) is None
+    assert TERMS["sensor_nonlinearity"].lower(ctx) is None

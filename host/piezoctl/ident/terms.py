@@ -460,6 +460,15 @@ class Saturation(Term):
     STEP = 0.025   # the grid step, fraction of the drive span
     only_beyond_calibrated_range = True   # a rail inside the range clipped the calibration too (refuses)
 
+    def own_lower(self, ctx):
+        """Round 25: the clip's gain is not negative. A rail takes displacement away beyond its threshold (the
+        column ``G[H(clip(u)) - H(u)]`` at gain 1); at a negative gain the column adds displacement there, which is
+        an asymmetric loop's extra beyond a knee, not a rail (held-out s133-059, an asymmetry: the clip alone at a
+        free gain lowered the held-out error to 0.44/0.47 and was reported as its inseparable alternative; bounded,
+        it is no alternative). The refined model applies the clip exactly, at gain 1, so the exact check never
+        accepted a negative one; the linearized test and the pair tests did fit it."""
+        return [0.0]
+
     def refuses(self, ctx):
         if beyond_calibrated_sides(ctx, self.STEP):
             return None
