@@ -647,6 +647,54 @@ def beyond_calibrated_mask(ctx) -> np.ndarray:
     return np.concatenate(out)
 
 
+def inside_calibrated_veto(ctx, e_before, correction, fold, within) -> str | None:
+    """Round 25: why a map of the reading (``Term.sized_inside_calibration``: the sensor's curve) is not credited
+    where the recordings leave the calibrated drive range, or None.
+
+    A sensor's curve is a static map of the displacement read, the same on every recording and inside the
+    calibrated range as beyond it. Beyond the calibrated edge the base goes on as a straight line, and a missing
+    curvature there is also what a term of the drive beyond the edge takes (an asymmetric loop past a knee, a
+    rail): the data cannot tell them apart there ("Known limits"). Inside the range the two differ: an asymmetry
+    or a rail beyond the edge leaves the in-range samples as the calibration left them, a curve that changed since
+    the calibration bends them too. So where the recordings go beyond the edge (on a side, by more than the knee
+    grid's step: ``beyond_calibrated_sides``, the asymmetry's and saturation's own condition), the curve must pass
+    its size gate on the samples inside the range as well (held-out s133-013, an asymmetry past a knee 3.4 V
+    beyond the edge on a Bouc-Wen stage, was named ``sensor_nonlinearity``).
+
+    Parameters
+    ----------
+    ctx : the fold-0 context (its signals, valid masks and calibrated range).
+    e_before, correction : ndarray
+        The nested residual before the term and its held-out predicted correction [um], used samples.
+    fold : ndarray of int
+        Fold of each used sample.
+    within : callable
+        The size gate on one fold ratio (``_evaluate``'s).
+
+    Returns
+    -------
+    str or None
+        The veto's reason, with the in-range fold ratios; None where the recordings stay inside the range or the
+        curve passes there.
+    """
+    from ..ident.terms import beyond_calibrated_sides
+    if not beyond_calibrated_sides(ctx, INSIDE_STEP):
+        return None
+    inside = ~beyond_calibrated_mask(ctx)
+    fr, _ = ratios_where(e_before, correction, fold, inside, None) if np.any(inside) else (None, None)
+    if fr is not None and all(within(x) for x in fr):
+        return None
+    shown = "no sample" if fr is None else "fold ratios " + "/".join(f"{x:.2f}" for x in fr)
+    return (f"its held-out improvement lies beyond the calibrated drive range: on the samples inside it ({shown}) "
+            f"it does not pass the size gate, and a sensor's curve reads the same displacement there; beyond the "
+            f"edge a missing curvature is the base's straight continuation or a term of the drive there "
+            f"(asymmetric hysteresis, saturation)")
+
+
+INSIDE_STEP = 0.025   # [fraction of the drive span] beyond the calibrated edge: the asymmetry's and saturation's grid
+#                       step (their ``STEP``), the same reach that lets them be offered
+
+
 def residual(ctx):
     return np.concatenate([(s.y - s.yb)[v] for s, v in zip(ctx.signals, ctx.valid)])
 
@@ -791,6 +839,10 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
             fold_ratios, p, cr = list(bc["fold_ratios"]), bc["p"], bc["credited_ratio"]
             significant, veto, credited_only = True, None, False
+    if significant and term.sized_inside_calibration:   # round 25: a map of the reading shows inside the range
+        why = inside_calibrated_veto(ctxs[0], rb_res, pred_after[used], fold_all[used], within)
+        if why:
+            significant, veto, credited_only = False, why, False
     for c in ctxs:   # every setting's stacked regressors (about 1M rows each at full length): only this
         c.design_cache.clear()   # evaluation uses them; kept, they held 1.9 GB at the peak (docs/diagnose-speed.md)
     from .signature import HELDOUT_CHECKED

@@ -108,6 +108,9 @@ class Term:
     only_beyond_calibrated_range = False  # refused where the recordings stay in the calibrated drive range; two such
     #                                       terms are told apart only by a named effect's size (round 21,
     #                                       diagnose.discriminate.separate)
+    sized_inside_calibration = False  # round 25: a map of the reading; where the recordings leave the calibrated
+    #                                    range it must pass its size gate inside it too (diagnose.select.
+    #                                    inside_calibrated_veto): beyond the edge it is the base's continuation's
     ratio_beyond_level = False  # round 22: its exact held-out ratio is also reported beyond each recording's level
     #                             (diagnose.select.beyond_level_sse): for a term that is not itself a level, whose
     #                             recordings hold the drive while it acts (the base's level there is the hysteresis
@@ -456,6 +459,15 @@ class Saturation(Term):
     COARSE = tuple(0.025 * i for i in range(15))   # threshold below the largest drive, fraction of the span
     STEP = 0.025   # the grid step, fraction of the drive span
     only_beyond_calibrated_range = True   # a rail inside the range clipped the calibration too (refuses)
+
+    def own_lower(self, ctx):
+        """Round 25: the clip's gain is not negative. A rail takes displacement away beyond its threshold (the
+        column ``G[H(clip(u)) - H(u)]`` at gain 1); at a negative gain the column adds displacement there, which is
+        an asymmetric loop's extra beyond a knee, not a rail (held-out s133-059, an asymmetry: the clip alone at a
+        free gain lowered the held-out error to 0.44/0.47 and was reported as its inseparable alternative; bounded,
+        it is no alternative). The refined model applies the clip exactly, at gain 1, so the exact check never
+        accepted a negative one; the linearized test and the pair tests did fit it."""
+        return [0.0]
 
     def refuses(self, ctx):
         if beyond_calibrated_sides(ctx, self.STEP):
@@ -1222,6 +1234,7 @@ class SensorNonlinearity(Term):
     name = "sensor_nonlinearity"
     intercept = True
     same_on_every_recording = True
+    sized_inside_calibration = True
     signature = "static function of the measured displacement"
 
     @staticmethod
