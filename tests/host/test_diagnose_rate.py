@@ -8,7 +8,7 @@ import pytest
 from piezoctl.diagnose import select as S
 from piezoctl.diagnose import significance as sg
 from piezoctl.diagnose.run import locate
-from piezoctl.dsp import filt
+from piezoctl.dsp import drive_rate, filt
 from piezoctl.ident import refined
 from piezoctl.ident.terms import TERMS
 from piezoctl.io.recording import Recording
@@ -283,3 +283,60 @@ def test_a_loop_of_its_own_size_in_each_recording_is_not_credited_to_the_rate():
     drives = [75 + 55 * np.sin(2 * np.pi * np.cumsum(f) / FS), tri[2]]
     _, c, _ = evaluate(drives, [dict(base, terms={"rate_dependent_hysteresis": law})] * 2)
     assert c.significant and max(c.fold_ratios) < 0.5
+
+
+def test_a_narrowing_is_zero_at_the_calibrations_rates_and_moves_every_threshold_alike():
+    """Round 24: the narrowing's threshold shift is zero wherever the drive is no faster than the calibration's
+    fastest rate (the base holds the loop there), and beyond it every play's threshold moves in by the same amount
+    whatever its size, clipped at 0."""
+    hp = _plane(np.random.default_rng(8))
+    dt = 1 / FS
+    term = TERMS["rate_dependent_hysteresis"]
+    t = np.arange(int(2 * FS)) / FS
+    slow = 0.8 * np.sin(2 * np.pi * 0.5 * t)              # up to 2.5 FS/s
+    floor = float(np.max(drive_rate(slow, dt)))
+    assert np.all(term.narrowing_shift(slow, dt, 10.0, 0.05, floor) == 0.0)
+    assert np.all(term.narrowed(hp, slow, dt, 10.0, 0.05, floor) == 0.0)
+    fast = 0.8 * np.sin(2 * np.pi * 20 * t)               # up to 100 FS/s
+    sh = term.narrowing_shift(fast, dt, 10.0, 0.05, floor)
+    assert 0.03 < sh.max() < 0.05
+    want = plane_width_change(hp, fast, np.ones(t.size), np.full(t.size, 0.12))
+    r = np.asarray(hp["r"])
+    smaller = dict(hp, r=[float(x) for x in np.where(r > 0, np.maximum(r - 0.12, 0.0), 0.0)])
+    from piezoctl.models.hysteresis import hysteresis_output
+    got = hysteresis_output(smaller, fast) - hysteresis_output(hp, fast)
+    assert np.max(np.abs(want)) > 0.05 and np.allclose(want, got, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("law", ["narrow", "none"])
+def test_a_narrowing_loop_is_found_and_a_rate_independent_stage_is_not(law):
+    """Round 24: a stage whose plays' thresholds move in with the rate, the same amount for each (0.1 x r / (r +
+    10 FS/s) from rest, written out here, not through the term), recorded with sines at three rates (the slow
+    triangle is its calibration) is found by the narrowing settings; the widening settings alone leave it (the
+    widening's gain sits at its bound 0); a rate-independent stage is not credited."""
+    rng = np.random.default_rng(9)
+    base, t, drives = _stage(rng)
+    hp = base["hysteresis"]
+    dyn = base["dynamics"]
+    term = TERMS["rate_dependent_hysteresis"]
+    recs = []
+    for i, u in enumerate(drives):
+        v = (u - 75.0) / 75.0
+        r = drive_rate(v, 1 / FS)
+        shift = 0.1 * r / (r + 10.0) if law == "narrow" else np.zeros(v.size)
+        extra = plane_width_change(hp, v, np.ones(v.size), shift)
+        y = refined.simulate(base, t, u) + filt(dyn["b"], dyn["a"], extra) + rng.normal(0, 0.005, t.size)
+        recs.append(Recording(t=t, u=u, y=y, path=f"r{i}.csv"))
+    ctx, _, _ = locate(base, recs[3:], recs, [r.path for r in recs], 0.5, 0.5)
+    fold_all = np.concatenate([f[v] for f, v in zip(ctx.fold, ctx.valid)])
+    block_all = np.concatenate([b[v] for b, v in zip(ctx.block, ctx.valid)])
+    e = S.residual(ctx)
+    c = S._evaluate([ctx, ctx], term, [e, e], fold_all, block_all, 10 ** 6, sg.ALPHA / 12)
+    if law == "narrow":
+        assert np.sqrt(np.mean(e ** 2)) > 0.05               # far above the noise (0.005 um)
+        assert c.significant and max(c.fold_ratios) < 0.5
+        assert all(st[1] < 0 for st in c.setting)
+        doc = term.model_params(ctx, c.setting[0], c.coef[0])
+        assert doc["width_k"] < 0 and doc["rate_floor_fs_per_s"] > 0
+    else:
+        assert not c.significant
