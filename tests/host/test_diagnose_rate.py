@@ -201,8 +201,8 @@ def test_the_widening_bound():
     ctx = SimpleNamespace(signals=[SimpleNamespace(v=v, dt=1 / FS)], valid=[t > 0.1],
                           base={"hysteresis": _plane(np.random.default_rng(0))})
     term = TERMS["rate_dependent_hysteresis"]
-    lead = [5.0] * term.n_nuisance(ctx)    # the constant widening's gains (round 16) do not count
-    assert len(lead) == len(term.CONSTANT_K)
+    lead = [5.0] * term.n_nuisance(ctx)    # the constant widening's and shift's gains (rounds 16, 24) do not count
+    assert len(lead) == len(term.CONSTANT_K) + len(term.CONSTANT_D)
     assert term.implausible(ctx, (3.0, 1.0), lead + [1.8, 0.1]) is None
     assert term.implausible(ctx, (3000.0, 1.0), lead + [100.0, 0.1]) is None    # 100 x 50 / 3050 = 1.6
     assert "wide" in term.implausible(ctx, (30.0, 1.0), lead + [273.0, 0.0])     # two-effect s113-001's gain

@@ -695,7 +695,13 @@ class RateDependentHysteresis(Term):
     # switch a ramp's share earlier on both sides, the same amount for every kernel whatever its size): settings
     # (ref, -d), every play's threshold less d x c [half-span of the drive], c measured from the calibration's
     # fastest rate (zero where the base was fitted); the free gain >= 0 scales the change
-    NARROW_D = (0.05,)
+    NARROW_D = (0.05, 0.1)
+    # round 24: the narrowing's rate-independent counterpart, a nuisance beside the constant widening (free signs):
+    # every play's threshold less d at every rate. A KP stage's base misfits its loop in this shape on every
+    # recording (s131-020, least squares on each recording alone: the narrowing column at a low reference, c
+    # nearly constant, leaves 0.42 to 0.56 of the slow triangles' residual as of the fast sines'); without it the
+    # narrowing took that static misfit (round 22's null s121-023 at 0.76/0.79)
+    CONSTANT_D = (0.05, 0.1)
 
     @staticmethod
     def width(v, dt, ref, k, cutoff=RATE_CUTOFF_HZ) -> np.ndarray:
@@ -763,6 +769,15 @@ class RateDependentHysteresis(Term):
         return np.column_stack([change(hp, v, np.full(v.size, 1.0 + float(k))) for k in ks]) \
             if len(ks) else np.zeros((v.size, 0))
 
+    def constant_shift(self, hp, v, ds=None, cached=False) -> np.ndarray:
+        """(T, len(ds)) [um]: H with every play's threshold less d (at least 0) minus H, for each d (default
+        ``CONSTANT_D``) [half-span of the drive]: the rate-independent part of the narrowing law (round 24)."""
+        ds = self.CONSTANT_D if ds is None else ds
+        v = np.asarray(v, float)
+        change = plane_width_change_cached if cached else plane_width_change
+        return np.column_stack([change(hp, v, np.ones(v.size), np.full(v.size, float(d))) for d in ds]) \
+            if len(ds) else np.zeros((v.size, 0))
+
     def _constant_columns(self, ctx, s) -> np.ndarray:
         """``G[constant_widening]`` of signal ``s`` on ``ctx.base``: the same for every setting, so kept in
         ``ctx.refit_cache`` with the objects it was computed from (a hit needs ``s`` and ``ctx.base`` by
@@ -771,13 +786,15 @@ class RateDependentHysteresis(Term):
         hit = ctx.refit_cache.get(key)
         if hit is not None and hit[0] is s and hit[1] is ctx.base:
             return hit[2]
-        g = G(ctx.base, self.constant_widening(ctx.base["hysteresis"], s.v, cached=True))
+        hp = ctx.base["hysteresis"]
+        g = G(ctx.base, np.column_stack([self.constant_widening(hp, s.v, cached=True),
+                                         self.constant_shift(hp, s.v, cached=True)]))
         g.setflags(write=False)
         ctx.refit_cache[key] = (s, ctx.base, g)
         return g
 
     def n_nuisance(self, ctx):
-        return len(self.CONSTANT_K) if self.has_plays(ctx) else 0
+        return len(self.CONSTANT_K) + len(self.CONSTANT_D) if self.has_plays(ctx) else 0
 
     def test_nuisance(self, ctx):
         """(n_settled, m x (n_rec - 1)) or None: the hysteresis groups (``hysteresis_groups``: the reversible curve,
@@ -888,9 +905,12 @@ class RateDependentHysteresis(Term):
             return {"gain": float(coef[0]), "ref_fs_per_s": float(setting), "rate_cutoff_hz": RATE_CUTOFF_HZ}
         ref, k = setting
         n = self.n_nuisance(ctx)
+        nk = len(self.CONSTANT_K)
         out = {"gain": float(coef[n]), "ref_fs_per_s": float(ref), "width_k": float(k),
-               "rate_cutoff_hz": RATE_CUTOFF_HZ, "constant_k": [float(x) for x in self.CONSTANT_K[:n]],
-               "constant_gain": [float(c) for c in coef[:n]], "widen_bw": True}
+               "rate_cutoff_hz": RATE_CUTOFF_HZ, "constant_k": [float(x) for x in self.CONSTANT_K],
+               "constant_gain": [float(c) for c in coef[:nk]], "widen_bw": True,
+               "constant_shift": [float(x) for x in self.CONSTANT_D],
+               "constant_shift_gain": [float(c) for c in coef[nk:n]]}
         if k < 0:   # round 24: the narrowing's rate is measured from the calibration's fastest
             out["rate_floor_fs_per_s"] = self.calibration_rate(ctx)
         return out
@@ -902,16 +922,18 @@ class RateDependentHysteresis(Term):
             st.h = st.h + float(p["gain"]) * self.narrowed(hp, st.v, st.dt, float(p["ref_fs_per_s"]),
                                                             -float(p["width_k"]),
                                                             float(p.get("rate_floor_fs_per_s", 0.0)), cutoff)
-            ks = [float(x) for x in p.get("constant_k", [])]
-            if ks:
-                st.h = st.h + self.constant_widening(hp, st.v, ks) @ np.asarray(p["constant_gain"], float)
         elif "width_k" in p:
             hp = st.params["hysteresis"]
             st.h = st.h + float(p["gain"]) * self.widened(hp, st.v, st.dt, float(p["ref_fs_per_s"]),
                                                            float(p["width_k"]), cutoff, bool(p.get("widen_bw")))
+        if "width_k" in p:
+            hp = st.params["hysteresis"]
             ks = [float(x) for x in p.get("constant_k", [])]
             if ks:   # round 16: the base's own constant widening fitted with the term
                 st.h = st.h + self.constant_widening(hp, st.v, ks) @ np.asarray(p["constant_gain"], float)
+            ds = [float(x) for x in p.get("constant_shift", [])]
+            if ds:   # round 24: and its constant shift
+                st.h = st.h + self.constant_shift(hp, st.v, ds) @ np.asarray(p["constant_shift_gain"], float)
         else:
             st.h = st.h + float(p["gain"]) * self.basis(st.v, st.hyst, st.dt, float(p["ref_fs_per_s"]), cutoff)
 
