@@ -108,6 +108,14 @@ class Term:
     only_beyond_calibrated_range = False  # refused where the recordings stay in the calibrated drive range; two such
     #                                       terms are told apart only by a named effect's size (round 21,
     #                                       diagnose.discriminate.separate)
+    setting_nuisance = False  # round 25: the nuisance columns' values depend on the setting's family
+    #                           (``family``): its "before" and its ranking among settings are per family
+
+    @staticmethod
+    def family(setting):
+        """The family of settings whose nuisance columns are alike (one, unless ``setting_nuisance``)."""
+        return ""
+
     ratio_beyond_level = False  # round 22: its exact held-out ratio is also reported beyond each recording's level
     #                             (diagnose.select.beyond_level_sse): for a term that is not itself a level, whose
     #                             recordings hold the drive while it acts (the base's level there is the hysteresis
@@ -894,11 +902,24 @@ class RateDependentHysteresis(Term):
         if not isinstance(setting, tuple):
             return G(ctx.base, self.basis(s.v, s.hyst, s.dt, setting))
         ref, k = setting
+        const = self._constant_columns(ctx, s)
         if k < 0:
             own = self.narrowed(ctx.base["hysteresis"], s.v, s.dt, ref, -k, self.calibration_rate(ctx), cached=True)
-        else:
+        else:   # round 25: the constant shift is the narrowing's counterpart only (zero columns: no coefficient)
             own = self.widened(ctx.base["hysteresis"], s.v, s.dt, ref, k, cached=True)
-        return np.column_stack([self._constant_columns(ctx, s), G(ctx.base, own)])
+            const = const.copy()
+            const[:, len(self.CONSTANT_K):] = 0.0
+        return np.column_stack([const, G(ctx.base, own)])
+
+    # round 25: each family of settings is nested against its own rate-independent counterpart (the widening
+    # against the constant widening, the narrowing against the constant widening and shift): select fits a
+    # setting's "before" with that setting's own nuisance columns and ranks settings by their gain over it
+    setting_nuisance = True
+
+    @staticmethod
+    def family(setting):
+        """The family whose nuisance a setting is nested against: ``"narrow"`` for (ref, -d), else ``"widen"``."""
+        return "narrow" if isinstance(setting, tuple) and float(setting[1]) < 0 else "widen"
 
     def model_params(self, ctx, setting, coef):
         if not isinstance(setting, tuple):
@@ -907,11 +928,12 @@ class RateDependentHysteresis(Term):
         n = self.n_nuisance(ctx)
         nk = len(self.CONSTANT_K)
         out = {"gain": float(coef[n]), "ref_fs_per_s": float(ref), "width_k": float(k),
-               "rate_cutoff_hz": RATE_CUTOFF_HZ, "constant_k": [float(x) for x in self.CONSTANT_K],
-               "constant_gain": [float(c) for c in coef[:nk]], "widen_bw": True,
-               "constant_shift": [float(x) for x in self.CONSTANT_D],
-               "constant_shift_gain": [float(c) for c in coef[nk:n]]}
-        if k < 0:   # round 24: the narrowing's rate is measured from the calibration's fastest
+               "rate_cutoff_hz": RATE_CUTOFF_HZ, "constant_k": [float(x) for x in self.CONSTANT_K[:nk]],
+               "constant_gain": [float(c) for c in coef[:nk]], "widen_bw": True}
+        if k < 0:   # round 24: the narrowing's rate is measured from the calibration's fastest; round 25: its
+            # constant shift (a widening's shift columns are zero: the model as before round 24)
+            out["constant_shift"] = [float(x) for x in self.CONSTANT_D]
+            out["constant_shift_gain"] = [float(c) for c in coef[nk:n]]
             out["rate_floor_fs_per_s"] = self.calibration_rate(ctx)
         return out
 
