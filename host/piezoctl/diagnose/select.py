@@ -436,7 +436,7 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
     ref: dict = {}
 
     def score(st, d, sse):
-        if not term.setting_nuisance:
+        if not getattr(term, "setting_nuisance", False):
             return sse
         f = term.family(st)
         if f not in ref:
@@ -716,7 +716,8 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
             e_before[test] = e[test] - pn
         best = best_setting(ctx, term, e, train, test, rows, N)
-        if term.setting_nuisance and (own or N is not None):   # round 25: "before" with the best's own family
+        if getattr(term, "setting_nuisance", False) and (own or N is not None):   # round 25: "before" with the
+            # chosen setting's own family's nuisance
             own_b = term.nuisance_columns(ctx, best[1].k)
             Xn = best[1].X[:, own_b] if own_b else np.zeros((e.size, 0))
             _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
