@@ -432,6 +432,19 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
     settings = term.settings(ctx)
     lb = term.lower(ctx)
     best = None
+    # round 25: a term whose nuisance columns depend on the setting's family (``Term.setting_nuisance``) ranks its
+    # settings by their training error less that of their own family's nuisance alone: the family with more
+    # nuisance columns would otherwise win on what those columns take
+    ref: dict = {}
+
+    def score(st, d, sse):
+        if not getattr(term, "setting_nuisance", False):
+            return sse
+        f = term.family(st)
+        if f not in ref:
+            own = term.nuisance_columns(ctx, d.k)
+            ref[f] = _fit_predict(d.X[:, own], e, train, test, rows, nuis=nuis, predict=False)[2] if own else 0.0
+        return sse - ref[f]
     level = {}   # refinement level at which each tried setting was proposed (grid: 0)
     new_level = 0
     for _ in range(3):
@@ -443,8 +456,9 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
             # round 22: the test rows are predicted with the best setting only (below), not with every setting
             # (the whole design times the coefficients and the nuisance's test rows: about half of each fit)
             th, _, sse = _fit_predict(d.X, e, train, test, rows, lb, nuis, predict=False)
-            if best is None or sse < best[2]:
-                best = (st, d, sse, th)
+            sc = score(st, d, sse)
+            if best is None or sc < best_score:
+                best, best_score = (st, d, sse, th), sc
         new_level = level[repr(best[0])] + 1
         settings = term.refine(ctx, best[0], new_level) if new_level <= 2 else []
         if not settings:
@@ -752,6 +766,12 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
             e_before[test] = e[test] - pn
         best = best_setting(ctx, term, e, train, test, rows, N)
+        if getattr(term, "setting_nuisance", False) and (own or N is not None):   # round 25: "before" with the
+            # chosen setting's own family's nuisance
+            own_b = term.nuisance_columns(ctx, best[1].k)
+            Xn = best[1].X[:, own_b] if own_b else np.zeros((e.size, 0))
+            _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
+            e_before[test] = e[test] - pn
         best_st.append(best[0])
         pred_after[test] = best[3] - (e[test] - e_before[test])
         why = _unidentified(e[test], e_before[test], pred_after[test])

@@ -62,6 +62,11 @@ Parameters (JSON, physical units where they have one)
       x (1 + constant_k_i) (the constant widening the term was nested
       against, refitted with it); with ``widen_bw`` true a Bouc-Wen column of
       the plane is scaled by the same width factor, ``(w - 1) c_h h(v)``.
+      Round 24: ``width_k`` < 0 is a narrowing: every play's threshold is
+      ``max(r_j + width_k x / (x + ref), 0)`` (moved in by the same amount
+      for every play), ``x = max(r - rate_floor_fs_per_s, 0)`` the rate
+      beyond the calibration's fastest [FS/s], H changes by ``gain`` times
+      the change; a Bouc-Wen column is not changed.
     - ``creep``: ``tau_s`` (list), ``gain`` (list, [1]), ``static_gain`` [1]
       and ``h_ref_um``: ``w + sum g_i (lowpass_tau_i(w) - w) + g_s (w - h_ref)``
       (g_s: the static gain the calibration, faster than the slow terms, did

@@ -111,6 +111,15 @@ class Term:
     sized_inside_calibration = False  # round 25: a map of the reading; where the recordings leave the calibrated
     #                                    range it must pass its size gate inside it too (diagnose.select.
     #                                    inside_calibrated_veto): beyond the edge it is the base's continuation's
+    #                                    error or a term of the drive there
+    setting_nuisance = False  # round 25: the nuisance columns' values depend on the setting's family
+    #                           (``family``): its "before" and its ranking among settings are per family
+
+    @staticmethod
+    def family(setting):
+        """The family of settings whose nuisance columns are alike (one, unless ``setting_nuisance``)."""
+        return ""
+
     ratio_beyond_level = False  # round 22: its exact held-out ratio is also reported beyond each recording's level
     #                             (diagnose.select.beyond_level_sse): for a term that is not itself a level, whose
     #                             recordings hold the drive while it acts (the base's level there is the hysteresis
@@ -703,6 +712,17 @@ class RateDependentHysteresis(Term):
     # 1 and 1 + k, not only at 1.5 and 2 (a stage 1.3x wider everywhere passed at 0.32/0.39 beside round 17's first
     # per-recording nuisance, the constant widening of each recording; that nuisance was not kept)
     CONSTANT_K = (0.25, 0.5, 1.0)
+    # round 24: a loop may also narrow with the rate (a piezo's loop widens or narrows; the foreign KP law's kernels
+    # switch a ramp's share earlier on both sides, the same amount for every kernel whatever its size): settings
+    # (ref, -d), every play's threshold less d x c [half-span of the drive], c measured from the calibration's
+    # fastest rate (zero where the base was fitted); the free gain >= 0 scales the change
+    NARROW_D = (0.05, 0.1)
+    # round 24: the narrowing's rate-independent counterpart, a nuisance beside the constant widening (free signs):
+    # every play's threshold less d at every rate. A KP stage's base misfits its loop in this shape on every
+    # recording (s131-020, least squares on each recording alone: the narrowing column at a low reference, c
+    # nearly constant, leaves 0.42 to 0.56 of the slow triangles' residual as of the fast sines'); without it the
+    # narrowing took that static misfit (round 22's null s121-023 at 0.76/0.79)
+    CONSTANT_D = (0.05, 0.1)
 
     @staticmethod
     def width(v, dt, ref, k, cutoff=RATE_CUTOFF_HZ) -> np.ndarray:
@@ -715,6 +735,36 @@ class RateDependentHysteresis(Term):
         """The law before round 15 (model files without ``width_k``): the hysteretic part scaled by the rate."""
         r = drive_rate(v, dt, cutoff)
         return r / (r + ref) * hyst
+
+    @staticmethod
+    def narrowing_shift(v, dt, ref, d, floor, cutoff=RATE_CUTOFF_HZ) -> np.ndarray:
+        """Round 24: the plays' threshold shift ``d c`` [half-span of the drive] per sample, ``c = x / (x + ref)``
+        with ``x = max(r - floor, 0)``: r the low-passed drive rate [FS/s], ``floor`` the calibration's fastest
+        rate [FS/s] (:meth:`calibration_rate`). The base was fitted on loops run at the calibration's rates, so it
+        holds the loop as it is there; only what a faster drive changes is the term's. Round 22's narrowing used
+        ``c = r / (r + ref)`` from rest and, refined, worsened the slow triangles 2.3 to 6.2 times: they run at
+        the calibration's rates, where that law already narrowed the loop (c 0.2 at its references)."""
+        x = np.maximum(drive_rate(v, dt, cutoff) - float(floor), 0.0)
+        return float(d) * x / (x + float(ref))
+
+    @staticmethod
+    def calibration_rate(ctx) -> float:
+        """The calibration's fastest settled drive rate [FS/s] (low-passed as the term's rate; 0 without
+        calibration recordings): where the base's loop was measured."""
+        hit = ctx.refit_cache.get(("rate: calibration rate",))
+        if hit is not None and hit[0] is ctx.base:
+            return hit[1]
+        mid, half = float(ctx.base["u_mid"]), float(ctx.base["u_half"])
+        r = max((float(np.max(drive_rate((c.u - mid) / half, c.dt)[k0:])) for c, k0 in zip(ctx.cal, ctx.cal_k0)
+                 if len(c.u) > k0), default=0.0)
+        ctx.refit_cache[("rate: calibration rate",)] = (ctx.base, r)
+        return r
+
+    def narrowed(self, hp, v, dt, ref, d, floor, cutoff=RATE_CUTOFF_HZ, cached=False) -> np.ndarray:
+        """H with every play's threshold less :meth:`narrowing_shift` (at least 0) minus H [um]. A Bouc-Wen column
+        (no thresholds) is not changed."""
+        sh = self.narrowing_shift(v, dt, ref, d, floor, cutoff)
+        return (plane_width_change_cached if cached else plane_width_change)(hp, v, np.ones(len(v)), sh)
 
     def widened(self, hp, v, dt, ref, k, cutoff=RATE_CUTOFF_HZ, bw=True, cached=False) -> np.ndarray:
         """H with the widened plays minus H [um] (``plane_width_change``); with ``bw`` (round 16) plus the plane's
@@ -740,6 +790,15 @@ class RateDependentHysteresis(Term):
         return np.column_stack([change(hp, v, np.full(v.size, 1.0 + float(k))) for k in ks]) \
             if len(ks) else np.zeros((v.size, 0))
 
+    def constant_shift(self, hp, v, ds=None, cached=False) -> np.ndarray:
+        """(T, len(ds)) [um]: H with every play's threshold less d (at least 0) minus H, for each d (default
+        ``CONSTANT_D``) [half-span of the drive]: the rate-independent part of the narrowing law (round 24)."""
+        ds = self.CONSTANT_D if ds is None else ds
+        v = np.asarray(v, float)
+        change = plane_width_change_cached if cached else plane_width_change
+        return np.column_stack([change(hp, v, np.ones(v.size), np.full(v.size, float(d))) for d in ds]) \
+            if len(ds) else np.zeros((v.size, 0))
+
     def _constant_columns(self, ctx, s) -> np.ndarray:
         """``G[constant_widening]`` of signal ``s`` on ``ctx.base``: the same for every setting, so kept in
         ``ctx.refit_cache`` with the objects it was computed from (a hit needs ``s`` and ``ctx.base`` by
@@ -748,13 +807,15 @@ class RateDependentHysteresis(Term):
         hit = ctx.refit_cache.get(key)
         if hit is not None and hit[0] is s and hit[1] is ctx.base:
             return hit[2]
-        g = G(ctx.base, self.constant_widening(ctx.base["hysteresis"], s.v, cached=True))
+        hp = ctx.base["hysteresis"]
+        g = G(ctx.base, np.column_stack([self.constant_widening(hp, s.v, cached=True),
+                                         self.constant_shift(hp, s.v, cached=True)]))
         g.setflags(write=False)
         ctx.refit_cache[key] = (s, ctx.base, g)
         return g
 
     def n_nuisance(self, ctx):
-        return len(self.CONSTANT_K) if self.has_plays(ctx) else 0
+        return len(self.CONSTANT_K) + len(self.CONSTANT_D) if self.has_plays(ctx) else 0
 
     def test_nuisance(self, ctx):
         """(n_settled, m x (n_rec - 1)) or None: the hysteresis groups (``hysteresis_groups``: the reversible curve,
@@ -802,7 +863,8 @@ class RateDependentHysteresis(Term):
     def settings(self, ctx):
         if not self.has_plays(ctx):
             return list(self.REFS)
-        return [(ref, k) for k in self.WIDTH_K for ref in self.REFS]
+        return [(ref, k) for k in self.WIDTH_K for ref in self.REFS] + \
+            [(ref, -d) for d in self.NARROW_D for ref in self.REFS]
 
     def refine(self, ctx, setting, level):
         if not isinstance(setting, tuple):
@@ -832,6 +894,15 @@ class RateDependentHysteresis(Term):
         r_max = max((float(np.max(drive_rate(s.v, s.dt)[v])) for s, v in zip(ctx.signals, ctx.valid) if np.any(v)),
                     default=0.0)
         g = float(coef[self.n_nuisance(ctx) if isinstance(setting, tuple) else 0])
+        if float(k) < 0:   # round 24: a narrowing that closes every play at the fastest rate is no narrower loop
+            x = max(r_max - self.calibration_rate(ctx), 0.0)
+            shift = g * -float(k) * x / (x + float(ref))
+            r_top = max((float(r) for r in ctx.base["hysteresis"]["r"]), default=0.0)
+            if shift < r_top:
+                return None
+            return (f"the fit moves every play's threshold in by {shift:.3g} of the drive's half-span at the "
+                    f"recordings' fastest rate, at least the widest play's {r_top:.3g}: the loop would close; the "
+                    f"term's shape is standing in for another effect")
         w = g * float(k) * r_max / (r_max + float(ref))
         if w <= self.MAX_WIDENING:
             return None
@@ -844,27 +915,60 @@ class RateDependentHysteresis(Term):
         if not isinstance(setting, tuple):
             return G(ctx.base, self.basis(s.v, s.hyst, s.dt, setting))
         ref, k = setting
-        return np.column_stack([self._constant_columns(ctx, s),
-                                G(ctx.base, self.widened(ctx.base["hysteresis"], s.v, s.dt, ref, k, cached=True))])
+        const = self._constant_columns(ctx, s)
+        if k < 0:
+            own = self.narrowed(ctx.base["hysteresis"], s.v, s.dt, ref, -k, self.calibration_rate(ctx), cached=True)
+        else:   # round 25: the constant shift is the narrowing's counterpart only (zero columns: no coefficient)
+            own = self.widened(ctx.base["hysteresis"], s.v, s.dt, ref, k, cached=True)
+            const = const.copy()
+            const[:, len(self.CONSTANT_K):] = 0.0
+        return np.column_stack([const, G(ctx.base, own)])
+
+    # round 25: each family of settings is nested against its own rate-independent counterpart (the widening
+    # against the constant widening, the narrowing against the constant widening and shift): select fits a
+    # setting's "before" with that setting's own nuisance columns and ranks settings by their gain over it
+    setting_nuisance = True
+
+    @staticmethod
+    def family(setting):
+        """The family whose nuisance a setting is nested against: ``"narrow"`` for (ref, -d), else ``"widen"``."""
+        return "narrow" if isinstance(setting, tuple) and float(setting[1]) < 0 else "widen"
 
     def model_params(self, ctx, setting, coef):
         if not isinstance(setting, tuple):
             return {"gain": float(coef[0]), "ref_fs_per_s": float(setting), "rate_cutoff_hz": RATE_CUTOFF_HZ}
         ref, k = setting
         n = self.n_nuisance(ctx)
-        return {"gain": float(coef[n]), "ref_fs_per_s": float(ref), "width_k": float(k),
-                "rate_cutoff_hz": RATE_CUTOFF_HZ, "constant_k": [float(x) for x in self.CONSTANT_K[:n]],
-                "constant_gain": [float(c) for c in coef[:n]], "widen_bw": True}
+        nk = len(self.CONSTANT_K)
+        out = {"gain": float(coef[n]), "ref_fs_per_s": float(ref), "width_k": float(k),
+               "rate_cutoff_hz": RATE_CUTOFF_HZ, "constant_k": [float(x) for x in self.CONSTANT_K[:nk]],
+               "constant_gain": [float(c) for c in coef[:nk]], "widen_bw": True}
+        if k < 0:   # round 24: the narrowing's rate is measured from the calibration's fastest; round 25: its
+            # constant shift (a widening's shift columns are zero: the model as before round 24)
+            out["constant_shift"] = [float(x) for x in self.CONSTANT_D]
+            out["constant_shift_gain"] = [float(c) for c in coef[nk:n]]
+            out["rate_floor_fs_per_s"] = self.calibration_rate(ctx)
+        return out
 
     def apply(self, p, st):
         cutoff = float(p.get("rate_cutoff_hz", RATE_CUTOFF_HZ))
-        if "width_k" in p:
+        if "width_k" in p and float(p["width_k"]) < 0:   # round 24: a narrowing
+            hp = st.params["hysteresis"]
+            st.h = st.h + float(p["gain"]) * self.narrowed(hp, st.v, st.dt, float(p["ref_fs_per_s"]),
+                                                            -float(p["width_k"]),
+                                                            float(p.get("rate_floor_fs_per_s", 0.0)), cutoff)
+        elif "width_k" in p:
             hp = st.params["hysteresis"]
             st.h = st.h + float(p["gain"]) * self.widened(hp, st.v, st.dt, float(p["ref_fs_per_s"]),
                                                            float(p["width_k"]), cutoff, bool(p.get("widen_bw")))
+        if "width_k" in p:
+            hp = st.params["hysteresis"]
             ks = [float(x) for x in p.get("constant_k", [])]
             if ks:   # round 16: the base's own constant widening fitted with the term
                 st.h = st.h + self.constant_widening(hp, st.v, ks) @ np.asarray(p["constant_gain"], float)
+            ds = [float(x) for x in p.get("constant_shift", [])]
+            if ds:   # round 24: and its constant shift
+                st.h = st.h + self.constant_shift(hp, st.v, ds) @ np.asarray(p["constant_shift_gain"], float)
         else:
             st.h = st.h + float(p["gain"]) * self.basis(st.v, st.hyst, st.dt, float(p["ref_fs_per_s"]), cutoff)
 
@@ -877,6 +981,14 @@ class RateDependentHysteresis(Term):
         ref, k = setting
         vps = ref * ctx.base["u_half"]
         g = float(coef[self.n_nuisance(ctx)])
+        if k < 0:
+            floor = self.calibration_rate(ctx) * ctx.base["u_half"]
+            return ({"gain": round(g, 4), "ref_v_per_s": round(vps, 1), "width_k": k,
+                     "rate_floor_v_per_s": round(floor, 1)},
+                    f"the hysteresis loop narrows with the drive rate (every play's threshold less {-k:g} x {g:.2f} "
+                    f"c of the drive's half-span, c = x / (x + {vps:.0f} V/s), x the rate beyond the calibration's "
+                    f"fastest {floor:.0f} V/s); the residual grows with |du/dt|, changes sign with the direction and "
+                    f"stays after a fast stroke turns")
         return ({"gain": round(g, 4), "ref_v_per_s": round(vps, 1), "width_k": k},
                 f"the hysteresis loop widens with the drive rate (the plays' thresholds x (1 + {k:g} r / (r + "
                 f"{vps:.0f} V/s)), their change to the output x {g:.2f}); the residual grows with |du/dt|, "

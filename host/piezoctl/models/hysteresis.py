@@ -494,7 +494,7 @@ _WIDTH_CACHE: dict = {}
 _WIDTH_CACHE_MAX_SAMPLES = 16_000_000   # widened-play changes kept: at most about 128 MB of float64
 
 
-def plane_width_change_cached(hp: dict, v, width) -> np.ndarray:
+def plane_width_change_cached(hp: dict, v, width, shift=None) -> np.ndarray:
     """:func:`plane_width_change` (the same floats, a read-only array), kept for a recurring operator, drive and
     width.
 
@@ -508,10 +508,13 @@ def plane_width_change_cached(hp: dict, v, width) -> np.ndarray:
     v = np.ascontiguousarray(v, dtype=float)
     w = np.ascontiguousarray(np.asarray(width, float).reshape(-1))
     key = _output_key(hp, v) + (w.size, hashlib.sha256(w.view(np.uint8)).digest())
+    if shift is not None:   # round 24: the narrowing's shift is part of the key
+        sh = np.ascontiguousarray(np.asarray(shift, float).reshape(-1))
+        key = key + (sh.size, hashlib.sha256(sh.view(np.uint8)).digest())
     hit = _WIDTH_CACHE.get(key)
     if hit is not None:
         return hit
-    out = plane_width_change(hp, v, w)
+    out = plane_width_change(hp, v, w, shift)
     out.setflags(write=False)
     if sum(x.size for x in _WIDTH_CACHE.values()) + out.size <= _WIDTH_CACHE_MAX_SAMPLES:
         _WIDTH_CACHE[key] = out
@@ -719,10 +722,13 @@ def plays_varying(v, R, y0) -> np.ndarray:
     return out
 
 
-def plane_width_change(hp: dict, v, width) -> np.ndarray:
+def plane_width_change(hp: dict, v, width, shift=None) -> np.ndarray:
     """Change [um] of a ``plane`` operator's output when every play's threshold is multiplied by ``width`` (T,)
     [1] at each sample: ``sum_{r_j > 0} F_j(P_{r_j width}(v)) - F_j(P_{r_j}(v))`` (:func:`plays_varying`). The
-    reversible curve (threshold 0) and a Bouc-Wen column are unchanged. Zero for other operator types."""
+    reversible curve (threshold 0) and a Bouc-Wen column are unchanged. Zero for other operator types.
+
+    ``shift`` (T,) [normalized drive], optional (round 24): the thresholds are ``max(r_j width - shift, 0)``, every
+    play's threshold moved by the same amount whatever its size (a loop that narrows with ``shift > 0``)."""
     v = np.ascontiguousarray(v, dtype=float)
     out = np.zeros(v.size)
     if hp.get("type", "pi") != "plane" or v.size == 0:
@@ -734,7 +740,10 @@ def plane_width_change(hp: dict, v, width) -> np.ndarray:
     v_rest = float(hp.get("v_rest", 0.0))
     P0 = play_states(v, r, v_rest)
     w = np.asarray(width, float).reshape(-1)
-    P1 = plays_varying(v, w[:, None] * r[None, hyst], np.full(hyst.size, v_rest))
+    R = w[:, None] * r[None, hyst]
+    if shift is not None:
+        R = np.maximum(R - np.asarray(shift, float).reshape(-1)[:, None], 0.0)
+    P1 = plays_varying(v, R, np.full(hyst.size, v_rest))
     for i, j in enumerate(hyst):
         kn, vals = hp["knots"][j], hp["values"][j]
         out += interp_linear_ext(P1[:, i], kn, vals) - interp_linear_ext(P0[:, j], kn, vals)
