@@ -60,8 +60,9 @@ def flush_subnormal(x: np.ndarray) -> np.ndarray:
     A filter's response to a column that is zero outside a short range (a play's hat function) decays into
     the subnormal range and, for a slow pole, stays there (``a * x`` rounds back to ``x``): products with a
     subnormal operand take the processor's slow path, and a Gram matrix of such columns took 10 to 50 times
-    longer (docs/diagnose-rounds/round-25.md, "Round 25: speed"). A subnormal product changes no sum that holds
-    a normal term, so only the tiniest sums move, by less than 2.2e-308."""
+    longer (docs/diagnose-rounds/round-25.md, "Round 25: speed"). With the other factors of the data's scale
+    (|x| < 1e6) such a product is below 1e-301, and it changes no sum that also holds a term of the data's scale
+    (checked bit for bit on the base fit: tests/host/test_diagnose_speed_round25.py)."""
     x[np.abs(x) < np.finfo(x.dtype).tiny] = 0.0
     return x
 
