@@ -138,9 +138,13 @@ def test_term_regressors_are_the_linearized_simulation():
     y0 = refined.simulate(base, t, u)
     cases = {"thermal_drift": ((15.0, -1.0), [0.0, 0.2, 0.01]),   # (time constant, the drift's sign) "sensor_offset": (None, [0.3]),
              "asymmetric_hysteresis": (None, [0.4, -0.2, 0.0]),
-             "rate_dependent_hysteresis": ((3.0, 1.0), [0.1, -0.05, 0.03, 0.2, 0.0]),   # constant widenings first (k 0.25, 0.5, 1)
+             # constant widenings first (k 0.25, 0.5, 1), then the constant shifts (d 0.05, 0.1; round 25: zero
+             # columns for a widening setting, so their coefficients leave the model unchanged), gain, intercept
+             "rate_dependent_hysteresis": ((3.0, 1.0), [0.1, -0.05, 0.03, 0.7, -0.4, 0.2, 0.0]),
+             "rate_dependent_hysteresis narrowing": ((3.0, -0.05), [0.1, -0.05, 0.03, 0.2, -0.1, 0.5, 0.0]),
              "unmodeled_resonance": ((900.0, 0.02), [0.05, 0.02]), "sensor_nonlinearity": (None, [0.05, 0.02, 0.0])}
-    for name, (setting, coef) in cases.items():
+    for key, (setting, coef) in cases.items():
+        name = key.split()[0]
         term = TERMS[name]
         X = term.regressors(ctx, s, setting)
         par = dict(base, terms={name: {k: v for k, v in term.term(ctx, setting, coef).items() if k[0] != "_"}})
@@ -148,7 +152,8 @@ def test_term_regressors_are_the_linearized_simulation():
             par["hysteresis"] = term.term(ctx, setting, coef)["_hysteresis"]
         d = refined.simulate(par, t, u) - y0
         tol = 1e-9 if name != "sensor_nonlinearity" else 1e-6   # evaluated at the model output vs the measured span
-        assert np.max(np.abs(d - X @ coef)) < tol * max(1.0, np.max(np.abs(d))), name
+        assert np.max(np.abs(d - X @ coef)) < tol * max(1.0, np.max(np.abs(d))), key
+        assert np.max(np.abs(d)) > 1e-3, key   # the term changes the model: the comparison is not 0 = 0
 
 
 def drift_session_setup():

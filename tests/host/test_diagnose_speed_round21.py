@@ -24,12 +24,20 @@ def test_rate_designs_share_the_columns_equal_for_every_setting_and_stack_the_sa
     settings = term.settings(ctx)
     ds = [S._design(ctx, term, st) for st in settings]
     first = ds[0]
-    shared = term.nuisance_columns(ctx, first.k)   # the constant widenings and the intercept
-    assert len(shared) == first.k - 1 and len(settings) > 4
+    nuisance = term.nuisance_columns(ctx, first.k)   # the constant widenings and shifts, and the intercept
+    assert len(nuisance) == first.k - 1 and len(settings) > 4
+    # round 25: a widening's shift columns are zero, a narrowing's are not: a narrowing shares with the first
+    # design (a widening) the constant widenings and the intercept only
+    shifts = list(range(len(term.CONSTANT_K), term.n_nuisance(ctx)))
+    assert shifts and term.family(settings[0]) == "widen"
+    assert {term.family(st) for st in settings} == {"widen", "narrow"}
     for d, st in zip(ds, settings):
         X = d.X
         assert X.flags.c_contiguous and X.shape == (d.n, d.k)
         assert np.array_equal(X.view(np.int64), _stacked(ctx, term, st).view(np.int64))   # the same bits
+        narrow = term.family(st) == "narrow"
+        assert all(np.any(X[:, j] != 0.0) == narrow for j in shifts)
+        shared = [j for j in nuisance if not (narrow and j in shifts)]
         if d is not first:
             assert all(d.col(j).base is first.X for j in shared)   # views of the first design's columns
             own = [j for j in range(d.k) if j not in shared]
