@@ -10,15 +10,9 @@ import types
 import numpy as np
 
 from piezoctl.diagnose import slow_signature as ss
+from test_slow_drift_r23 import FS, _triangle
 
-FS = 2000.0   # [Hz]
 PERIOD = 1.0  # [s]
-
-
-def _triangle(n_cycles, period=PERIOD):
-    t = np.arange(int(n_cycles * period * FS)) / FS
-    ph = (t / period) % 1.0
-    return t, 1.0 - 2.0 * np.abs(ph - 0.5)   # a maximum at every period's start, 0 .. 1
 
 
 def _ctx(recs):
@@ -37,7 +31,7 @@ def _case(seed=0, walk_rise=0.17):
     """A repeated triangle from 70 s and a walk from 90 s on the session clock, a drift of ``RATE`` through both;
     the triangle's misfit repeats per cycle, the walk's misfit rises by ``walk_rise`` um against the drift."""
     rng = np.random.default_rng(seed)
-    t1, u1 = _triangle(16)
+    t1, u1 = _triangle(16, PERIOD)
     drift = lambda t, ts: LEVEL + RATE * (t + ts - 70.0)   # noqa: E731
     y1 = 0.05 * np.sin(2 * np.pi * u1) + drift(t1, 70.0) + 0.003 * rng.standard_normal(t1.size)
     t2 = np.arange(int(14 * FS)) / FS
