@@ -59,3 +59,46 @@ def test_the_rate_candidate_is_the_same_without_the_family_reference(monkeypatch
     assert shared.fold_ratios == first_only.fold_ratios and shared.p == first_only.p
     assert shared.ratio == first_only.ratio and shared.credited == first_only.credited
     assert all(np.array_equal(a, b) for a, b in zip(shared.coef, first_only.coef))
+
+
+def test_lstsq_box_with_a_floor_is_lsq_linear_or_none_when_the_bounded_fit_cannot_be_below_the_floor():
+    from piezoctl.diagnose.solve import lstsq_box
+    rng = np.random.default_rng(5)
+    X = rng.normal(size=(400, 4)) * [1.0, 3.0, 0.1, 10.0]
+    lo, hi = np.array([-np.inf, -np.inf, -np.inf, 0.0]), np.full(4, np.inf)
+    for sign in (1.0, -1.0):   # the last coefficient inside, then outside its bound
+        y = X @ [0.5, -1.0, 2.0, sign * 0.3] + rng.normal(0, 0.1, 400)
+        plain = lstsq_box(X, y, lo, hi)
+        sse = float(np.sum((y - X @ plain) ** 2))
+        same = lstsq_box(X, y, lo, hi, floor=sse * 10)   # the floor above: computed as before
+        assert same is not None and np.array_equal(same, plain)
+        if sign > 0:   # inside: the unbounded fit, lsq_linear's own answer
+            assert np.array_equal(lstsq_box(X, y, lo, hi, floor=0.0), plain)
+        else:          # outside: the unbounded fit's error is a floor of the bounded one's
+            x_unb = np.linalg.lstsq(X, y, rcond=None)[0]
+            sse_unb = float(np.sum((y - X @ x_unb) ** 2))
+            assert sse_unb < sse
+            assert lstsq_box(X, y, lo, hi, floor=sse_unb * 0.999) is None
+            assert np.array_equal(lstsq_box(X, y, lo, hi, floor=sse_unb * 1.001), plain)
+
+
+def test_the_rate_candidate_is_the_same_without_pruning_and_pruning_happens(monkeypatch):
+    from piezoctl.diagnose import solve
+    _, _, run = _rate_evaluation()
+    calls = {"none": 0}
+    box = solve.lstsq_box
+
+    def counted(*a, **k):
+        th = box(*a, **k)
+        calls["none"] += th is None
+        return th
+    monkeypatch.setattr(S, "_lstsq_box", counted)
+    pruned = run()
+    assert calls["none"] > 0   # some settings' bounded fits were not computed
+    monkeypatch.setattr(S, "_PRUNE_MARGIN", np.inf)   # every bounded fit computed (round 25)
+    calls["none"] = 0
+    full = run()
+    assert calls["none"] == 0
+    assert pruned.setting == full.setting and pruned.fold_ratios == full.fold_ratios and pruned.p == full.p
+    assert pruned.ratio == full.ratio and pruned.credited == full.credited
+    assert all(np.array_equal(a, b) for a, b in zip(pruned.coef, full.coef))
