@@ -356,9 +356,9 @@ class _Design:
         return X
 
 
-def _lstsq_bounded(X, y, lb, floor=None):
-    """Least squares with lower bounds ``lb`` (-inf: free) on unit-RMS columns (``floor``: :func:`solve.lstsq_box`)."""
-    return _lstsq_box(X, y, lb, np.inf, floor)
+def _lstsq_bounded(X, y, lb):
+    """Least squares with lower bounds ``lb`` (-inf: free) on unit-RMS columns."""
+    return _lstsq_box(X, y, lb, np.inf)
 
 
 _NUIS_GRAM: dict = {}   # the last nuisance's training products: {"last": (N, e, idx, N'N, N'e[idx])}
@@ -398,7 +398,7 @@ def _predict(X, th, test, nuis=None):
     return nuis[1] @ th[:m] + (X @ th[m:])[test]
 
 
-def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True, above=None):
+def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True):
     """Least squares of e on X over train rows (strided), coefficients >= ``lb`` when given; prediction on
     test rows (None without ``predict``: :func:`best_setting` predicts with its best setting only). ``nuis``: the
     nested test's nuisance as (train rows, test rows) of its columns, prepended (its coefficients first,
@@ -406,12 +406,7 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True, abov
 
     Unbounded fits are solved from their Gram matrix assembled by blocks: the nuisance's own block ``N'N`` is
     shared by all the settings of a term (:func:`_nuis_gram`), and no stacked copy ``[N, X]`` of the training
-    rows is made.
-
-    ``above`` (round 26, bounded fits without bounded nuisance): a training error [as the returned one]; when
-    the fit's unbounded solution is outside the bounds and its error is above it, the bounded fit (at least as
-    large an error) is not computed and ``(None, None, inf)`` is returned (:func:`best_setting`: a setting that
-    cannot be the best)."""
+    rows is made."""
     idx = train_rows(train, rows)
     box = nuis is not None and len(nuis) > 2 and nuis[2] is not None
     y = e[idx]
@@ -426,11 +421,7 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True, abov
         Xtr = Xi if nuis is None else np.hstack([nuis[0], Xi])
         if nuis is not None:
             lb = np.concatenate([np.full(nuis[0].shape[1], -np.inf), np.asarray(lb, float)])
-        # the training error is the residual's squares times len(train) / len(idx) (below)
-        floor = None if above is None else above / (np.sum(train) / max(idx.size, 1))
-        th = _lstsq_bounded(Xtr, y, lb, floor)
-        if th is None:
-            return None, None, np.inf
+        th = _lstsq_bounded(Xtr, y, lb)
         fit = Xtr @ th
     elif nuis is None:
         th = _lstsq_gram(Xi.T @ Xi, Xi.T @ y, idx.size)
@@ -468,11 +459,6 @@ def _keep_designs(ctx, term, settings):
         del ctx.design_cache[key]
 
 
-# round 26: how much larger than the best setting's training error the error of a setting's unbounded fit must be
-# for its bounded fit to be skipped (relative; far above the round-off between the two ways the errors are summed)
-_PRUNE_MARGIN = 1e-5
-
-
 def best_setting(ctx, term, e, train, test, rows, nuis=None):
     """(setting, design, sse on train, prediction on test, coefficients) with the least training error over the
     term's grid, then over its finer settings around the best one (``Term.refine``, twice). With ``nuis``
@@ -485,14 +471,14 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
     # nuisance columns would otherwise win on what those columns take
     ref: dict = {}
 
-    def family_ref(st, d):
+    def score(st, d, sse):
         if not getattr(term, "setting_nuisance", False):
-            return 0.0
+            return sse
         f = term.family(st)
         if f not in ref:
             own = term.nuisance_columns(ctx, d.k)
             ref[f] = _fit_predict(d.take(own), e, train, test, rows, nuis=nuis, predict=False)[2] if own else 0.0
-        return ref[f]
+        return sse - ref[f]
     level = {}   # refinement level at which each tried setting was proposed (grid: 0)
     new_level = 0
     for _ in range(3):
@@ -503,12 +489,8 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
             d = _design(ctx, term, st)
             # round 22: the test rows are predicted with the best setting only (below), not with every setting
             # (the whole design times the coefficients and the nuisance's test rows: about half of each fit)
-            r0 = family_ref(st, d)
-            # round 26: a bounded fit whose unbounded fit is outside the bounds and already no better than the
-            # best so far (by a margin far above round-off: the two errors are summed differently) is not computed
-            above = None if best is None or lb is None else best_score + r0 + _PRUNE_MARGIN * abs(best_score + r0)
-            th, _, sse = _fit_predict(d, e, train, test, rows, lb, nuis, predict=False, above=above)
-            sc = sse - r0
+            th, _, sse = _fit_predict(d, e, train, test, rows, lb, nuis, predict=False)
+            sc = score(st, d, sse)
             if best is None or sc < best_score:
                 best, best_score = (st, d, sse, th), sc
         new_level = level[repr(best[0])] + 1
