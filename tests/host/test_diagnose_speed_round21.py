@@ -1,5 +1,6 @@
 """Round 21 (docs/diagnose-rounds/round-21.md, "Round 21: speed and memory"): a term's designs share the columns that are equal for
-every setting (the rate term's constant widenings and intercept) instead of a copy per setting; the base dynamics'
+every setting (the rate term's constant widenings and intercept; round 26: a narrowing's constant shifts with its
+family's first design) instead of a copy per setting; the base dynamics'
 slow tail and the held samples are computed once per context. Neither changes a result."""
 
 import numpy as np
@@ -31,6 +32,7 @@ def test_rate_designs_share_the_columns_equal_for_every_setting_and_stack_the_sa
     shifts = list(range(len(term.CONSTANT_K), term.n_nuisance(ctx)))
     assert shifts and term.family(settings[0]) == "widen"
     assert {term.family(st) for st in settings} == {"widen", "narrow"}
+    first_narrow = next(d for d, st in zip(ds, settings) if term.family(st) == "narrow")
     for d, st in zip(ds, settings):
         X = d.X
         assert X.flags.c_contiguous and X.shape == (d.n, d.k)
@@ -42,7 +44,13 @@ def test_rate_designs_share_the_columns_equal_for_every_setting_and_stack_the_sa
             assert all(d.col(j).base is first.X for j in shared)   # views of the first design's columns
             own = [j for j in range(d.k) if j not in shared]
             assert all(d.col(j).base is not first.X for j in own)
-            assert d.own_nbytes == len(own) * d.n * 8
+            # round 26: a narrowing after its family's first shares that design's shift columns (the same arrays)
+            later = narrow and d is not first_narrow
+            if later:
+                assert all(d.col(j) is first_narrow.col(j) for j in shifts)
+            assert d.own_nbytes == (len(own) - (len(shifts) if later else 0)) * d.n * 8
+        if narrow and d is first_narrow:
+            assert all(d.col(j).base is None for j in shifts)   # its own copies
     assert first.own_nbytes == first.k * first.n * 8 and first.X is first.X   # kept stacked: shares nothing
 
 

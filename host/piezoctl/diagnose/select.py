@@ -283,6 +283,10 @@ class _Design:
     keeps its stacked ``X`` as before (stacking a dozen columns of 1 M rows on every fit costs 0.1 s)."""
 
     def __init__(self, ctx, term, setting, ref=None):
+        # ``ref``: a design or a list of them (round 26: the term's first design and its family's first, for a
+        # term whose nuisance columns depend on the setting's family); each column is shared with the first of
+        # them that holds it bit for bit
+        refs = [r for r in (ref if isinstance(ref, (list, tuple)) else [ref]) if r is not None]
         self.setting = setting
         # each recording's settled rows copied once, straight into the stacked design (a masked copy per
         # recording and then np.vstack copied every design of about 1 M rows twice)
@@ -296,17 +300,20 @@ class _Design:
             np.compress(v, R, axis=0, out=X[pos:pos + m])
             pos += m
         self.n, self.k = X.shape
-        same = []
-        if ref is not None and ref.k == self.k:
+        same = {}   # column -> the reference design's same column
+        for r in refs:
+            if r.k != self.k:
+                continue
             # equal to the bit (the int64 view: -0.0 and 0.0 differ, a NaN equals itself)
             # (round 22: every 1000th row first; a column differing there is not compared whole: 2.1 s of
             # held-out s125-023's 75 s were these comparisons, mostly of columns that differ from the first row)
-            same = [j for j in range(self.k)
-                    if np.array_equal(X[::1000, j].view(np.int64), ref.col(j)[::1000].view(np.int64))
-                    and np.array_equal(X[:, j].view(np.int64), ref.col(j).view(np.int64))]
+            for j in range(self.k):
+                if j not in same and np.array_equal(X[::1000, j].view(np.int64), r.col(j)[::1000].view(np.int64)) \
+                        and np.array_equal(X[:, j].view(np.int64), r.col(j).view(np.int64)):
+                    same[j] = r.col(j)
         if same:
             self._X = None
-            self.cols = [ref.col(j) if j in same else np.ascontiguousarray(X[:, j]) for j in range(self.k)]
+            self.cols = [same[j] if j in same else np.ascontiguousarray(X[:, j]) for j in range(self.k)]
             self.own_nbytes = (self.k - len(same)) * self.n * X.itemsize
         else:
             self._X, self.cols = X, None
@@ -315,6 +322,28 @@ class _Design:
     def col(self, j) -> np.ndarray:
         """Column ``j`` (n_settled,) of the design (a view of the stacked design when it is kept)."""
         return self._X[:, j] if self._X is not None else self.cols[j]
+
+    def rows(self, idx) -> np.ndarray:
+        """``X[idx]`` (len(idx), k), C-ordered, the same floats, without stacking the other rows (round 26: a
+        fit reads its training rows only; stacking a shared design whole for each of them was 11 of s0-017's
+        114 s CPU)."""
+        if self._X is not None:
+            return self._X[idx]
+        out = np.empty((len(idx), self.k))
+        for j, c in enumerate(self.cols):
+            out[:, j] = c[idx]
+        return out
+
+    def take(self, cols) -> np.ndarray:
+        """``X[:, cols]`` (n_settled, len(cols)) without stacking the other columns: the same floats in the same
+        layout (Fortran order, as numpy's indexing returns it; a fit's products are summed in another order on
+        another layout, and the ratios moved by 1e-13)."""
+        if self._X is not None:
+            return self._X[:, cols]
+        out = np.empty((self.n, len(cols)), order="F")
+        for i, j in enumerate(cols):
+            out[:, i] = self.cols[j]
+        return out
 
     @property
     def X(self) -> np.ndarray:
@@ -381,11 +410,11 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True):
     idx = train_rows(train, rows)
     box = nuis is not None and len(nuis) > 2 and nuis[2] is not None
     y = e[idx]
-    Xi = X[idx]
+    Xi = X.rows(idx) if isinstance(X, _Design) else X[idx]   # a design: its training rows only (round 26)
     if box:   # bounded nuisance columns (the initial state's gains): a box solve over all columns
         Xtr = np.hstack([nuis[0], Xi])
-        lo = np.concatenate([nuis[2][0], np.full(X.shape[1], -np.inf) if lb is None else np.asarray(lb, float)])
-        hi = np.concatenate([nuis[2][1], np.full(X.shape[1], np.inf)])
+        lo = np.concatenate([nuis[2][0], np.full(Xi.shape[1], -np.inf) if lb is None else np.asarray(lb, float)])
+        hi = np.concatenate([nuis[2][1], np.full(Xi.shape[1], np.inf)])
         th = _lstsq_box(Xtr, y, lo, hi)
         fit = Xtr @ th
     elif lb is not None:
@@ -406,14 +435,19 @@ def _fit_predict(X, e, train, test, rows, lb=None, nuis=None, predict=True):
         m = N.shape[1]
         fit = N @ th[:m] + Xi @ th[m:]
     sse_tr = float(np.sum((y - fit) ** 2)) * (np.sum(train) / max(idx.size, 1))
-    return th, (_predict(X, th, test, nuis) if predict else None), sse_tr
+    return th, (_predict(X.X if isinstance(X, _Design) else X, th, test, nuis) if predict else None), sse_tr
 
 
 def _design(ctx, term, st):
     key = (term.name, repr(st))
     if key not in ctx.design_cache:
-        ref = next((d for k, d in ctx.design_cache.items() if k[0] == term.name), None)
-        ctx.design_cache[key] = _Design(ctx, term, st, ref)
+        mine = [d for k, d in ctx.design_cache.items() if k[0] == term.name]
+        refs = mine[:1]
+        if getattr(term, "setting_nuisance", False):   # round 26: and its family's first design (the rate
+            # term's narrowing settings share their constant shift columns, which the first, widening, design
+            # holds as zeros: 2 of 3 own columns of each narrowing design, 267 MiB of s0-017's peak)
+            refs += [d for d in mine if term.family(d.setting) == term.family(st)][:1]
+        ctx.design_cache[key] = _Design(ctx, term, st, refs)
     return ctx.design_cache[key]
 
 
@@ -443,7 +477,7 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
         f = term.family(st)
         if f not in ref:
             own = term.nuisance_columns(ctx, d.k)
-            ref[f] = _fit_predict(d.X[:, own], e, train, test, rows, nuis=nuis, predict=False)[2] if own else 0.0
+            ref[f] = _fit_predict(d.take(own), e, train, test, rows, nuis=nuis, predict=False)[2] if own else 0.0
         return sse - ref[f]
     level = {}   # refinement level at which each tried setting was proposed (grid: 0)
     new_level = 0
@@ -455,7 +489,7 @@ def best_setting(ctx, term, e, train, test, rows, nuis=None):
             d = _design(ctx, term, st)
             # round 22: the test rows are predicted with the best setting only (below), not with every setting
             # (the whole design times the coefficients and the nuisance's test rows: about half of each fit)
-            th, _, sse = _fit_predict(d.X, e, train, test, rows, lb, nuis, predict=False)
+            th, _, sse = _fit_predict(d, e, train, test, rows, lb, nuis, predict=False)
             sc = score(st, d, sse)
             if best is None or sc < best_score:
                 best, best_score = (st, d, sse, th), sc
@@ -762,14 +796,14 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         e_before[test] = e[test]
         N = _nuis(ctx, term, train, test, rows)   # nested against a refit of the model's own flexibility here
         if own or N is not None:  # "before" is the model with the nuisance columns alone refitted here
-            Xn = d0.X[:, own] if own else np.zeros((e.size, 0))
+            Xn = d0.take(own) if own else np.zeros((e.size, 0))
             _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
             e_before[test] = e[test] - pn
         best = best_setting(ctx, term, e, train, test, rows, N)
         if getattr(term, "setting_nuisance", False) and (own or N is not None):   # round 25: "before" with the
             # chosen setting's own family's nuisance
             own_b = term.nuisance_columns(ctx, best[1].k)
-            Xn = best[1].X[:, own_b] if own_b else np.zeros((e.size, 0))
+            Xn = best[1].take(own_b) if own_b else np.zeros((e.size, 0))
             _, pn, _ = _fit_predict(Xn, e, train, test, rows, nuis=N)
             e_before[test] = e[test] - pn
         best_st.append(best[0])
