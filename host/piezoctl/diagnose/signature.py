@@ -160,7 +160,7 @@ def transfer_peak(tr: Transfer, f_above: float | None = None) -> tuple[int, bool
     (one-sided, level ``ALPHA``: the measurement smaller than the model, the deviation the model's excess) and
     ``|T|`` has no significant local peak above ``f_above``, no peak is significant (no mode is offered; its
     check fails). Development null s136-009 (Bouc-Wen, stage modes 247 and 301 Hz, calibration top 382 Hz; its
-    base G at 4.7 kHz 0.09 of its static gain against the stage's 0.003): ``|T - 1|`` peaked at 4680 Hz with
+    base G at 4.7 kHz 0.09 of its static gain against the stage's about 0.008): ``|T - 1|`` peaked at 4680 Hz with
     ``|T|`` = 0.09 and no ``|T|`` peak above the band; a "mode" at 4820 Hz (2.1 samples per period) fitted to
     the base's overshoot was named with an exact ratio of 1.00. Where ``|T|`` does peak, the ``|T - 1|`` peak
     is kept: offering at the ``|T|`` peak instead was tried and not kept (it moved s134-006's named 3698 Hz to
