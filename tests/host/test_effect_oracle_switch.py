@@ -30,3 +30,15 @@ def test_creep_and_coupling_still_switch_off_and_others_are_refused():
     assert st.creep is None
     with pytest.raises(ValueError):
         switch_off(copy.deepcopy(case.stage), "delay")
+
+
+def test_the_asymmetry_switches_off_and_the_rails_stay():
+    # round 26: the extra beyond the knee is the effect; the amplifier's rails are the stage's own
+    case = draw_case(131, 13, ("asymmetric_hysteresis",), scale=0.5)
+    st = copy.deepcopy(case.stage)
+    assert st.asym is not None
+    rails = tuple(st.rails_v)
+    switch_off(st, "asymmetric_hysteresis")
+    assert st.asym is None
+    assert tuple(st.rails_v) == rails
+    assert case.stage.asym is not None   # the case's own stage is untouched
