@@ -904,7 +904,7 @@ def drift_on_cycles(evals, ctxs, es, fold_all, log) -> None:
 
     Round 26: a candidate significant on its own whose cycles hold keeps that model too (``cycle_coef``), which
     ``select._first_exact`` checks when the exact check refuses the line fitted on every block (development
-    s135-031: linearized 0.76/0.65, exact 1.22/1.22, the walk's level -2.0 um; the triangle's cycle means
+    s135-031: linearized 0.76/0.65, exact 1.22/1.22, the walk's base level +0.83 um; the triangle's cycle means
     +17 nm/s, t = 27)."""
     c = next((x for x in evals if x.name == "thermal_drift"), None)
     if c is None:
