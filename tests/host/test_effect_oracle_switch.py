@@ -7,6 +7,7 @@ import pytest
 
 from piezoctl.bench.effect_oracle import switch_off
 from piezoctl.foreign.cases import draw_case
+from piezoctl.foreign.stage import FS_HZ
 
 
 def test_a_concealed_mode_is_removed_and_its_residue_given_back():
@@ -42,3 +43,14 @@ def test_the_asymmetry_switches_off_and_the_rails_stay():
     assert st.asym is None
     assert tuple(st.rails_v) == rails
     assert case.stage.asym is not None   # the case's own stage is untouched
+
+
+def test_a_drift_switches_off_and_the_calibration_it_never_reached_is_unchanged():
+    # round 26: the drift's oracle; the drift begins after the calibration, so its base is the kept one
+    case = draw_case(131, 1, ("thermal_drift",), scale=0.5)
+    st = copy.deepcopy(case.stage)
+    assert st.drift is not None
+    switch_off(st, "thermal_drift")
+    assert st.drift is None and case.stage.drift is not None
+    t_end = max(r.t_session + r.u.size / FS_HZ for r in case.calibration)
+    assert case.stage.drift.t_on_s >= t_end - 1e-9

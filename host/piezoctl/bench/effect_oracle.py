@@ -1,5 +1,6 @@
-"""What the true effect would reach on a kept creep, coupling, concealed-mode or (round 26) asymmetry case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios
-above 0.7").
+"""What the true effect would reach on a kept creep, drift, coupling, concealed-mode or asymmetry case
+(docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios above 0.7"; the drift and the asymmetry since round 26:
+the drift begins after the calibration, so its base fitted without it is the kept one).
 
 A kept case directory of ``tools/bench-diagnose --foreign --keep DIR`` (``sSSS-III-EFFECT`` with the recordings and
 ``out/``) is drawn again from its seed and index (scale 0.5, as the held-out runs; the kept recordings are
@@ -44,7 +45,7 @@ import numpy as np
 SETTLE_S = 0.5
 ACTING_NOISE = 2.0       # a sample is acted on where the effect changes it by more than this many noise RMS
 
-ORACLE_EFFECTS = ("creep", "cross_coupling", "unmodeled_resonance", "asymmetric_hysteresis")
+ORACLE_EFFECTS = ("creep", "thermal_drift", "cross_coupling", "unmodeled_resonance", "asymmetric_hysteresis")
 
 __all__ = ["ORACLE_EFFECTS", "switch_off", "branch_ratios", "oracle_case", "main"]
 
@@ -68,11 +69,13 @@ def _less_level(parts) -> np.ndarray:
 
 def switch_off(stage, effect: str) -> None:
     """Switch the concealed ``effect`` off in ``stage`` (in place), as ``Case.without_effects`` does for it alone:
-    creep, coupling and (round 26) the asymmetry's extra beyond its knee dropped; a concealed mode (the last of
-    ``stage.modes``, round 24) removed and its residue
+    creep, a drift (round 26), coupling and (round 26) the asymmetry's extra beyond its knee dropped; a concealed
+    mode (the last of ``stage.modes``, round 24) removed and its residue
     given back to the first mode, so the static gain is the same."""
     if effect == "creep":
         stage.creep = None
+    elif effect == "thermal_drift":
+        stage.drift = None
     elif effect == "cross_coupling":
         stage.coupling = None
     elif effect == "asymmetric_hysteresis":   # round 26: the extra beyond the knee; the amplifier's rails stay
@@ -152,8 +155,9 @@ def oracle_case(d: str) -> dict:
            "truth_beyond_level": _ratio(_less_level(T), _less_level(R)),
            "refined_beyond_level": _ratio(_less_level(F), _less_level(R)),
            "kept": _ratio(Rc - Ec, Rc), "kept_acting": _ratio((Rc - Ec)[act], Rc[act]) if act.any() else None,
-           "noise_um": noise, "effect": case.info.get({"creep": "creep", "cross_coupling": "coupling",
-                                                            "asymmetric_hysteresis": "asym"}.get(effect, "modes")), "rows": rows}
+           "noise_um": noise, "effect": case.info.get({"creep": "creep", "thermal_drift": "drift",
+                                                  "cross_coupling": "coupling",
+                                                  "asymmetric_hysteresis": "asym"}.get(effect, "modes")), "rows": rows}
     if mode:
         b, a = (np.asarray(base["dynamics"][k], float) for k in ("b", "a"))
         gain = mode["residue"] * b.sum() / a.sum()   # the residue of the static gain, in G's units

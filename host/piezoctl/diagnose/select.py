@@ -195,6 +195,8 @@ class Candidate:
     #                                           blocks did not); the all-data model is sized on the dwells too
     from_cycles: bool = False                 # round 25, drift: its model sized on a repeated drive's cycles
     #                                           (slow_signature.drift_coef_on_cycles); so is the all-data model
+    cycle_coef: list | None = None            # round 26, drift: per fold, (setting, coef) sized on those cycles
+    #                                           for a significant candidate (slow_signature.drift_on_cycles)
     lag_bounded: bool = False                 # round 21: evaluated with the corrections' lag bounded to the loop's
     #                                           latency (select._lag_beyond_latency)
 
@@ -1527,6 +1529,8 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
                   f"error in each fold (ratios {c.exact_fold_ratios[0]:.2f}, {c.exact_fold_ratios[1]:.2f})")
         if c.dwell_coef is not None and _exact_on_dwells(c, fctx, fold_all, recs, span, log):
             return c
+        if c.cycle_coef is not None and _exact_on_cycles(c, fctx, fold_all, recs, span, log):
+            return c
         if c.term.same_on_every_recording and fctx[0] is fctx[1] and _exact_per_recording(c, ex, fctx[0].names,
                                                                                           log):
             return c
@@ -1636,6 +1640,29 @@ def _exact_on_dwells(c, fctx, fold_all, recs, span, log) -> bool:
             f"(the time constants up to the longest dwell, the base's loop kept) it lowers the held-out error in "
             f"each fold (ratios {fr[0]:.2f}, {fr[1]:.2f}).")
     _add_note(c, note)
+    return True
+
+
+def _exact_on_cycles(c, fctx, fold_all, recs, span, log) -> bool:
+    """Round 26: a significant drift's model sized on a repeated drive's cycles (``c.cycle_coef``), exactly checked
+    when the one fitted on every block was refused; when it lowers the held-out error in each fold it becomes the
+    candidate's model (``from_cycles``, as round 25's drift sized there) and the refusal is lifted."""
+    refused = list(c.exact_fold_ratios)
+    c2 = dataclasses.replace(c, setting=[x[0] for x in c.cycle_coef], coef=[x[1] for x in c.cycle_coef], exact=None)
+    ex = [_exact_fold(fctx[f], c2, f, fold_all, recs) for f in (0, 1)]
+    fr, before, after = _exact_figures(ex, span)
+    log(f"    exact {c.name} sized on the cycles: {fr}")
+    if max(fr) >= 1.0:
+        c.veto += f"; nor sized on the repeated drive's cycles (ratios {fr[0]:.2f}, {fr[1]:.2f})"
+        return False
+    c.setting, c.coef, c.exact, c.exact_fold_ratios = c2.setting, c2.coef, ex, fr
+    c.from_cycles, c.veto, c.exact_before, c.exact_after = True, None, before, after
+    c.exact_above, c.exact_beyond_level = _exact_above(ex, span), _exact_beyond_level(ex, span)
+    c.worsened = _worsened(ex, fctx[0].names)
+    _add_note(c, f"Its line fitted on every block was refused by the exact check (ratios {refused[0]:.2f}, "
+                 f"{refused[1]:.2f}: the other recordings' levels carry the base's misfit of their histories); sized "
+                 f"on the repeated drive's cycles it lowers the held-out error in each fold (ratios {fr[0]:.2f}, "
+                 f"{fr[1]:.2f}).")
     return True
 
 

@@ -900,9 +900,18 @@ def drift_on_cycles(evals, ctxs, es, fold_all, log) -> None:
     p 5.4e-3, the base's residual on the recordings 0.72 um RMS: no slow candidate passed and nothing was named.
 
     Round 25: a candidate whose line does not lower each fold (or raises the BIC) while the cycles hold is sized on
-    them instead (:func:`drift_coef_on_cycles`, ``from_cycles``), and the exact check decides (s133-001, s118-016)."""
+    them instead (:func:`drift_coef_on_cycles`, ``from_cycles``), and the exact check decides (s133-001, s118-016).
+
+    Round 26: a candidate significant on its own whose cycles hold keeps that model too (``cycle_coef``), which
+    ``select._first_exact`` checks when the exact check refuses the line fitted on every block (development
+    s135-031: linearized 0.76/0.65, exact 1.22/1.22, the walk's base level +0.83 um; the triangle's cycle means
+    +17 nm/s, t = 27)."""
     c = next((x for x in evals if x.name == "thermal_drift"), None)
-    if c is None or c.significant:
+    if c is None:
+        return
+    if c.significant:
+        if not c.veto:
+            _cycle_model(c, ctxs, es, fold_all, log)
         return
     if c.veto and not getattr(c, "credited_only", False):
         return
@@ -940,6 +949,21 @@ def drift_on_cycles(evals, ctxs, es, fold_all, log) -> None:
     c.veto = None
     c.significant = True
     c.cycles = cy
+
+
+def _cycle_model(c, ctxs, es, fold_all, log) -> None:
+    """Round 26: for a significant drift candidate whose cycle means hold at its level (:func:`cycles_hold`),
+    ``c.cycle_coef``: per fold, :func:`drift_coef_on_cycles` on that fold's training rows, each with the cycle
+    means' sign; else nothing."""
+    cy = cycle_mean_test(ctxs, es, fold_all)
+    if not cycles_hold(cy, c.p_max):
+        return
+    sized = [drift_coef_on_cycles(ctxs[f], es[f], fold_all == f) for f in (0, 1)]
+    if any(x is None for x in sized) or any(x[0][1] != np.sign(cy["slope_um_per_s"]) for x in sized):
+        return
+    c.cycle_coef = sized
+    log(f"    drift also sized on the cycles ({cycle_phrase(cy)}): "
+        + ", ".join(f"{1e3 * x[0][1] * x[1][-1]:+.2f}" for x in sized) + " nm/s")
 
 
 def level_columns(ctx) -> np.ndarray:
