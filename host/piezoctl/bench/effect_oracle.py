@@ -1,4 +1,5 @@
-"""What the true effect would reach on a kept creep, coupling or concealed-mode case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios
+"""What the true effect would reach on a kept creep, coupling, concealed-mode (round 26: delay, bandwidth, sensor offset,
+rate) case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios
 above 0.7").
 
 A kept case directory of ``tools/bench-diagnose --foreign --keep DIR`` (``sSSS-III-EFFECT`` with the recordings and
@@ -44,7 +45,11 @@ import numpy as np
 SETTLE_S = 0.5
 ACTING_NOISE = 2.0       # a sample is acted on where the effect changes it by more than this many noise RMS
 
-ORACLE_EFFECTS = ("creep", "cross_coupling", "unmodeled_resonance")
+ORACLE_EFFECTS = ("creep", "cross_coupling", "unmodeled_resonance", "delay", "amplifier_bandwidth", "sensor_offset",
+                  "rate_dependent_hysteresis")
+# the case's ``info`` key that states each effect's size (printed with the figures)
+_INFO_KEY = {"creep": "creep", "cross_coupling": "coupling", "unmodeled_resonance": "modes", "delay": "delay_ms",
+             "amplifier_bandwidth": "amp_fc_hz", "sensor_offset": "offset_change_um", "rate_dependent_hysteresis": "rate"}
 
 __all__ = ["ORACLE_EFFECTS", "switch_off", "branch_ratios", "oracle_case", "main"]
 
@@ -69,7 +74,9 @@ def _less_level(parts) -> np.ndarray:
 def switch_off(stage, effect: str) -> None:
     """Switch the concealed ``effect`` off in ``stage`` (in place), as ``Case.without_effects`` does for it alone:
     creep and coupling dropped; a concealed mode (the last of ``stage.modes``, round 24) removed and its residue
-    given back to the first mode, so the static gain is the same."""
+    given back to the first mode, so the static gain is the same; round 26: a delay back to the loop's one sample,
+    the amplifier's pole and the rate dependence dropped, the sensor's zero of the calibration's session on every
+    session. Any other effect raises ``ValueError``."""
     if effect == "creep":
         stage.creep = None
     elif effect == "cross_coupling":
@@ -77,6 +84,14 @@ def switch_off(stage, effect: str) -> None:
     elif effect == "unmodeled_resonance":
         res = stage.modes.pop()
         stage.modes[0].r += res.r
+    elif effect == "delay":                       # round 26: the drive-side and sensor effects, as
+        stage.delay_samples = 1                   # ``Case.without_effects`` sets them (the loop's own sample kept)
+    elif effect == "amplifier_bandwidth":
+        stage.amp_fc_hz = None
+    elif effect == "sensor_offset":               # the calibration's session's zero on every session
+        stage.sensor.offset_by_session = {0: stage.sensor.offset_by_session[0]}
+    elif effect == "rate_dependent_hysteresis":
+        stage.rate = None
     else:
         raise ValueError(f"no oracle for {effect}")
 
@@ -149,7 +164,7 @@ def oracle_case(d: str) -> dict:
            "truth_beyond_level": _ratio(_less_level(T), _less_level(R)),
            "refined_beyond_level": _ratio(_less_level(F), _less_level(R)),
            "kept": _ratio(Rc - Ec, Rc), "kept_acting": _ratio((Rc - Ec)[act], Rc[act]) if act.any() else None,
-           "noise_um": noise, "effect": case.info.get({"creep": "creep", "cross_coupling": "coupling"}.get(effect, "modes")), "rows": rows}
+           "noise_um": noise, "effect": case.info.get(_INFO_KEY[effect]), "rows": rows}
     if mode:
         b, a = (np.asarray(base["dynamics"][k], float) for k in ("b", "a"))
         gain = mode["residue"] * b.sum() / a.sum()   # the residue of the static gain, in G's units
