@@ -1815,7 +1815,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
             from .signature import check_in_context
             cache = {}
             check = (lambda c, _x=ctx_all, _k=cache: check_in_context(_x, c.name, _setting_of(c), f_band, _k,
-                                                                      heldout=c.heldout, term=c.term))
+                                                                      heldout=c.heldout))
         best = _first_exact(evals, fctx, fold_all, recs, span, log, check)
         log("  " + ", ".join(f"{c.name} {c.ratio:.3f} ({c.fold_ratios[0]:.2f}/{c.fold_ratios[1]:.2f} p {c.p:.0e} "
                              f"n{c.n_active} c{c.credited:.2f}){'*' if c.significant and not c.veto else ''}{'V' if c.veto else ''}"

@@ -53,9 +53,8 @@ from ..ident.terms import LATENCY_SAMPLES, UnmodeledResonance
 from .discriminate import rate_band_hz
 
 __all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies", "model_notches", "NOTCH_DAMPING",
-           "dispersion", "drive_band_hz", "within_band", "frequency_response", "refit_ratio", "check_delay",
-           "check_bandwidth", "delay_or_pole", "check_mode", "check_slew", "check_slew_absent", "below_limit",
-           "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
+           "dispersion", "drive_band_hz", "within_band", "check_delay", "check_bandwidth", "delay_or_pole", "check_mode",
+           "check_slew", "check_slew_absent", "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
 
 ALPHA = 0.01                 # level of every test here
 SEG_S = 0.1                  # [s] segment length aimed at (10 Hz bins); shortened so each recording gives 4
@@ -319,13 +318,6 @@ def unidentified_fit(tr, dt, f_band):
     return best
 
 
-def frequency_response(b, a, f, dt: float) -> np.ndarray:
-    """``G(e^{j w dt})`` of the discrete filter ``(b, a)`` (``lfilter`` convention, coefficients of ``z^-k``) at
-    the frequencies ``f`` [Hz]; ``dt`` [s] the sample period."""
-    zi = np.exp(-2j * np.pi * np.asarray(f, float) * dt)   # z^-1
-    return np.polyval(np.asarray(b, float)[::-1], zi) / np.polyval(np.asarray(a, float)[::-1], zi)
-
-
 def below_unity(tr: Transfer) -> Transfer:
     """The bins where ``|T|`` is not above 1 beyond the estimate's spread (one-sided, level ``ALPHA``): a delay
     or a first-order pole multiplies the transfer by a magnitude of at most 1, so a bin where the measurement is
@@ -372,8 +364,7 @@ def _shape_test(tr, s2, f_band, dt, name, grid, shape_of, label, f_alt=None, eve
                         "dispersion": float(s2), "chi2_flat": chi0 / s2, "chi2_unidentified": c_lat / s2,
                         "chi2_shape": c / s2, "dof": dof, "F": F, "p": p, "gain": a,
                         "latency_samples": d_lat / dt, "unidentified_mode_hz": f0, "unidentified_damping": z,
-                        "setting": th if isinstance(th, tuple) else float(th),
-                        "deviation_share_above_band": share_above}}
+                        "setting": float(th), "deviation_share_above_band": share_above}}
 
 
 def drive_band_hz(us, dt: float) -> float:
@@ -398,18 +389,8 @@ SHAPE_MIN_BINS = 3
 
 
 def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: float | None = None,
-                f_dynamics: float | None = None, refit=None, _grid=None) -> dict:
+                f_dynamics: float | None = None) -> dict:
     """A delay's shape: ``T = a exp(-j 2 pi f d)``, ``d`` from 0 to 64 samples (quarter-sample steps).
-
-    ``refit`` (round 26): ``(d [s], ratio)``, the candidate's own delay and ``ratio(f)`` = its refitted dynamics
-    over the current model's, ``G_d(f) / G(f)`` (:func:`frequency_response`). The term's model is the delay in
-    front of dynamics refitted on the calibration with it (``ident.terms._DriveTerm.refit_dynamics``); ``T`` is
-    measured over the current model, whose G was fitted on a slow calibration without the delay and took its lag
-    inside the calibration's band (an order-2 G with a zero outside the unit circle is a Pade delay). There the
-    true delay's ``T`` is ``exp(-j w d) G_d / G``, not ``exp(-j w d)``: flat 1 inside the calibration's band for
-    every ``d`` (so no evidence either way there) and the delay's phase above it only through ``G_d / G``. The
-    delay's family is then the pure delays and this shape (the better of the two; its ``d`` is the term's, not
-    fitted here); the alternative is unchanged. With an order-0 G the ratio is 1 and nothing changes.
 
     ``f_drive`` [Hz] (round 14): the band the recordings' drive excites (:func:`drive_band_hz`). When given and
     above ``f_band``, the shape is tested on the bins up to it, where a delay acts on what the drive moves; above
@@ -435,18 +416,8 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
     band) the alternative took a lightly damped mode at the band's edge, whose phase falls like a delay's, and
     refused held-out s120-038 (a true 1.8 ms delay, static base: fold ratios 0.12/0.12; alternative a 63 Hz mode,
     F = 2.3, p = 0.027; from the base's 120 Hz: F = 4.8, p = 2.8e-4). None: from ``f_band`` (as before)."""
-    pure = [(d, False) for d in np.arange(0.0, 64.25, 0.25) * dt]
-    if refit is not None and _grid is None:
-        r0 = check_delay(tr, s2, f_band, dt, f_drive, f_dynamics)   # the pure delays alone, reported beside
-        r = check_delay(tr, s2, f_band, dt, f_drive, f_dynamics, refit=refit, _grid=pure + [(float(refit[0]), True)])
-        r["figures"].update({"F_pure": r0["figures"].get("F"), "p_pure": r0["figures"].get("p"),
-                             "passed_pure": bool(r0["passed"])})
-        return r
-    grid = _grid or pure
-
-    def shape(g, f):
-        s = np.exp(-2j * np.pi * f * g[0])
-        return s * refit[1](f) if g[1] else s
+    grid = np.arange(0.0, 64.25, 0.25) * dt
+    shape = lambda d, f: np.exp(-2j * np.pi * f * d)   # noqa: E731
     label = "phase linear in frequency through zero with a flat magnitude of a delay"
     r = None
     if f_drive is not None and f_drive > f_band:
@@ -462,9 +433,7 @@ def check_delay(tr: Transfer, s2: float, f_band: float, dt: float, f_drive: floa
                            f"least {SHAPE_MIN_BINS})"}
     if r is None:
         r = _shape_test(tr, s2, f_band, dt, "delay", grid, shape, label, f_dynamics)
-    st = r["figures"].pop("setting", None)
-    r["figures"]["delay_s"] = None if st is None else float(st[0])
-    r["figures"]["refit_shape"] = None if st is None else bool(st[1])   # the delay with its refitted G fitted best
+    r["figures"]["delay_s"] = r["figures"].pop("setting", None)
     r["figures"]["drive_band_hz"] = None if f_drive is None else float(f_drive)
     return r
 
@@ -657,7 +626,7 @@ def check_slew_absent(heldout, us, dt, limit_v_per_s, nperseg=None) -> dict:
 
 
 def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None,
-                    drive_band=False, f_dynamics=None, refit=None) -> dict | None:
+                    drive_band=False, f_dynamics=None) -> dict | None:
     """The signature check of one candidate (None: the term has none here).
 
     Parameters
@@ -682,9 +651,6 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None
     f_dynamics : float, optional
         The band the base states its dynamics identified in [Hz]: the delay's alternative lies above it
         (:func:`check_delay`, round 18).
-    refit : tuple, optional
-        The delay's ``(d [s], ratio)``: its own setting and its refitted dynamics over the current model's
-        (:func:`check_delay`, round 26).
     """
     if name not in DRIVE_TERMS:
         return None
@@ -704,30 +670,15 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None
                 "reason": "the recordings give no informative bin of the residual's transfer"}
     s2, _ = dispersion(tr, f_band)
     if name == "delay":
-        return check_delay(tr, s2, f_band, dt, drive_band_hz(us, dt) if drive_band else None, f_dynamics, refit)
+        return check_delay(tr, s2, f_band, dt, drive_band_hz(us, dt) if drive_band else None, f_dynamics)
     if name == "amplifier_bandwidth":
         return check_bandwidth(tr, s2, f_band, dt)
     return check_mode(tr, s2, f_band, float(setting[0]), float(setting[1]))
 
 
-def refit_ratio(ctx, term, setting):
-    """The delay's ``(d [s], ratio)`` for :func:`check_delay` (round 26): ``term``'s dynamics refitted on the
-    calibration with it at ``setting`` [samples] in front (``refit_dynamics``, cached on the context) over the
-    current model's ``ctx.base["dynamics"]``, as a function of frequency [Hz]; None when the current G is static
-    (order 0: the refit is static too and the ratio 1) or the term has no refit."""
-    dyn = ctx.base["dynamics"]
-    if len(dyn["a"]) <= 1 or not hasattr(term, "refit_dynamics"):
-        return None
-    bd, ad = term.refit_dynamics(ctx, float(setting))
-    b0, a0, dt = dyn["b"], dyn["a"], ctx.dt
-    return float(setting) * dt, lambda f: frequency_response(bd, ad, f, dt) / frequency_response(b0, a0, f, dt)
-
-
-def check_in_context(ctx, name, setting, f_band, cache=None, heldout=None, term=None) -> dict | None:
+def check_in_context(ctx, name, setting, f_band, cache=None, heldout=None) -> dict | None:
     """:func:`check_candidate` on the current model of a selection context (``select.Ctx``): its output, the
-    measurements and the drives of the settled samples. ``cache`` (a dict) keeps the transfer for the round.
-    ``term``: the candidate's term; a delay's shape is then also tried with its refitted dynamics
-    (:func:`refit_ratio`, round 26)."""
+    measurements and the drives of the settled samples. ``cache`` (a dict) keeps the transfer for the round."""
     if name not in DRIVE_TERMS:
         return None
     xs = [np.asarray(s.yb, float)[v] for s, v in zip(ctx.signals, ctx.valid)]
@@ -741,6 +692,5 @@ def check_in_context(ctx, name, setting, f_band, cache=None, heldout=None, term=
             tr = transfer(xs, ys, ctx.dt)
             if cache is not None:
                 cache["transfer"] = tr
-    refit = refit_ratio(ctx, term, setting) if name == "delay" and term is not None else None
     return check_candidate(name, setting, xs, ys, us, ctx.dt, f_band, tr=tr, heldout=heldout, drive_band=True,
-                           f_dynamics=getattr(ctx, "dynamics_band_hz", None), refit=refit)
+                           f_dynamics=getattr(ctx, "dynamics_band_hz", None))
