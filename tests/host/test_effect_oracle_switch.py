@@ -30,7 +30,7 @@ def test_creep_and_coupling_still_switch_off_and_others_are_refused():
     switch_off(st, "creep")
     assert st.creep is None
     with pytest.raises(ValueError):
-        switch_off(copy.deepcopy(case.stage), "delay")
+        switch_off(copy.deepcopy(case.stage), "saturation")
 
 
 def test_the_asymmetry_switches_off_and_the_rails_stay():
@@ -54,3 +54,21 @@ def test_a_drift_switches_off_and_the_calibration_it_never_reached_is_unchanged(
     assert st.drift is None and case.stage.drift is not None
     t_end = max(r.t_session + r.u.size / FS_HZ for r in case.calibration)
     assert case.stage.drift.t_on_s >= t_end - 1e-9
+
+
+@pytest.mark.parametrize("effect,index", [("delay", 7), ("amplifier_bandwidth", 10), ("sensor_offset", 2),
+                                          ("rate_dependent_hysteresis", 4)])
+def test_drive_side_sensor_and_rate_effects_switch_off_as_the_case_s_reference(effect, index):
+    """Round 26: the stage with the effect off equals ``Case.without_effects`` in what the effect sets, and the
+    case's own stage still has it."""
+    case = draw_case(131, index, (effect,), scale=0.5)
+    st = copy.deepcopy(case.stage)
+    switch_off(st, effect)
+    ref = case.without_effects()
+    assert st.delay_samples == ref.delay_samples == 1
+    assert st.amp_fc_hz is None and st.rate is None
+    assert st.sensor.offset_by_session == ref.sensor.offset_by_session
+    own = case.stage
+    assert {"delay": own.delay_samples > 1, "amplifier_bandwidth": own.amp_fc_hz is not None,
+            "sensor_offset": len(own.sensor.offset_by_session) > 1,
+            "rate_dependent_hysteresis": own.rate is not None}[effect]

@@ -1,6 +1,6 @@
-"""What the true effect would reach on a kept creep, drift, coupling, concealed-mode or asymmetry case
-(docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios above 0.7"; the drift and the asymmetry since round 26:
-the drift begins after the calibration, so its base fitted without it is the kept one).
+"""What the true effect would reach on a kept creep, drift, coupling, concealed-mode, asymmetry, delay, bandwidth,
+sensor offset or rate case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios above 0.7"; every effect after
+the first four since round 26; the drift begins after the calibration, so its base fitted without it is the kept one).
 
 A kept case directory of ``tools/bench-diagnose --foreign --keep DIR`` (``sSSS-III-EFFECT`` with the recordings and
 ``out/``) is drawn again from its seed and index (scale 0.5, as the held-out runs; the kept recordings are
@@ -45,7 +45,12 @@ import numpy as np
 SETTLE_S = 0.5
 ACTING_NOISE = 2.0       # a sample is acted on where the effect changes it by more than this many noise RMS
 
-ORACLE_EFFECTS = ("creep", "thermal_drift", "cross_coupling", "unmodeled_resonance", "asymmetric_hysteresis")
+ORACLE_EFFECTS = ("creep", "thermal_drift", "cross_coupling", "unmodeled_resonance", "asymmetric_hysteresis", "delay",
+                  "amplifier_bandwidth", "sensor_offset", "rate_dependent_hysteresis")
+# the case's ``info`` key that states each effect's size (printed with the figures)
+_INFO_KEY = {"creep": "creep", "thermal_drift": "drift", "cross_coupling": "coupling", "unmodeled_resonance": "modes",
+             "asymmetric_hysteresis": "asym", "delay": "delay_ms", "amplifier_bandwidth": "amp_fc_hz",
+             "sensor_offset": "offset_change_um", "rate_dependent_hysteresis": "rate"}
 
 __all__ = ["ORACLE_EFFECTS", "switch_off", "branch_ratios", "oracle_case", "main"]
 
@@ -70,8 +75,10 @@ def _less_level(parts) -> np.ndarray:
 def switch_off(stage, effect: str) -> None:
     """Switch the concealed ``effect`` off in ``stage`` (in place), as ``Case.without_effects`` does for it alone:
     creep, a drift (round 26), coupling and (round 26) the asymmetry's extra beyond its knee dropped; a concealed
-    mode (the last of ``stage.modes``, round 24) removed and its residue
-    given back to the first mode, so the static gain is the same."""
+    mode (the last of ``stage.modes``, round 24) removed and its residue given back to the first mode, so the static
+    gain is the same; round 26: a delay back to the loop's one sample, the amplifier's pole and the rate dependence
+    dropped, the sensor's zero of the calibration's session on every session. Any other effect raises
+    ``ValueError``."""
     if effect == "creep":
         stage.creep = None
     elif effect == "thermal_drift":
@@ -83,6 +90,14 @@ def switch_off(stage, effect: str) -> None:
     elif effect == "unmodeled_resonance":
         res = stage.modes.pop()
         stage.modes[0].r += res.r
+    elif effect == "delay":                       # round 26: the drive-side and sensor effects, as
+        stage.delay_samples = 1                   # ``Case.without_effects`` sets them (the loop's own sample kept)
+    elif effect == "amplifier_bandwidth":
+        stage.amp_fc_hz = None
+    elif effect == "sensor_offset":               # the calibration's session's zero on every session
+        stage.sensor.offset_by_session = {0: stage.sensor.offset_by_session[0]}
+    elif effect == "rate_dependent_hysteresis":
+        stage.rate = None
     else:
         raise ValueError(f"no oracle for {effect}")
 
@@ -155,9 +170,7 @@ def oracle_case(d: str) -> dict:
            "truth_beyond_level": _ratio(_less_level(T), _less_level(R)),
            "refined_beyond_level": _ratio(_less_level(F), _less_level(R)),
            "kept": _ratio(Rc - Ec, Rc), "kept_acting": _ratio((Rc - Ec)[act], Rc[act]) if act.any() else None,
-           "noise_um": noise, "effect": case.info.get({"creep": "creep", "thermal_drift": "drift",
-                                                  "cross_coupling": "coupling",
-                                                  "asymmetric_hysteresis": "asym"}.get(effect, "modes")), "rows": rows}
+           "noise_um": noise, "effect": case.info.get(_INFO_KEY[effect]), "rows": rows}
     if mode:
         b, a = (np.asarray(base["dynamics"][k], float) for k in ("b", "a"))
         gain = mode["residue"] * b.sum() / a.sum()   # the residue of the static gain, in G's units
