@@ -987,11 +987,23 @@ def _branch_common(ctx, term, e, fold_all, setting):
         rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])[used]
         bc["per_recording"] = {ctx.names[i]: r for i, r in static_map.across_recordings(y, br, rec, e[used],
                                                                                           X).items()}
-        # credited as the whole residual is: its gain there less the base's whole misfit energy per sample on
-        # held-out calibration histories (an upper bound of what that misfit leaves in the common part)
-        bc["credited_ratio"] = _one_band_credited(bc["before_um"] ** 2, bc["after_um"] ** 2, float(
-            sum(ctx.misfit["mse_um2"].values())) if ctx.misfit else 0.0)
+        # credited beyond the base's misfit on held-out calibration histories reduced to its own common part
+        # (round 26, static_map.common_misfit: its lag averages out there as the recordings' does); the whole
+        # misfit energy (round 19's upper bound) where no history could be reduced
+        bc["credited_ratio"] = _one_band_credited(bc["before_um"] ** 2, bc["after_um"] ** 2,
+                                                  common_misfit_um2(ctx.misfit))
     return bc
+
+
+def common_misfit_um2(misfit: dict | None) -> float:
+    """The base's misfit energy [um^2] the branch-common reading is credited beyond: ``misfit["common_um2"]``
+    (``static_map.common_misfit``) when the histories could be reduced, else the whole excess energy per sample
+    (every band of ``misfit["mse_um2"]``); 0 without a misfit estimate."""
+    if not misfit:
+        return 0.0
+    if misfit.get("common_um2") is not None:
+        return float(misfit["common_um2"])
+    return float(sum(misfit["mse_um2"].values()))
 
 
 def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):
