@@ -852,8 +852,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             and ctxs[0] is ctxs[1]):
         # round 19: a static map of y, refused beside the base's history-dependent misfit: judged on what every
         # branch shares at equal y (static_map.py), where that misfit averages out and the map does not
-        # credited as the whole residual is: its gain there less the base's whole misfit energy per sample on
-        # held-out calibration histories (an upper bound of what that misfit leaves in the common part)
+        # credited beyond the base's misfit on held-out calibration histories reduced alike (round 26)
         bc = _branch_common(ctxs[0], term, es[0], fold_all, best_st[0])
         if bc is not None and dbic < 0 and _common_passes(bc, within, p_max):
             whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
