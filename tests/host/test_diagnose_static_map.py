@@ -211,3 +211,51 @@ def test_the_sparse_averager_gives_the_dense_ones_figures_on_the_curve_case():
     assert np.allclose(new["fold_ratios"], old["fold_ratios"], rtol=1e-10, atol=0)
     assert new_rec.keys() == old_rec.keys() and np.allclose(list(new_rec.values()), list(old_rec.values()),
                                                             rtol=1e-10, atol=0)
+
+
+def _history(resid, resid_in, u, y, rec=0, segment=0):
+    """One held-out calibration history covering the whole of recording ``rec``, every sample scored."""
+    return {"recording": rec, "segment": segment, "start": 0, "stop": u.size, "resid": resid, "resid_in": resid_in,
+            "scored": np.ones(u.size, bool)}
+
+
+def test_the_bases_lag_misfit_leaves_little_in_the_common_part_and_a_level_keeps_its_energy():
+    # round 26: a lag of the model behind the stage (opposite sign rising and falling at equal y) averages out of
+    # the branch-common part; a level (an unknown initial state) is common to every branch and keeps its energy
+    from piezoctl.diagnose.static_map import common_misfit
+    rng = np.random.default_rng(3)
+    u, d = _triangle([40, 30, 35, 20, 38, 25])
+    y = 0.5 * u
+    seen = rng.normal(0, 0.01, u.size)   # the reference fit's error on the same samples: noise [um]
+    lag = seen + 0.08 * d
+    m_lag = common_misfit([_history(lag, seen, u, y)], [u], [y])
+    assert m_lag is not None and m_lag < 0.05 * float(np.mean(lag ** 2) - np.mean(seen ** 2))
+    level = seen + 0.08
+    m_level = common_misfit([_history(level, seen, u, y)], [u], [y])
+    assert abs(m_level - 0.08 ** 2) < 0.1 * 0.08 ** 2
+    # held out no worse than seen: no excess
+    assert common_misfit([_history(seen, seen, u, y)], [u], [y]) == 0.0
+
+
+def test_a_history_too_short_for_two_bins_gives_no_common_misfit_and_the_credit_falls_back_to_the_whole():
+    from piezoctl.diagnose.select import common_misfit_um2
+    from piezoctl.diagnose.static_map import common_misfit
+    u = np.linspace(0.0, 10.0, 60)   # one branch, fewer samples than the bins need
+    h = _history(np.full(u.size, 0.1), np.zeros(u.size), u, 0.5 * u)
+    assert common_misfit([h], [u], [0.5 * u]) is None
+    mse = {"level": 0.01, "slow": 0.002, "fast": 0.003}
+    assert common_misfit_um2({"mse_um2": mse, "common_um2": None}) == sum(mse.values())
+    assert common_misfit_um2({"mse_um2": mse, "common_um2": 0.001}) == 0.001
+    assert common_misfit_um2(None) == 0.0
+
+
+def test_the_levels_of_one_refits_histories_average_as_the_recordings_do_and_separate_refits_keep_theirs():
+    # one refit predicting two histories it did not see, off by opposite levels, is one model on two recordings:
+    # their common part averages the levels where both visit; two refits' histories are reduced apart
+    from piezoctl.diagnose.static_map import common_misfit
+    u, _ = _triangle([40, 30, 35, 20, 38, 25])
+    y, z = 0.5 * u, np.zeros(u.size)
+    up, down = _history(z + 0.08, z, u, y, rec=0), _history(z - 0.08, z, u, y, rec=1)
+    assert common_misfit([up, down], [u, u], [y, y]) < 1e-3 * 0.08 ** 2   # against 0.08 ** 2 apart
+    down["segment"] = 1
+    assert abs(common_misfit([up, down], [u, u], [y, y]) - 0.08 ** 2) < 1e-9

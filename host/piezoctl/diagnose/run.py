@@ -28,6 +28,7 @@ from ..io.modelfile import make_provenance, save_model
 from ..io.recording import load_recording, sensor_session, session_start
 from . import locate as loc
 from . import significance as sg
+from . import static_map
 from .discriminate import calibration_band_hz, separation_doc
 from .misfit import BANDS, band_energy, base_misfit
 from .select import CHECKED_TERMS, FURTHER_RATIO_MAX, Ctx, make_masks, make_signals, select, simulate_refined
@@ -64,6 +65,8 @@ def fit_base_model(cal, calibration, settle_s, out, log, t_start, block_s=DEFAUL
     k0 = [min(int(round(settle_s / r.dt)), len(r) // 2) for r in cal]   # as locate's cal_k0
     base_info["misfit"] = base_misfit(held, [os.path.basename(str(p)) for p in calibration], cal[0].dt, 1.0 / block_s,
                                       edge_hz=calibration_band_hz(cal, k0))
+    if base_info["misfit"] is not None:   # round 26: what that misfit leaves where a static map acts
+        base_info["misfit"]["common_um2"] = static_map.common_misfit(held, [r.u for r in cal], [r.y for r in cal])
     prov = make_provenance(list(calibration), {"settle_s": settle_s}, rows=[len(r) for r in cal],
                            metrics={"dynamics_order": base_info["dynamics_order"], "plane": {
                                k: v for k, v in base_info["plane"].items() if k != "cv_table"}})

@@ -888,8 +888,7 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
             and ctxs[0] is ctxs[1]):
         # round 19: a static map of y, refused beside the base's history-dependent misfit: judged on what every
         # branch shares at equal y (static_map.py), where that misfit averages out and the map does not
-        # credited as the whole residual is: its gain there less the base's whole misfit energy per sample on
-        # held-out calibration histories (an upper bound of what that misfit leaves in the common part)
+        # credited beyond the base's misfit on held-out calibration histories reduced alike (round 26)
         bc = _branch_common(ctxs[0], term, es[0], fold_all, best_st[0])
         if bc is not None and dbic < 0 and _common_passes(bc, within, p_max):
             whole = {"branch_common": bc, "fold_ratios": list(fold_ratios), "credited_ratio": cr, "p": p}
@@ -1023,11 +1022,23 @@ def _branch_common(ctx, term, e, fold_all, setting):
         rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctx.valid)])[used]
         bc["per_recording"] = {ctx.names[i]: r for i, r in static_map.across_recordings(y, br, rec, e[used],
                                                                                           X).items()}
-        # credited as the whole residual is: its gain there less the base's whole misfit energy per sample on
-        # held-out calibration histories (an upper bound of what that misfit leaves in the common part)
-        bc["credited_ratio"] = _one_band_credited(bc["before_um"] ** 2, bc["after_um"] ** 2, float(
-            sum(ctx.misfit["mse_um2"].values())) if ctx.misfit else 0.0)
+        # credited beyond the base's misfit on held-out calibration histories reduced to its own common part
+        # (round 26, static_map.common_misfit: its lag averages out there as the recordings' does); the whole
+        # misfit energy (round 19's upper bound) where no history could be reduced
+        bc["credited_ratio"] = _one_band_credited(bc["before_um"] ** 2, bc["after_um"] ** 2,
+                                                  common_misfit_um2(ctx.misfit))
     return bc
+
+
+def common_misfit_um2(misfit: dict | None) -> float:
+    """The base's misfit energy [um^2] the branch-common reading is credited beyond: ``misfit["common_um2"]``
+    (``static_map.common_misfit``) when the histories could be reduced, else the whole excess energy per sample
+    (every band of ``misfit["mse_um2"]``); 0 without a misfit estimate."""
+    if not misfit:
+        return 0.0
+    if misfit.get("common_um2") is not None:
+        return float(misfit["common_um2"])
+    return float(sum(misfit["mse_um2"].values()))
 
 
 def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):

@@ -30,7 +30,8 @@ MIN_CELL = 5         # samples of one branch in one bin for its mean to count
 MIN_BRANCHES = 2     # branches in a bin for a common part: a contrast needs two visits
 TURN = 0.02          # the drive turns when it moves back by this fraction of its span (ignores noise-sized wiggles)
 
-__all__ = ["branches", "common_averager", "branch_common_test", "across_recordings", "N_BINS", "TURN"]
+__all__ = ["branches", "common_averager", "branch_common_test", "across_recordings", "common_misfit", "N_BINS",
+           "TURN"]
 
 
 def branches(u: np.ndarray, turn: float = TURN) -> np.ndarray:
@@ -204,3 +205,61 @@ def branch_common_test(y: np.ndarray, branch: np.ndarray, e: np.ndarray, X: np.n
     return {"fold_ratios": ratios, "p": p, "n_bins": int(d.size), "coef": coef,
             "before_um": float(np.sqrt(np.average(np.concatenate(b_all) ** 2, weights=w))),
             "after_um": float(np.sqrt(np.average(np.concatenate(a_all) ** 2, weights=w)))}
+
+
+def common_misfit(holdout: list, drives: list, outputs: list) -> float | None:
+    """The base's misfit on held-out calibration histories reduced to its branch-common part (round 26).
+
+    The credited ratio of :func:`branch_common_test`'s reading subtracted the base's *whole* misfit energy per
+    sample on unseen histories (round 19: an upper bound). Much of that misfit is the dynamics' lag, of opposite
+    sign rising and falling at equal displacement, which the common part averages out as it does on the
+    recordings, and the levels of unseen histories differ in sign between them. Each refit of the plane (one
+    ``segment`` left out of every calibration recording at once) is one model predicting several histories it did
+    not see, as the base predicts the recordings: its histories are reduced together as the recordings are
+    (branches of each history's drive, ``N_BINS`` equal-count bins of the model's output over their scored
+    samples), and the excess over the reference fit's common part on the same samples is pooled over the refits
+    with the test's weights (branches per bin).
+
+    Parameters
+    ----------
+    holdout : list of dict
+        ``ident.base._holdout_histories``'s result: ``recording``, ``segment``, ``start``, ``stop``, ``resid`` and
+        ``resid_in`` [um], ``scored``.
+    drives, outputs : list of ndarray
+        Per calibration recording its drive [V] and measured displacement [um] (the model's output over a history
+        is the measured one less ``resid``).
+
+    Returns
+    -------
+    float or None
+        The excess energy per weighted bin [um^2] (held out minus seen, at least 0); None when no refit's
+        histories hold a bin visited by two branches.
+    """
+    groups = {}
+    for h in holdout:
+        groups.setdefault(h.get("segment", 0), []).append(h)
+    tot, tot_in, wsum = 0.0, 0.0, 0.0
+    for hs in groups.values():
+        y, br, r, r_in, n0 = [], [], [], [], 0
+        for h in hs:
+            a, b = int(h["start"]), int(h["stop"])
+            m = np.asarray(h["scored"], bool)
+            if not np.any(m):
+                continue
+            y.append((np.asarray(outputs[h["recording"]], float)[a:b] - np.asarray(h["resid"], float))[m])
+            bh = branches(np.asarray(drives[h["recording"]], float)[a:b])[m] + n0   # unique across histories
+            n0 = int(bh.max()) + 1
+            br.append(bh)
+            r.append(np.asarray(h["resid"], float)[m])
+            r_in.append(np.asarray(h["resid_in"], float)[m])
+        if not y:
+            continue
+        A, w = common_averager(_binned(np.concatenate(y)), np.concatenate(br))
+        if w.size == 0:
+            continue
+        tot += float(np.sum(w * (A @ np.concatenate(r)) ** 2))
+        tot_in += float(np.sum(w * (A @ np.concatenate(r_in)) ** 2))
+        wsum += float(np.sum(w))
+    if wsum <= 0:
+        return None
+    return max(tot - tot_in, 0.0) / wsum

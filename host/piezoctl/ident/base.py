@@ -675,7 +675,8 @@ def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX
     Returns
     -------
     list of dict
-        Per held-out history: ``recording`` (index), ``start``, ``stop`` (sample range held out), ``resid``
+        Per held-out history: ``recording`` (index), ``segment`` (which refit: the quarter left out of every
+        recording at once), ``start``, ``stop`` (sample range held out), ``resid``
         (measured - simulated over that range [um]), ``resid_in`` (the same with the reference fit) and
         ``scored`` (bool mask over the range).
     """
@@ -721,7 +722,7 @@ def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX
             yhat = cols[i][a:b] @ th[:layout.n_cols] + th[-1]
             y_in = cols[i][a:b] @ th_ref[:layout.n_cols] + th_ref[-1]
             v = vs[i][a:b]
-            out.append({"recording": i, "start": a, "stop": b, "resid": ys[i][a:b] - yhat,
+            out.append({"recording": i, "segment": k, "start": a, "stop": b, "resid": ys[i][a:b] - yhat,
                         "resid_in": ys[i][a:b] - y_in, "scored": (v >= lo) & (v <= hi)})
     return out
 
