@@ -283,6 +283,79 @@ def dynamics_corrections(ctx) -> np.ndarray:
     return ctx.dyn_nuisance
 
 
+# [Hz] the edge of the slow band when the context states none: the diagnosis' level/slow band edge is 1 / its
+# block length (``diagnose.misfit``: 1 s blocks).
+SLOW_EDGE_HZ = 1.0
+
+
+def _factors(c) -> tuple:
+    """(leading zeros, first nonzero coefficient, roots) of a polynomial in q = z^-1 with coefficients ``c``
+    (ascending powers of q): ``c = q^lead * c0 * prod(1 - r q)``."""
+    c = np.asarray(c, float)
+    nz = np.flatnonzero(c)
+    if nz.size == 0:
+        return 0, 0.0, np.zeros(0)
+    lead = int(nz[0])
+    tail = np.trim_zeros(c[lead:], "b")
+    return lead, float(tail[0]), np.roots(tail)
+
+
+def _is_slow(r, dt: float, f_slow_hz: float) -> np.ndarray:
+    """Whether each root ``r`` of a discrete transfer function is slower than ``f_slow_hz`` [Hz]: its
+    continuous-time frequency |ln r| / (2 pi dt) lies below it (a root at 0 is none: a pure sample shift)."""
+    r = np.asarray(r, complex)
+    with np.errstate(divide="ignore"):
+        w = np.abs(np.log(np.where(r == 0, 1e-300, r))) / (2.0 * np.pi * dt)
+    return (r != 0) & (w < f_slow_hz)
+
+
+def slow_dynamics_kept(b, a, b_now, a_now, dt: float, f_slow_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """G refitted beside a drive-side term, with the current model's slow poles and zeros in place of its own.
+
+    A delay, an amplifier's pole or a slew limit in front of the stage acts at the drive's fast edges; below the
+    slow band's edge it changes nothing (a delay's phase there is w d, of order 1e-2 rad for a ms; its gain
+    none). The ARX refit of G (unit gain at 0 Hz) nevertheless places a real pole and zero there that nearly
+    cancel but not quite, and their mismatch is a gain step inside the slow band: on s121-003 (16 samples' delay)
+    a pair at 0.99977 / 0.99978 gave |G| 1.02 at 0.3 Hz and 1.045 at 1 Hz where the base's G gave 1.002 and
+    1.006, so the slow triangles were read 4-5 % large (docs/diagnose-rounds/round-25.md, "Round 25: sensor
+    curve after a drive-side term"). So the refit keeps its roots above ``f_slow_hz`` and takes below it the
+    current model's (which the calibration fitted without the term), then unit static gain again.
+
+    Parameters
+    ----------
+    b, a : array_like
+        The refitted G (coefficients in ascending powers of z^-1).
+    b_now, a_now : array_like
+        The current model's G.
+    dt : float
+        Sample period [s].
+    f_slow_hz : float
+        The slow band's edge [Hz].
+
+    Returns
+    -------
+    (b, a) : tuple of ndarray
+        The refit with the current model's slow roots, unit static gain, of at least the refit's length (a later
+        round refits at the current model's order); ``(b, a)`` unchanged (the same arrays) when neither G has a
+        root below ``f_slow_hz`` (a static G included).
+    """
+    lb, kb, zb = _factors(b)
+    la, ka, pa = _factors(a)
+    _, _, zn = _factors(b_now)
+    _, _, pn = _factors(a_now)
+    slow = [_is_slow(x, dt, f_slow_hz) for x in (zb, pa, zn, pn)]
+    if not any(m.any() for m in slow) or kb == 0.0 or ka == 0.0:
+        return b, a
+    zeros = np.concatenate([zb[~slow[0]], zn[slow[2]]])
+    poles = np.concatenate([pa[~slow[1]], pn[slow[3]]])
+    bn = np.concatenate([np.zeros(lb), kb * np.atleast_1d(np.real(np.poly(zeros)))])
+    an = np.concatenate([np.zeros(la), ka * np.atleast_1d(np.real(np.poly(poles)))])
+    n = max(bn.size, an.size, len(a), len(b))   # trailing zeros (roots at 0): the refit's order kept
+    bn, an = np.pad(bn, (0, n - bn.size)), np.pad(an, (0, n - an.size))
+    an = an / an[0]
+    return bn * (np.sum(an) / np.sum(bn)), an
+
+
 class _DriveTerm(Term):
     stage = "drive"
     group = "drive_dynamics"
@@ -328,6 +401,10 @@ class _DriveTerm(Term):
         order = len(ctx.base["dynamics"]["a"]) - 1   # the current model's order: one ARX fit per setting
         ba = fit_dynamics(xs, [np.asarray(r.y, float) - off for r in ctx.cal], ctx.cal_k0, max_rows=40_000,
                           band=ctx.refit_cache["band"], orders=(order,))
+        # Round 26: below the slow band's edge the term changes nothing; keep the current model's G there
+        misfit = getattr(ctx, "misfit", None)
+        f_slow = float(misfit["slow_hz"]) if misfit else SLOW_EDGE_HZ
+        ba = slow_dynamics_kept(ba[0], ba[1], ctx.base["dynamics"]["b"], ctx.base["dynamics"]["a"], ctx.dt, f_slow)
         ctx.refit_cache[key] = ba
         return ba
 
