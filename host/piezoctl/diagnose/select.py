@@ -1631,18 +1631,29 @@ def _exact_on_common(c, fctx, fold_all, recs, span, log) -> bool:
     return True
 
 
+def _exact_resized(c, c2, fctx, fold_all, recs, span, log, short: str, where: str):
+    """The exact check of ``c`` with its model sized elsewhere (``c2``: on the dwells, round 19; on a repeated drive's
+    cycles, round 26). Returns ``(ex, fold ratios, before, after)`` when it lowers each fold's held-out error; else
+    adds the refusal to ``c.veto`` and returns None."""
+    ex = [_exact_fold(fctx[f], c2, f, fold_all, recs) for f in (0, 1)]
+    fr, before, after = _exact_figures(ex, span)
+    log(f"    exact {c.name} sized on {short}: {fr}")
+    if max(fr) >= 1.0:
+        c.veto += f"; nor sized on {where} (ratios {fr[0]:.2f}, {fr[1]:.2f})"
+        return None
+    return ex, fr, before, after
+
+
 def _exact_on_dwells(c, fctx, fold_all, recs, span, log) -> bool:
     """Round 19: creep's model sized on the dwells after the steps (``c.dwell_coef``), exactly checked when the one
     fitted on all blocks was refused; when it lowers the held-out error in each fold it becomes the candidate's
     model (``from_dwells``) and the refusal is lifted. Its fold ratios are reported beside the refused ones."""
     refused = list(c.exact_fold_ratios)
     c2 = dataclasses.replace(c, coef=list(c.dwell_coef), exact=None)
-    ex = [_exact_fold(fctx[f], c2, f, fold_all, recs) for f in (0, 1)]
-    fr, before, after = _exact_figures(ex, span)
-    log(f"    exact {c.name} sized on the dwells: {fr}")
-    if max(fr) >= 1.0:
-        c.veto += f"; nor sized on the dwells after the steps (ratios {fr[0]:.2f}, {fr[1]:.2f})"
+    got = _exact_resized(c, c2, fctx, fold_all, recs, span, log, "the dwells", "the dwells after the steps")
+    if got is None:
         return False
+    ex, fr, before, after = got
     c.coef, c.exact, c.exact_fold_ratios, c.from_dwells, c.veto = list(c.dwell_coef), ex, fr, True, None
     c.exact_before, c.exact_after = before, after
     c.worsened = _worsened(ex, fctx[0].names)
@@ -1660,12 +1671,10 @@ def _exact_on_cycles(c, fctx, fold_all, recs, span, log) -> bool:
     candidate's model (``from_cycles``, as round 25's drift sized there) and the refusal is lifted."""
     refused = list(c.exact_fold_ratios)
     c2 = dataclasses.replace(c, setting=[x[0] for x in c.cycle_coef], coef=[x[1] for x in c.cycle_coef], exact=None)
-    ex = [_exact_fold(fctx[f], c2, f, fold_all, recs) for f in (0, 1)]
-    fr, before, after = _exact_figures(ex, span)
-    log(f"    exact {c.name} sized on the cycles: {fr}")
-    if max(fr) >= 1.0:
-        c.veto += f"; nor sized on the repeated drive's cycles (ratios {fr[0]:.2f}, {fr[1]:.2f})"
+    got = _exact_resized(c, c2, fctx, fold_all, recs, span, log, "the cycles", "the repeated drive's cycles")
+    if got is None:
         return False
+    ex, fr, before, after = got
     c.setting, c.coef, c.exact, c.exact_fold_ratios = c2.setting, c2.coef, ex, fr
     c.from_cycles, c.veto, c.exact_before, c.exact_after = True, None, before, after
     c.exact_above, c.exact_beyond_level = _exact_above(ex, span), _exact_beyond_level(ex, span)
