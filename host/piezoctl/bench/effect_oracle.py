@@ -73,33 +73,12 @@ def _less_level(parts) -> np.ndarray:
 
 
 def switch_off(stage, effect: str) -> None:
-    """Switch the concealed ``effect`` off in ``stage`` (in place), as ``Case.without_effects`` does for it alone:
-    creep, a drift (round 26), coupling and (round 26) the asymmetry's extra beyond its knee dropped; a concealed
-    mode (the last of ``stage.modes``, round 24) removed and its residue given back to the first mode, so the static
-    gain is the same; round 26: a delay back to the loop's one sample, the amplifier's pole and the rate dependence
-    dropped, the sensor's zero of the calibration's session on every session. Any other effect raises
-    ``ValueError``."""
-    if effect == "creep":
-        stage.creep = None
-    elif effect == "thermal_drift":
-        stage.drift = None
-    elif effect == "cross_coupling":
-        stage.coupling = None
-    elif effect == "asymmetric_hysteresis":   # round 26: the extra beyond the knee; the amplifier's rails stay
-        stage.asym = None
-    elif effect == "unmodeled_resonance":
-        res = stage.modes.pop()
-        stage.modes[0].r += res.r
-    elif effect == "delay":                       # round 26: the drive-side and sensor effects, as
-        stage.delay_samples = 1                   # ``Case.without_effects`` sets them (the loop's own sample kept)
-    elif effect == "amplifier_bandwidth":
-        stage.amp_fc_hz = None
-    elif effect == "sensor_offset":               # the calibration's session's zero on every session
-        stage.sensor.offset_by_session = {0: stage.sensor.offset_by_session[0]}
-    elif effect == "rate_dependent_hysteresis":
-        stage.rate = None
-    else:
+    """Switch the concealed ``effect`` off in ``stage`` (in place) with ``foreign.cases.switch_off``, the switch
+    ``Case.without_effects`` applies to every effect; effects outside :data:`ORACLE_EFFECTS` raise ``ValueError``."""
+    from ..foreign.cases import switch_off as switch_one
+    if effect not in ORACLE_EFFECTS:
         raise ValueError(f"no oracle for {effect}")
+    switch_one(stage, effect)
 
 
 def branch_ratios(resid, cols, true_gain: float) -> tuple[float, float]:

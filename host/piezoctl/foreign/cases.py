@@ -24,7 +24,7 @@ from .hysteresis import LAWS, draw_law
 from .stage import (FS_HZ, Asymmetry, Coupling, Creep, Drift, Mode, RateDependence, Sensor,
                     Stage)
 
-__all__ = ["EFFECTS", "MULTI_PAIRS", "Rec", "Case", "case_plan", "draw_case", "write_case"]
+__all__ = ["EFFECTS", "MULTI_PAIRS", "Rec", "Case", "switch_off", "case_plan", "draw_case", "write_case"]
 
 EFFECTS = ("creep", "thermal_drift", "sensor_offset", "cross_coupling", "rate_dependent_hysteresis",
            "unmodeled_resonance", "delay", "amplifier_slew_limit", "amplifier_bandwidth",
@@ -66,18 +66,47 @@ class Case:
 
     def without_effects(self) -> Stage:
         """A copy of the stage with every concealed effect switched off (the same law,
-        modes, amplifier and sensor otherwise): the reference an effect is measured against."""
+        modes, amplifier and sensor otherwise): the reference an effect is measured against.
+        Each effect is switched off by :func:`switch_off`; the last mode is only taken out when
+        it is the concealed one (it is the stage's own otherwise)."""
         st = copy.deepcopy(self.stage)
-        st.creep = st.drift = st.coupling = st.rate = st.asym = None
-        st.slew_v_per_s = st.amp_fc_hz = None
-        st.delay_samples = 1
-        st.rails_v = (-30.0, 160.0)
-        if "unmodeled_resonance" in self.truth:
-            res = st.modes.pop()
-            st.modes[0].r += res.r
-        st.sensor.offset_by_session = {0: st.sensor.offset_by_session[0]}
-        st.sensor.nl_by_session = {0: st.sensor.nl_by_session[0]}
+        for effect in EFFECTS:
+            if effect != "unmodeled_resonance" or effect in self.truth:
+                switch_off(st, effect)
         return st
+
+
+def switch_off(stage: Stage, effect: str) -> None:
+    """Switch one concealed ``effect`` (one of :data:`EFFECTS`) off in ``stage``, in place.
+
+    A stage without the effect is left as it is, except for ``unmodeled_resonance``: the last
+    mode of ``stage.modes`` is removed and its residue given back to the first mode (the static
+    gain stays), so call it only on a stage whose last mode is the concealed one. The delay goes
+    back to the loop's own sample, the rails to the amplifier's (-30, 160) V, the sensor's zero
+    and curve to the calibration's session's on every session. Any other name raises
+    ``ValueError``. One switch for :meth:`Case.without_effects` and ``bench.effect_oracle``.
+    """
+    if effect in _EFFECT_ATTR:
+        setattr(stage, _EFFECT_ATTR[effect], None)
+    elif effect == "delay":
+        stage.delay_samples = 1
+    elif effect == "saturation":
+        stage.rails_v = (-30.0, 160.0)
+    elif effect == "unmodeled_resonance":
+        res = stage.modes.pop()
+        stage.modes[0].r += res.r
+    elif effect == "sensor_offset":
+        stage.sensor.offset_by_session = {0: stage.sensor.offset_by_session[0]}
+    elif effect == "sensor_nonlinearity":
+        stage.sensor.nl_by_session = {0: stage.sensor.nl_by_session[0]}
+    else:
+        raise ValueError(f"unknown effect {effect!r}")
+
+
+# effects that are one optional part of the stage, absent when None
+_EFFECT_ATTR = {"creep": "creep", "thermal_drift": "drift", "cross_coupling": "coupling",
+                "rate_dependent_hysteresis": "rate", "asymmetric_hysteresis": "asym",
+                "amplifier_slew_limit": "slew_v_per_s", "amplifier_bandwidth": "amp_fc_hz"}
 
 
 def case_plan(n: int, multi: bool = False) -> list[tuple]:
