@@ -53,6 +53,7 @@ def test_the_pole_s_failed_shape_lifts_the_delay_s_refusal_but_not_the_slew_limi
     pole.veto = "its signature check fails: ..."
     S._lift_lag_apart(evals, pole, lambda *a: None)
     assert delay.veto is None                      # checked on its own shape next
+    assert "amplifier_bandwidth, which left less fast residual, failed its own shape check" in delay.discrimination
     assert slew.veto and "group's least" in slew.veto
 
 

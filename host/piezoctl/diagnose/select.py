@@ -1487,6 +1487,8 @@ def _lift_lag_apart(evals, c, log):
     for o in evals:
         if getattr(o, "lag_apart_from", None) == c.name and o.veto and "than the group's least" in o.veto:
             o.veto, o.lag_apart_from = None, None
+            _add_note(o, f"{c.name}, which left less fast residual, failed its own shape check, so {o.name} was "
+                         f"checked on its own shape.")
             log(f"    {o.name}: refused only by {c.name}'s fast residual, whose own shape failed: checked on its own")
 
 
