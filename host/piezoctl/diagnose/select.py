@@ -1480,10 +1480,10 @@ def _lift_lag_apart(evals, c, log):
     """Round 27: the delay and the amplifier's pole are both linear lags sized with G refitted on the calibration
     (below its band), so above that band their exact models differ mostly by the refitted G's continuation, where
     the calibration says nothing; the group's fast residual (``_discriminate``) then orders the pair but cannot
-    refuse the other lag once the least one's own transfer shape has failed (round 26's held-out s138-038, a 1.1 ms delay on a
-    Coleman-Hodgdon stage: the pole left 0.44 of the delay's fast residual and failed its pole shape, F 1.11). The
-    refused partner gets its own shape and exact checks. A slew limit's refusal stays: its excess fast residual is
-    a ramp's shape, which no continuation of a linear G gives."""
+    refuse the other lag once the least one's own transfer shape has failed (round 26's held-out s138-038, a 1.1 ms
+    delay on a Coleman-Hodgdon stage: the pole left 0.44 of the delay's fast residual and failed its pole shape,
+    F 1.11). The refused partner gets its own shape and exact checks. A slew limit's refusal stays: its excess fast
+    residual is a ramp's shape, which no continuation of a linear G gives."""
     for o in evals:
         if getattr(o, "lag_apart_from", None) == c.name and o.veto and "than the group's least" in o.veto:
             o.veto, o.lag_apart_from = None, None
