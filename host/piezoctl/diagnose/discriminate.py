@@ -53,7 +53,7 @@ def highpassed(ctx, ys, fc):
     return np.concatenate([sps.sosfiltfilt(sos, s.y - y)[v] for s, y, v in zip(ctx.signals, ys, ctx.valid)])
 
 
-def discriminate_group(cands, hp, fold_all, block_all, fc, apart_out=None):
+def discriminate_group(cands, hp, fold_all, block_all, fc, apart_out=None, best_out=None):
     """Order candidates of one group by their exact high-passed held-out residual.
 
     ``hp[i]``: the high-passed residual of candidate i's exact model, each sample predicted by the fold that did
@@ -63,7 +63,8 @@ def discriminate_group(cands, hp, fold_all, block_all, fc, apart_out=None):
     ambiguity then holds among the best and the candidates that test cannot tell from it; one whose energy exceeds
     the best's at p < ``ALPHA_DISC`` (its own pair test) is told apart and put behind them (the selection refuses
     it, as every candidate told apart from the best). ``apart_out``, when
-    given, receives the indices of the candidates told apart from the best (in the first case, every other).
+    given, receives the indices of the candidates told apart from the best (in the first case, every other);
+    ``best_out`` (round 27), when given, receives the best's index.
 
     Returns
     -------
@@ -75,6 +76,8 @@ def discriminate_group(cands, hp, fold_all, block_all, fc, apart_out=None):
     en = [np.bincount(inv, h[used] ** 2) / cnt for h in hp]
     tot = [float(np.sum(e)) for e in en]
     best = int(np.argmin(tot))
+    if best_out is not None:
+        best_out.append(best)
     ps = []
     for i in range(len(hp)):
         if i == best:

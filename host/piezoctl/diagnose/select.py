@@ -197,6 +197,8 @@ class Candidate:
     #                                           (slow_signature.drift_coef_on_cycles); so is the all-data model
     cycle_coef: list | None = None            # round 26, drift: per fold, (setting, coef) sized on those cycles
     #                                           for a significant candidate (slow_signature.drift_on_cycles)
+    lag_apart_from: str | None = None         # round 27: the lag partner (LAG_PAIR) whose smaller fast residual
+    #                                           refused it; lifted if that partner's own shape check fails
     lag_bounded: bool = False                 # round 21: evaluated with the corrections' lag bounded to the loop's
     #                                           latency (select._lag_beyond_latency)
 
@@ -1243,8 +1245,8 @@ def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
             sel = fold_all == 1 - f
             h[sel] = highpassed(fctx[f], c.exact[f]["ys"], fc_hp)[sel]
         hp.append(h)
-    apart = []
-    order, text = discriminate_group(dd, hp, fold_all, block_all, fc_hp, apart)
+    apart, best = [], []
+    order, text = discriminate_group(dd, hp, fold_all, block_all, fc_hp, apart, best)
     log("    " + text)
     pos = [i for i, c in enumerate(evals) if any(c is x for x in dd)]
     for i, k in zip(pos, order):
@@ -1259,6 +1261,8 @@ def _discriminate(evals, fctx, fold_all, block_all, recs, fc_hp, log):
         dd[k].veto = (f"its exact model leaves more residual above {fc_hp:.0f} Hz than the group's least (paired block "
                       f"test, level {ALPHA_DISC:g}): the fast motion is not its shape")
         log(f"    {dd[k].name}: {dd[k].veto}")
+        if {dd[k].name, dd[best[0]].name} == set(LAG_PAIR):   # round 27: lifted if the least's shape fails
+            dd[k].lag_apart_from = dd[best[0]].name
 
 
 LAG_PAIR = ("delay", "amplifier_bandwidth")
@@ -1472,6 +1476,22 @@ def _worsened(ex, names):
     return worst
 
 
+def _lift_lag_apart(evals, c, log):
+    """Round 27: the delay and the amplifier's pole are both linear lags sized with G refitted on the calibration
+    (below its band), so above that band their exact models differ mostly by the refitted G's continuation, where
+    the calibration says nothing; the group's fast residual (``_discriminate``) then orders the pair but cannot
+    refuse the other lag once the least one's own transfer shape has failed (round 26's held-out s138-038, a 1.1 ms
+    delay on a Coleman-Hodgdon stage: the pole left 0.44 of the delay's fast residual and failed its pole shape,
+    F 1.11). The refused partner gets its own shape and exact checks. A slew limit's refusal stays: its excess fast
+    residual is a ramp's shape, which no continuation of a linear G gives."""
+    for o in evals:
+        if getattr(o, "lag_apart_from", None) == c.name and o.veto and "than the group's least" in o.veto:
+            o.veto, o.lag_apart_from = None, None
+            _add_note(o, f"{c.name}, which left less fast residual, failed its own shape check, so {o.name} was "
+                         f"checked on its own shape.")
+            log(f"    {o.name}: refused only by {c.name}'s fast residual, whose own shape failed: checked on its own")
+
+
 def _setting_of(c):
     """The candidate's setting for its signature check: a mode's (freq, damping) of fold 0, else the mean of the
     folds' scalar settings."""
@@ -1505,6 +1525,7 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
             if c.signature_check is not None and not c.signature_check["passed"]:
                 c.veto = "its signature check fails: " + c.signature_check["reason"]
                 log(f"    signature {c.name}: {c.veto}")
+                _lift_lag_apart(evals, c, log)
                 continue
         ex = c.exact or [_exact_fold(fctx[f], c, f, fold_all, recs) for f in (0, 1)]
         c.exact_fold_ratios, c.exact_before, c.exact_after = _exact_figures(ex, span)
