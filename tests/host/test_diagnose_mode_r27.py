@@ -79,3 +79,20 @@ def test_the_mode_states_its_test_nuisance_at_the_higher_band():
     assert np.allclose(term.test_nuisance(_ctx(ys, cal_band=900.0, dyn_band=EDGE)),
                        T.rolloff_corrections(ctx, 900.0))
     assert term.test_nuisance(_ctx(ys, cal_band=None, dyn_band=None)) is None
+
+
+def test_the_mode_has_no_rolloff_after_a_first_term():
+    """After a term is accepted (the folds' contexts carry its flexibility, the context of all data holds it in
+    its model's ``terms``) the roll-off is not in the mode's test nor in its model's fit: measured in the first
+    round only."""
+    ys = [_ydyn(5, 6000)]
+    term = T.TERMS["unmodeled_resonance"]
+    first = _ctx(ys)
+    first.base = {"terms": {}}
+    assert term.test_nuisance(first) is not None
+    folds = _ctx(ys)
+    folds.accepted_flex = np.zeros((int(folds.valid[0].sum()), 1))
+    assert term.test_nuisance(folds) is None
+    everything = _ctx(ys)
+    everything.base = {"terms": {"sensor_offset": {"offset_um": 0.3}}}
+    assert term.test_nuisance(everything) is None

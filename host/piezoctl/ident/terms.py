@@ -1227,8 +1227,10 @@ class UnmodeledResonance(Term):
         be several times too large (measured over model ``|T|`` 0.3 to 0.8 on the round-26 misses, falling
         smoothly): that deficit is broad, the mode's ring narrow; without these columns the deficit stays in
         the "before" residual and hides the ring. Not in the model (the refined model gets the mode alone). First
-        round only (no term accepted yet), as the curve's: after a term it was not measured (round 27)."""
-        if getattr(ctx, "accepted_flex", None) is not None:
+        round only (no term accepted yet): after a term it was not measured (round 27). Read on the folds'
+        contexts (``accepted_flex``) and on the context of all data, where the model's setting is fitted (its
+        base then holds the accepted ``terms``), so that the test and the model's fit agree."""
+        if getattr(ctx, "accepted_flex", None) is not None or (getattr(ctx, "base", None) or {}).get("terms"):
             return None
         edge = max(float(getattr(ctx, "cal_band_hz", None) or 0.0), float(getattr(ctx, "dynamics_band_hz", None) or 0.0))
         return rolloff_corrections(ctx, edge) if edge > 0.0 else None
