@@ -873,9 +873,6 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
     if significant:   # round 15: a fit whose size is not the term's physics (the rate term's widening)
         veto = next((w for w in (term.implausible(ctxs[0], c[0], c[4]) for c in chosen) if w), None)
         significant = veto is None
-    if significant and hasattr(term, "twin_column") and term.has_plays(ctxs[0]):   # round 27: the rate's own
-        veto = _rate_free_twin(ctxs, term, es, fold_all, block_all, rows, best_st)
-        significant = veto is None
     if significant and whole is not None and "share_above" in whole:   # round 21: where it acts, not below
         veto = term.acts_below_edge(whole["share_above"], whole["above_hz"])
         significant = veto is None
@@ -1095,46 +1092,6 @@ def _beside_below(ctxs, term, es, fold_all, rows, settings):
         x1 = _design(ctx, term, settings[f]).X
         p_big[test] = p_small[test] + _fit_predict(x1, r, train, test, rows, term.lower(ctx))[1]
     return p_small, p_big
-
-
-def _rate_free_twin(ctxs, term, es, fold_all, block_all, rows, settings):
-    """Round 27: the rate term must lower the held-out error beyond its rate-free twin (``twin_column``: the same
-    widening held at one rate per recording, in place of the term's own column, beside the same nuisance), its
-    gain >= 0 (the loop widens, or narrows, further where the drive runs faster); None when it does, else the
-    veto's text.
-
-    Rate dependence is a loop whose width changes with the rate along the recordings; a base misfit of its own
-    size in a recording run at rates beyond the calibration's is not (held-out null s138-005, Coleman-Hodgdon:
-    sines of 54 V at 18 and 22 Hz, 5.9 and 7.6 V/ms against the calibration's 0.75; measured over model 0.994 and
-    0.993 at the fundamental, the residual 0.149 and 0.161 um RMS: the same misfit at both rates, named rate at
-    0.56/0.51 on the contrast with the calibration's slow loops)."""
-    from .discriminate import beyond_test
-    p_small, p_big = np.zeros(fold_all.size), np.zeros(fold_all.size)
-    for f in (0, 1):
-        ctx, e = ctxs[f], es[f]
-        train, test = fold_all == f, fold_all == 1 - f
-        N = _nuis(ctx, term, train, test, rows)
-        x1 = _design(ctx, term, settings[f]).X
-        j = term.n_nuisance(ctx)   # the term's own column (the constant columns before it, the intercept after)
-        twin = np.concatenate([np.asarray(term.twin_column(ctx, s, settings[f]), float)[v]
-                               for s, v in zip(ctx.signals, ctx.valid)])
-        x0 = x1.copy()
-        x0[:, j] = twin
-        lb = list(term.lower(ctx))
-        p_small[test] = _fit_predict(x0, e, train, test, rows, lb, N)[1]
-        p_big[test] = _fit_predict(np.column_stack([x0, x1[:, j]]), e, train, test, rows, lb + [0.0], N)[1]
-    used = fold_all >= 0
-    rec = np.concatenate([np.full(int(np.sum(v)), i) for i, v in enumerate(ctxs[0].valid)])[used]
-    e_all = np.zeros(fold_all.size)
-    for f in (0, 1):
-        e_all[fold_all == 1 - f] = es[f][fold_all == 1 - f]
-    r = beyond_test(e_all[used], p_small[used], p_big[used], fold_all[used], block_all[used], rec, ctxs[0].dt)
-    if r["significant"]:
-        return None
-    return (f"beside its rate-free twin (the same widening held at one rate per recording) the rate adds nothing "
-            f"(p = {r['p']:.1e}, fold ratios {r['fold_ratios'][0]:.3f}/{r['fold_ratios'][1]:.3f}): the loop's "
-            f"misfit does not change with the rate along the recordings; a loop of its own size in a fast "
-            f"recording is the base's misfit there, not rate dependence")
 
 
 def model_with(base, terms):

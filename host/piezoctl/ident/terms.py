@@ -1001,32 +1001,6 @@ class RateDependentHysteresis(Term):
             const[:, len(self.CONSTANT_K):] = 0.0
         return np.column_stack([const, G(ctx.base, own)])
 
-    def twin_column(self, ctx, s, setting) -> np.ndarray:
-        """Round 27: the term's own column (``columns``' last) with the rate held at one value per recording: the
-        plays widened (or narrowed) by the factor the law gives at the mean of ``c`` over the recording's moving
-        samples, through G [um]. A loop whose width does not change with the rate along a recording - a base
-        misfit of its own size there - is this column; the rate is credited only beyond it
-        (``select._rate_free_twin``)."""
-        ref, k = setting
-        hp = ctx.base["hysteresis"]
-        v = np.asarray(s.v, float)
-        r = drive_rate(v, s.dt)
-        if k < 0:
-            x = np.maximum(r - self.calibration_rate(ctx), 0.0)
-            c = x / (x + float(ref))
-        else:
-            c = r / (r + float(ref))
-        moving = np.abs(np.diff(v, prepend=v[0])) > 0
-        cbar = float(np.mean(c[moving])) if np.any(moving) else 0.0
-        if k < 0:
-            own = plane_width_change(hp, v, np.ones(v.size), np.full(v.size, -float(k) * cbar))
-        else:
-            w = 1.0 + float(k) * cbar
-            own = plane_width_change(hp, v, np.full(v.size, w))
-            if hp.get("bw") and hp.get("type", "pi") == "plane":
-                own = own + (w - 1.0) * bouc_wen_column(hp, v)
-        return G(ctx.base, own)
-
     # round 25: each family of settings is nested against its own rate-independent counterpart (the widening
     # against the constant widening, the narrowing against the constant widening and shift): select fits a
     # setting's "before" with that setting's own nuisance columns and ranks settings by their gain over it
