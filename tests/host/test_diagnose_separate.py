@@ -309,7 +309,7 @@ def _slew_case_below_fit(fast_below, limit_adds):
     e = ring + lag + 0.01 * rng.standard_normal(n)
     correction = ring + lag + 0.002 * rng.standard_normal(n)
     q_small = lag + 0.002 * rng.standard_normal(n)
-    q_big = q_small + (ring if limit_adds else 0.0)
+    q_big = q_small + (limit_adds * ring)
     return check_slew_absent((e, correction, fold, block, rec, e, np.zeros(n), correction, q_small, q_big), [u], DT,
                              limit, nperseg=50)
 
@@ -321,6 +321,14 @@ def test_slew_fails_when_the_corrections_fitted_below_the_limit_leave_it_nothing
     assert r["testable"] and not r["passed"], r
     assert r["figures"]["p_beyond_refit"] < 0.01 and r["figures"]["p_beyond_below_fit"] >= 0.01
     assert "same below the limit" in r["reason"]
+
+
+def test_slew_fails_when_it_adds_beyond_the_corrections_fitted_below_the_limit_less_than_an_effects_size():
+    """s137-036 in the second form: beside the corrections the limit added 0.4 and 3.4 %, at p 6.4e-3: significant,
+    not an effect."""
+    r = _slew_case_below_fit(fast_below=True, limit_adds=0.05)
+    assert r["testable"] and not r["passed"], r
+    assert r["figures"]["p_beyond_below_fit"] < 0.01 and min(r["figures"]["fold_ratios_beyond_below_fit"]) > 0.8
 
 
 def test_slew_passes_when_it_adds_beyond_the_corrections_fitted_below_the_limit():
