@@ -1064,8 +1064,8 @@ def _beside_unlimited(ctxs, term, es, fold_all, rows, settings):
 def _beside_below(ctxs, term, es, fold_all, rows, settings):
     """Round 27: held-out predictions of the nested nuisance fitted only where the slew limit at ``settings[f]``
     does not act, nor for one guard before or after (``signature.below_limit`` with ``limited`` and ``ahead``), and
-    of that plus the term fitted on what the
-    nuisance leaves on the whole training fold (``signature.check_slew_absent``).
+    of that plus the term fitted on what the nuisance leaves on the whole training fold
+    (``signature.check_slew_absent``).
 
     A slew limit changes nothing where the drive's rate stays below it, so the rate-independent corrections the
     term is nested against (the dynamics corrections, the hysteresis groups) can be identified there and carried

@@ -36,8 +36,10 @@ say nothing about G, and any drive-side term can take a misfit of G there. This 
    length before (the dynamics still ring after a burst); there the term predicts nothing, so neither a
    delay's nor a pole's shape may pass check 3 there: a lag below the limit is not the rate's. Round 27: when the
    improvement below the limit is significant and the drive runs there at half the limit or more
-   (``BELOW_RATE_SHARE``), the corrections the term is nested against, fitted only below the limit, must leave
-   the limit an improvement above it (a base misfit the same at every rate is not the limit's).
+   (``BELOW_RATE_SHARE``; not counting one guard before and after each stretch where the limit acts), the
+   corrections the term is nested against, fitted only there, must leave the limit an improvement of a named
+   effect's size above it (``significance.RATIO_MAX`` in each fold): a base misfit the same at every rate is not
+   the limit's.
 
 A check with no informative bin to test on says so and does not refuse the term (``testable`` False).
 Every threshold is a test level (``ALPHA``), a coherence level derived from it, the estimate's own variance,
@@ -653,9 +655,10 @@ def check_slew_absent(heldout, us, dt, limit_v_per_s, nperseg=None) -> dict:
     only below the limit and of that plus the term. Where the limit did not act on the calibration the refit is
     the current model's and the second step is the term's own test again; a misfit the same at every rate (null
     s137-036: a lag growing linearly with frequency, present on the sines below the limit) then passes it. So,
-    when the drive also runs below the limit at ``BELOW_RATE_SHARE`` of it or more (the corrections are then
-    identified at rates near the limit), the limit must also improve beyond those corrections, or the check
-    fails."""
+    when the drive also runs below the limit at ``BELOW_RATE_SHARE`` of it or more (one guard before and after
+    each stretch where the limit acts left out: the rise to the limit is the fast motion's; the corrections are
+    then identified at rates near the limit), the limit must also improve beyond those corrections, significantly
+    and to ``RATIO_MAX`` in each fold (s137-036 beside them: 0.996/0.966 at p 6.4e-3), or the check fails."""
     from .discriminate import ALPHA_SEPARATE, beyond_test
     from .significance import RATIO_MAX
     before, corr, fold, block, rec = heldout[:5]
@@ -685,7 +688,7 @@ def check_slew_absent(heldout, us, dt, limit_v_per_s, nperseg=None) -> dict:
         # round 27: the corrections the term is nested against, identified where the limit does not act, must
         # leave the limit something above it. Testable where the drive also runs within a factor of two of the
         # limit below it (``BELOW_RATE_SHARE``): corrections fitted on slow motion alone say nothing about fast
-        # motion (a true limit's recordings run below it only on slow triangles and dwells)
+        # motion (the foreign slew design's recordings run below the limit only on slow triangles and dwells)
         du = np.concatenate([np.abs(np.diff(np.asarray(u, float), prepend=float(u[0]))) / dt for u in us])
         quiet = np.concatenate(below_limit(us, dt, limit_v_per_s, n, limited=True, ahead=True)) & (fold >= 0)
         fig["below_rate_top_v_per_s"] = float(np.max(du[quiet])) if np.any(quiet) else 0.0
