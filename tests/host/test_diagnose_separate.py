@@ -283,3 +283,81 @@ def test_two_beyond_range_terms_must_add_a_named_effects_size_beyond_each_other(
     r3 = _run_beyond_pair(c, xb3, e3, True)
     assert r3["verdict"] == "a" and "beyond_size_max" not in r3
 
+
+
+def _slew_case_below_fit(fast_below, limit_adds):
+    """Round 27: a slew candidate whose refit of the dynamics is the current model's (the limit did not act on the
+    calibration: the check's refit step is then the term's own test) and which also takes a lag present at every
+    rate. ``fast_below``: the drive also runs a 10 Hz sine at 0.7 of the limit, below it, where the nested
+    corrections fitted below the limit take that lag; ``limit_adds``: the limit still takes the steps' ring beyond
+    them."""
+    rng = np.random.default_rng(7)
+    fold, block, rec = layout()
+    n = N_BLOCKS * BLOCK
+    t = np.arange(n) * DT
+    u = np.zeros(n)
+    step_at = np.arange(BLOCK // 2, n, BLOCK)
+    for k in step_at:
+        u[k:] += 5.0 * (1 if (k // BLOCK) % 2 else -1)
+    limit = 1e3   # [V/s]
+    if fast_below:
+        u += 0.7 * limit / (2 * np.pi * 10.0) * np.sin(2 * np.pi * 10.0 * t)
+    ring = np.zeros(n)
+    for k in step_at:
+        ring[k:k + 40] = np.exp(-np.arange(min(40, n - k)) / 10.0)
+    lag = 0.5 * np.cos(2 * np.pi * 10.0 * t)
+    e = ring + lag + 0.01 * rng.standard_normal(n)
+    correction = ring + lag + 0.002 * rng.standard_normal(n)
+    q_small = lag + 0.002 * rng.standard_normal(n)
+    q_big = q_small + (limit_adds * ring)
+    return check_slew_absent((e, correction, fold, block, rec, e, np.zeros(n), correction, q_small, q_big), [u], DT,
+                             limit, nperseg=50)
+
+
+def test_slew_fails_when_the_corrections_fitted_below_the_limit_leave_it_nothing():
+    """Null s137-036: a lag at every rate, taken above the limit by the term; the corrections fitted where the limit
+    does not act (the drive runs there at 0.7 of the limit) take it, and the limit adds nothing beyond them."""
+    r = _slew_case_below_fit(fast_below=True, limit_adds=False)
+    assert r["testable"] and not r["passed"], r
+    assert r["figures"]["p_beyond_refit"] < 0.01 and r["figures"]["p_beyond_below_fit"] >= 0.01
+    assert "same below the limit" in r["reason"]
+
+
+def test_slew_fails_when_it_adds_beyond_the_corrections_fitted_below_the_limit_less_than_an_effects_size():
+    """s137-036 in the second form: beside the corrections the limit added 0.4 and 3.4 %, at p 6.4e-3: significant,
+    not an effect."""
+    r = _slew_case_below_fit(fast_below=True, limit_adds=0.05)
+    assert r["testable"] and not r["passed"], r
+    assert r["figures"]["p_beyond_below_fit"] < 0.01 and min(r["figures"]["fold_ratios_beyond_below_fit"]) > 0.8
+
+
+def test_slew_passes_when_it_adds_beyond_the_corrections_fitted_below_the_limit():
+    r = _slew_case_below_fit(fast_below=True, limit_adds=True)
+    assert r["passed"], r
+    assert r["figures"]["p_beyond_below_fit"] < 0.01
+
+
+def test_slew_below_fit_not_tested_where_the_drive_below_the_limit_is_slow():
+    """A true limit's recordings run below it only slowly (triangles, dwells): the corrections fitted there say
+    nothing about fast motion, and the check keeps its round-11 verdict."""
+    r = _slew_case_below_fit(fast_below=False, limit_adds=False)
+    assert r["passed"], r
+    assert r["figures"]["p_improvement_below"] < 0.01 and r["figures"]["p_beyond_refit"] < 0.01
+    assert "p_beyond_below_fit" not in r["figures"]
+    assert r["figures"]["below_rate_top_v_per_s"] < 0.5 * 1e3
+
+
+def test_below_limit_ahead_drops_the_rise_to_the_limit():
+    """Round 27: a drive whose rate rises through the limit runs just below it for a few samples before the limit
+    acts (held-out s135-055, s136-008: 0.97 of the limit, which made the corrections' test run on recordings whose
+    other rows below the limit are slow); with ``ahead`` those samples are left out as the samples after are."""
+    from piezoctl.diagnose.signature import below_limit
+    dt, limit, n = 1e-3, 1e3, 20
+    rate = np.concatenate([np.full(200, 10.0), np.linspace(10.0, 3e3, 100), np.full(100, 3e3), np.full(300, 0.0)])
+    u = np.cumsum(rate) * dt
+    plain = below_limit([u], dt, limit, n, limited=True)[0]
+    ahead = below_limit([u], dt, limit, n, limited=True, ahead=True)[0]
+    du = np.abs(np.diff(u, prepend=u[0])) / dt
+    assert np.max(du[plain]) > 0.9 * limit                 # the rise to the limit counted below it
+    assert np.max(du[ahead]) < 0.9 * limit and np.all(ahead <= plain)
+    assert np.all(ahead[:150])                           # the slow start stays

@@ -34,7 +34,12 @@ say nothing about G, and any drive-side term can take a misfit of G there. This 
    below the limit (an active-block test on those samples). Round 10's shape test follows: ``T`` is
    estimated again on the segments whose drive rate stays below the limit throughout and for one segment's
    length before (the dynamics still ring after a burst); there the term predicts nothing, so neither a
-   delay's nor a pole's shape may pass check 3 there: a lag below the limit is not the rate's.
+   delay's nor a pole's shape may pass check 3 there: a lag below the limit is not the rate's. Round 27: when the
+   improvement below the limit is significant and the drive runs there at half the limit or more
+   (``BELOW_RATE_SHARE``; not counting one guard before and after each stretch where the limit acts), the
+   corrections the term is nested against, fitted only there, must leave the limit an improvement of a named
+   effect's size above it (``significance.RATIO_MAX`` in each fold): a base misfit the same at every rate is not
+   the limit's.
 
 A check with no informative bin to test on says so and does not refuse the term (``testable`` False).
 Every threshold is a test level (``ALPHA``), a coherence level derived from it, the estimate's own variance,
@@ -57,6 +62,10 @@ __all__ = ["ALPHA", "Transfer", "transfer", "transfer_peak", "mode_frequencies",
            "check_slew", "check_slew_absent", "below_limit", "check_candidate", "DRIVE_TERMS", "HELDOUT_CHECKED"]
 
 ALPHA = 0.01                 # level of every test here
+# round 27: the slew limit's nuisance fitted below the limit is tested only where the drive runs there at half the
+# limit or more (chosen, not read from cases: corrections fitted within a factor of two of the rate they are
+# carried to)
+BELOW_RATE_SHARE = 0.5
 SEG_S = 0.1                  # [s] segment length aimed at (10 Hz bins); shortened so each recording gives 4
 MIN_SEGMENTS = 4             # segments per recording at least (fewer: the recording is not used)
 DRIVE_TERMS = ("delay", "amplifier_bandwidth", "unmodeled_resonance", "amplifier_slew_limit")
@@ -603,11 +612,13 @@ def check_slew(xs, ys, us, dt, limit_v_per_s, f_band, nperseg=None) -> dict:
             "figures": fig}
 
 
-def below_limit(us, dt, limit_v_per_s, n, limited=False) -> list:
+def below_limit(us, dt, limit_v_per_s, n, limited=False, ahead=False) -> list:
     """Per recording, the samples whose drive rate |du/dt| stays below ``limit_v_per_s`` [V/s] and did for ``n``
     samples before (the dynamics still ring after a burst). ``limited``: instead, where the rate-limited drive
     (``AmplifierSlewLimit.drive``) equals the drive, and did for ``n`` samples before: after a large step the
-    limited drive still ramps while the drive's own rate is zero."""
+    limited drive still ramps while the drive's own rate is zero. ``ahead`` (round 27): and stays so for ``n``
+    samples after (a drive whose rate rises through the limit runs just below it before the limit acts: those few
+    samples are the fast motion's, not the slow drive's)."""
     from ..ident.terms import AmplifierSlewLimit
     keep = []
     for u in us:
@@ -616,7 +627,10 @@ def below_limit(us, dt, limit_v_per_s, n, limited=False) -> list:
             act = (np.abs(AmplifierSlewLimit.drive(u, limit_v_per_s, dt) - u) > 1e-9 * max(np.ptp(u), 1e-12))
         else:
             act = np.abs(np.diff(u, prepend=u[0])) / dt >= limit_v_per_s
-        keep.append(np.convolve(act.astype(float), np.ones(n), "full")[:u.size] == 0)
+        ok = np.convolve(act.astype(float), np.ones(n), "full")[:u.size] == 0
+        if ahead:
+            ok &= np.convolve(act[::-1].astype(float), np.ones(n), "full")[:u.size][::-1] == 0
+        keep.append(ok)
     return keep
 
 
@@ -635,8 +649,18 @@ def check_slew_absent(heldout, us, dt, limit_v_per_s, nperseg=None) -> dict:
     acted on the calibration brings refitted dynamics that improve every sample (development case s109-009, the
     true limit: fold ratios 0.20/0.15 where it does not act); otherwise what the term takes is the refit's, not
     the rate's (development case s109-006, a resonance: the limit acts on 7 samples) and the check fails. This
-    second step was added after reading s109-009 fail the first alone."""
+    second step was added after reading s109-009 fail the first alone.
+
+    Round 27: ``heldout[8:10]`` (``select._beside_below``), the held-out predictions of the nested nuisance fitted
+    only below the limit and of that plus the term. Where the limit did not act on the calibration the refit is
+    the current model's and the second step is the term's own test again; a misfit the same at every rate (null
+    s137-036: a lag growing linearly with frequency, present on the sines below the limit) then passes it. So,
+    when the drive also runs below the limit at ``BELOW_RATE_SHARE`` of it or more (one guard before and after
+    each stretch where the limit acts left out: the rise to the limit is the fast motion's; the corrections are
+    then identified at rates near the limit), the limit must also improve beyond those corrections, significantly
+    and to ``RATIO_MAX`` in each fold (s137-036 beside them: 0.996/0.966 at p 6.4e-3), or the check fails."""
     from .discriminate import ALPHA_SEPARATE, beyond_test
+    from .significance import RATIO_MAX
     before, corr, fold, block, rec = heldout[:5]
     n = nperseg or _nperseg([u.size for u in us], dt)
     below = np.concatenate(below_limit(us, dt, limit_v_per_s, n, limited=True))
@@ -660,6 +684,28 @@ def check_slew_absent(heldout, us, dt, limit_v_per_s, nperseg=None) -> dict:
         e, p0, p1 = heldout[5:8]
         own = beyond_test(e, p0, p1, fold, block, rec, dt)
     fig.update({"p_beyond_refit": own["p"], "fold_ratios_beyond_refit": own["fold_ratios"]})
+    if own["significant"] and len(heldout) >= 10:
+        # round 27: the corrections the term is nested against, identified where the limit does not act, must
+        # leave the limit something above it. Testable where the drive also runs within a factor of two of the
+        # limit below it (``BELOW_RATE_SHARE``): corrections fitted on slow motion alone say nothing about fast
+        # motion (the foreign slew design's recordings run below the limit only on slow triangles and dwells)
+        du = np.concatenate([np.abs(np.diff(np.asarray(u, float), prepend=float(u[0]))) / dt for u in us])
+        quiet = np.concatenate(below_limit(us, dt, limit_v_per_s, n, limited=True, ahead=True)) & (fold >= 0)
+        fig["below_rate_top_v_per_s"] = float(np.max(du[quiet])) if np.any(quiet) else 0.0
+        if fig["below_rate_top_v_per_s"] >= BELOW_RATE_SHARE * float(limit_v_per_s):
+            q = beyond_test(e, heldout[8], heldout[9], fold, block, rec, dt)
+            fig.update({"p_beyond_below_fit": q["p"], "fold_ratios_beyond_below_fit": q["fold_ratios"]})
+            # and of a named effect's size (the first round's size gate, ``significance.RATIO_MAX``, in each fold):
+            # s137-036's limit added 0.4 and 3.4 % beside them, at p 6.4e-3
+            if not q["significant"] or max(q["fold_ratios"]) > RATIO_MAX:
+                reason = (f"where the limit does not act ({100 * fig['below_fraction']:.0f} % of the samples, drive "
+                          f"rates up to {fig['below_rate_top_v_per_s'] / 1000:.1f} V/ms) the term still lowers the "
+                          f"held-out error (p = {r['p']:.1e}, fold ratios {r['fold_ratios'][0]:.3f}/"
+                          f"{r['fold_ratios'][1]:.3f}), and beside the rate-independent corrections fitted there it "
+                          f"adds no effect's size above the limit (p = {q['p']:.1e}, fold ratios "
+                          f"{q['fold_ratios'][0]:.3f}/{q['fold_ratios'][1]:.3f}; level {ALPHA_SEPARATE:g}, size "
+                          f"{RATIO_MAX:g}): the base's misfit is the same below the limit, not the rate's")
+                return {"testable": True, "passed": False, "figures": fig, "reason": reason}
     if own["significant"]:
         return {"testable": True, "passed": True, "figures": fig, "reason": None}
     reason = (f"where the limit does not act ({100 * fig['below_fraction']:.0f} % of the samples) the term still "
@@ -690,7 +736,8 @@ def check_candidate(name, setting, xs, ys, us, dt, f_band, tr=None, heldout=None
     tr : Transfer, optional
         :func:`transfer` of ``xs``, ``ys`` when already computed.
     heldout : tuple, optional
-        The slew limit's held-out figures for :func:`check_slew_absent` (before, correction, fold, block, rec).
+        The slew limit's held-out figures for :func:`check_slew_absent` (before, correction, fold, block, rec[,
+        e, p_refit, p_both[, p_below, p_below_and_term]]).
     drive_band : bool
         Test the delay's shape up to the band the drives ``us`` excite (:func:`drive_band_hz`, round 14).
     f_dynamics : float, optional
