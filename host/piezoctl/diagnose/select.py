@@ -1250,7 +1250,7 @@ def _slow_before_map(best, evals, fctx, fold_all, recs, span, log, check):
     ratios 0.90 / 0.95 where its model on the dwells reaches 0.25: held-out s137-000) and sorts it after the curve.
     The exact models compare the two on equal terms; the one that explains more is named first, and the curve,
     tested again in the next round beside the slow term's model, is named only where its credit survives it
-    (held-out s137-000 creep, s138-016 drift: the curve first at exact ratios 0.84, 0.69).
+    (held-out s137-000, creep: the curve first at an exact ratio 0.84, creep's model on the dwells 0.27).
 
     Returns the candidate accepted (``evals`` reordered in place when it changes)."""
     if not best.term.same_on_every_recording:
