@@ -396,22 +396,15 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
     other (``before``: the slopes alone refitted on the same fold), and the active-block test of
     ``significance.active_block_test`` gives p. A delay's or a band limit's misfit lies at the edges, before the
     dwell starts, and the base's level misfit is a constant within each dwell: neither can take these columns.
-    Round 27: creep's columns are only those of the time constants the dwells can size (:func:`dwell_taus`, as
-    :func:`creep_coef_on_dwells`); a slower element is a line over each dwell that the slope per recording and
-    the level per dwell share, and its free gain only fitted the training dwells' noise (development s138-015,
-    Coleman-Hodgdon, 4 dwells of 2 s: p 1.3e-3 with the 3 s and 10 s elements, 4.1e-4 without).
 
-    Returns None when fewer than 2 dwells (nothing to share between steps), no time constant the dwells can size,
-    or when the dwells all lie in one fold (nothing to fit on, or to test on), else a dict: ``dwells``, ``ratio``
+    Returns None when fewer than 2 dwells (nothing to share between steps) or when the dwells all lie in one fold
+    (nothing to fit on, or to test on), else a dict: ``dwells``, ``ratio``
     and ``fold_ratios`` (held-out RMS after / before on the dwell samples), ``p``, ``n_active``,
     ``rms_before_um``, ``gains`` (per fold, per time constant).
     """
     ctx = ctxs[0]
     creep = TERMS["creep"]
-    # round 27: only the time constants the dwells can size (as creep's model on them, creep_coef_on_dwells): a
-    # slower element's tail is a line over each dwell, which the slope per recording and the level per dwell
-    # share; its free gain fits the training dwells' noise and costs the held-out dwells power
-    taus = dwell_taus(ctx, creep.taus(ctx))
+    taus = creep.taus(ctx)
     if not taus:
         return None
     dw, tt, rec = _dwell_samples(ctx)
