@@ -697,26 +697,6 @@ def beyond_calibrated_mask(ctx) -> np.ndarray:
     return np.concatenate(out)
 
 
-def _blocks_holding(blocks, mask) -> np.ndarray:
-    """Samples whose block holds at least one sample of ``mask``: the blocks where a term confined to ``mask``
-    (a knee beyond the calibrated edge) acts.
-
-    Parameters
-    ----------
-    blocks : ndarray of int
-        Block id per sample.
-    mask : ndarray of bool
-        Where the term can act (``beyond_calibrated_mask``), per sample.
-
-    Returns
-    -------
-    ndarray of bool
-        Per sample: its block holds a sample of ``mask``.
-    """
-    blocks = np.asarray(blocks)
-    return np.isin(blocks, np.unique(blocks[np.asarray(mask, bool)]))
-
-
 def inside_calibrated_veto(ctx, e_before, correction, fold, within) -> str | None:
     """Round 25: why a map of the reading (``Term.sized_inside_calibration``: the sensor's curve) is not credited
     where the recordings leave the calibrated drive range, or None.
@@ -881,13 +861,6 @@ def _evaluate(ctxs, term, es, fold_all, block_all, rows, p_max, ratio_max=sg.RAT
         if fr_w is not None:
             whole = {"beyond_calibrated_range": True, "fold_ratios": list(fold_ratios), "credited_ratio": cr}
             fold_ratios, cr = fr_w, cr_w
-            # round 27: block-tested on the blocks where the drive leaves the range, as it is sized there: elsewhere
-            # the knee is zero and its "correction" only the nested nuisance's refit beside it (held-out s137-044:
-            # the in-range triangle's six blocks all active, all worse beside round 26's levels)
-            p_all, inb = p, _blocks_holding(block_all[used], w)
-            t, p, n_act = sg.active_block_test(rb_res[inb], ra_res[inb], pred_after[used][inb],
-                                               block_all[used][inb], units[inb])
-            whole.update(p_all_blocks=p_all)
     significant = _linearized_gates(fold_ratios, p, dbic, whole, p_max, within, ratio_max < FURTHER_RATIO_MAX,
                                     above_p=not beside_drive)
     veto = None

@@ -694,28 +694,6 @@ class AsymmetricHysteresis(Term):
     def nuisance_columns(self, ctx, k: int) -> list:
         return [k - 1] if self._constant(ctx) else []
 
-    def test_nuisance(self, ctx):
-        """(n_settled, n_rec): a level per recording (1 on its settled rows), a nuisance of the nested test only
-        (``select.term_nuisance``; the model does not get them). Round 26: a loop past a knee is judged beyond each
-        recording's level. A recording starts in a hysteresis state its unknown history left, and beyond the
-        calibrated edge the base's continuation errs by a level of its own per recording (held-out s133-044,
-        Bouc-Wen: -1.5 um on the triangle, -4.6 um on the walk, against an extra of 0.5-0.6 um RMS); the knee
-        (no constant where one side is left) cannot take a level, and the units where it acts measured that level
-        more than the knee (p 6e-3). Nested against the levels, "before" and "after" both lose them; what is left
-        is the shape the knee follows on every recording that crosses it."""
-        key = ("asymmetry: level per recording",)
-        hit = ctx.refit_cache.get(key)
-        if hit is not None and hit[0] is ctx.signals:
-            return hit[1]
-        cols = []
-        for s, v in zip(ctx.signals, ctx.valid):
-            d = np.zeros((int(np.sum(v)), ctx.n_rec))
-            d[:, s.index] = 1.0
-            cols.append(d)
-        out = np.vstack(cols) if cols else np.zeros((0, ctx.n_rec))
-        ctx.refit_cache[key] = (ctx.signals, out)
-        return out
-
     def term(self, ctx, setting, coef) -> dict:
         coef = np.asarray(coef, float)
         if not self._constant(ctx):
