@@ -1581,7 +1581,7 @@ def _lift_lag_apart(evals, c, log):
     F 1.11). The refused partner gets its own shape and exact checks. A slew limit's refusal stays: its excess fast
     residual is a ramp's shape, which no continuation of a linear G gives."""
     for o in evals:
-        if getattr(o, "lag_apart_from", None) == c.name and o.veto and "than the group's least" in o.veto:
+        if o.lag_apart_from == c.name and o.veto and "than the group's least" in o.veto:
             o.veto, o.lag_apart_from = None, None
             _add_note(o, f"{c.name}, which left less fast residual, failed its own shape check, so {o.name} was "
                          f"checked on its own shape.")
