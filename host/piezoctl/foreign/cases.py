@@ -29,6 +29,8 @@ __all__ = ["EFFECTS", "MULTI_PAIRS", "Rec", "Case", "switch_off", "case_plan", "
 EFFECTS = ("creep", "thermal_drift", "sensor_offset", "cross_coupling", "rate_dependent_hysteresis",
            "unmodeled_resonance", "delay", "amplifier_slew_limit", "amplifier_bandwidth",
            "sensor_nonlinearity", "saturation", "asymmetric_hysteresis")
+# [V] the amplifier's own rails; a concealed saturation brings one of them in
+AMP_RAILS_V = (-30.0, 160.0)
 # Two-effect cases: pairs whose concealments are compatible.
 MULTI_PAIRS = (("creep", "cross_coupling"), ("thermal_drift", "amplifier_slew_limit"),
                ("sensor_offset", "unmodeled_resonance"), ("sensor_nonlinearity", "delay"))
@@ -82,7 +84,7 @@ def switch_off(stage: Stage, effect: str) -> None:
     A stage without the effect is left as it is, except for ``unmodeled_resonance``: the last
     mode of ``stage.modes`` is removed and its residue given back to the first mode (the static
     gain stays), so call it only on a stage whose last mode is the concealed one. The delay goes
-    back to the loop's own sample, the rails to the amplifier's (-30, 160) V, the sensor's zero
+    back to the loop's own sample, the rails to the amplifier's own (:data:`AMP_RAILS_V`), the sensor's zero
     and curve to the calibration's session's on every session. Any other name raises
     ``ValueError``. One switch for :meth:`Case.without_effects` and ``bench.effect_oracle``.
     """
@@ -91,7 +93,7 @@ def switch_off(stage: Stage, effect: str) -> None:
     elif effect == "delay":
         stage.delay_samples = 1
     elif effect == "saturation":
-        stage.rails_v = (-30.0, 160.0)
+        stage.rails_v = AMP_RAILS_V
     elif effect == "unmodeled_resonance":
         res = stage.modes.pop()
         stage.modes[0].r += res.r
@@ -153,7 +155,7 @@ def _draw_stage(rng, law_names, f1_min_hz=300.0):
                     lsb_um=1.25 * stroke / 2 ** bits, offset_by_session={0: _u(rng, -0.5, 0.5)},
                     nl_by_session={0: eps0}, lam=_u(rng, 0.1, 0.3))
     return Stage(law=law, stroke_um=stroke, amp_gain=_u(rng, 0.95, 1.05), amp_offset_v=_u(rng, -1, 1),
-                 rails_v=(-30.0, 160.0), modes=modes, sensor=sensor, delay_samples=1)
+                 rails_v=AMP_RAILS_V, modes=modes, sensor=sensor, delay_samples=1)
 
 
 def draw_case(seed: int, index: int, truth: tuple, scale: float = 1.0, design: str | None = None) -> Case:
@@ -273,7 +275,7 @@ def draw_case(seed: int, index: int, truth: tuple, scale: float = 1.0, design: s
         stage.modes.append(r)
     if "saturation" in truth:
         side, rail = eff["sat"]
-        stage.rails_v = (-30.0, rail) if side > 0 else (rail, 160.0)
+        stage.rails_v = (AMP_RAILS_V[0], rail) if side > 0 else (rail, AMP_RAILS_V[1])
         info["rail_v"] = rail
     if "asymmetric_hysteresis" in truth:
         side, knee = eff["asym"]
@@ -402,7 +404,7 @@ def draw_case(seed: int, index: int, truth: tuple, scale: float = 1.0, design: s
             rev.append(Rec("rev_beyond_range_sine", sg.decaying_sine(S * _u(rng, 8, 12), _u(rng, 0.5, 3), r_lo, r_hi, 1e9), None, 0, 1, 0))
         elif d == "asymmetric_hysteresis":
             side, knee = eff["asym"]
-            r_lo, r_hi = (lo, min(knee + 30.0, 160.0)) if side > 0 else (knee - 30.0, hi)
+            r_lo, r_hi = (lo, min(knee + 30.0, AMP_RAILS_V[1])) if side > 0 else (knee - 30.0, hi)
             rev.append(Rec("rev_beyond_range_triangle", sg.triangle(S * _u(rng, 8, 15), _u(rng, 0.3, 2), r_lo, r_hi), None, 0, 1, 0))
             rev.append(Rec("rev_beyond_range_walk", sg.random_walk(S * _u(rng, 8, 12), r_lo, r_hi, _u(rng, 0.5, 2), rng), None, 0, 1, 0))
     # a slow in-range triangle in every reveal set (the effect must not be needed there)
