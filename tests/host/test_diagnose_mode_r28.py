@@ -104,3 +104,16 @@ def test_a_small_concealed_mode_above_a_rigid_base_is_kept():
 def test_only_the_mode_term_asks_for_the_reading():
     assert T.UnmodeledResonance.first_mode_reading is True
     assert not any(getattr(cls, "first_mode_reading", False) for cls in (T.Term,))
+
+
+def test_a_reading_that_is_no_evidence_leaves_the_base_as_before():
+    """A rigid base whose stage rings weakly at a concealed 3 % mode at 1800 Hz and rolls off a little above
+    2.5 kHz: a unit mode near the ring, however damped, does not lower the error by the size gate, so the mode
+    is judged against the base as before (no ratios, no veto)."""
+    w = _drive(4)
+    y_stage = lowpass(w, 2500.0, DT) + 0.03 * (_mode(w, 1800.0, 0.02) - w)
+    c, fctx, fold_all, ex = _case(y_stage, w, (1800.0, 0.02))
+    r = S.first_mode_reading(c, fctx, fold_all, ex)
+    assert r["figures"] is not None and r["ratios"] is None and r["veto"] is None
+    held = [sse / x["sse_before"] for (sse, _, _), x in zip(r["figures"], ex)]
+    assert max(held) > S.sg.RATIO_MAX ** 2
