@@ -1,6 +1,7 @@
 """Round 28 (docs/diagnose-rounds/round-28.md, "Round 28: speed"): a design's settled rows are gathered by
-``np.take`` (no buffered copy), a shared design's training rows through its transpose, and the base's last plane
-fit and its held-out histories share one filtering of the plane columns. None of these changes a float."""
+``np.take`` (no buffered copy), and the base's last plane fit and its held-out histories share one filtering of
+the plane columns. Neither changes a float. (A shared design's training rows gathered through its transpose were
+tried and reverted: slower on s0-017; the test of their layout stays.)"""
 
 import numpy as np
 

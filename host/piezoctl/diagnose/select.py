@@ -333,15 +333,13 @@ class _Design:
     def rows(self, idx) -> np.ndarray:
         """``X[idx]`` (len(idx), k), C-ordered, the same floats, without stacking the other rows (round 26: a
         fit reads its training rows only; stacking a shared design whole for each of them was 11 of s0-017's
-        114 s CPU). ``idx``: row indices in ``[0, n)`` (``solve.train_rows``)."""
+        114 s CPU)."""
         if self._X is not None:
             return self._X[idx]
-        # round 28: each column's rows gathered into a contiguous row of the transpose, then one C-ordered copy
-        # (the same floats; writing each column's rows strided into the C-ordered result took a third longer)
-        out = np.empty((self.k, len(idx)))
+        out = np.empty((len(idx), self.k))
         for j, c in enumerate(self.cols):
-            np.take(c, idx, out=out[j], mode="clip")
-        return np.ascontiguousarray(out.T)
+            out[:, j] = c[idx]
+        return out
 
     def take(self, cols) -> np.ndarray:
         """``X[:, cols]`` (n_settled, len(cols)) without stacking the other columns: the same floats in the same
