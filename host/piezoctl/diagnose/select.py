@@ -293,16 +293,19 @@ class _Design:
         refs = [r for r in (ref if isinstance(ref, (list, tuple)) else [ref]) if r is not None]
         self.setting = setting
         # each recording's settled rows copied once, straight into the stacked design (a masked copy per
-        # recording and then np.vstack copied every design of about 1 M rows twice)
+        # recording and then np.vstack copied every design of about 1 M rows twice). Round 28: by ``np.take`` of
+        # the settled indices with ``mode="clip"`` (they are in range, so nothing is clipped): ``np.compress``
+        # (``take`` with the default ``mode="raise"``) buffers its ``out`` and copied every design twice, 6.5 of
+        # s0-017's 117 s CPU
         n = sum(int(np.count_nonzero(v)) for v in ctx.valid)
         X, pos = None, 0
         for s, v in zip(ctx.signals, ctx.valid):
             R = np.asarray(term.regressors(ctx, s, setting), float)   # (samples, columns)
             if X is None:
                 X = np.empty((n, R.shape[1]))
-            m = int(np.count_nonzero(v))
-            np.compress(v, R, axis=0, out=X[pos:pos + m])
-            pos += m
+            i = np.flatnonzero(v)
+            np.take(R, i, axis=0, out=X[pos:pos + i.size], mode="clip")
+            pos += i.size
         self.n, self.k = X.shape
         same = {}   # column -> the reference design's same column
         for r in refs:

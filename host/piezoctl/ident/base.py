@@ -627,17 +627,31 @@ def _cv_sizes(vs, v_rest, ys, qs, k0s, spans, r_all, sign=0.0):
             {"reversal_levels": n_rev, "plays_allowed": plays, "table": table})
 
 
-def _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba=None, max_rows=MAX_ROWS, sign=0.0):
+def _filtered_plane_columns(P, v, v_rest, layout, Gba) -> np.ndarray:
+    """(samples, layout.n_cols): one recording's plane columns (each play's hat basis, then the Bouc-Wen state)
+    filtered by G = ``Gba`` (b, a) over the whole recording, subnormal tails set to 0 (``dsp.flush_subnormal``)."""
+    C = [flush_subnormal(filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:]))
+         for i, kn in zip(layout.index, layout.knots)]
+    if layout.bw:
+        C.append(flush_subnormal(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest)))[:, None])
+    return np.hstack(C)
+
+
+def _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba=None, max_rows=MAX_ROWS, sign=0.0, cols=None):
     """Knot values (coefficients, then the offset) of the plane, columns filtered by G = ``Gba`` (b, a) when
-    given, on all settled samples (strided), with the trend columns (not returned)."""
+    given, on all settled samples (strided), with the trend columns (not returned). ``cols``: the recordings'
+    :func:`_filtered_plane_columns` for this ``Gba`` when already computed (round 28: the last fit and
+    :func:`_holdout_histories` share them; the same floats as filtering here)."""
     ns = [y.size for y in ys]
     Ts = _trends(ns, k0s)
     per = max(1000, max_rows // len(ys))
     blocks = []
-    for P, v, T, y, k0 in zip(Ps, vs, Ts, ys, k0s):
+    for j, (P, v, T, y, k0) in enumerate(zip(Ps, vs, Ts, ys, k0s)):
         rows = _strided(np.arange(y.size) >= k0, per)
         if Gba is None:
             C = plane_columns(P, layout, rows, v, v_rest)
+        elif cols is not None:
+            C = cols[j][rows]
         else:  # filter each play's columns over the whole recording, keep the strided rows (no subnormal tails)
             C = [flush_subnormal(filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:])[rows])
                  for i, kn in zip(layout.index, layout.knots)]
@@ -664,7 +678,8 @@ def _plane_output(Ps, vs, v_rest, layout, th):
     return out
 
 
-def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX_ROWS, sign=0.0) -> list:
+def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX_ROWS, sign=0.0,
+                       cols=None) -> list:
     """The base's error on calibration histories it did not see: each of ``HOLDOUT_SEGMENTS`` contiguous
     quarters of every calibration recording's settled part is left out in turn (of all recordings at once), the
     plane's knot values (size, ridge, Bouc-Wen shape and dynamics kept) are refitted on the rest and the
@@ -681,15 +696,11 @@ def _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows=MAX
         ``scored`` (bool mask over the range).
     """
     n_rec = len(ys)
-    # every play's columns through G once per recording (the refits only change which rows enter)
-    cols = []
-    for P, v in zip(Ps, vs):
-        # without the filters' subnormal tails: they made every refit's Gram matrix 10 to 50 times slower
-        C = [flush_subnormal(filt(Gba[0], Gba[1], hat_basis(P[:, i], kn)[:, 1:]))
-             for i, kn in zip(layout.index, layout.knots)]
-        if layout.bw:
-            C.append(flush_subnormal(filt(Gba[0], Gba[1], _bw_state(v, layout.bw, v_rest)))[:, None])
-        cols.append(np.hstack(C))
+    # every play's columns through G once per recording (the refits only change which rows enter), without the
+    # filters' subnormal tails: they made every refit's Gram matrix 10 to 50 times slower. ``cols``: these,
+    # computed by the caller for its last plane fit (round 28)
+    if cols is None:
+        cols = [_filtered_plane_columns(P, v, v_rest, layout, Gba) for P, v in zip(Ps, vs)]
     per = max(1000, max_rows // n_rec)
     edges = [np.linspace(k0, y.size, HOLDOUT_SEGMENTS + 1).astype(int) for y, k0 in zip(ys, k0s)]
 
@@ -798,11 +809,14 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
     th = _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, None, max_rows, sign)
     band = band_cps(_plane_output(Ps, vs, v_rest, layout, th), k0s)
     Gba, order, scores = (np.array([1.0]), np.array([1.0])), 0, {}
+    cols = None
     for it in range(2):
         xs = _plane_output(Ps, vs, v_rest, layout, th)
         Gba, order, scores = _select_dynamics(xs, [y - th[-1] for y in ys], k0s, max_rows // 2, refine=it == 1,
                                               band=band)
-        th = _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows, sign)
+        if it == 1 and holdout:   # the last fit's filtered columns, whole, for the held-out histories too
+            cols = [_filtered_plane_columns(P, v, v_rest, layout, Gba) for P, v in zip(Ps, vs)]
+        th = _fit_plane(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows, sign, cols)
     vals = layout.values(th[:-1])
     hyst = {"type": "plane", "r": list(map(float, layout.r)), "knots": [k.tolist() for k in layout.knots],
             "values": [v.tolist() for v in vals], "offset": float(th[-1]), "v_rest": float(v_rest),
@@ -825,5 +839,5 @@ def fit_base(recordings, max_rows: int = MAX_ROWS, u_rest: float = 0.0, settle_s
            "dynamics": {"b": np.asarray(Gba[0]).tolist(), "a": np.asarray(Gba[1]).tolist()},
            "terms": {}, "base_info": info}
     if holdout:
-        out["_holdout"] = _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows, sign)
+        out["_holdout"] = _holdout_histories(Ps, vs, v_rest, layout, ridge, ys, k0s, Gba, max_rows, sign, cols)
     return out
