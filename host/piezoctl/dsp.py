@@ -17,7 +17,7 @@ import numpy as np
 from scipy import signal
 
 __all__ = ["filt", "lowpass", "lowpass_tau", "mode_filter", "slew_limit", "drive_rate", "RATE_CUTOFF_HZ",
-           "turning_points", "blas_threads"]
+           "turning_points", "stroke_half_excursion", "blas_threads"]
 
 RATE_CUTOFF_HZ = 50.0
 _SLEW_SCALAR = 32   # slew_limit: ramp steps taken one by one before the rest is taken as an array
@@ -180,6 +180,52 @@ def turning_points(v) -> np.ndarray:
     dn = d[nz]
     return nz[np.flatnonzero(dn[1:] != dn[:-1]) + 1]
 
+
+
+def stroke_half_excursion(v, deadband: float) -> np.ndarray:
+    """Half the excursion of the stroke each sample lies on: the signal's travel from the reversal before it to
+    the reversal after it, halved. A reversal counts once the signal has come back more than ``deadband`` from its
+    extreme (so the noise's wiggles do not split a stroke).
+
+    A play of threshold r reverses on a stroke only when the stroke's half excursion exceeds r: on a periodic drive
+    of amplitude A it is A.
+
+    Parameters
+    ----------
+    v : array_like
+        The signal (any unit), e.g. the normalized drive [FS].
+    deadband : float
+        The return that confirms a reversal (the unit of ``v``), >= 0.
+
+    Returns
+    -------
+    ndarray
+        Per sample, the half excursion (the unit of ``v``); zeros for fewer than two samples.
+    """
+    v = np.asarray(v, float)
+    n = v.size
+    out = np.zeros(n)
+    if n < 2:
+        return out
+    pts = np.concatenate([[0], turning_points(v), [n - 1]])
+    keep, trend, ext = [0], 0, 0
+    for p in pts[1:]:
+        x = v[p]
+        if trend == 0:                       # no direction yet: the first move beyond the deadband sets it
+            if abs(x - v[0]) > deadband:
+                trend, ext = (1 if x > v[0] else -1), p
+        elif (x - v[ext]) * trend >= 0:      # further the same way: the extreme moves on
+            ext = p
+        elif abs(x - v[ext]) > deadband:     # came back beyond the deadband: the extreme was a reversal
+            keep.append(ext)
+            trend, ext = -trend, p
+    keep.append(ext if trend else n - 1)
+    if keep[-1] != n - 1:
+        keep.append(n - 1)
+    keep = np.unique(np.asarray(keep, np.intp))
+    for a, b in zip(keep[:-1], keep[1:]):
+        out[a:b + 1] = 0.5 * abs(v[b] - v[a])
+    return out
 
 # (set, get) entry points of the OpenBLAS builds numpy and scipy load (their wheels rename the symbols)
 _BLAS_THREAD_SYMBOLS = (("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),

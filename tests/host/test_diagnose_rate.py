@@ -379,3 +379,35 @@ def test_a_loop_narrower_at_every_rate_is_not_credited_to_the_rate():
     _, e, c = _evaluate_on_shifted_stage(term, lambda v: np.full(v.size, 0.05))
     assert np.sqrt(np.mean(e ** 2)) > 0.05               # far above the noise (0.005 um)
     assert not c.significant and min(c.fold_ratios) > 0.9
+
+
+def _narrowing_ctx(amplitude):
+    """A reveal of fast sines of ``amplitude`` [FS] (60 Hz) around mid-range beside a slow calibration triangle
+    (0.5 Hz over the full span), on ``_plane``'s stage (widest play 0.45)."""
+    from types import SimpleNamespace
+    t = np.arange(int(FS)) / FS
+    v = amplitude * np.sin(2 * np.pi * 60 * t)
+    cal = np.interp(t, [0, 0.5, 1.0], [-0.9, 0.9, -0.9])
+    base = {"hysteresis": _plane(np.random.default_rng(0)), "u_mid": 0.0, "u_half": 1.0}
+    return SimpleNamespace(signals=[SimpleNamespace(v=v, dt=1 / FS)], valid=[t > 0.1], base=base,
+                           cal=[SimpleNamespace(u=cal, dt=1 / FS)], cal_k0=[0], refit_cache={})
+
+
+def test_a_narrowing_that_closes_the_strokes_it_acts_on_is_refused():
+    """Round 28: a threshold shift of 0.3 of the half-span (below the widest play, 0.45: round 24's bound does
+    not act) on sines of half excursion 0.05 would close every play they reverse - what it changes is the state of
+    plays the sines never reverse, a level (the held-out null s139-009) - refused; the same shift on sines of 0.8,
+    and the rate cases' 0.03 on either, are a narrower loop."""
+    term = TERMS["rate_dependent_hysteresis"]
+    small, large = _narrowing_ctx(0.05), _narrowing_ctx(0.8)
+    lead = [0.0] * term.n_nuisance(small)
+    ref = 1.0                                          # FS/s, far below the sines' rates: c near 1
+    assert "close every play" in term.implausible(small, (ref, -0.1), lead + [3.0, 0.0])
+    assert term.implausible(large, (ref, -0.1), lead + [3.0, 0.0]) is None
+    assert term.implausible(small, (ref, -0.1), lead + [0.3, 0.0]) is None
+    assert term.implausible(large, (ref, -0.1), lead + [0.3, 0.0]) is None
+    # the shift is measured beyond the calibration's fastest rate: a sine no faster than the calibration is not
+    # narrowed at all, whatever the gain below the widest play
+    slow = _narrowing_ctx(0.05)
+    slow.signals[0].v = 0.05 * np.sin(2 * np.pi * 0.5 * np.arange(int(FS)) / FS)
+    assert term.implausible(slow, (ref, -0.1), lead + [3.0, 0.0]) is None

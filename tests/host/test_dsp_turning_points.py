@@ -29,3 +29,25 @@ def test_every_index_is_a_change_of_direction_and_none_is_missed():
             continue
         assert (k in i) == (last != 0 and dk != last)
         last = dk
+
+
+def test_stroke_half_excursion_is_the_amplitude_of_a_sine_and_noise_does_not_split_a_stroke():
+    """Round 28: on a sine of amplitude 0.3 (with noise well inside the deadband) every sample after the first
+    reversal lies on a stroke of half excursion 0.3; without the deadband the noise splits the strokes."""
+    from piezoctl.dsp import stroke_half_excursion
+    rng = np.random.default_rng(3)
+    t = np.arange(20000) / 10000.0
+    v = 0.1 + 0.3 * np.sin(2 * np.pi * 5 * t) + rng.normal(0, 0.001, t.size)
+    a = stroke_half_excursion(v, 0.02)
+    inner = (t > 0.06) & (t < 1.94)                   # between the first and the last reversal
+    assert np.allclose(a[inner], 0.3, atol=0.01)
+    assert np.median(stroke_half_excursion(v, 0.0)[inner]) < 0.05
+
+
+def test_stroke_half_excursion_follows_strokes_of_different_sizes():
+    """Strokes of 1, then 0.1, then 0.5 (half excursions 0.5, 0.05, 0.25) each carry their own half."""
+    from piezoctl.dsp import stroke_half_excursion
+    v = np.concatenate([np.linspace(0, 1, 101), np.linspace(1, 0.9, 11)[1:], np.linspace(0.9, 1.4, 51)[1:]])
+    a = stroke_half_excursion(v, 0.02)
+    assert np.allclose(a[:100], 0.5) and np.allclose(a[102:110], 0.05) and np.allclose(a[112:], 0.25)
+    assert stroke_half_excursion(np.array([1.0]), 0.02).tolist() == [0.0]

