@@ -30,7 +30,6 @@ def _cand(name, folds):
 def _first(c, monkeypatch, later_round=False):
     # the branch-common re-sizing needs a real context; it is not what these tests are about
     monkeypatch.setattr(select, "_exact_on_common", lambda *a, **k: False)
-    monkeypatch.setattr(select, "_exact_sized_alone", lambda *a, **k: False)   # round 28's route, tested apart
     ctx = types.SimpleNamespace(names=NAMES)
     fctx = [ctx, types.SimpleNamespace(names=NAMES)] if later_round else [ctx, ctx]
     return select._first_exact([c], fctx, None, None, 1.0, lambda *_: None)

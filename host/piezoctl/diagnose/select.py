@@ -193,8 +193,6 @@ class Candidate:
     #                                           steps (slow_signature.creep_model_on_dwells)
     from_dwells: bool = False                 # round 19: that model passed the exact check (the one fitted on all
     #                                           blocks did not); the all-data model is sized on the dwells too
-    sized_alone: bool = False                 # round 28, a map of the reading: its model sized on its own columns
-    #                                           alone (_exact_sized_alone); so is the all-data model
     from_cycles: bool = False                 # round 25, drift: its model sized on a repeated drive's cycles
     #                                           (slow_signature.drift_coef_on_cycles); so is the all-data model
     cycle_coef: list | None = None            # round 26, drift: per fold, (setting, coef) sized on those cycles
@@ -1667,72 +1665,7 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
         if c.term.same_on_every_recording and fctx[0] is fctx[1] and _exact_on_common(c, fctx, fold_all, recs,
                                                                                        span, log):
             return c
-        if c.term.same_on_every_recording and fctx[0] is fctx[1] and _exact_sized_alone(c, fctx, fold_all, recs,
-                                                                                         span, log):
-            return c
     return None
-
-
-def _exact_sized_alone(c, fctx, fold_all, recs, span, log) -> bool:
-    """Round 28: a map of the reading (``Term.same_on_every_recording``) refused by the exact check, first round
-    only, with its model sized on its own columns alone (no nested nuisance), as the refined model will hold it.
-
-    Its coefficients come from the nested fit, jointly with free gains on the base's hysteresis channels and the
-    dynamics corrections; the refined model gets the curve alone. On a Bouc-Wen stage a square of the reading
-    shares much with those gains, so the nested fit splits the curve between them, and the curve alone then makes
-    the recordings worse (held-out s139-011: linearized 0.66 / 0.61, exact 1.40 / 1.20; the kept base plus the
-    true curve 0.61). The linearized gates it passed stay the test; only the size the exact check simulates
-    changes. Checked exactly as every candidate is: each fold's held-out error lower, no recording worse than
-    ``WORSEN_MAX``; when it passes it becomes the candidate's model and the refusal is lifted.
-
-    Parameters
-    ----------
-    c : Candidate
-        The refused candidate (its ``veto`` holds the refusal; extended when this fails too).
-    fctx : list
-        The two folds' contexts (the same object in the first round).
-    fold_all : ndarray of int
-        Fold of each settled sample (-1: unused).
-    recs : list
-        The recordings, as simulated by the exact check.
-    span : float
-        The recordings' measured span [um] (the NRMSE's scale).
-    log : callable
-        Progress lines.
-
-    Returns
-    -------
-    bool
-        Whether the curve sized alone passes the exact check.
-    """
-    ctx = fctx[0]
-    e = residual(ctx)
-    key = (c.term.name, repr(c.setting[0]))
-    cached = key in ctx.design_cache
-    X = _design(ctx, c.term, c.setting[0]).X
-    coef = []
-    for f in (0, 1):   # all training rows of the fold: three columns
-        th, _, _ = _fit_predict(X, e, fold_all == f, fold_all == 1 - f, fold_all.size, predict=False)
-        coef.append(np.asarray(th, float))
-    if not cached:   # the design is not kept beyond this check (recomputed to the same floats if asked for)
-        del ctx.design_cache[key]
-    c2 = dataclasses.replace(c, coef=coef, exact=None)
-    ex = [_exact_fold(fctx[f], c2, f, fold_all, recs) for f in (0, 1)]
-    fr, before, after = _exact_figures(ex, span)
-    worse = _worsened(ex, ctx.names)
-    log(f"    exact {c.name} sized alone: {fr}" + (f", {worse[0]} x{worse[1]:.2f}" if worse else ""))
-    if max(fr) >= 1.0 or worse:
-        c.veto += (f"; nor sized on its own columns alone (ratios {fr[0]:.2f}, {fr[1]:.2f}"
-                   + (f"; {worse[0]} x{worse[1]:.2f}" if worse else "") + ")")
-        return False
-    refused = list(c.exact_fold_ratios)
-    c.coef, c.exact, c.exact_fold_ratios, c.veto, c.sized_alone = coef, ex, fr, None, True
-    c.exact_before, c.exact_after, c.worsened = before, after, None
-    _add_note(c, f"Its model sized jointly with the nested test's free gains on the base's hysteresis was refused by "
-                 f"the exact check (ratios {refused[0]:.2f}, {refused[1]:.2f}: the refined model holds the curve "
-                 f"alone); sized on its own columns alone it lowers the held-out error in each fold (ratios "
-                 f"{fr[0]:.2f}, {fr[1]:.2f}).")
-    return True
 
 
 def per_recording_ratios(ex) -> list:
@@ -2104,8 +2037,7 @@ def select(ctx, terms, recs, fold_all, block_all, max_terms, rows, fc_hp, log, f
         # so fitted on all data too: fitted beside the nested nuisance and simulated without it, the rate term's
         # all-data model was worse than the base on the data it was fitted to (null s117-023: NRMSE 0.0034 ->
         # 0.0067; rate s121-035: 0.0097 -> 0.0133) while its fold models, fitted alone, lowered the held-out error
-        # round 28: so is a map of the reading that passed only sized alone (_exact_sized_alone)
-        N = None if term.fit_model_alone(ctx_all) or best.sized_alone else _nuis(ctx_all, term, allmask, np.zeros(e_all.size, bool), rows,
+        N = None if term.fit_model_alone(ctx_all) else _nuis(ctx_all, term, allmask, np.zeros(e_all.size, bool), rows,
                                                               dynamics=False, initial=False, accepted=False)
         st, _, _, _, th = best_setting(ctx_all, term, e_all, allmask, np.zeros(e_all.size, bool), rows, N)
         if best.from_dwells:   # round 19: the model the exact check passed, sized on every dwell
