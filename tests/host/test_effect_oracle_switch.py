@@ -72,3 +72,16 @@ def test_drive_side_sensor_and_rate_effects_switch_off_as_the_case_s_reference(e
     assert {"delay": own.delay_samples > 1, "amplifier_bandwidth": own.amp_fc_hz is not None,
             "sensor_offset": len(own.sensor.offset_by_session) > 1,
             "rate_dependent_hysteresis": own.rate is not None}[effect]
+
+
+def test_a_sensor_curve_switches_off_to_the_calibration_s_curve_on_every_session():
+    """Round 28: the sensor curve's oracle; the calibration's session keeps its own curve, so its base is the kept
+    one, and the reveal session reads through that same curve once the effect is off."""
+    case = draw_case(131, 11, ("sensor_nonlinearity",), scale=0.5)
+    own = case.stage.sensor.nl_by_session
+    assert len(own) > 1 and own[1] != own[0]
+    st = copy.deepcopy(case.stage)
+    switch_off(st, "sensor_nonlinearity")
+    assert st.sensor.nl_by_session == {0: own[0]}
+    assert st.sensor.nl_by_session == case.without_effects().sensor.nl_by_session
+    assert case.stage.sensor.nl_by_session[1] == own[1]   # the case's own stage is untouched

@@ -1,5 +1,5 @@
 """What the true effect would reach on a kept creep, drift, coupling, concealed-mode, asymmetry, delay, bandwidth,
-sensor offset or rate case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios above 0.7"; every effect after
+sensor offset, rate or sensor curve case (docs/diagnose-rounds/round-22.md, "Round 22: held-out ratios above 0.7"; every effect after
 the first four since round 26; the drift begins after the calibration, so its base fitted without it is the kept one).
 
 A kept case directory of ``tools/bench-diagnose --foreign --keep DIR`` (``sSSS-III-EFFECT`` with the recordings and
@@ -46,11 +46,12 @@ SETTLE_S = 0.5
 ACTING_NOISE = 2.0       # a sample is acted on where the effect changes it by more than this many noise RMS
 
 ORACLE_EFFECTS = ("creep", "thermal_drift", "cross_coupling", "unmodeled_resonance", "asymmetric_hysteresis", "delay",
-                  "amplifier_bandwidth", "sensor_offset", "rate_dependent_hysteresis")
+                  "amplifier_bandwidth", "sensor_offset", "rate_dependent_hysteresis", "sensor_nonlinearity")
 # the case's ``info`` key that states each effect's size (printed with the figures)
 _INFO_KEY = {"creep": "creep", "thermal_drift": "drift", "cross_coupling": "coupling", "unmodeled_resonance": "modes",
              "asymmetric_hysteresis": "asym", "delay": "delay_ms", "amplifier_bandwidth": "amp_fc_hz",
-             "sensor_offset": "offset_change_um", "rate_dependent_hysteresis": "rate"}
+             "sensor_offset": "offset_change_um", "rate_dependent_hysteresis": "rate",
+             "sensor_nonlinearity": "sensor_nl_of_stroke"}
 
 __all__ = ["ORACLE_EFFECTS", "switch_off", "branch_ratios", "oracle_case", "main"]
 
