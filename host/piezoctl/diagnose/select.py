@@ -25,7 +25,8 @@ from . import significance as sg, static_map
 from .misfit import _one_band_credited, above_per_recording, credited_ratio, ratios_above, ratios_where
 from .discriminate import ALPHA_DISC, discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
-                             drift_coef_on_cycles, drift_on_cycles, drift_on_pair, signature_tests)
+                             drift_coef_on_cycles, drift_on_cycles, drift_on_pair, signature_tests, step_phrase)
+from .slow_signature import _step_holds as step_holds   # creep's step test at a level (an alternative's, round 28)
 from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",
@@ -1220,9 +1221,45 @@ def pair_design(ctxs, cands, f):
     return N, np.concatenate(lo) if lo else np.zeros(0), np.concatenate(hi) if hi else np.zeros(0), cols
 
 
-def _separate(best, evals, fctx, es, fold_all, block_all, rows, log):
+def own_signature_refuses(c, check=None) -> str | None:
+    """Round 28: why the candidate ``c``, an alternative of a pair test, cannot be the effect by its own
+    signature, or None. The pair test (``discriminate.separate``) is linearized and blind to the physics: over a
+    recording a slow element of creep's chain or a slew limit's refit of G can take a drift's ramp. An alternative
+    the tool could not name on these data is no alternative: creep without its tail after the steps (its step
+    test, at the level of a term's own hypothesis ``ALPHA``: "no held step, no creep"), a drive-side term or a mode
+    whose frequency-domain shape check (``check``, ``signature.check_in_context``) fails.
+
+    Parameters
+    ----------
+    c : Candidate
+        The alternative, with its round's ``slow_signature`` (creep) when the slow signatures ran.
+    check : callable, optional
+        ``check(candidate)`` -> the shape check's dict (``passed``, ``reason``) or None.
+
+    Returns
+    -------
+    str or None
+        The reason in words, or None when its signature does not refuse it (or has nothing to say).
+    """
+    if c.name == "creep":
+        if c.slow_signature is None:
+            return None
+        st = c.slow_signature.get("step_response")
+        if step_holds(st, sg.ALPHA):
+            return None
+        return "its own signature, the tail after the steps, does not hold (" + step_phrase(st) + ")"
+    if check is None:
+        return None
+    r = check(c)
+    if r is None or r.get("passed", True):
+        return None
+    return "its own signature check fails: " + str(r.get("reason"))
+
+
+def _separate(best, evals, fctx, es, fold_all, block_all, rows, log, check=None):
     """The accepted candidate's pair tests against the round's other candidates (``discriminate.separate``);
-    sets ``best.separation``."""
+    sets ``best.separation``. An alternative its own signature refuses (:func:`own_signature_refuses`) gets the
+    verdict ``signature`` instead of ``inseparable`` (round 28)."""
     e = np.zeros(fold_all.size)
     for f in (0, 1):
         e[fold_all == 1 - f] = es[f][fold_all == 1 - f]
@@ -1231,6 +1268,12 @@ def _separate(best, evals, fctx, es, fold_all, block_all, rows, log):
                                fctx[0].dt, rows)
     for c in fctx:
         c.design_cache.clear()
+    for r in best.separation:
+        b = next((c for c in evals if c.name == r["name"]), None)
+        why = own_signature_refuses(b, check) if r["verdict"] == "inseparable" and b is not None else None
+        if why:
+            r["verdict"], r["reason"] = "signature", why
+            log(f"    pair {best.name}/{r['name']}: not inseparable, {why}")
     for r in best.separation:
         log(f"    pair {best.name}/{r['name']}: {r['verdict']} (alone p {r['named_alone']['p']:.0e}/"
             f"{r['alternative_alone']['p']:.0e}, beyond p {r['named_beyond']['p']:.0e}/"
@@ -1254,7 +1297,7 @@ def _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, s
     different group explains all it does and more (verdict ``b``: held out, it improves beyond the accepted one and
     the accepted one does not beyond it), that one is offered first instead (its exact and signature checks
     again), once. Returns the candidate accepted."""
-    _separate(best, evals, fctx, es, fold_all, block_all, rows, log)
+    _separate(best, evals, fctx, es, fold_all, block_all, rows, log, check)
     alt = next((c for r in best.separation if r["verdict"] == "b" for c in evals
                 if c.name == r["name"] and c.significant and not c.veto
                 and not (c.term.group and c.term.group == best.term.group)), None)
@@ -1264,7 +1307,7 @@ def _prefer_containing(best, evals, fctx, es, fold_all, block_all, rows, recs, s
     evals.insert(evals.index(best), evals.pop(evals.index(alt)))
     first = _first_exact(evals, fctx, fold_all, recs, span, log, check)
     if first is alt:
-        _separate(alt, evals, fctx, es, fold_all, block_all, rows, log)
+        _separate(alt, evals, fctx, es, fold_all, block_all, rows, log, check)
         return alt
     return best
 
