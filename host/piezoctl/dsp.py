@@ -181,7 +181,6 @@ def turning_points(v) -> np.ndarray:
     return nz[np.flatnonzero(dn[1:] != dn[:-1]) + 1]
 
 
-
 def stroke_half_excursion(v, deadband: float) -> np.ndarray:
     """Half the excursion of the stroke each sample lies on: the signal's travel from the reversal before it to
     the reversal after it, halved. A reversal counts once the signal has come back more than ``deadband`` from its
@@ -226,6 +225,7 @@ def stroke_half_excursion(v, deadband: float) -> np.ndarray:
     for a, b in zip(keep[:-1], keep[1:]):
         out[a:b + 1] = 0.5 * abs(v[b] - v[a])
     return out
+
 
 # (set, get) entry points of the OpenBLAS builds numpy and scipy load (their wheels rename the symbols)
 _BLAS_THREAD_SYMBOLS = (("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),

@@ -25,8 +25,8 @@ from . import significance as sg, static_map
 from .misfit import _one_band_credited, above_per_recording, credited_ratio, ratios_above, ratios_where
 from .discriminate import ALPHA_DISC, discriminate_group, highpassed, separate
 from .slow_signature import (SIGNATURES, attribute, creep_coef_on_dwells, creep_model_on_dwells, creep_on_steps,
-                             drift_coef_on_cycles, drift_on_cycles, drift_on_pair, signature_tests, step_phrase)
-from .slow_signature import _step_holds as step_holds   # creep's step test at a level (an alternative's, round 28)
+                             drift_coef_on_cycles, drift_on_cycles, drift_on_pair, signature_tests, step_holds,
+                             step_phrase)
 from .solve import lstsq_box as _lstsq_box, train_rows
 
 __all__ = ["CHECKED_TERMS", "FURTHER_RATIO_MAX", "Signals", "Ctx", "Candidate", "make_masks", "make_signals",

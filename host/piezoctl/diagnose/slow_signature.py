@@ -82,7 +82,7 @@ from .misfit import credited_ratio
 from .solve import lstsq_box, train_rows
 
 __all__ = ["SIGNATURES", "ALPHA_SIGNATURE", "SignatureTest", "signature_groups", "signature_tests", "attribute",
-           "step_response_test", "base_tail", "creep_on_steps", "creep_model_on_dwells", "creep_coef_on_dwells", "dwell_taus",
+           "step_response_test", "step_holds", "step_phrase", "base_tail", "creep_on_steps", "creep_model_on_dwells", "creep_coef_on_dwells", "dwell_taus",
            "drift_on_pair", "drift_on_cycles", "cycle_mean_test", "repeated_cycles", "pair_level_test", "calibration_orbit_test", "drift_beyond_plane_test", "refit_plane", "DRIFT_BEYOND_PLANE"]
 
 SIGNATURES = ("creep", "thermal_drift", "sensor_offset")
@@ -451,7 +451,7 @@ def step_response_test(ctxs, es, fold_all, block_all, rows) -> dict | None:
             "base_tail": tails}
 
 
-def _step_holds(st, level) -> bool:
+def step_holds(st, level) -> bool:
     """The step-response test holds at ``level``: p below it and the held-out error lower in each fold."""
     return bool(st is not None and st["p"] < level and max(st["fold_ratios"]) < 1.0)
 
@@ -592,7 +592,7 @@ def creep_model_on_dwells(evals, ctxs, es, fold_all, block_all, rows, log) -> No
     if c is None or not c.significant or c.veto:
         return
     st = step_response_test(ctxs, es, fold_all, block_all, rows)
-    if not _step_holds(st, c.p_max):
+    if not step_holds(st, c.p_max):
         return
     coef = [creep_coef_on_dwells(ctxs[f], es[f], fold_all == f, rows) for f in (0, 1)]
     if any(x is None for x in coef):
@@ -1846,8 +1846,8 @@ def signature_tests(ctxs, es, nuisances, fold_all, block_all, rows) -> list:
         if n == "creep":   # round 13: creep's signature is its tail after the steps (step_response_test)
             st = step_response_test(ctxs, es, fold_all, block_all, rows)
             out[-1].step = st
-            out[-1].holds = _step_holds(st, ALPHA_SIGNATURE)
-            out[-1].confirms = _step_holds(st, sg.ALPHA)
+            out[-1].holds = step_holds(st, ALPHA_SIGNATURE)
+            out[-1].confirms = step_holds(st, sg.ALPHA)
         if DRIFT_BEYOND_PLANE and n == "thermal_drift" and (out[-1].holds or out[-1].confirms):
             # round 14: the trend within the recordings only beyond the base's plane refitted on them
             pt = drift_beyond_plane_test(ctxs, es, designs, fold_all, block_all, rows)
