@@ -18,7 +18,7 @@ import numpy as np
 
 from ..dsp import blas_threads, filt
 from ..ident import refined
-from ..ident.terms import LATENCY_SAMPLES, Term, dynamics_corrections, holds_mode
+from ..ident.terms import LATENCY_SAMPLES, Term, dynamics_corrections
 from ..io.recording import session_start
 from ..models.hysteresis import clear_output_cache, hysteresis_groups, initial_state_span
 from . import significance as sg, static_map
@@ -1695,12 +1695,6 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
                       f"{fa[1]:.2f}): what it takes lies below its edge")
             log(f"    {c.name}: {c.veto}")
             continue
-        if max(c.exact_fold_ratios) < 1.0 and c.term.first_mode_reading:
-            reading = first_mode_reading(c, fctx, fold_all, ex)
-            if reading["veto"]:
-                c.veto = reading["veto"]
-                log(f"    {c.name}: {c.veto}")
-                continue
         if max(c.exact_fold_ratios) < 1.0:
             c.exact = ex
             c.worsened = worse
@@ -1718,74 +1712,6 @@ def _first_exact(evals, fctx, fold_all, recs, span, log, check=None):
                                                                                        span, log):
             return c
     return None
-
-
-# round 28: the stage's own first mode, read at the ring's frequency times these factors (+-19 % in steps of 4.4 %:
-# a damped mode's ring and the peak of a mode fitted with a free gain lie a few % apart) and at these dampings
-# (0.01 to 0.32 in steps of sqrt(2): a stage's main mode, lightly to well damped)
-FIRST_MODE_SPAN = tuple(2.0 ** (k / 16) for k in range(-4, 5))
-FIRST_MODE_DAMPINGS = tuple(0.01 * 2.0 ** (k / 2) for k in range(11))
-
-
-def first_mode_reading(c, fctx, fold_all, ex) -> dict:
-    """Round 28: the ring of mode candidate ``c`` read as the stage's own first mode above the band the base
-    identified, and whether the mode is credited beyond that reading.
-
-    Above that band the base's G is its continuation: nothing there was excited by the calibration, and every
-    stage has a first mode that carries its static gain. When the calibration stayed far below it (development
-    null s140-045: a 25 Hz calibration, the stage's own 820 Hz main mode, residue 0.92), the reveal rings at it
-    and a concealed mode with a free gain takes it (x0.12, named). The reading: G continued by a unit-gain mode
-    (``M(ydyn) - ydyn``, the term's basis on the model's dynamic output, fixed gain 1, no coefficient), its
-    frequency (``FIRST_MODE_SPAN`` around the candidate's) and damping (``FIRST_MODE_DAMPINGS``) and timing
-    chosen on fold f's training samples, scored held out on the other, as the exact check ``ex``
-    (``_exact_fold``'s sums). Where that reading lowers the held-out RMS error to at most ``significance.RATIO_MAX``
-    of the base's in each fold (the size gate a term's credit must meet: it is evidence as a term would be), the
-    mode is credited only if its exact model is below the reading's by that gate in each fold; else it is the
-    base's gap above its band, not a concealed mode. (On the rigid-G resonance misses s137-052, s139-006,
-    s139-052, the reading at the true mode's frequency lowers the error by less than 0.3 %: no evidence.) Only where the base's G holds no mode of its own (:func:`~piezoctl.ident.terms.holds_mode`):
-    where it holds one, the calibration reached the stage's first mode, and a unit mode over G is a broad roll-off
-    of G above its band (development s140-052: G's 389 Hz mode, the true concealed 1078 Hz mode named x0.93 on
-    main; the reading at 981 Hz, damping 0.32, lowered the held-out error to 0.82/0.85 of the base's and vetoed
-    it, the base's misfit above its band taken for a first mode).
-
-    Returns ``{"figures": [(held-out SSE [um^2], freq [Hz], damping) per fold] or None (G holds a mode),
-    "ratios": [mode / reading, held-out RMS, per fold] or None, "veto": str or None}``."""
-    if any(holds_mode(fctx[f].base["dynamics"]) for f in (0, 1)):
-        # the calibration reached the stage's first mode: a unit mode over G would be a roll-off of G's own
-        # dynamics above its band (the base's misfit there, round 27's test nuisance), not the reading
-        return {"figures": None, "ratios": None, "veto": None}
-    e_all = [residual(fctx[f]) for f in (0, 1)]
-    best = []
-    for f in (0, 1):
-        ctx, e = fctx[f], e_all[f]
-        train, test = fold_all == f, fold_all == 1 - f
-        f0 = float(c.setting[f][0])
-        top = None
-        for q in FIRST_MODE_SPAN:
-            for z in FIRST_MODE_DAMPINGS:
-                X = np.vstack([c.term.basis(np.asarray(s.ydyn, float), f0 * q, z, s.dt)[v]
-                               for s, v in zip(ctx.signals, ctx.valid)])
-                for j in range(X.shape[1]):   # the ring's timing within a sample (the term's two columns)
-                    r = e - X[:, j]
-                    sse = float(np.sum(r[train] ** 2))
-                    if top is None or sse < top[0]:
-                        top = (sse, float(np.sum(r[test] ** 2)), f0 * q, z)
-        best.append(top)
-    figs = [(b[1], b[2], b[3]) for b in best]
-    out = {"figures": figs, "ratios": None, "veto": None}
-    if any(b[1] <= 0.0 or b[1] > sg.RATIO_MAX ** 2 * x["sse_before"] for b, x in zip(best, ex)):
-        return out   # the reading is no evidence by a term's size gate: the base stays the "before", as checked
-    out["ratios"] = [float(np.sqrt(x["sse_after"] / b[1])) for b, x in zip(best, ex)]
-    if max(out["ratios"]) <= sg.RATIO_MAX:
-        return out
-    held = [float(np.sqrt(b[1] / x["sse_before"])) for b, x in zip(best, ex)]
-    out["veto"] = (f"above the band the base identified, the stage's own first mode reads the ring as well: the "
-                   f"base's G continued by a mode at {figs[0][1]:.0f} Hz (damping {figs[0][2]:.2g}) carrying the "
-                   f"static gain, with no coefficient, lowers the held-out error to {held[0]:.2f}, {held[1]:.2f} of "
-                   f"the base's; the mode's exact model leaves {out['ratios'][0]:.2f}, {out['ratios'][1]:.2f} times the "
-                   f"reading's held-out error (a term must reach {sg.RATIO_MAX:g}): the base's gap above its band (a "
-                   "mode the calibration never excited), not a concealed effect")
-    return out
 
 
 def per_recording_ratios(ex) -> list:

@@ -125,9 +125,6 @@ class Term:
     #                             (diagnose.select.beyond_level_sse): for a term that is not itself a level, whose
     #                             recordings hold the drive while it acts (the base's level there is the hysteresis
     #                             state the unknown history left, not the term's)
-    first_mode_reading = False  # round 28: a mode above the identified band is credited only beyond the reading
-    #                             that it is the stage's own first mode, which the calibration never reached
-    #                             (diagnose.select.first_mode_reading)
 
     def applicable(self, ctx) -> bool:
         return True
@@ -306,14 +303,6 @@ def rolloff_corrections(ctx, edge_hz: float) -> np.ndarray:
 # [Hz] the edge of the slow band when the context states none: the diagnosis' level/slow band edge is 1 / its
 # block length (``diagnose.misfit``: 1 s blocks).
 SLOW_EDGE_HZ = 1.0
-
-
-def holds_mode(dynamics: dict) -> bool:
-    """Whether the dynamics ``{"b": ..., "a": ...}`` (discrete, ascending powers of z^-1) hold a mode: a complex
-    pole pair (round 28). A base whose G has none (a static gain, or real poles only) states that its calibration
-    never reached the stage's first mode, which every stage has and which carries its static gain."""
-    _, _, r = _factors(np.asarray(dynamics.get("a", [1.0]), float))
-    return bool(np.any(np.abs(np.imag(r)) > 1e-9 * np.maximum(np.abs(r), 1.0)))
 
 
 def _factors(c) -> tuple:
@@ -1210,7 +1199,6 @@ class UnmodeledResonance(Term):
     nested_dynamics = True
     signature = "residual energy in a narrow band above the calibration band, ringing after corners"
     acts_above_calibration = True   # offered only above the calibration's band, where its columns act
-    first_mode_reading = True
     DAMPINGS = (0.005, 0.01, 0.02, 0.05)   # the vocabulary's mode dampings (coupling's modes, the delay's alternative)
     # round 19: the dampings the mode is fitted at, the same range in steps of at most sqrt(2). A lightly damped
     # ring decays as exp(-2 pi f zeta t); at a step of 2 (DAMPINGS) the envelope can be a third off one decay time
