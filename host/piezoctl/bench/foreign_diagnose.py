@@ -124,7 +124,7 @@ def main(argv=None) -> int:
     """Command line of ``tools/bench-diagnose --foreign``."""
     ap = argparse.ArgumentParser(prog="bench-diagnose --foreign")
     ap.add_argument("--foreign", action="store_true", help="(selects this benchmark)")
-    ap.add_argument("--seed", type=int, default=0, help="case draw; development: 0..9, 101..140 (--multi 101..126); held out: >= 141 (--multi >= 127), run once per round (docs/foreign-stage.md)")
+    ap.add_argument("--seed", type=int, default=0, help="case draw; development: 0..9, 101..142 (--multi 101..127); held out: >= 143 (--multi >= 128), run once per round (docs/foreign-stage.md)")
     ap.add_argument("--n", type=int, default=60, help="cases (n/5 nulls, the rest cycle through the effects)")
     ap.add_argument("--multi", action="store_true", help="two-effect cases instead")
     ap.add_argument("--scale", type=float, default=1.0, help="duration factor (1: 55 to 100 s of data per case)")
