@@ -10,6 +10,7 @@ from piezoctl.ident import base as B
 from piezoctl.ident.terms import TERMS
 from test_diagnose_speed_round20 import _two_contexts
 from test_diagnose_speed_round25 import _calibration
+from base_compare import assert_same_base
 
 
 def test_a_design_is_the_bits_of_its_masked_and_stacked_regressors():
@@ -56,10 +57,4 @@ def test_the_base_fit_filters_its_last_plane_columns_once_and_is_the_same_floats
     made.clear()
     old = B.fit_base(recs, holdout=True)
     assert len(made) == 2 * len(recs)                # fit_base's, unused by the fit, and the histories' own
-    ho_new, ho_old = B.history_holdout(new), B.history_holdout(old)
-    assert new == old                                 # every parameter, the cross-validation table included
-    assert len(ho_new) == len(ho_old) > 0
-    for hn, ho in zip(ho_new, ho_old):
-        assert hn.keys() == ho.keys()
-        for k in hn:
-            assert np.array_equal(np.asarray(hn[k]), np.asarray(ho[k]))
+    assert_same_base(new, old)                        # every parameter and held-out history, bit for bit
